@@ -1,0 +1,260 @@
+"""Error-model files: which basis terms f(q, w, aux) multiply each generalized error.
+
+`eps_e = sum_j c_j f_j(q, w, aux)` (the seed paper's Eq. 5). Terms are parsed from a whitelist of
+Python expression syntax (numbers, variables, + - * / **, sin, cos, and the shorthands poly and
+fourier) into sympy; user text is never evaluated.
+"""
+from __future__ import annotations
+
+import ast
+import re
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import sympy as sp
+import yaml
+
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.validation import ModelError, require, require_keys
+
+MAX_TERM_LENGTH = 200
+MAX_EXPONENT = 16
+FUNCTIONS = {"sin": sp.sin, "cos": sp.cos}
+
+
+@dataclass(frozen=True)
+class Term:
+    """One basis function; `text` is its canonical spelling in the variables q1..qn, fx.., aux."""
+
+    text: str
+    expr: sp.Expr
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One unknown c_j: the generalized error it scales (index into eps) and its term."""
+
+    error: int
+    term: Term
+
+    def name(self, robot: Robot) -> str:
+        return f"{robot.error_names()[self.error]}:{self.term.text}"
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """Terms per generalized error, in eps order; `aux` lists the auxiliary data columns used."""
+
+    terms: tuple[tuple[Term, ...], ...]
+    aux: tuple[str, ...]
+    source: str = ""
+    source_hash: str = ""
+
+    @property
+    def coefficients(self) -> list[Coefficient]:
+        return [Coefficient(e, t) for e, terms in enumerate(self.terms) for t in terms]
+
+    def coefficient_names(self, robot: Robot) -> list[str]:
+        return [c.name(robot) for c in self.coefficients]
+
+    def unique_terms(self) -> list[Term]:
+        """Distinct basis functions in first-use order: the generated code evaluates each once."""
+        seen: dict[str, Term] = {}
+        for terms in self.terms:
+            for t in terms:
+                seen.setdefault(t.text, t)
+        return list(seen.values())
+
+    def to_yaml_dict(self, robot: Robot) -> dict:
+        """A dict that `load_error_model` reads back into this model (explicit per error)."""
+        frames = {}
+        for i in range(robot.n + 1):
+            block = {e: [t.text for t in self.terms[6 * i + k]] for k, e in enumerate(ERROR_NAMES)}
+            frames[i] = block
+        out = {"default": ["1"], "frames": frames}
+        if self.aux:
+            out["aux"] = list(self.aux)
+        return out
+
+
+class _TermParser:
+    """Turns one term string into sympy expressions (a list: poly and fourier expand)."""
+
+    def __init__(self, symbols: dict[str, sp.Symbol], where: str):
+        self.symbols, self.where = symbols, where
+
+    def fail(self, text: str, why: str):
+        raise ModelError(f"{self.where}: term {text!r}: {why}")
+
+    def parse(self, text) -> list[sp.Expr]:
+        if isinstance(text, (int, float)) and not isinstance(text, bool):
+            text = repr(text)
+        if not isinstance(text, str):
+            self.fail(str(text), "terms must be strings such as \"q1**2\"")
+        if len(text) > MAX_TERM_LENGTH:
+            self.fail(text[:40] + "...", f"longer than {MAX_TERM_LENGTH} characters")
+        try:
+            tree = ast.parse(text.strip(), mode="eval").body
+        except SyntaxError:
+            self.fail(text, "not a valid expression; use numbers, variables, + - * / **, sin, cos, poly, fourier")
+        if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in ("poly", "fourier"):
+            return self.shorthand(text, tree)
+        return [self.expr(text, tree)]
+
+    def shorthand(self, text: str, node: ast.Call) -> list[sp.Expr]:
+        if node.keywords:
+            self.fail(text, "keyword arguments are not allowed")
+        args = node.args
+        if node.func.id == "poly":
+            if len(args) != 2:
+                self.fail(text, "poly takes (variable, order), e.g. poly(q1, 3)")
+            v, k = self.expr(text, args[0]), self.number(text, args[1])
+            if k != int(k) or not 1 <= k <= MAX_EXPONENT:
+                self.fail(text, f"poly order must be an integer 1..{MAX_EXPONENT}")
+            return [v ** j for j in range(1, int(k) + 1)]
+        if len(args) != 3:
+            self.fail(text, "fourier takes (variable, period, harmonics), e.g. fourier(q1, 0.45, 2)")
+        v, period, h = self.expr(text, args[0]), self.number(text, args[1]), self.number(text, args[2])
+        if period <= 0:
+            self.fail(text, "fourier period must be positive")
+        if h != int(h) or not 1 <= h <= 32:
+            self.fail(text, "fourier harmonics must be an integer 1..32")
+        out = []
+        for j in range(1, int(h) + 1):
+            arg = 2 * sp.pi * j * v / sp.Rational(repr(float(period)))
+            out += [sp.sin(arg), sp.cos(arg)]
+        return out
+
+    def number(self, text: str, node) -> float:
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            return -self.number(text, node.operand)
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            return float(node.value)
+        self.fail(text, "expected a number here")
+
+    def expr(self, text: str, node) -> sp.Expr:
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            return sp.Integer(node.value) if isinstance(node.value, int) else sp.Rational(repr(node.value))
+        if isinstance(node, ast.Name):
+            if node.id not in self.symbols:
+                self.fail(text, f"unknown variable '{node.id}'; known: {', '.join(self.symbols)} "
+                                f"(declare a data column under 'aux:')")
+            return self.symbols[node.id]
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            v = self.expr(text, node.operand)
+            return -v if isinstance(node.op, ast.USub) else v
+        if isinstance(node, ast.BinOp):
+            ops = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+                   ast.Div: lambda a, b: a / b}
+            if isinstance(node.op, ast.Pow):
+                k = self.number(text, node.right)
+                if abs(k) > MAX_EXPONENT:
+                    self.fail(text, f"exponent {k:g} is larger than {MAX_EXPONENT}")
+                return self.expr(text, node.left) ** (sp.Integer(int(k)) if k == int(k) else sp.Rational(repr(k)))
+            if type(node.op) in ops:
+                return ops[type(node.op)](self.expr(text, node.left), self.expr(text, node.right))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS:
+            if len(node.args) != 1 or node.keywords:
+                self.fail(text, f"{node.func.id} takes one argument")
+            return FUNCTIONS[node.func.id](self.expr(text, node.args[0]))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("poly", "fourier"):
+            self.fail(text, f"{node.func.id}(...) must stand alone as a whole term")
+        self.fail(text, f"'{ast.unparse(node)}' is not allowed; use numbers, variables, + - * / **, sin, cos, poly, fourier")
+
+
+def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
+    """The names a term may use: q1..qn, joint names as aliases, the wrench and aux columns."""
+    q = joint_symbols(robot)
+    names = {f"q{i + 1}": s for i, s in enumerate(q)}
+    names.update({j.name: s for j, s in zip(robot.joints, q)})
+    names.update({w: sp.Symbol(w, real=True) for w in WRENCH})
+    names.update({a: sp.Symbol(a, real=True) for a in aux})
+    return names
+
+
+RESERVED = {"q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
+
+
+def is_aux_name(name: str) -> bool:
+    """Auxiliary columns become C and Python identifiers next to the generated temporaries."""
+    return (name.isidentifier() and not name.startswith("_") and name not in RESERVED
+            and not re.fullmatch(r"[tq]\d+", name))
+
+
+def joint_symbols(robot: Robot) -> tuple[sp.Symbol, ...]:
+    return tuple(sp.Symbol(f"q{i + 1}", real=True) for i in range(robot.n))
+
+
+def _canonical(expr: sp.Expr) -> str:
+    return sp.sstr(expr, order="lex")
+
+
+def load_error_model(path: str | Path | None, robot: Robot, aux_columns: tuple[str, ...] = ()) -> ErrorModel:
+    """Read an error-model file for `robot`; `aux_columns` are data columns usable as variables.
+
+    `path=None` gives the constant-only model (every error gets the term "1").
+    """
+    if path is None:
+        spec, where, digest = {"default": ["1"]}, "<constant model>", ""
+    else:
+        path = Path(path)
+        where = str(path)
+        require(path.is_file(), f"{where}: no such error-model file")
+        try:
+            spec = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ModelError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return error_model_from_dict(spec, robot, where, aux_columns, digest)
+
+
+def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str, ...] = (),
+                          digest: str = "") -> ErrorModel:
+    require(isinstance(spec, dict), f"{where}: expected a mapping with 'default' and/or 'frames'")
+    require_keys(spec, where, optional={"default", "frames", "aux", "description"})
+    declared = spec.get("aux", [])
+    require(isinstance(declared, list) and all(isinstance(a, str) and a.isidentifier() for a in declared),
+            f"{where}: aux: expected a list of data column names")
+    symbols = variables(robot, ())
+    clash = [a for a in declared if a in symbols or not is_aux_name(a)]
+    require(not clash, f"{where}: aux: '{clash[0] if clash else ''}' is a joint, wrench or reserved name "
+                       f"(q, eps, w, aux, c, f, p, J, T, Jq, t<k>); rename the data column")
+    aux_all = tuple(dict.fromkeys(list(declared) + [a for a in aux_columns if a not in symbols and is_aux_name(a)]))
+    symbols = variables(robot, aux_all)
+
+    def parse_list(items, w) -> tuple[Term, ...]:
+        require(isinstance(items, list), f"{w}: expected a list of terms such as [\"1\", \"q1\"]")
+        parser = _TermParser(symbols, w)
+        out: dict[str, Term] = {}
+        for item in items:
+            for expr in parser.parse(item):
+                if expr.is_number:
+                    require(expr == 1, f"{w}: term {item!r} is a constant; write the constant term as \"1\"")
+                text = _canonical(expr)
+                require(text not in out, f"{w}: term {item!r} repeats '{text}'; each term may appear once")
+                out[text] = Term(text, expr)
+        return tuple(out.values())
+
+    default = parse_list(spec.get("default", ["1"]), f"{where}: default")
+    terms = [default] * robot.n_errors
+    frames = spec.get("frames") or {}
+    require(isinstance(frames, dict), f"{where}: frames: expected a mapping from frame number to terms")
+    for key, block in frames.items():
+        require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n,
+                f"{where}: frames: key {key!r} is not a frame number 0..{robot.n}")
+        fw = f"{where}: frames.{key}"
+        if isinstance(block, list):
+            terms[6 * key:6 * key + 6] = [parse_list(block, fw)] * 6
+            continue
+        require(isinstance(block, dict), f"{fw}: expected a list of terms or a mapping from ex..ep to terms")
+        for err, items in block.items():
+            require(err in ERROR_NAMES, f"{fw}: unknown error '{err}'; use one of {', '.join(ERROR_NAMES)}")
+            terms[6 * key + ERROR_NAMES.index(err)] = parse_list(items, f"{fw}.{err}")
+    used = set()
+    for ts in terms:
+        for t in ts:
+            used |= {s.name for s in t.expr.free_symbols}
+    aux = tuple(a for a in aux_all if a in used or a in declared)
+    require(any(terms), f"{where}: the model has no terms at all")
+    return ErrorModel(terms=tuple(terms), aux=aux, source=where, source_hash=digest)

@@ -1,0 +1,88 @@
+"""The exact nonlinear chain with generalized errors, in plain numpy (batched over poses).
+
+This is the independent reference for the generated code (finite differences of these
+functions check `J_e`) and the truth model of the simulator. Shapes: q (N, n), eps (N, 6(n+1))
+or (6(n+1),); transforms (N, 4, 4); lengths in m, angles in rad.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gecgen.model.robot import Elementary, Robot
+
+
+def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros(angle.shape + (4, 4))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R[..., axis, axis] = 1.0
+    R[..., 3, 3] = 1.0
+    R[..., i, i], R[..., i, j], R[..., j, i], R[..., j, j] = c, -s, s, c
+    return R
+
+
+def _trans(vec: np.ndarray) -> np.ndarray:
+    T = np.broadcast_to(np.eye(4), vec.shape[:-1] + (4, 4)).copy()
+    T[..., :3, 3] = vec
+    return T
+
+
+def elementary(op: Elementary) -> np.ndarray:
+    """4x4 matrix of one constant elementary transform."""
+    kind, value = op
+    if kind == "H":
+        return np.array([[float(v) for v in row] for row in value])
+    if kind[0] == "T":
+        return _trans(np.eye(3)["xyz".index(kind[1])] * float(value))
+    return _rot("xyz".index(kind[1]), np.array(float(value)))
+
+
+def constant(ops: tuple[Elementary, ...]) -> np.ndarray:
+    T = np.eye(4)
+    for op in ops:
+        T = T @ elementary(op)
+    return T
+
+
+def error_transform(e: np.ndarray) -> np.ndarray:
+    """E = Trans(ex, ey, ez) RotY(es) RotZ(er) RotX(ep) for e (..., 6)."""
+    return _trans(e[..., :3]) @ _rot(1, e[..., 3]) @ _rot(2, e[..., 4]) @ _rot(0, e[..., 5])
+
+
+def joint_motion(axis, kind: str, q: np.ndarray) -> np.ndarray:
+    """M(q): rotation by q about the unit axis (Rodrigues) or translation q * axis."""
+    u = np.array([float(a) for a in axis])
+    if kind == "P":
+        return _trans(q[..., None] * u)
+    c, s = np.cos(q)[..., None, None], np.sin(q)[..., None, None]
+    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    M = np.broadcast_to(np.eye(4), q.shape + (4, 4)).copy()
+    M[..., :3, :3] = c * np.eye(3) + s * K + (1 - c) * np.outer(u, u)
+    return M
+
+
+def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
+    """World transforms W_0..W_n (after each frame's errors) and the tool, each (N, 4, 4)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    N = q.shape[0]
+    eps = np.zeros((N, robot.n_errors)) if eps is None else np.broadcast_to(eps, (N, robot.n_errors))
+    W = constant(robot.base) @ error_transform(eps[:, 0:6])
+    out = [W]
+    for i, joint in enumerate(robot.joints):
+        A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, q[:, i]) @ constant(joint.post)
+        W = W @ A @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)])
+        out.append(W)
+    out.append(W @ constant(robot.tool))
+    return out
+
+
+def tool_pose(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
+    """World pose of the tool frame, (N, 4, 4)."""
+    return frames(robot, q, eps)[-1]
+
+
+def target_positions(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
+    """World positions of every target, (N, n_targets, 3) in target-file order."""
+    T = tool_pose(robot, q, eps)
+    t = np.array(list(robot.targets.values()))  # (nt, 3)
+    return np.einsum("nij,kj->nki", T[:, :3, :3], t) + T[:, None, :3, 3]

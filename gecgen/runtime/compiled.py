@@ -1,0 +1,196 @@
+"""Load the generated code of a robot and error model, and call it on many poses at once.
+
+The C source is built once per content hash with the system compiler into a cache folder
+(`$GECGEN_CACHE`, default `~/.cache/gecgen`) and loaded with ctypes. Without a C compiler the
+same functions come from the generated CasADi module, and a warning says so.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gecgen.emit import render
+from gecgen.model.errors import ErrorModel
+from gecgen.model.robot import Robot
+
+CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("GECGEN_CACHE", Path.home() / ".cache" / "gecgen"))
+
+
+def compiler() -> str | None:
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+
+
+def build_shared_library(files: dict[str, str], name: str) -> Path:
+    """Compile NAME.c into a shared library in the cache (once per content hash)."""
+    digest = hashlib.sha256((files[f"{name}.c"] + files[f"{name}.h"] + " ".join(CFLAGS)).encode()).hexdigest()[:20]
+    lib = cache_dir() / f"{name}-{digest}.so"
+    if lib.exists():
+        return lib
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for fname in (f"{name}.c", f"{name}.h"):
+            Path(tmp, fname).write_text(files[fname])
+        out = Path(tmp) / "lib.so"
+        run = subprocess.run([compiler(), *CFLAGS, f"{name}.c", "-o", str(out), "-lm"], cwd=tmp,
+                             capture_output=True, text=True)
+        if run.returncode != 0:
+            raise RuntimeError(f"compiling the generated C for {name} failed: {run.stderr.strip()}")
+        part = lib.with_suffix(f".{os.getpid()}.part")
+        shutil.copy(out, part)
+        part.replace(lib)  # atomic: parallel processes never load a half-written library
+    return lib
+
+
+def _ptr(a: np.ndarray | None):
+    return None if a is None else a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+@dataclass
+class Dims:
+    nq: int
+    nt: int
+    ne: int
+    nc: int
+    naux: int
+
+
+class CompiledModel:
+    """Batch entry points over the generated code of one robot and error model.
+
+    Shapes: q (N, nq), w (N, 6), aux (N, naux), c (nc,), eps (N, ne). Returned target arrays
+    are (N, nt, 3); Jacobians (N, 3 nt, ne) and (N, 3 nt, nc).
+    """
+
+    def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
+        self.robot, self.model = robot, model
+        self.files = render(robot, model)
+        self.dims = Dims(robot.n, len(robot.targets), robot.n_errors, len(model.coefficients), len(model.aux))
+        if backend == "auto":
+            backend = "c" if compiler() else "casadi"
+            if backend == "casadi":
+                warnings.warn("no C compiler found (set CC): using the CasADi form of the generated code, "
+                              "which is slower", stacklevel=2)
+        self.backend = backend
+        if backend == "c":
+            self._lib = ctypes.CDLL(str(build_shared_library(self.files, robot.name)))
+        elif backend == "casadi":
+            self._ca = load_casadi_module(self.files, robot.name).functions()
+        else:
+            raise ValueError(f"unknown backend {backend!r}; use auto, c or casadi")
+
+    # -- argument handling -------------------------------------------------------------
+    def _poses(self, q, w=None, aux=None):
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
+        N = q.shape[0]
+        w = np.zeros((N, 6)) if w is None else np.ascontiguousarray(np.broadcast_to(np.asarray(w, float), (N, 6)))
+        if self.dims.naux:
+            if aux is None:
+                raise ValueError(f"the error model uses auxiliary signals {list(self.model.aux)}: pass aux values")
+            aux = np.ascontiguousarray(np.broadcast_to(np.asarray(aux, float), (N, self.dims.naux)))
+        else:
+            aux = None
+        return q, w, aux, N
+
+    def _fn(self, name):
+        return getattr(self._lib, f"{self.robot.name}_{name}")
+
+    def _casadi(self, name, N, *columns):
+        """Evaluate a CasADi function pose by pose (columns: per-pose arrays, or shared arrays)."""
+        f = self._ca[name]
+        outs = []
+        for i in range(N):
+            args = [a[i] if (a is not None and a.ndim == 2) else (a if a is not None else np.zeros(0)) for a in columns]
+            res = f(*args)
+            res = res if isinstance(res, (list, tuple)) else [res]
+            outs.append([np.asarray(r).ravel() for r in res])
+        return [np.array([o[k] for o in outs]) for k in range(len(outs[0]))] if outs else []
+
+    # -- entry points ---------------------------------------------------------------------
+    def model_targets(self, q, w, aux, c, with_H: bool = False):
+        """Modelled target positions (N, nt, 3) at eps(c), and H_e (N, 3nt, nc) if asked."""
+        q, w, aux, N = self._poses(q, w, aux)
+        c = np.ascontiguousarray(c, float)
+        d = self.dims
+        if self.backend == "casadi":
+            (p,) = self._casadi("model", N, q, w, aux, c)
+            if not with_H:
+                return p.reshape(N, d.nt, 3)
+            (eps,) = self._casadi("eps", N, q, w, aux, c)
+            (H,) = self._casadi("H_e", N, q, w, aux, eps)
+            return p.reshape(N, d.nt, 3), H.reshape(N, 3 * d.nt, d.nc)
+        p = np.empty((N, d.nt, 3))
+        H = np.empty((N, 3 * d.nt, d.nc)) if with_H else None
+        self._fn("model_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), _ptr(p), _ptr(H))
+        return (p, H) if with_H else p
+
+    def J_e(self, q, eps):
+        """Target positions (N, nt, 3) and J_e (N, 3nt, ne) at per-pose errors eps."""
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
+        N, d = q.shape[0], self.dims
+        eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, float), (N, d.ne)))
+        if self.backend == "casadi":
+            p, J = self._casadi("J_e", N, q, eps)
+            return p.reshape(N, d.nt, 3), J.reshape(N, 3 * d.nt, d.ne)
+        p, J = np.empty((N, d.nt, 3)), np.empty((N, 3 * d.nt, d.ne))
+        self._fn("J_e_batch")(ctypes.c_int(N), _ptr(q), _ptr(eps), _ptr(p), _ptr(J))
+        return p, J
+
+    def nominal_targets(self, q):
+        """Target positions (N, nt, 3) of the nominal model."""
+        return self.J_e(q, np.zeros(self.dims.ne))[0]
+
+    def eps(self, q, w, aux, c):
+        """Generalized errors (N, ne) at each pose for coefficients c."""
+        q, w, aux, N = self._poses(q, w, aux)
+        c = np.ascontiguousarray(c, float)
+        if self.backend == "casadi":
+            return self._casadi("eps", N, q, w, aux, c)[0].reshape(N, self.dims.ne)
+        out = np.empty((N, self.dims.ne))
+        f = self._fn("eps")
+        for i in range(N):
+            f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(c), _ptr(out[i]))
+        return out
+
+    def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11):
+        """Corrected joint commands (N, nq) and status codes (N,) (0 ok, 1 not converged,
+        2 singular, 3 outside the joint limits)."""
+        q, w, aux, N = self._poses(q_cmd, w, aux)
+        c = np.ascontiguousarray(c, float)
+        if self.backend == "casadi":
+            raise RuntimeError("compensation runs in the generated C; install a C compiler (or set CC)")
+        out, status = np.empty_like(q), np.empty(N, dtype=np.intc)
+        self._fn("compensate_batch").restype = ctypes.c_int
+        self._fn("compensate_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), ctypes.c_int(max_iter),
+                                     ctypes.c_double(tol), _ptr(out),
+                                     status.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+        return out, status
+
+
+def load_casadi_module(files: dict[str, str], name: str):
+    """Import the generated CasADi module from its text (written to the cache first)."""
+    text = files[f"{name}_casadi.py"]
+    digest = hashlib.sha256(text.encode()).hexdigest()[:20]
+    path = cache_dir() / f"{name}_casadi_{digest}.py"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.exists():
+        path.write_text(text)
+    spec = importlib.util.spec_from_file_location(f"gecgen_generated_{name}_{digest}", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

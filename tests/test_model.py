@@ -1,0 +1,108 @@
+"""Robot and error-model files: contract values, pinned kinematics, and refusal of bad input."""
+import numpy as np
+import pytest
+from conftest import ROBOTS
+
+from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model.kinematics import tool_pose
+
+
+def test_pps_home_pose_and_prismatic_axes():
+    robot = load_robot(ROBOTS / "pps.yaml")
+    T = tool_pose(robot, np.zeros(6))[0]
+    np.testing.assert_allclose(T[:3, :3], np.eye(3), atol=1e-12)  # tool axes parallel to world axes
+    np.testing.assert_allclose(T[:3, 3], [0, 0.60, 0.80], atol=1e-12)
+    for k in range(3):  # joints 1-3 move the tool along world +X, +Y, +Z
+        q = np.zeros(6)
+        q[k] = 0.123
+        np.testing.assert_allclose(tool_pose(robot, q)[0][:3, 3] - T[:3, 3], 0.123 * np.eye(3)[k], atol=1e-12)
+    assert robot.points["isocenter"] == (0.0, 0.80, 0.40)
+
+
+def test_industrial6r_stretched_pose():
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    T = tool_pose(robot, np.radians([0, -90, -90, 0, 0, 0]))[0]
+    np.testing.assert_allclose(T[:3, 3], [2.715, 0, 0.634], atol=1e-12)
+    np.testing.assert_allclose(T[:3, 2], [1, 0, 0], atol=1e-12)
+
+
+def test_puma560_matches_robotics_toolbox_dh():
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    T = tool_pose(robot, np.zeros(6))[0]  # toolbox: p560.fkine(qz) has t = [0.4521, -0.1500, 0.4318]
+    np.testing.assert_allclose(T[:3, 3], [0.4521, -0.15005, 0.4318], atol=1e-12)
+    assert [round(np.degrees(j.upper)) for j in robot.joints] == [160, 225, 45, 170, 100, 266]
+
+
+def write(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+GOOD = """name: r2
+angle_unit: deg
+joints:
+  - {type: R, theta: 0, d: 0.1, a: 0.5, alpha: 0, limits: [-90, 90]}
+  - {type: P, theta: 0, d: 0, a: 0.2, alpha: 90, limits: [0, 0.3]}
+targets: {t: [0, 0, 0.1]}
+"""
+
+
+@pytest.mark.parametrize("text, expect", [
+    (GOOD.replace("targets: {t: [0, 0, 0.1]}\n", ""), "missing key 'targets'"),
+    (GOOD.replace("type: P", "type: Q"), "unknown joint type 'Q'"),
+    (GOOD.replace("a: 0.5", "a: long"), "joints[0].a: expected a number"),
+    (GOOD.replace("limits: [0, 0.3]", "limits: [0.3, 0]"), "lower limit"),
+    (GOOD.replace("angle_unit: deg", "angle_unit: grad"), "angle_unit"),
+    (GOOD + "colour: red\n", "unknown key 'colour'"),
+    (GOOD.replace("{t: [0, 0, 0.1]}", "{t: [0, 0]}"), "targets.t"),
+])
+def test_malformed_robot_files_are_refused_with_one_line(tmp_path, text, expect):
+    path = write(tmp_path, "r2.yaml", text)
+    with pytest.raises(ModelError) as err:
+        load_robot(path)
+    message = str(err.value)
+    assert expect in message and str(path) in message and "\n" not in message
+
+
+@pytest.mark.parametrize("terms, expect", [
+    ('["__import__(\'os\').system(\'true\')"]', "is not allowed"),
+    ('["q3"]', "unknown variable 'q3'"),
+    ('["temp_c"]', "unknown variable 'temp_c'"),
+    ('["q1 +"]', "not a valid expression"),
+    ('["q1**400"]', "exponent"),
+    ('["q1", "q1"]', "repeats"),
+    ('["2"]', "constant"),
+    ('["q1.real"]', "is not allowed"),
+    ('["poly(q1)"]', "poly takes"),
+    ('["sin(poly(q1, 2))"]', "must stand alone"),
+])
+def test_bad_terms_are_refused(tmp_path, terms, expect):
+    robot = load_robot(write(tmp_path, "r2.yaml", GOOD))
+    path = write(tmp_path, "r2.errors.yaml", f"frames:\n  1:\n    ey: {terms}\n")
+    with pytest.raises(ModelError) as err:
+        load_error_model(path, robot)
+    message = str(err.value)
+    assert expect in message and "frames.1.ey" in message and str(path) in message and "\n" not in message
+
+
+def test_term_language(tmp_path):
+    robot = load_robot(write(tmp_path, "r2.yaml", GOOD))
+    path = write(tmp_path, "e.yaml", 'aux: [temp_c]\ndefault: ["1"]\nframes:\n  1: ["1", "poly(q1, 3)"]\n'
+                                     '  2:\n    ey: ["1", "fy", "fy*q2**3", "fourier(q2, 0.45, 2)", "temp_c", "cos(q1 + q2)"]\n')
+    model = load_error_model(path, robot)
+    texts = [t.text for t in model.terms[6 * 2 + 1]]
+    assert texts[:3] == ["1", "fy", "fy*q2**3"] and len(texts) == 3 + 4 + 2
+    assert [t.text for t in model.terms[6]] == ["1", "q1", "q1**2", "q1**3"]
+    assert model.aux == ("temp_c",)
+    assert len(model.coefficients) == 6 + 6 * 4 + 5 + 9
+
+
+def test_shipped_default_models(shipped):
+    robot, model = shipped
+    first = [t.text for t in model.terms[6]]
+    if robot.name == "puma560":
+        assert all([t.text for t in ts] == ["1"] for ts in model.terms)
+    else:
+        assert first == ["1", "q1", "q1**2", "fx", "fy", "fz", "mx", "my", "mz"]
+        assert all([t.text for t in ts] == ["1"] for ts in model.terms[:6])
