@@ -32,9 +32,106 @@ def cmd_generate(args) -> dict:
             "n_params": len(model.coefficients), "n_errors": robot.n_errors}
 
 
+def _progress(enabled: bool):
+    """A rich status line for long steps on a terminal; silent under --json or when piped."""
+    from contextlib import nullcontext
+
+    if not enabled or not sys.stderr.isatty():
+        return nullcontext(None)
+    from rich.console import Console
+
+    return Console(stderr=True).status("working")
+
+
+def _identify_inputs(args):
+    from gecgen.model.measurements import read_measurements
+    from gecgen.runtime.compiled import CompiledModel
+
+    robot = load_robot(args.robot)
+    data = read_measurements(args.data, robot)
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    return robot, model, data, CompiledModel(robot, model)
+
+
+def cmd_identify(args) -> dict:
+    from gecgen.runtime import calibration
+    from gecgen.runtime.identify import identify
+
+    robot, model, data, cm = _identify_inputs(args)
+    with _progress(not args.json) as status:
+        def progress(it, rms_mm):
+            if status:
+                status.update(f"Gauss-Newton iteration {it}: linearised residual {rms_mm:.4f} mm rms")
+
+        fit = identify(cm, data, registration_mode=args.register, progress=progress)
+    calib = calibration.from_fit(robot, model, fit)
+    out = Path(args.output or f"{robot.name}.calib.json")
+    calibration.save(calib, out)
+    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
+              "n_points": len(data.xyz), **calib.report, "registration": fit.registration.to_dict()}
+    return result
+
+
+def cmd_evaluate(args) -> dict:
+    from gecgen.model.measurements import read_measurements
+    from gecgen.runtime import calibration
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.identify import position_errors, summary
+
+    calib = calibration.load(args.calibration)
+    data = read_measurements(args.data, calib.robot)
+    cm = CompiledModel(calib.robot, calib.model)
+    y = calib.registration.to_world(data.xyz)
+    return {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(y),
+            "before": summary(position_errors(cm, data, y, None)),
+            "after": summary(position_errors(cm, data, y, calib.c))}
+
+
+def cmd_compensate(args) -> dict:
+    import numpy as np
+
+    from gecgen.model.measurements import read_commands, write_commands
+    from gecgen.runtime import calibration
+    from gecgen.runtime.compiled import CompiledModel
+
+    calib = calibration.load(args.calibration)
+    cmds = read_commands(args.poses, calib.robot, calib.model.aux)
+    cm = CompiledModel(calib.robot, calib.model)
+    q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
+    failed = np.nonzero((status == 1) | (status == 2))[0]
+    if len(failed):
+        raise RuntimeError(f"{args.poses}: row {failed[0] + 2}: the correction did not converge "
+                           f"({len(failed)} rows); the command may be near a singularity")
+    write_commands(args.output, calib.robot, cmds, q)
+    outside = [int(k) + 2 for k in np.nonzero(status == 3)[0]]
+    if outside:
+        print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
+              f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
+    dq = q - cmds.q
+    return {"robot": calib.robot.name, "output": str(args.output), "n_poses": len(q), "outside_limits_rows": outside,
+            "max_correction": {name: float(np.abs(dq[:, j]).max()) for j, name in enumerate(calib.robot.joint_names)}}
+
+
+def cmd_redundancy(args) -> dict:
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.identify import redundancy
+
+    data = None
+    if args.data:
+        from gecgen.model.measurements import read_measurements
+
+        data = read_measurements(args.data, load_robot(args.robot))
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
+    result = redundancy(CompiledModel(robot, model), data).to_dict()
+    return {"robot": robot.name, "data": args.data, **result}
+
+
 def _print_human(result: dict):
     for key, value in result.items():
-        print(f"{key}: {value}")
+        if key == "eliminated":
+            print(f"eliminated: {len(value)} (use --json for the list with what each merged into)")
+        elif key not in ("identifiable",):
+            print(f"{key}: {value}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +148,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("robot")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("-o", "--output", help="output folder (default: generated/NAME)")
+
+    p = command("identify", cmd_identify, "fit the error model to measured data and write a calibration")
+    p.add_argument("robot")
+    p.add_argument("data", help="measurement CSV (CONTRACTS.md section 3)")
+    p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+    p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
+    p.add_argument("--register", choices=["auto", "always", "never"], default="auto",
+                   help="register the measurement frame onto the robot world first (auto: when far apart)")
+
+    p = command("evaluate", cmd_evaluate, "position errors of new data before and after the calibration")
+    p.add_argument("calibration")
+    p.add_argument("data")
+
+    p = command("compensate", cmd_compensate, "corrected joint commands for nominal commands")
+    p.add_argument("calibration")
+    p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--max-iter", type=int, default=50)
+
+    p = command("redundancy", cmd_redundancy, "which coefficients are eliminated and what they merge into")
+    p.add_argument("robot")
+    p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
+    p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     return parser
 
 
@@ -58,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         result = args.fn(args)
-    except (ModelError, FileNotFoundError) as exc:
+    except (ModelError, FileNotFoundError, ValueError) as exc:
         print(f"gecgen {args.command}: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:

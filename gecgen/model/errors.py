@@ -137,6 +137,8 @@ class _TermParser:
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
             return sp.Integer(node.value) if isinstance(node.value, int) else sp.Rational(repr(node.value))
         if isinstance(node, ast.Name):
+            if node.id == "pi":
+                return sp.pi
             if node.id not in self.symbols:
                 self.fail(text, f"unknown variable '{node.id}'; known: {', '.join(self.symbols)} "
                                 f"(declare a data column under 'aux:')")
@@ -173,7 +175,7 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
     return names
 
 
-RESERVED = {"q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
+RESERVED = {"pi", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
 
 
 def is_aux_name(name: str) -> bool:

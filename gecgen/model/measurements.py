@@ -160,3 +160,61 @@ def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrenc
             out.writerow([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
                           *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
                           targets[data.target[r]], *map(repr, data.xyz[r].tolist())])
+
+
+@dataclass(frozen=True)
+class Commands:
+    """Joint commands to compensate: q (P, n), w (P, 6), aux (P, len(aux_names)), and the file's
+    header and rows kept verbatim so the output repeats every other column unchanged."""
+
+    q: np.ndarray
+    w: np.ndarray
+    aux: np.ndarray
+    aux_names: tuple[str, ...]
+    header: list[str]
+    rows: list[list[str]]
+
+
+def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
+    """A CSV of nominal joint commands q1..qn, optional wrench and the aux columns the model uses."""
+    path = Path(path)
+    where = str(path)
+    require(path.is_file(), f"{where}: no such file of joint commands")
+    with path.open(newline="") as fh:
+        reader = csv.reader(fh)
+        header = [h.strip() for h in next(reader, [])]
+        rows = list(reader)
+    qcols = [f"q{i + 1}" for i in range(robot.n)]
+    for col in (*qcols, *aux_names):
+        require(col in header, f"{where}: row 1: missing column '{col}'")
+    require(rows, f"{where}: no data rows after the header")
+    idx = {h: k for k, h in enumerate(header)}
+    values = np.zeros((len(rows), len(header)))
+    for k, row in enumerate(rows):
+        require(len(row) == len(header), f"{where}: row {k + 2}: {len(row)} fields, the header has {len(header)}")
+        for col in (*qcols, *[c for c in WRENCH if c in idx], *aux_names):
+            try:
+                v = float(row[idx[col]])
+            except ValueError:
+                raise ModelError(f"{where}: row {k + 2}, column '{col}': {row[idx[col]]!r} is not a number") from None
+            require(math.isfinite(v), f"{where}: row {k + 2}, column '{col}': not finite")
+            values[k, idx[col]] = v
+    w = np.zeros((len(rows), 6))
+    for j, c in enumerate(WRENCH):
+        if c in idx:
+            w[:, j] = values[:, idx[c]]
+    return Commands(values[:, [idx[c] for c in qcols]], w, values[:, [idx[a] for a in aux_names]], aux_names,
+                    header, rows)
+
+
+def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):
+    """The input rows with q1..qn replaced by q (P, n), full precision."""
+    idx = {h: k for k, h in enumerate(commands.header)}
+    with Path(path).open("w", newline="") as fh:
+        out = csv.writer(fh, lineterminator="\n")
+        out.writerow(commands.header)
+        for row, qi in zip(commands.rows, q):
+            row = list(row)
+            for j in range(robot.n):
+                row[idx[f"q{j + 1}"]] = repr(float(qi[j]))
+            out.writerow(row)

@@ -1,0 +1,193 @@
+"""Identification: iterated least squares on H_e (the seed paper's Eq. 8, done carefully).
+
+Gauss-Newton on the nonlinear chain: at the current coefficients c the generated code gives the
+modelled targets and H_e (J_e at eps(c) times the basis terms); the step solves the column-scaled
+least-squares problem by Householder QR. Rows are streamed through the QR in blocks of poses, so
+memory stays bounded by the block size whatever the number of poses (the R factor of [H | r] is
+all that is kept). Redundant and unexcited coefficients are found first (`redundancy`) and held
+at zero.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from gecgen.model.measurements import Measurements
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.redundancy import Redundancy, analyze, generic_design
+from gecgen.runtime.registration import IDENTITY, Registration, register
+
+BLOCK_POSES = 2000
+#: condition number of the column-scaled kept H_e above which the fit is reported ill-posed
+ILL_CONDITIONED = 1e6
+
+
+@dataclass(frozen=True)
+class Fit:
+    """Result of `identify`. c (nc,) all coefficients (eliminated ones 0); std (nc,) with NaN for
+    eliminated; cov (k, k) over `redundancy.kept`; sigma_m the residual standard deviation per
+    coordinate (m); metrics in mm."""
+
+    c: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+    redundancy: Redundancy
+    registration: Registration
+    sigma_m: float
+    condition_number: float
+    observability_index: float
+    iterations: int
+    converged: bool
+    before: dict
+    train: dict
+    warnings: tuple[str, ...]
+
+
+def _poses_inputs(cm: CompiledModel, data: Measurements):
+    return data.q, data.w, data.aux_columns(cm.model.aux)
+
+
+def _blocks(data: Measurements, block: int):
+    """Row indices grouped by blocks of consecutive poses."""
+    order = np.argsort(data.pose, kind="stable")
+    bounds = np.searchsorted(data.pose[order], np.arange(0, data.n_poses + block, block))
+    for b in range(len(bounds) - 1):
+        if bounds[b] < bounds[b + 1]:
+            yield b * block, min((b + 1) * block, data.n_poses), order[bounds[b]:bounds[b + 1]]
+
+
+def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES):
+    """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c."""
+    q, w, aux = _poses_inputs(cm, data)
+    nt = cm.dims.nt
+    for start, stop, rows in _blocks(data, block):
+        p, H = cm.model_targets(q[start:stop], w[start:stop], aux[start:stop], c, with_H=True)
+        local = data.pose[rows] - start
+        Hr = H.reshape(stop - start, nt, 3, -1)[local, data.target[rows]]
+        yield Hr.reshape(-1, H.shape[-1]), (y[rows] - p[local, data.target[rows]]).ravel()
+
+
+def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray | None = None):
+    """R factor of [H | r] over streamed blocks, (k+1, k+1), and the number of rows m."""
+    R, m = None, 0
+    for H, r in blocks:
+        A = H if columns is None else H[:, columns]
+        if scale is not None:
+            A = A / scale
+        M = np.column_stack([A, r]) if R is None else np.vstack([R, np.column_stack([A, r])])
+        R = np.linalg.qr(M, mode="r")
+        m += len(r)
+    k1 = R.shape[1]
+    if R.shape[0] < k1:  # fewer rows than unknowns so far: pad so the shape is always square
+        R = np.vstack([R, np.zeros((k1 - R.shape[0], k1))])
+    return R, m
+
+
+def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> np.ndarray:
+    """|measured - modelled| per measured point (R,), m; c=None is the nominal model."""
+    q, w, aux = _poses_inputs(cm, data)
+    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)
+    return np.linalg.norm(y - p[data.pose, data.target], axis=1)
+
+
+def summary(errors_m: np.ndarray) -> dict:
+    """{rms_mm, max_mm} of point position errors given in m."""
+    return {"rms_mm": float(1e3 * np.sqrt(np.mean(errors_m ** 2))), "max_mm": float(1e3 * errors_m.max())}
+
+
+def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> np.ndarray:
+    """R factor of H_e at generic poses, rows of the measured targets only: the data-free design."""
+    nc, ntm = cm.dims.nc, len(targets)
+    n_poses = max(40, int(np.ceil(3 * nc / (3 * ntm))))
+    q, w, aux = generic_design(cm.robot, cm.dims.naux, n_poses, np.random.default_rng(seed))
+    _, H = cm.model_targets(q, w, aux, np.zeros(nc), with_H=True)
+    rows = (3 * targets[:, None] + np.arange(3)).ravel()
+    A = H[:, rows, :].reshape(-1, nc)
+    return np.linalg.qr(A, mode="r")
+
+
+def redundancy(cm: CompiledModel, data: Measurements | None = None, registration_mode: str = "auto") -> Redundancy:
+    """Structural analysis for the targets the data measures (all robot targets without data)."""
+    if data is None:
+        return analyze(structural_matrix(cm, np.arange(cm.dims.nt)), None, cm.robot, cm.model, cm.dims.nt)
+    targets = np.unique(data.target)
+    y = _registered(cm, data, registration_mode).to_world(data.xyz)
+    R0, _ = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)))
+    return analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets))
+
+
+def _registered(cm: CompiledModel, data: Measurements, mode: str) -> Registration:
+    p_nom = cm.nominal_targets(data.q)[data.pose, data.target]
+    return register(p_nom, data.xyz, mode)
+
+
+def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
+             step_tol_m: float = 1e-12, progress=None) -> Fit:
+    """Fit the error model of `cm` to `data`.
+
+    Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms);
+    `progress(iteration, rms_mm)` is called after each step when given.
+    """
+    notes = []
+    registration = _registered(cm, data, registration_mode)
+    y = registration.to_world(data.xyz)
+    nc = cm.dims.nc
+    c = np.zeros(nc)
+    targets = np.unique(data.target)
+    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, c))
+    red = analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets))
+    kept = np.array(red.kept, int)
+    k = len(kept)
+    if m <= k:
+        raise ValueError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
+                         f"measure more poses or reduce the error model")
+    scale = np.linalg.norm(R0[:, kept], axis=0)
+    converged, it = False, 0
+    for it in range(1, max_iter + 1):
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+        z = R[:k, k]
+        c[kept] += solve_triangular(R[:k, :k], z) / scale
+        if progress:
+            progress(it, 1e3 * abs(R[k, k]) / np.sqrt(m))
+        if np.linalg.norm(z) / np.sqrt(m) < step_tol_m:
+            converged = True
+            break
+    if not converged:
+        notes.append(f"Gauss-Newton did not converge in {max_iter} iterations; the result is the last iterate")
+    R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+    Rk, rss = R[:k, :k], R[k, k] ** 2
+    sigma = float(np.sqrt(rss / (m - k)))
+    sv = np.linalg.svd(Rk, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    obs = float(np.exp(np.mean(np.log(np.maximum(sv, 1e-300)))) / np.sqrt(m))
+    Rinv = solve_triangular(Rk, np.eye(k))
+    cov = sigma ** 2 * (Rinv @ Rinv.T) / np.outer(scale, scale)
+    std = np.full(nc, np.nan)
+    std[kept] = np.sqrt(np.diag(cov))
+    if cond > ILL_CONDITIONED:
+        notes.append(f"ill-conditioned: condition number {cond:.3g} of the scaled H_e; some coefficients are "
+                     f"barely excited (see std), measure poses that move them or drop their terms")
+    if m - k < k:
+        notes.append(f"few measurements: {m} coordinates for {k} coefficients; uncertainties are large")
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return Fit(c=c, std=std, cov=cov, redundancy=red, registration=registration, sigma_m=sigma,
+               condition_number=cond, observability_index=obs, iterations=it, converged=converged,
+               before=summary(position_errors(cm, data, y, None)), train=summary(position_errors(cm, data, y, c)),
+               warnings=tuple(notes))
+
+
+def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarray:
+    """Standard deviation (m) of the predicted position of every target, (N, nt), from the
+    coefficient covariance: sqrt(trace(H_k cov H_k^T)) per target."""
+    kept = np.array(fit.redundancy.kept, int)
+    _, H = cm.model_targets(q, w, aux, fit.c, with_H=True)
+    Hk = H[:, :, kept]
+    var = np.einsum("nrk,kl,nrl->nr", Hk, fit.cov, Hk)
+    return np.sqrt(var.reshape(len(Hk), cm.dims.nt, 3).sum(-1))
+
+
+__all__ = ["Fit", "IDENTITY", "identify", "position_errors", "prediction_std", "redundancy", "summary"]

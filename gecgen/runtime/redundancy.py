@@ -1,0 +1,173 @@
+"""Redundancy analysis: which coefficients cannot be identified, and what each one merges into.
+
+Two kinds, both decided by an exact rank test on column-normalised `H_e` (greedy Gram-Schmidt in
+a fixed preference order, so ties are broken the same way every time):
+
+* structural - dependent at generic poses (random joints, wrench and aux within the limits), so
+  no data can ever separate it. The analytic rules (Meggiolaro and Dubowsky 2000) set the order:
+  for a revolute joint i, translation along and rotation about its axis at frame i-1 (for DH,
+  `ez` and `er` of frame i-1) act like the joint and frame i; for a prismatic joint, every
+  translation of frame i-1 and the rotation about the axis (`ex ey ez er`); with one measured
+  point the last frame's rotations act like its translations. These are eliminated first, so the
+  counts reproduce 4R + 2P + 6 (full pose) and 4R + 2P + 3 (one point); the same test also
+  catches the cross-redundancies polynomial terms add beyond the rules.
+* unexcited - independent at generic poses but dependent on the actual data (joints the data
+  never moves, a wrench that never changes).
+
+"Merged into" is the least-squares representation of the eliminated column by the kept ones: a
+value c of the eliminated coefficient is indistinguishable from adding factor * c to each.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gecgen.model.errors import ErrorModel
+from gecgen.model.kinematics import constant
+from gecgen.model.robot import ERROR_NAMES, Robot
+
+#: a normalised column whose part orthogonal to the kept ones is below this is dependent
+RANK_TOL = 1e-7
+#: merged-into entries contributing less than this (relative) are not listed
+MERGE_REPORT_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Eliminated:
+    param: str
+    index: int
+    reason: str  # "structural" or "unexcited"
+    detail: str
+    merged_into: tuple[tuple[str, float], ...] = ()
+
+    def to_dict(self) -> dict:
+        return {"param": self.param, "reason": self.reason, "detail": self.detail,
+                "merged_into": [{"param": p, "factor": f} for p, f in self.merged_into]}
+
+
+@dataclass(frozen=True)
+class Redundancy:
+    names: tuple[str, ...]
+    kept: tuple[int, ...]
+    eliminated: tuple[Eliminated, ...] = field(default_factory=tuple)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_identifiable(self) -> int:
+        return len(self.kept)
+
+    def to_dict(self) -> dict:
+        counts = {r: sum(e.reason == r for e in self.eliminated) for r in ("structural", "unexcited")}
+        return {"n_params": self.n_params, "n_identifiable": self.n_identifiable,
+                "n_structural": counts["structural"], "n_unexcited": counts["unexcited"],
+                "identifiable": [self.names[k] for k in self.kept],
+                "eliminated": [e.to_dict() for e in self.eliminated]}
+
+
+def rule_candidates(robot: Robot, n_targets_measured: int) -> dict[int, str]:
+    """Generalized errors (eps index) the analytic rules eliminate, with the rule in words."""
+    out: dict[int, str] = {}
+    for i, joint in enumerate(robot.joints, start=1):
+        axis = constant(joint.pre)[:3, :3] @ np.array([float(a) for a in joint.axis])  # in frame i-1
+        k = int(np.argmax(np.abs(axis)))
+        if abs(abs(axis[k]) - 1) > 1e-9:
+            continue  # axis not along a frame axis: no single-parameter rule, the rank test decides
+        rot = {0: "ep", 1: "es", 2: "er"}[k]
+        if joint.kind == "R":
+            errs = [f"e{'xyz'[k]}", rot]
+            why = f"revolute joint {i} ({joint.name}): translation along and rotation about its axis at frame {i - 1} act like the joint and frame {i}"
+        else:
+            errs = ["ex", "ey", "ez", rot]
+            why = f"prismatic joint {i} ({joint.name}): translations of frame {i - 1} and rotation about its axis act like frame {i}"
+        for e in errs:
+            out[6 * (i - 1) + ERROR_NAMES.index(e)] = why
+    if n_targets_measured == 1:
+        for e in ("es", "er", "ep"):
+            out.setdefault(6 * robot.n + ERROR_NAMES.index(e),
+                           f"one measured point: rotations of the last frame ({robot.n}) act like its translations")
+    return out
+
+
+def preference_order(robot: Robot, model: ErrorModel, candidates: dict[int, str]) -> np.ndarray:
+    """Coefficient indices, most wanted first: rule-eliminated errors last; lower terms before higher."""
+    coefs = model.coefficients
+    position = {}
+    for e, terms in enumerate(model.terms):
+        for k, t in enumerate(terms):
+            position[(e, t.text)] = k
+    key = [(c.error in candidates, position[(c.error, c.term.text)], c.error) for c in coefs]
+    return np.array(sorted(range(len(coefs)), key=lambda j: key[j]))
+
+
+def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL) -> tuple[list[int], list[int]]:
+    """Greedy rank test on the columns of A (m x nc) in `order`: (kept, dependent) indices."""
+    norms = np.linalg.norm(A, axis=0)
+    Q = np.zeros((A.shape[0], 0))
+    kept, dependent = [], []
+    for j in order:
+        if norms[j] == 0:
+            dependent.append(int(j))
+            continue
+        v = A[:, j] / norms[j]
+        for _ in range(2):  # twice is enough (Kahan-Parlett) for orthogonality to working precision
+            v = v - Q @ (Q.T @ v)
+        r = np.linalg.norm(v)
+        if r < tol:
+            dependent.append(int(j))
+        else:
+            kept.append(int(j))
+            Q = np.column_stack([Q, v / r])
+    return sorted(kept), dependent
+
+
+def merged_into(A: np.ndarray, kept: list[int], dependent: list[int], names) -> dict[int, tuple]:
+    """For each dependent column: ((kept name, factor), ...) largest contribution first."""
+    if not dependent or not kept:
+        return {j: () for j in dependent}
+    X = np.linalg.lstsq(A[:, kept], A[:, dependent], rcond=None)[0]
+    norms = np.linalg.norm(A, axis=0)
+    out = {}
+    for col, j in enumerate(dependent):
+        share = np.abs(X[:, col]) * norms[kept] / max(norms[j], 1e-300)
+        idx = [i for i in np.argsort(-share) if share[i] > MERGE_REPORT_TOL][:8]
+        out[j] = tuple((names[kept[i]], float(X[i, col])) for i in idx)
+    return out
+
+
+def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Generator):
+    """Random poses within the limits (continuous joints within +-pi), wrench and aux values."""
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    q = rng.uniform(lo, hi, (n_poses, robot.n))
+    w = np.column_stack([rng.normal(0, 100, (n_poses, 3)), rng.normal(0, 20, (n_poses, 3))])
+    return q, w, rng.normal(0, 1, (n_poses, n_aux))
+
+
+def analyze(A_generic: np.ndarray, A_data: np.ndarray | None, robot: Robot, model: ErrorModel,
+            n_targets_measured: int) -> Redundancy:
+    """Structural analysis on A_generic (H_e rows at generic poses, or their R factor) and, with
+    A_data, what the data leaves unexcited. Both are m x nc with the model's coefficient columns."""
+    names = tuple(model.coefficient_names(robot))
+    candidates = rule_candidates(robot, n_targets_measured)
+    order = preference_order(robot, model, candidates)
+    kept_g, dep_g = select_independent(A_generic, order)
+    eliminated = {}
+    merges = merged_into(A_generic, kept_g, dep_g, names)
+    coefs = model.coefficients
+    for j in dep_g:
+        detail = candidates.get(coefs[j].error, "depends on other terms of the model at every pose")
+        eliminated[j] = Eliminated(names[j], j, "structural", detail, merges[j])
+    kept = kept_g
+    if A_data is not None:
+        kept, dep_d = select_independent(A_data, order)
+        new = [j for j in dep_d if j not in eliminated]
+        merges = merged_into(A_data, kept, new, names)
+        for j in new:
+            why = ("the data never excites it (zero column)" if not np.any(A_data[:, j])
+                   else "the data cannot separate it from the kept parameters")
+            eliminated[j] = Eliminated(names[j], j, "unexcited", why, merges[j])
+    return Redundancy(names, tuple(kept), tuple(eliminated[j] for j in sorted(eliminated)))

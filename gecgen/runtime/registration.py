@@ -1,0 +1,69 @@
+"""Registration: the rigid transform from the robot's world frame to the measurement frame.
+
+A laser tracker or motion-capture system reports points in its own frame, y = R p + t with p in
+the robot world. The closed form (Kabsch/Umeyama without scale) on the nominal model brings the
+data into the robot world; what is left is small and belongs to frame 0's generalized errors.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: beyond these the measurement frame counts as "far" and is registered before the fit
+FAR_ANGLE_RAD = np.radians(1.0)
+FAR_DISTANCE_M = 0.02
+
+
+@dataclass(frozen=True)
+class Registration:
+    """y_measured = R @ p_world + t; `applied` says whether the data was mapped through it."""
+
+    R: np.ndarray  # (3, 3)
+    t: np.ndarray  # (3,) m
+    applied: bool
+
+    def to_world(self, y: np.ndarray) -> np.ndarray:
+        """Measured points (..., 3) in the robot world frame."""
+        return (y - self.t) @ self.R if self.applied else y
+
+    @property
+    def angle_rad(self) -> float:
+        return float(np.arccos(np.clip((np.trace(self.R) - 1) / 2, -1, 1)))
+
+    def to_dict(self) -> dict:
+        return {"rotation": self.R.tolist(), "translation": self.t.tolist(), "applied": self.applied,
+                "angle_deg": float(np.degrees(self.angle_rad)), "distance_mm": float(1e3 * np.linalg.norm(self.t))}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Registration":
+        return cls(np.array(d["rotation"]), np.array(d["translation"]), bool(d["applied"]))
+
+
+IDENTITY = Registration(np.eye(3), np.zeros(3), False)
+
+
+def kabsch(p: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R, t minimising |y - (R p + t)| over points p, y (N, 3)."""
+    pc, yc = p.mean(0), y.mean(0)
+    U, _, Vt = np.linalg.svd((y - yc).T @ (p - pc))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    return R, yc - R @ pc
+
+
+def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto") -> Registration:
+    """Registration of measured points y onto nominal model points (N, 3).
+
+    mode: "auto" applies it when the frames are far apart (over 1 degree or 20 mm), "always",
+    or "never" (the data is already in the robot world frame).
+    """
+    if mode not in ("auto", "always", "never"):
+        raise ValueError(f"registration mode {mode!r}: use auto, always or never")
+    if len(y) < 3 or np.linalg.matrix_rank(y - y.mean(0), tol=1e-6) < 2:
+        if mode == "always":
+            raise ValueError("registration needs at least three non-collinear measured points")
+        return IDENTITY
+    R, t = kabsch(p_nominal, y)
+    far = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
+    return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)))
