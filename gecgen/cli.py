@@ -126,6 +126,36 @@ def cmd_redundancy(args) -> dict:
     return {"robot": robot.name, "data": args.data, **result}
 
 
+def cmd_diagnose(args) -> dict:
+    from gecgen.emit import generate
+    from gecgen.loop.diagnose import diagnose, write_error_model
+    from gecgen.model.measurements import read_measurements
+
+    robot = load_robot(args.robot)
+    data = read_measurements(args.data, robot)
+    val = read_measurements(args.val, robot) if args.val else None
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    with _progress(not args.json) as status:
+        def progress(round_no, rms_mm):
+            if status:
+                status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
+
+        diag = diagnose(robot, model, data, val, registration_mode=args.register, progress=progress)
+    out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
+    write_error_model(robot, diag.final.model, diag.effects, out)
+    generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
+    generate(robot, diag.final.model, generated)
+    result = {"robot": robot.name, "before": diag.before, "after": diag.after,
+              "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
+              "rounds": diag.history, "candidates_tested": diag.candidates_tested,
+              "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses"}
+    if args.report:
+        from gecgen.loop.report import write_report
+
+        result["report"] = str(write_report(diag, data, args.report, str(out)))
+    return result
+
+
 def _print_human(result: dict):
     for key, value in result.items():
         if key == "eliminated":
@@ -171,6 +201,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("robot")
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+
+    p = command("diagnose", cmd_diagnose, "trace the residual to missing effects, add them, refit, report")
+    p.add_argument("robot")
+    p.add_argument("data")
+    p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
+    p.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
+    p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
+    p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
+    p.add_argument("--report", help="folder for report.md and its plots")
+    p.add_argument("--register", choices=["auto", "always", "never"], default="auto")
     return parser
 
 

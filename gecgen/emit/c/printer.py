@@ -1,6 +1,8 @@
 """C99 printer: doubles everywhere, shortest round-trip literals, small powers as products."""
 from __future__ import annotations
 
+import math
+
 from sympy.printing.c import C99CodePrinter
 
 
@@ -11,6 +13,9 @@ class CPrinter(C99CodePrinter):
 
     def _print_Integer(self, expr):
         return f"{int(expr)}.0"
+
+    def _print_Pi(self, expr):
+        return repr(math.pi)  # M_PI is POSIX, not C99
 
     def _print_Rational(self, expr):
         return self._print_Float(expr)

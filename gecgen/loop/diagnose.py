@@ -1,0 +1,359 @@
+"""diagnose: find the structure left in the residual, trace it to the effect the model lacks,
+add it, regenerate, refit, and report before and after.
+
+Each round:
+1. Fit the current model (Gauss-Newton through the generated code).
+2. Screen every candidate effect: a generalized error e times a small group of new basis terms
+   in one variable (higher powers of a joint; Fourier pairs over a scan of periods; sin/cos of a
+   revolute joint, twice its angle, and of sums of parallel-axis joints; wrench or payload times
+   a joint; auxiliary signals). The new columns are J_e[:, e] * f(pose); their worth is the drop
+   in the residual sum of squares once the current model's columns are projected out, computed
+   for all candidates of an error at once with one matrix product.
+3. Decide on training data only: the best candidate must pass a chi-square test with a
+   Bonferroni correction for the number of candidates tried, and must lower the k-fold
+   cross-validated RMS (linearised at the current fit). The validation file, if any, is for the
+   report only; nothing is chosen on it, nor on the training fit alone.
+4. Candidates whose fitted effect is nearly the same vector as the winner's are reported as
+   indistinguishable on this data.
+5. Write the new error model, regenerate and compile its code, refit; repeat until nothing passes.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy import stats
+
+from gecgen.model.errors import ErrorModel, error_model_from_dict
+from gecgen.model.kinematics import constant, frames
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import Fit, identify, position_errors, rows_H_and_residual, summary
+
+#: family-wise false-alarm rate of one screening round
+ALPHA = 1e-3
+#: a candidate must lower the cross-validated RMS by at least this fraction
+MIN_CV_GAIN = 0.01
+FOLDS = 5
+MAX_ROUNDS = 8
+PERIODS = 40
+#: fitted effects this similar (cosine) are indistinguishable on the data
+SAME_EFFECT = 0.95
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A group of new terms, all in the variables `variables`, for one generalized error."""
+
+    family: str
+    variables: tuple[str, ...]
+    terms: tuple[str, ...]
+    values: np.ndarray  # (P, len(terms)) term values per pose
+
+
+@dataclass
+class Effect:
+    error: str
+    variables: list[str]
+    terms: list[str]
+    family: str
+    gain_mm: float  # cross-validated RMS before minus after adding it
+    p_value: float
+    coefficients: list[dict] = field(default_factory=list)
+    alternatives: list[dict] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"error": self.error, "variables": self.variables, "terms": self.terms, "family": self.family,
+                "gain_mm": self.gain_mm, "p_value": self.p_value, "coefficients": self.coefficients,
+                "indistinguishable": self.alternatives}
+
+
+def _range(v: np.ndarray) -> float:
+    return float(v.max() - v.min()) if len(v) else 0.0
+
+
+def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[int, ...]]:
+    """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow)."""
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    q = rng.uniform(lo, hi, (16, robot.n))
+    W = frames(robot, q)
+    axes = [W[i][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
+            for i, j in enumerate(robot.joints)]
+    groups, run = [], [0]
+    for i in range(1, robot.n):
+        both_r = robot.joints[i].kind == robot.joints[run[-1]].kind == "R"
+        if both_r and np.allclose(np.cross(axes[run[-1]], axes[i]), 0, atol=1e-9):
+            run.append(i)
+        else:
+            if len(run) > 1:
+                groups.append(tuple(run))
+            run = [i]
+    if len(run) > 1:
+        groups.append(tuple(run))
+    return groups
+
+
+def fourier_candidate(name: str, v: np.ndarray, period: float) -> Candidate:
+    """sin and cos of 2 pi v / period (period rounded to 4 significant digits, as written)."""
+    period = float(f"{period:.4g}")
+    a = 2 * np.pi * v / period
+    return Candidate("fourier", (name,), (f"sin(2*pi*{name}/{period:g})", f"cos(2*pi*{name}/{period:g})"),
+                     np.column_stack([np.sin(a), np.cos(a)]))
+
+
+def refine_period(best: Candidate, data: Measurements, screen_one) -> Candidate:
+    """A fine scan of periods around a Fourier winner of the coarse scan (one grid step each way)."""
+    name = best.variables[0]
+    v = data.q[:, int(name[1:]) - 1]
+    period = float(best.terms[0].split("/")[-1].rstrip(")"))
+    span = _range(v)
+    step = (2 * span / max(span / 60, 1e-12)) ** (1 / (PERIODS - 1))
+    fine = [fourier_candidate(name, v, p) for p in np.geomspace(period / step, period * step, 41)]
+    return max(fine, key=screen_one)
+
+
+def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
+    """Every candidate term group the data can support (variables that actually vary)."""
+    out: list[Candidate] = []
+    present = {t.text for ts in model.terms for t in ts}
+
+    def add(family, variables, terms, values):
+        out.append(Candidate(family, tuple(variables), tuple(terms), np.column_stack(values)))
+
+    moving = [i for i in range(robot.n) if _range(data.q[:, i]) > 1e-9]
+    for i in moving:
+        v, name, joint = data.q[:, i], f"q{i + 1}", robot.joints[i]
+        top = max([k for k in range(1, 9) if f"{name}**{k}" in present or (k == 1 and name in present)], default=0)
+        for k in (top + 1, top + 2):
+            add("polynomial", [name], [f"{name}**{k}" if k > 1 else name], [v ** k])
+        if joint.kind == "R":
+            add("trigonometric", [name], [f"sin({name})", f"cos({name})"], [np.sin(v), np.cos(v)])
+            add("trigonometric", [name], [f"sin(2*{name})", f"cos(2*{name})"], [np.sin(2 * v), np.cos(2 * v)])
+        span = _range(v)
+        if joint.kind == "P" or span < np.pi:
+            spacing = np.median(np.diff(np.unique(v))) if len(np.unique(v)) > 2 else span / 2
+            shortest = max(2.5 * spacing, span / 60)
+            for period in np.geomspace(shortest, 2 * span, PERIODS) if 2 * span > shortest else ():
+                out.append(fourier_candidate(name, v, period))
+    for group in parallel_joint_groups(robot, rng):
+        for a, b in zip(group, group[1:]):
+            names = [f"q{a + 1}", f"q{b + 1}"]
+            s = data.q[:, a] + data.q[:, b]
+            add("trigonometric", names, [f"sin({names[0]} + {names[1]})", f"cos({names[0]} + {names[1]})"],
+                [np.sin(s), np.cos(s)])
+    wrench = [k for k in range(6) if _range(data.w[:, k]) > 1e-9]
+    for k in wrench:
+        f, fn = data.w[:, k], WRENCH[k]
+        if fn not in present:
+            add("wrench", [fn], [fn], [f])
+        for i in moving:
+            name = f"q{i + 1}"
+            add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
+            add("wrench x joint", [fn, name], [f"{fn}*{name}**2"], [f * data.q[:, i] ** 2])
+    for k, a in enumerate(data.aux_names):
+        v = data.aux[:, k]
+        if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):
+            add("auxiliary", [a], [a], [v])
+            add("auxiliary", [a], [f"{a}**2"], [v ** 2])
+    return [c for c in out if not (set(c.terms) & present)]
+
+
+def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarray, sigma2: float,
+           cands: list[Candidate], errors: list[int]) -> list[tuple[float, int, int, np.ndarray]]:
+    """(drop in RSS, candidate index, error index, projected fitted effect (3R,)) for every pair.
+
+    J (3R, ne) is J_e at the current fit for the measured rows; rows_pose (3R,) the pose of each
+    row; resid (3R,) is orthogonal to the columns of Q (3R, k).
+    """
+    results = []
+    F = np.concatenate([c.values for c in cands], axis=1)[rows_pose]  # (3R, total columns)
+    sizes = [c.values.shape[1] for c in cands]
+    starts = np.cumsum([0] + sizes)
+    for e in errors:
+        X = J[:, e:e + 1] * F  # all candidate columns for error e
+        norms = np.linalg.norm(X, axis=0)
+        if not np.any(norms > 0):
+            continue
+        QtX = Q.T @ X
+        rX = resid @ X
+        for ci, c in enumerate(cands):
+            s = slice(starts[ci], starts[ci + 1])
+            Xs = X[:, s]
+            G = Xs.T @ Xs - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
+            scale = np.sqrt(np.maximum(np.diag(Xs.T @ Xs), 1e-300))
+            Gs = G / np.outer(scale, scale)
+            if np.linalg.eigvalsh(Gs).min() < 1e-8:
+                continue  # (nearly) inside the current model: nothing new to add
+            b = rX[s] / scale
+            beta = np.linalg.solve(Gs, b)
+            drop = float(b @ beta)
+            if drop > 9 * sigma2:  # cheap pre-filter; the real test follows
+                fitted = (Xs - Q @ QtX[:, s]) @ (beta / scale)
+                results.append((drop, ci, e, fitted))
+    results.sort(key=lambda t: -t[0])
+    return results
+
+
+def _folds(n_poses: int, rng: np.random.Generator) -> np.ndarray:
+    return rng.permutation(n_poses) % FOLDS
+
+
+def cv_rms(H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray) -> float:
+    """k-fold cross-validated RMS point error (m) of a linear correction H dc ~ r (3R rows)."""
+    sq = 0.0
+    for f in range(FOLDS):
+        test = fold[rows_pose] == f
+        scale = np.maximum(np.linalg.norm(H[~test], axis=0), 1e-300)
+        dc = np.linalg.lstsq(H[~test] / scale, r[~test], rcond=None)[0] / scale
+        sq += np.sum((r[test] - H[test] @ dc) ** 2)
+    return float(np.sqrt(sq / (len(r) / 3)))
+
+
+@dataclass
+class Round:
+    model: ErrorModel
+    cm: CompiledModel
+    fit: Fit
+
+
+def _fit(robot, model, data, registration_mode) -> Round:
+    cm = CompiledModel(robot, model)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # conditioning is reported in the final fit, not per round
+        fit = identify(cm, data, registration_mode=registration_mode)
+    return Round(model, cm, fit)
+
+
+def _with_terms(robot: Robot, model: ErrorModel, error: int, terms: tuple[str, ...], aux: tuple[str, ...]) -> ErrorModel:
+    spec = model.to_yaml_dict(robot)
+    frame, name = divmod(error, 6)
+    spec["frames"][frame][ERROR_NAMES[name]] += list(terms)
+    used_aux = sorted(set(spec.get("aux", [])) | {a for a in aux if any(a in t for t in terms)})
+    if used_aux:
+        spec["aux"] = used_aux
+    return error_model_from_dict(spec, robot, "<diagnose>", aux)
+
+
+def _linear_system(rnd: Round, data: Measurements, y: np.ndarray):
+    H, r = zip(*rows_H_and_residual(rnd.cm, data, y, rnd.fit.c))
+    return np.vstack(H)[:, list(rnd.fit.redundancy.kept)], np.concatenate(r)
+
+
+def _rows_pose(data: Measurements) -> np.ndarray:
+    order = np.argsort(data.pose, kind="stable")  # the row order rows_H_and_residual yields
+    return np.repeat(data.pose[order], 3), order
+
+
+@dataclass
+class Diagnosis:
+    robot: Robot
+    initial: Round
+    final: Round
+    effects: list[Effect]
+    rounds: int
+    candidates_tested: int
+    before: dict
+    after: dict
+    history: list[dict]
+
+
+def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
+             registration_mode: str = "auto", seed: int = 0, progress=None) -> Diagnosis:
+    """Run the loop; without `val`, a seeded fifth of the poses is held out for the report."""
+    rng = np.random.default_rng(seed)
+    if val is None:
+        held = rng.permutation(data.n_poses)
+        n_val = max(1, data.n_poses // 5)
+        val, data = data.subset(np.sort(held[:n_val])), data.subset(np.sort(held[n_val:]))
+    fold = _folds(data.n_poses, rng)
+    rnd = first = _fit(robot, model, data, registration_mode)
+    effects: list[Effect] = []
+    history, tested = [], 0
+    for round_no in range(1, MAX_ROUNDS + 1):
+        if progress:
+            progress(round_no, rnd.fit.train["rms_mm"])
+        y = rnd.fit.registration.to_world(data.xyz)
+        H, r = _linear_system(rnd, data, y)
+        rows_pose, order = _rows_pose(data)
+        Q = np.linalg.qr(H / np.linalg.norm(H, axis=0))[0]
+        m, k = len(r), H.shape[1]
+        sigma2 = float(r @ r) / (m - k)
+        cands = candidates(robot, rnd.model, data, rng)
+        eps = rnd.cm.eps(data.q, data.w, data.aux_columns(rnd.model.aux), rnd.fit.c)
+        _, Jall = rnd.cm.J_e(data.q, eps)
+        J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
+        errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
+        results = screen(J, rows_pose, r, Q, sigma2, cands, errors)
+        n_tests = max(1, len(cands) * len(errors))
+        tested += n_tests
+        base_cv = cv_rms(H, r, rows_pose, fold)
+        chosen = None
+        for drop, ci, e, fitted in results[:8]:
+            c = cands[ci]
+            df = len(c.terms)
+            p = float(stats.chi2.sf(drop / sigma2, df))
+            if p * n_tests > ALPHA:
+                break  # sorted by drop: nothing further can pass either
+            X = J[:, e:e + 1] * c.values[rows_pose]
+            cv = cv_rms(np.column_stack([H, X]), r, rows_pose, fold)
+            if cv < (1 - MIN_CV_GAIN) * base_cv:
+                chosen = (drop, ci, e, fitted, p, cv)
+                break
+        history.append({"round": round_no, "train_rms_mm": rnd.fit.train["rms_mm"], "cv_rms_mm": 1e3 * base_cv,
+                        "candidates": n_tests, "accepted": None})
+        if chosen is None:
+            break
+        drop, ci, e, fitted, p, cv = chosen
+        c = cands[ci]
+        if c.family == "fourier":
+            def drop_of(cand, e=e):
+                found = screen(J, rows_pose, r, Q, 0.0, [cand], [e])
+                return found[0][0] if found else 0.0
+            c = refine_period(c, data, drop_of)
+        history[-1]["accepted"] = f"{robot.error_names()[e]}: {', '.join(c.terms)}"
+        alternatives = []
+        for d2, ci2, e2, f2 in results[:200]:
+            if (ci2, e2) == (ci, e) or d2 < 0.5 * drop:
+                continue
+            cos = abs(f2 @ fitted) / (np.linalg.norm(f2) * np.linalg.norm(fitted))
+            if cos > SAME_EFFECT:
+                alternatives.append({"error": robot.error_names()[e2], "terms": list(cands[ci2].terms),
+                                     "similarity": float(cos)})
+        new_model = _with_terms(robot, rnd.model, e, c.terms, data.aux_names)
+        rnd = _fit(robot, new_model, data, registration_mode)
+        coefs = _effect_coefficients(robot, rnd, e, len(c.terms))
+        effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), c.family,
+                              1e3 * (base_cv - cv), p, coefs, alternatives[:5]))
+    before = _scores(first, data, val)
+    after = _scores(rnd, data, val)
+    return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history)
+
+
+def _effect_coefficients(robot: Robot, rnd: Round, error: int, n_new: int) -> list[dict]:
+    """Fitted value and standard deviation of the n_new terms just added to `error`."""
+    new = {t.text for t in rnd.model.terms[error][-n_new:]}
+    names = rnd.model.coefficient_names(robot)
+    return [{"name": names[j], "value": float(rnd.fit.c[j]), "std": float(rnd.fit.std[j])}
+            for j, c in enumerate(rnd.model.coefficients) if c.error == error and c.term.text in new]
+
+
+def _scores(rnd: Round, data: Measurements, val: Measurements) -> dict:
+    yv = rnd.fit.registration.to_world(val.xyz)
+    ev = position_errors(rnd.cm, val, yv, rnd.fit.c)
+    s = summary(ev)
+    return {"train_rms_mm": rnd.fit.train["rms_mm"], "val_rms_mm": s["rms_mm"], "val_max_mm": s["max_mm"]}
+
+
+def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], path: str | Path):
+    """The model as an error-model file, with a header naming what diagnose added."""
+    lines = [f"# Error model of {robot.name} written by gecgen diagnose."]
+    lines += [f"# added: {e.error} <- {', '.join(e.terms)} (held-out gain {e.gain_mm:.4f} mm)" for e in effects]
+    if not effects:
+        lines.append("# nothing significant was left in the residual; the model is unchanged")
+    spec = model.to_yaml_dict(robot)
+    Path(path).write_text("\n".join(lines) + "\n" + yaml.safe_dump(spec, sort_keys=False, width=120))

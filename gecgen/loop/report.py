@@ -1,0 +1,84 @@
+"""The human report of a diagnosis: Markdown with PNG plots (matplotlib, no display needed)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from gecgen.loop.diagnose import Diagnosis, Round  # noqa: E402
+from gecgen.model.measurements import Measurements  # noqa: E402
+from gecgen.model.robot import WRENCH  # noqa: E402
+from gecgen.runtime.identify import position_errors  # noqa: E402
+
+
+def _variable(data: Measurements, name: str) -> np.ndarray:
+    if name.startswith("q") and name[1:].isdigit():
+        return data.q[:, int(name[1:]) - 1]
+    if name in WRENCH:
+        return data.w[:, WRENCH.index(name)]
+    return data.aux[:, data.aux_names.index(name)]
+
+
+def _errors_by_pose(rnd: Round, data: Measurements) -> np.ndarray:
+    """RMS point error (mm) per pose."""
+    e = position_errors(rnd.cm, data, rnd.fit.registration.to_world(data.xyz), rnd.fit.c)
+    sq = np.bincount(data.pose, e ** 2, minlength=data.n_poses) / np.maximum(np.bincount(data.pose, minlength=data.n_poses), 1)
+    return 1e3 * np.sqrt(sq)
+
+
+def residual_plot(diag: Diagnosis, data: Measurements, variable: str, path: Path):
+    x = _variable(data, variable)
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    ax.plot(x, _errors_by_pose(diag.initial, data), ".", ms=4, alpha=0.7, label="declared model")
+    ax.plot(x, _errors_by_pose(diag.final, data), ".", ms=4, alpha=0.7, label="after diagnose")
+    ax.set_xlabel(variable)
+    ax.set_ylabel("residual per pose, rms (mm)")
+    ax.set_title(f"{diag.robot.name}: residual against {variable} (training data)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors_out: str) -> Path:
+    """Write report.md and one PNG per traced variable into outdir; returns the Markdown path."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    b, a = diag.before, diag.after
+    lines = [f"# gecgen diagnose: {diag.robot.name}", "",
+             f"Training data: {data.source} ({data.n_poses} poses). New error model: `{errors_out}`.", "",
+             "| | training RMS (mm) | held-out RMS (mm) | held-out max (mm) |", "|---|---|---|---|",
+             f"| declared model | {b['train_rms_mm']:.4f} | {b['val_rms_mm']:.4f} | {b['val_max_mm']:.4f} |",
+             f"| after diagnose | {a['train_rms_mm']:.4f} | {a['val_rms_mm']:.4f} | {a['val_max_mm']:.4f} |", "",
+             f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
+             "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS "
+             "on the training data.", ""]
+    if not diag.effects:
+        lines += ["Nothing significant is left in the residual: the declared model covers the data.", ""]
+    variables = []
+    for k, eff in enumerate(diag.effects, 1):
+        lines += [f"## Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", "",
+                  f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.", "",
+                  "| coefficient | value | std |", "|---|---|---|"]
+        lines += [f"| `{c['name']}` | {c['value']:.6g} | {c['std']:.2g} |" for c in eff.coefficients]
+        if eff.alternatives:
+            lines += ["", "Indistinguishable on this data (the same fitted effect):", ""]
+            lines += [f"- {alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
+                      for alt in eff.alternatives]
+        lines.append("")
+        variables += [v for v in eff.variables if v not in variables]
+    for v in variables:
+        png = f"residual_{v}.png"
+        residual_plot(diag, data, v, outdir / png)
+        lines += [f"![residual against {v}]({png})", ""]
+    lines += ["## Rounds", "", "| round | training RMS (mm) | CV RMS (mm) | candidates | accepted |", "|---|---|---|---|---|"]
+    lines += [f"| {h['round']} | {h['train_rms_mm']:.4f} | {h['cv_rms_mm']:.4f} | {h['candidates']} | {h['accepted'] or '-'} |"
+              for h in diag.history]
+    path = outdir / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path

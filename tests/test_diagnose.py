@@ -1,0 +1,103 @@
+"""diagnose finds the one effect a simulated robot has and the declared model lacks, and adds
+nothing on clean data. Truth: the exact chain with constant errors plus one undeclared effect."""
+import json
+
+import numpy as np
+import pytest
+from conftest import ROBOTS
+
+from gecgen.cli import main
+from gecgen.loop.diagnose import diagnose
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.kinematics import target_positions
+from gecgen.model.measurements import Measurements, write_measurements
+
+NOISE = 3e-5  # tracker noise per coordinate, m
+FLOOR_MM = 1e3 * NOISE * np.sqrt(3)  # rms point error of pure noise
+
+
+def dataset(robot, n_poses, seed, effect, targets, payload=False, aux=None):
+    rng = np.random.default_rng(seed)
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    q = rng.uniform(lo, hi, (n_poses, robot.n))
+    w = np.zeros((n_poses, 6))
+    if payload:
+        w[:, 1] = -9.81 * rng.choice([0.0, 70.0], n_poses)
+    a = rng.uniform(18, 30, (n_poses, 1)) if aux else np.zeros((n_poses, 0))
+    eps = np.tile(np.random.default_rng(7).normal(0, 5e-4, robot.n_errors), (n_poses, 1))
+    effect(eps, q, w, a)
+    y = target_positions(robot, q, eps)
+    pose, tgt = np.repeat(np.arange(n_poses), len(targets)), np.tile(targets, n_poses)
+    xyz = y[pose, tgt] + rng.normal(0, NOISE, (len(pose), 3))
+    return Measurements(q, w, a, (aux,) if aux else (), np.arange(n_poses), pose, tgt, xyz, "sim")
+
+
+def waviness(eps, q, w, a):  # lateral rail straightness: 0.3 mm over a 0.45 m wavelength
+    eps[:, 6 + 1] += 3e-4 * np.sin(2 * np.pi * q[:, 0] / 0.45 + 0.3)
+
+
+def bending(eps, q, w, a):  # couch droops with longitudinal extension under the payload
+    eps[:, 18 + 1] += 3e-7 * w[:, 1] * (q[:, 2] + 0.735) ** 2
+
+
+def gravity_compliance(eps, q, w, a):  # joint 2 of the 6R twists under the arm's weight
+    eps[:, 6 + 4] += 8e-4 * np.cos(q[:, 1] + q[:, 2])
+
+
+def eccentricity(eps, q, w, a):  # gear eccentricity of joint 1: once per revolution
+    eps[:, 0 + 4] += 3e-4 * np.sin(q[:, 0] + 0.5)
+
+
+def thermal(eps, q, w, a):  # the column grows with temperature (3 m of steel, 12e-6 per kelvin)
+    eps[:, 6 + 2] += 3.6e-5 * (a[:, 0] - 20.0)
+
+
+CASES = [
+    ("pps", waviness, [0, 1, 2], False, None, {"q1"}),
+    ("pps", bending, [0, 1, 2], True, None, {"q3", "fy"}),
+    ("industrial6r", gravity_compliance, [0], False, None, {"q2", "q3"}),
+    ("puma560", eccentricity, [0, 1, 2], False, None, {"q1"}),
+    ("puma560", thermal, [0, 1, 2], False, "temp_c", {"temp_c"}),
+]
+
+
+@pytest.mark.parametrize("name, effect, targets, payload, aux, traced", CASES, ids=[c[1].__name__ for c in CASES])
+def test_diagnose_traces_the_missing_effect(name, effect, targets, payload, aux, traced):
+    robot = load_robot(ROBOTS / f"{name}.yaml")
+    model = load_error_model(None, robot)
+    train = dataset(robot, 300, 1, effect, targets, payload, aux)
+    val = dataset(robot, 100, 2, effect, targets, payload, aux)
+    diag = diagnose(robot, model, train, val)
+    assert diag.effects, "nothing was added"
+    assert set(diag.effects[0].variables) & traced, diag.effects[0].to_dict()
+    assert diag.after["val_rms_mm"] < 0.7 * diag.before["val_rms_mm"]
+    assert diag.after["val_rms_mm"] < 1.3 * FLOOR_MM
+
+
+def test_diagnose_adds_nothing_on_clean_data():
+    robot = load_robot(ROBOTS / "pps.yaml")
+    model = load_error_model(None, robot)
+    for seed in (1, 3):
+        train = dataset(robot, 300, seed, lambda *args: None, [0, 1, 2], payload=True)
+        diag = diagnose(robot, model, train, None, seed=seed)
+        assert diag.effects == [] and diag.final.model is model
+
+
+def test_cli_diagnose_writes_model_code_and_report(tmp_path, capsys):
+    robot = load_robot(ROBOTS / "pps.yaml")
+    write_measurements(tmp_path / "train.csv", robot, dataset(robot, 250, 1, waviness, [0, 1, 2]))
+    const = tmp_path / "const.errors.yaml"
+    const.write_text('default: ["1"]\n')
+    out = tmp_path / "new.errors.yaml"
+    assert main(["diagnose", str(ROBOTS / "pps.yaml"), str(tmp_path / "train.csv"), "--errors", str(const),
+                 "-o", str(out), "--report", str(tmp_path / "rep"), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert set(res["before"]) == {"train_rms_mm", "val_rms_mm", "val_max_mm"}
+    eff = res["effects"][0]
+    assert eff["variables"] == ["q1"] and eff["gain_mm"] > 0 and "." in eff["error"] and eff["terms"]
+    assert res["errors_out"] == str(out) and out.exists()
+    new = load_error_model(out, robot)  # the written model reads back and holds the new terms
+    assert len(new.coefficients) > 42
+    assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_q1.png").exists()
+    assert any(p.suffix == ".c" for p in (tmp_path / "new_generated").iterdir())
