@@ -9,6 +9,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -35,21 +36,37 @@ def compiler() -> str | None:
     return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 
 
-def build_shared_library(files: dict[str, str], name: str) -> Path:
-    """Compile NAME.c into a shared library in the cache (once per content hash)."""
-    digest = hashlib.sha256((files[f"{name}.c"] + files[f"{name}.h"] + " ".join(CFLAGS)).encode()).hexdigest()[:20]
-    lib = cache_dir() / f"{name}-{digest}.so"
+def _emitter_hash() -> str:
+    """Hash of the code that decides what is generated: a change to it invalidates the cache."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted([*root.glob("symbolic/*.py"), *root.glob("emit/**/*.py"), *root.glob("emit/**/*.j2"),
+                        root / "model" / "errors.py", root / "model" / "robot.py", root / "model" / "urdf.py"]):
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def model_key(robot: Robot, model: ErrorModel) -> str:
+    """Cache key of the generated code for a robot and error model (content, not file names)."""
+    spec = json.dumps([robot.source_hashes, model.to_yaml_dict(robot), CFLAGS, _emitter_hash()], sort_keys=True)
+    return hashlib.sha256(spec.encode()).hexdigest()[:24]
+
+
+def shared_library(robot: Robot, model: ErrorModel) -> Path:
+    """The compiled generated C of a robot and error model; rendered and built only on a cache miss."""
+    lib = cache_dir() / f"{robot.name}-{model_key(robot, model)}.so"
     if lib.exists():
         return lib
+    files = render(robot, model)
     lib.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for fname in (f"{name}.c", f"{name}.h"):
+        for fname in (f"{robot.name}.c", f"{robot.name}.h"):
             Path(tmp, fname).write_text(files[fname])
         out = Path(tmp) / "lib.so"
-        run = subprocess.run([compiler(), *CFLAGS, f"{name}.c", "-o", str(out), "-lm"], cwd=tmp,
+        run = subprocess.run([compiler(), *CFLAGS, f"{robot.name}.c", "-o", str(out), "-lm"], cwd=tmp,
                              capture_output=True, text=True)
         if run.returncode != 0:
-            raise RuntimeError(f"compiling the generated C for {name} failed: {run.stderr.strip()}")
+            raise RuntimeError(f"compiling the generated C for {robot.name} failed: {run.stderr.strip()}")
         part = lib.with_suffix(f".{os.getpid()}.part")
         shutil.copy(out, part)
         part.replace(lib)  # atomic: parallel processes never load a half-written library
@@ -78,7 +95,6 @@ class CompiledModel:
 
     def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
         self.robot, self.model = robot, model
-        self.files = render(robot, model)
         self.dims = Dims(robot.n, len(robot.targets), robot.n_errors, len(model.coefficients), len(model.aux))
         if backend == "auto":
             backend = "c" if compiler() else "casadi"
@@ -87,9 +103,9 @@ class CompiledModel:
                               "which is slower", stacklevel=2)
         self.backend = backend
         if backend == "c":
-            self._lib = ctypes.CDLL(str(build_shared_library(self.files, robot.name)))
+            self._lib = ctypes.CDLL(str(shared_library(robot, model)))
         elif backend == "casadi":
-            self._ca = load_casadi_module(self.files, robot.name).functions()
+            self._ca = load_casadi_module(render(robot, model), robot.name).functions()
         else:
             raise ValueError(f"unknown backend {backend!r}; use auto, c or casadi")
 

@@ -2,7 +2,8 @@
 
 Gauss-Newton on the nonlinear chain: at the current coefficients c the generated code gives the
 modelled targets and H_e (J_e at eps(c) times the basis terms); the step solves the column-scaled
-least-squares problem by Householder QR. Rows are streamed through the QR in blocks of poses, so
+least-squares problem by Householder QR, damped (Levenberg-Marquardt) only when a full step
+would raise the residual, as it can when the data barely excites some coefficient. Rows are streamed through the QR in blocks of poses, so
 memory stays bounded by the block size whatever the number of poses (the R factor of [H | r] is
 all that is kept). Redundant and unexcited coefficients are found first (`redundancy`) and held
 at zero.
@@ -23,6 +24,8 @@ from gecgen.runtime.registration import IDENTITY, Registration, register
 BLOCK_POSES = 2000
 #: condition number of the column-scaled kept H_e above which the fit is reported ill-posed
 ILL_CONDITIONED = 1e6
+#: relative decrease of the residual sum of squares per step below which the fit is stationary
+RSS_TOL = 1e-6  # 5e-7 of the RMS: far below anything a tracker resolves
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,16 @@ def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray |
     return R, m
 
 
+def damped_step(Rk: np.ndarray, z: np.ndarray, lam: float) -> np.ndarray:
+    """Levenberg-Marquardt step in scaled coordinates: min |Rk dx - z|^2 + lam |dx|^2 (lam 0: Gauss-Newton)."""
+    if lam == 0:
+        return solve_triangular(Rk, z)
+    k = len(z)
+    R2 = np.linalg.qr(np.column_stack([np.vstack([Rk, np.sqrt(lam) * np.eye(k)]), np.concatenate([z, np.zeros(k)])]),
+                      mode="r")
+    return solve_triangular(R2[:k, :k], R2[:k, k])
+
+
 def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> np.ndarray:
     """|measured - modelled| per measured point (R,), m; c=None is the nominal model."""
     q, w, aux = _poses_inputs(cm, data)
@@ -145,17 +158,32 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
         raise ValueError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
     scale = np.linalg.norm(R0[:, kept], axis=0)
-    converged, it = False, 0
+    converged, it, lam = False, 0, 0.0
     for it in range(1, max_iter + 1):
         R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
         z = R[:k, k]
-        c[kept] += solve_triangular(R[:k, :k], z) / scale
-        if progress:
-            progress(it, 1e3 * abs(R[k, k]) / np.sqrt(m))
         if np.linalg.norm(z) / np.sqrt(m) < step_tol_m:
             converged = True
             break
-    if not converged:
+        rss_now = float(z @ z + R[k, k] ** 2)
+        for _ in range(16):
+            trial = c.copy()
+            trial[kept] += damped_step(R[:k, :k], z, lam) / scale
+            rss_trial = float(np.sum(position_errors(cm, data, y, trial) ** 2))
+            if rss_trial < rss_now:
+                break
+            lam = 1e-6 if lam == 0 else 10 * lam
+        else:
+            notes.append("the fit stalled: no step lowers the residual (strong nonlinearity or a poorly "
+                         "excited model); the result is the last iterate")
+            break
+        c, lam = trial, (lam / 10 if lam > 1e-9 else 0.0)
+        if progress:
+            progress(it, 1e3 * np.sqrt(rss_trial / m))
+        if rss_now - rss_trial <= RSS_TOL * rss_now:  # stationary: further steps change nothing
+            converged = True
+            break
+    if not converged and not notes:
         notes.append(f"Gauss-Newton did not converge in {max_iter} iterations; the result is the last iterate")
     R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
