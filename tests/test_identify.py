@@ -206,3 +206,30 @@ def test_millimetres_joint_limits_and_disagreeing_poses_are_refused(tmp_path, rn
     (tmp_path / "d.csv").write_text("\n".join(lines) + "\n")
     with pytest.raises(ModelError, match="disagrees with its row 2"):
         read_measurements(tmp_path / "d.csv", robot)
+
+
+def test_c_compensation_agrees_with_an_independent_python_solution(rng):
+    """scipy least squares on the exact numpy chain, with eps depending on q through the basis."""
+    from scipy.optimize import least_squares
+
+    from gecgen.model.kinematics import tool_pose
+
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    model = load_error_model(ROBOTS / "industrial6r.errors.yaml", robot)
+    cm = CompiledModel(robot, model)
+    c = rng.normal(0, 2e-5, len(model.coefficients))
+    w = np.array([10.0, -30.0, -900.0, 5.0, 2.0, -1.0])
+    q_cmd = np.radians([20, -70, 30, 30, 40, 10])
+    q_c, status = cm.compensate(q_cmd[None], w[None], None, c)
+    assert status[0] == 0
+    T_nom = tool_pose(robot, q_cmd)[0]
+
+    def pose_error(q):
+        T = tool_pose(robot, q, cm.eps(q[None], w[None], None, c))[0]
+        rot = 0.5 * sum(np.cross(T[:3, k], T_nom[:3, k]) for k in range(3))
+        return np.concatenate([T_nom[:3, 3] - T[:3, 3], rot])
+
+    ref = least_squares(pose_error, q_cmd, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    assert np.abs(pose_error(ref)).max() < 1e-12
+    np.testing.assert_allclose(q_c[0], ref, atol=1e-10)
+    assert np.abs(q_c[0] - q_cmd).max() > 1e-4  # a real correction, not the identity

@@ -1882,56 +1882,85 @@ static int cholesky_solve(double A[NS][NS], double *b, int m)
     return 1;
 }
 
+/* Pose residual of the modelled robot at q against the wanted tool pose Tn: r = [dp; rotation
+ * vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq (6 x NQ); returns |r|. */
+static double pose_residual(const double *q, const double *w, const double *aux, const double *c,
+                            const double *Tn, double *r, double *Jq)
+{
+    double eps[NE], T[16], norm = 0.0;
+    int i, k;
+    pps_eps(q, w, aux, c, eps);
+    pps_tool_jacobian(q, eps, T, Jq);
+    for (i = 0; i < 3; ++i) {
+        int u = (i + 1) % 3, v = (i + 2) % 3;
+        r[i] = Tn[4 * i + 3] - T[4 * i + 3];
+        r[3 + i] = 0.0;
+        for (k = 0; k < 3; ++k) r[3 + i] += 0.5 * (T[4 * u + k] * Tn[4 * v + k] - T[4 * v + k] * Tn[4 * u + k]);
+    }
+    for (i = 0; i < 6; ++i) norm += r[i] * r[i];
+    return sqrt(norm);
+}
+
+/* Least-squares (NQ < 6) or minimum-norm (NQ >= 6) Newton step dq for J dq = r; 0 if singular. */
+static int newton_step(const double *Jq, const double *r, double *dq)
+{
+    double A[NS][NS], b[NS];
+    int i, j, k;
+    for (i = 0; i < NS; ++i) {
+        for (j = 0; j < NS; ++j) {
+            double s = (i == j) ? 1e-14 : 0.0;
+            if (NQ >= 6) { for (k = 0; k < NQ; ++k) s += Jq[i * NQ + k] * Jq[j * NQ + k]; }
+            else { for (k = 0; k < 6; ++k) s += Jq[k * NQ + i] * Jq[k * NQ + j]; }
+            A[i][j] = s;
+        }
+        if (NQ >= 6) b[i] = r[i];
+        else { b[i] = 0.0; for (k = 0; k < 6; ++k) b[i] += Jq[k * NQ + i] * r[k]; }
+    }
+    if (!cholesky_solve(A, b, NS)) return 0;
+    for (j = 0; j < NQ; ++j) {
+        if (NQ >= 6) { dq[j] = 0.0; for (k = 0; k < 6; ++k) dq[j] += Jq[k * NQ + j] * b[k]; }
+        else dq[j] = b[j];
+    }
+    return 1;
+}
+
 int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations)
 {
-    double Tn[16], T[16], Jq[6 * NQ], eps[NE], r[6], A[NS][NS], b[NS];
-    int it, i, j, k;
+    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], norm;
+    int it, j, halvings;
     pps_fk(q_cmd, Tn);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
-    for (it = 0; it <= max_iter; ++it) {
-        double norm = 0.0;
-        pps_eps(q_out, w, aux, c, eps);
-        pps_tool_jacobian(q_out, eps, T, Jq);
-        for (i = 0; i < 3; ++i) {
-            /* position error, then the rotation vector taking the axes of T onto those of Tn */
-            int u = (i + 1) % 3, v = (i + 2) % 3;
-            r[i] = Tn[4 * i + 3] - T[4 * i + 3];
-            r[3 + i] = 0.0;
-            for (k = 0; k < 3; ++k) r[3 + i] += 0.5 * (T[4 * u + k] * Tn[4 * v + k] - T[4 * v + k] * Tn[4 * u + k]);
-        }
-        for (i = 0; i < 6; ++i) norm += r[i] * r[i];
-        if (sqrt(norm) <= tol) {
+    norm = pose_residual(q_out, w, aux, c, Tn, r, Jq);
+    for (it = 0; norm > tol; ++it) {
+        double alpha = 1.0, norm_try = norm;
+        if (it == max_iter) {
             if (iterations) *iterations = it;
-            for (j = 0; j < NQ; ++j)
-                if (q_out[j] < pps_q_min[j] || q_out[j] > pps_q_max[j]) return GECGEN_OUTSIDE_LIMITS;
-            return GECGEN_OK;
+            return GECGEN_NOT_CONVERGED;
         }
-        if (it == max_iter) break;
-        /* least squares (NQ < 6) or minimum-norm (NQ >= 6) Newton step */
-        for (i = 0; i < NS; ++i) {
-            for (j = 0; j < NS; ++j) {
-                double s = (i == j) ? 1e-14 : 0.0;
-                if (NQ >= 6) { for (k = 0; k < NQ; ++k) s += Jq[i * NQ + k] * Jq[j * NQ + k]; }
-                else { for (k = 0; k < 6; ++k) s += Jq[k * NQ + i] * Jq[k * NQ + j]; }
-                A[i][j] = s;
-            }
-            if (NQ >= 6) b[i] = r[i];
-            else { b[i] = 0.0; for (k = 0; k < 6; ++k) b[i] += Jq[k * NQ + i] * r[k]; }
-        }
-        if (!cholesky_solve(A, b, NS)) {
+        if (!newton_step(Jq, r, dq)) {
             if (iterations) *iterations = it;
             return GECGEN_SINGULAR;
         }
-        for (j = 0; j < NQ; ++j) {
-            double dq = 0.0;
-            if (NQ >= 6) { for (k = 0; k < 6; ++k) dq += Jq[k * NQ + j] * b[k]; }
-            else dq = b[j];
-            q_out[j] += dq;
+        /* backtrack so every step lowers the residual: the solution stays on the branch of q_cmd */
+        for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
+            for (j = 0; j < NQ; ++j) q_try[j] = q_out[j] + alpha * dq[j];
+            norm_try = pose_residual(q_try, w, aux, c, Tn, r_try, J_try);
+            if (norm_try < norm) break;
         }
+        if (!(norm_try < norm)) {
+            if (iterations) *iterations = it;
+            return GECGEN_NOT_CONVERGED;
+        }
+        memcpy(q_out, q_try, sizeof(q_try));
+        memcpy(r, r_try, sizeof(r_try));
+        memcpy(Jq, J_try, sizeof(J_try));
+        norm = norm_try;
     }
-    if (iterations) *iterations = max_iter;
-    return GECGEN_NOT_CONVERGED;
+    if (iterations) *iterations = it;
+    for (j = 0; j < NQ; ++j)
+        if (q_out[j] < pps_q_min[j] || q_out[j] > pps_q_max[j]) return GECGEN_OUTSIDE_LIMITS;
+    return GECGEN_OK;
 }
 
 int pps_compensate_batch(int n, const double *q_cmd, const double *w, const double *aux,
