@@ -81,3 +81,12 @@ def test_c_builds_pedantic_and_runs_clean_under_sanitizers(tmp_path, name):
     run = subprocess.run(["./driver"], cwd=tmp_path, capture_output=True, text=True)
     assert run.returncode == 0 and "status" in run.stdout, run.stdout + run.stderr
     assert "runtime error" not in run.stderr and "AddressSanitizer" not in run.stderr
+
+
+def test_casadi_functions_emit_their_own_c(tmp_path, monkeypatch):
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    cm = CompiledModel(robot, load_error_model(ROBOTS / "puma560.errors.yaml", robot), "casadi")
+    monkeypatch.chdir(tmp_path)  # casadi writes into the working folder
+    cm._ca["J_e"].generate("j.c")
+    build = subprocess.run(["cc", "-std=c99", "-c", "j.c", "-o", "j.o"], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr

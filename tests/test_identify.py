@@ -233,3 +233,18 @@ def test_c_compensation_agrees_with_an_independent_python_solution(rng):
     assert np.abs(pose_error(ref)).max() < 1e-12
     np.testing.assert_allclose(q_c[0], ref, atol=1e-10)
     assert np.abs(q_c[0] - q_cmd).max() > 1e-4  # a real correction, not the identity
+
+
+def test_recovered_coefficients_within_three_sigma_of_the_truth(rng):
+    """Truth on the identifiable coefficients only (eliminated ones would merge into them)."""
+    robot = load_robot(ROBOTS / "pps.yaml")
+    model = load_error_model(None, robot)
+    cm = CompiledModel(robot, model)
+    kept = np.array(redundancy(cm).kept)  # all four targets: 24 identifiable
+    truth = np.zeros(len(model.coefficients))
+    truth[kept] = rng.normal(0, 1e-3, len(kept))
+    data = simulate(robot, 150, rng, truth, noise=4e-5)  # constant model: eps = c
+    fit = identify(cm, data)
+    assert list(fit.redundancy.kept) == list(kept)
+    z = (fit.c[kept] - truth[kept]) / fit.std[kept]
+    assert np.all(np.abs(z) < 4.5) and np.mean(np.abs(z) < 3) >= 0.9, z
