@@ -82,69 +82,71 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     wcols = [c for c in WRENCH if c in header]
     aux_names = tuple(h for h in header if h not in required and h not in WRENCH)
     require(rows, f"{where}: no data rows after the header")
+    lengths = np.fromiter((len(r) for r in rows), int, len(rows))
+    bad = np.nonzero(lengths != len(header))[0]
+    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}: {lengths[bad[0]] if len(bad) else 0} "
+                          f"fields, the header has {len(header)}")
+    table = np.array(rows, dtype=object)
     idx = {h: k for k, h in enumerate(header)}
-    numeric = [*qcols, "x", "y", "z", *wcols, *aux_names]
 
-    def value(row, r, col):
-        text = row[idx[col]].strip() if idx[col] < len(row) else ""
+    def column(col: str) -> np.ndarray:
+        cells = table[:, idx[col]]
         try:
-            v = float(text)
+            values = cells.astype(float)
         except ValueError:
-            raise ModelError(f"{where}: row {r}, column '{col}': {text!r} is not a number; "
-                             f"fix the value (auxiliary columns must be numeric)") from None
-        require(math.isfinite(v), f"{where}: row {r}, column '{col}': {text} is not finite; remove the row or fix it")
-        return v
+            for r, text in enumerate(cells):
+                try:
+                    float(text)
+                except ValueError:
+                    raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; fix the "
+                                     f"value (auxiliary columns must be numeric)") from None
+        bad = np.nonzero(~np.isfinite(values))[0]
+        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
+                              f"{cells[bad[0]] if len(bad) else ''} is not finite; remove the row or fix it")
+        return values
 
-    poses: dict[int, tuple[int, list[float]]] = {}
-    pose_of_row, target_of_row, xyz = [], [], []
-    seen = set()
+    ids = column("pose")
+    bad = np.nonzero(ids != np.round(ids))[0]
+    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column 'pose': not an integer pose id")
+    ids = ids.astype(np.int64)
     targets = list(robot.targets)
+    tindex = {t: k for k, t in enumerate(targets)}
+    names = [str(t).strip() for t in table[:, idx["target"]]]
+    unknown = [r for r, t in enumerate(names) if t not in tindex]
+    require(not unknown, f"{where}: row {unknown[0] + 2 if unknown else 0}, column 'target': unknown target "
+                         f"'{names[unknown[0]] if unknown else ''}'; robot {robot.name} has {', '.join(targets)}")
+    target = np.array([tindex[t] for t in names])
+    key = ids * len(targets) + target
+    _, first = np.unique(key, return_index=True)
+    dup = np.setdiff1d(np.arange(len(rows)), first)
+    require(not len(dup), f"{where}: row {dup[0] + 2 if len(dup) else 0}: pose {ids[dup[0]] if len(dup) else 0} "
+                          f"measures target '{names[dup[0]] if len(dup) else ''}' twice; keep one row")
+    state_cols = [*qcols, *wcols, *aux_names]
+    state = np.column_stack([column(c) for c in state_cols])
+    xyz = np.column_stack([column(c) for c in ("x", "y", "z")])
+    q = state[:, :robot.n]
     lo = np.array([j.lower for j in robot.joints]) - limit_tolerance
     hi = np.array([j.upper for j in robot.joints]) + limit_tolerance
-    for k, row in enumerate(rows):
-        r = k + 2
-        require(len(row) == len(header), f"{where}: row {r}: {len(row)} fields, the header has {len(header)}")
-        try:
-            pid = int(row[idx["pose"]])
-        except ValueError:
-            raise ModelError(f"{where}: row {r}, column 'pose': {row[idx['pose']]!r} is not an integer pose id") from None
-        tname = row[idx["target"]].strip()
-        require(tname in targets, f"{where}: row {r}, column 'target': unknown target '{tname}'; "
-                                  f"robot {robot.name} has {', '.join(targets)}")
-        require((pid, tname) not in seen, f"{where}: row {r}: pose {pid} measures target '{tname}' twice; keep one row")
-        seen.add((pid, tname))
-        vals = [value(row, r, c) for c in numeric]
-        qv = np.array(vals[:robot.n])
-        bad = np.nonzero((qv < lo) | (qv > hi))[0]
-        if len(bad):
-            j = bad[0]
-            raise ModelError(f"{where}: row {r}, column 'q{j + 1}': {qv[j]:g} is outside the joint limits "
-                             f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
-        p = vals[robot.n:robot.n + 3]
-        require(max(abs(v) for v in p) < MM_SUSPECT,
-                f"{where}: row {r}, columns x y z: {p} look like millimetres; positions are in metres, divide by 1000")
-        state = vals[:robot.n] + vals[robot.n + 3:]
-        if pid in poses:
-            first_row, first = poses[pid]
-            diff = [c for c, a, b in zip([*qcols, *wcols, *aux_names], first, state) if a != b]
-            require(not diff, f"{where}: row {r}, column '{diff[0] if diff else ''}': pose {pid} disagrees with its "
-                              f"row {first_row}; rows of one pose must share joints, wrench and aux")
-        else:
-            poses[pid] = (r, state)
-        pose_of_row.append(pid)
-        target_of_row.append(targets.index(tname))
-        xyz.append(p)
-    ids = np.array(sorted(poses))
-    state = np.array([poses[i][1] for i in ids])
-    q = state[:, :robot.n]
-    w = np.zeros((len(ids), 6))
+    out = np.argwhere((q < lo) | (q > hi))
+    if len(out):
+        r, j = out[0]
+        raise ModelError(f"{where}: row {r + 2}, column 'q{j + 1}': {q[r, j]:g} is outside the joint limits "
+                         f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
+    mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
+    require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
+                         f"{xyz[mm[0]].tolist() if len(mm) else ''} look like millimetres; positions are in metres, divide by 1000")
+    pose_ids, first, pose = np.unique(ids, return_index=True, return_inverse=True)
+    differs = np.argwhere(state != state[first[pose]])
+    if len(differs):
+        r, k = differs[0]
+        raise ModelError(f"{where}: row {r + 2}, column '{state_cols[k]}': pose {ids[r]} disagrees with its row "
+                         f"{first[pose[r]] + 2}; rows of one pose must share joints, wrench and aux")
+    ps = state[first]
+    w = np.zeros((len(pose_ids), 6))
     for k, c in enumerate(wcols):
-        w[:, WRENCH.index(c)] = state[:, robot.n + k]
-    aux = state[:, robot.n + len(wcols):]
-    index = {pid: k for k, pid in enumerate(ids)}
-    return Measurements(q=q, w=w, aux=aux, aux_names=aux_names, pose_ids=ids,
-                        pose=np.array([index[p] for p in pose_of_row]), target=np.array(target_of_row),
-                        xyz=np.array(xyz), source=where)
+        w[:, WRENCH.index(c)] = ps[:, robot.n + k]
+    return Measurements(q=ps[:, :robot.n], w=w, aux=ps[:, robot.n + len(wcols):], aux_names=aux_names,
+                        pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where)
 
 
 def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrench: bool = True):
