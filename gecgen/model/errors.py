@@ -13,10 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
-import yaml
 
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
-from gecgen.model.validation import ModelError, require, require_keys
+from gecgen.model.validation import ModelError, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
@@ -202,11 +201,7 @@ def load_error_model(path: str | Path | None, robot: Robot, aux_columns: tuple[s
     else:
         path = Path(path)
         where = str(path)
-        require(path.is_file(), f"{where}: no such error-model file")
-        try:
-            spec = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise ModelError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        spec = read_yaml(path, "error-model")
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
     return error_model_from_dict(spec, robot, where, aux_columns, digest)
 

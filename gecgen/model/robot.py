@@ -19,9 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import sympy as sp
-import yaml
 
-from gecgen.model.validation import ModelError, require, require_keys
+from gecgen.model.validation import read_yaml, require, require_keys
 
 #: An elementary transform: ("Tx"|"Ty"|"Tz"|"Rx"|"Ry"|"Rz", value) or ("H", 4x4 rows).
 Elementary = tuple
@@ -164,11 +163,7 @@ def load_robot(path: str | Path) -> Robot:
     """Read and validate a robot file (YAML); every problem names the file, the key and the fix."""
     path = Path(path)
     where = str(path)
-    require(path.is_file(), f"{where}: no such robot file")
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    spec = read_yaml(path, "robot")
     require(isinstance(spec, dict), f"{where}: expected a mapping at the top level")
     require_keys(spec, where, required={"name", "targets"},
                  optional={"description", "angle_unit", "base", "tool", "joints", "urdf", "base_link",
