@@ -155,6 +155,13 @@ def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.rand
             name = f"q{i + 1}"
             add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
             add("wrench x joint", [fn, name], [f"{fn}*{name}**2"], [f * data.q[:, i] ** 2])
+    force = np.linalg.norm(data.w[:, :3], axis=1)
+    if sum(_range(data.w[:, k]) > 1e-9 for k in range(3)) > 1 and _range(force) > 1e-9:
+        # the payload's weight, whatever direction the sensor sees it in
+        magnitude = "sqrt(fx**2 + fy**2 + fz**2)"
+        add("payload", ["payload"], [magnitude], [force])
+        for i in moving:
+            add("payload x joint", ["payload", f"q{i + 1}"], [f"{magnitude}*q{i + 1}"], [force * data.q[:, i]])
     for k, a in enumerate(data.aux_names):
         v = data.aux[:, k]
         if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):

@@ -19,7 +19,7 @@ from gecgen.model.validation import ModelError, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
-FUNCTIONS = {"sin": sp.sin, "cos": sp.cos}
+FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sqrt": sp.sqrt}
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ class _TermParser:
         try:
             tree = ast.parse(text.strip(), mode="eval").body
         except SyntaxError:
-            self.fail(text, "not a valid expression; use numbers, variables, + - * / **, sin, cos, poly, fourier")
+            self.fail(text, "not a valid expression; use numbers, variables, + - * / **, sin, cos, sqrt, poly, fourier")
         if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in ("poly", "fourier"):
             return self.shorthand(text, tree)
         return [self.expr(text, tree)]
@@ -161,7 +161,7 @@ class _TermParser:
             return FUNCTIONS[node.func.id](self.expr(text, node.args[0]))
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("poly", "fourier"):
             self.fail(text, f"{node.func.id}(...) must stand alone as a whole term")
-        self.fail(text, f"'{ast.unparse(node)}' is not allowed; use numbers, variables, + - * / **, sin, cos, poly, fourier")
+        self.fail(text, f"'{ast.unparse(node)}' is not allowed; use numbers, variables, + - * / **, sin, cos, sqrt, poly, fourier")
 
 
 def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
@@ -174,7 +174,7 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
     return names
 
 
-RESERVED = {"pi", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
+RESERVED = {"pi", "sqrt", "sin", "cos", "poly", "fourier", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
 
 
 def is_aux_name(name: str) -> bool:
