@@ -1,0 +1,34 @@
+"""The command line contract: --json prints one JSON object and nothing else on stdout; failures
+exit non-zero with one line on stderr."""
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import ROBOTS
+
+
+def gecgen(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "gecgen.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def test_json_output_is_exactly_one_object(tmp_path):
+    run = gecgen("redundancy", ROBOTS / "puma560.yaml", "--json")
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout)  # raises if anything else is on stdout
+    assert out["n_params"] == 42 and out["n_identifiable"] == 30 and len(out["eliminated"]) == 12
+    assert all({"param", "reason", "merged_into"} <= set(e) for e in out["eliminated"])
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["identify", ROBOTS / "pps.yaml", "missing.csv"], "missing.csv: no such measurement file"),
+    (["generate", "nope.yaml"], "nope.yaml: no such robot file"),
+    (["evaluate", "none.json", "x.csv"], "none.json: no such calibration file"),
+    (["generate", ROBOTS / "pps.yaml", "--errors", ROBOTS / "puma560.yaml"], "unknown key"),
+])
+def test_failures_exit_non_zero_with_one_line(args, expect, tmp_path):
+    run = gecgen(*args, "--json", cwd=tmp_path)
+    assert run.returncode != 0 and run.stdout == ""
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and expect in lines[0], run.stderr
