@@ -202,6 +202,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
 
+    from gecgen.simulate.cli import add_parser as add_simulate
+
+    add_simulate(command)
+
     p = command("diagnose", cmd_diagnose, "trace the residual to missing effects, add them, refit, report")
     p.add_argument("robot")
     p.add_argument("data")
@@ -218,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         result = args.fn(args)
-    except (ModelError, FileNotFoundError, ValueError) as exc:
+    except (ModelError, FileNotFoundError) as exc:
         print(f"gecgen {args.command}: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:

@@ -156,7 +156,8 @@ def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.rand
             add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
             add("wrench x joint", [fn, name], [f"{fn}*{name}**2"], [f * data.q[:, i] ** 2])
     force = np.linalg.norm(data.w[:, :3], axis=1)
-    if sum(_range(data.w[:, k]) > 1e-9 for k in range(3)) > 1 and _range(force) > 1e-9:
+    # only when the force turns in the sensor frame does its magnitude differ from one component
+    if sum(_range(data.w[:, k]) > 0.01 * _range(force) for k in range(3)) > 1:
         # the payload's weight, whatever direction the sensor sees it in
         magnitude = "sqrt(fx**2 + fy**2 + fz**2)"
         add("payload", ["payload"], [magnitude], [force])
@@ -323,10 +324,11 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
                 return found[0][0] if found else 0.0
             c = refine_period(c, data, drop_of)
         history[-1]["accepted"] = f"{robot.error_names()[e]}: {', '.join(c.terms)}"
-        alternatives = []
+        alternatives, seen = [], {(e, cands[ci].terms)}
         for d2, ci2, e2, f2 in results[:200]:
-            if (ci2, e2) == (ci, e) or d2 < 0.5 * drop:
+            if (e2, cands[ci2].terms) in seen or d2 < 0.5 * drop:
                 continue
+            seen.add((e2, cands[ci2].terms))
             cos = abs(f2 @ fitted) / (np.linalg.norm(f2) * np.linalg.norm(fitted))
             if cos > SAME_EFFECT:
                 alternatives.append({"error": robot.error_names()[e2], "terms": list(cands[ci2].terms),

@@ -20,6 +20,8 @@ def _variable(data: Measurements, name: str) -> np.ndarray:
         return data.q[:, int(name[1:]) - 1]
     if name in WRENCH:
         return data.w[:, WRENCH.index(name)]
+    if name == "payload":
+        return np.linalg.norm(data.w[:, :3], axis=1)
     return data.aux[:, data.aux_names.index(name)]
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
+from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.redundancy import Redundancy, analyze, generic_design
 from gecgen.runtime.registration import IDENTITY, Registration, register
@@ -155,7 +156,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     kept = np.array(red.kept, int)
     k = len(kept)
     if m <= k:
-        raise ValueError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
+        raise ModelError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
     scale = np.linalg.norm(R0[:, kept], axis=0)
     converged, it, lam = False, 0, 0.0

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gecgen.model.validation import ModelError
+
 #: beyond these the measurement frame counts as "far" and is registered before the fit
 FAR_ANGLE_RAD = np.radians(1.0)
 FAR_DISTANCE_M = 0.02
@@ -62,7 +64,7 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto") -> Regist
         raise ValueError(f"registration mode {mode!r}: use auto, always or never")
     if len(y) < 3 or np.linalg.matrix_rank(y - y.mean(0), tol=1e-6) < 2:
         if mode == "always":
-            raise ValueError("registration needs at least three non-collinear measured points")
+            raise ModelError("registration needs at least three non-collinear measured points; use --register never")
         return IDENTITY
     R, t = kabsch(p_nominal, y)
     far = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M

@@ -1,0 +1,47 @@
+"""Simulated measurements of truth robots: data with known truth for trials and tests.
+
+    data = simulate(robot, truth, design, rng)
+
+gives what a laser tracker would record: the exact nonlinear chain at the true joints and
+generalized errors of every pose (`truth.true_state`), per-pose repeatability and per-point
+tracker noise, and the wrench a force/torque sensor in the robot's wrench frame reads.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gecgen.model.kinematics import target_positions
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import Robot
+from gecgen.simulate.designs import Design, one_at_a_time, paper_pps, paper_split, random_design
+from gecgen.simulate.truth import Truth, load_truth, sensor_wrench, thermal_profile, true_state
+
+__all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_pps", "paper_split", "random_design",
+           "simulate"]
+
+
+def approach_directions(q: np.ndarray) -> np.ndarray:
+    """Sign of each joint's last motion before each pose (+1 for the first pose and for no motion)."""
+    d = np.sign(np.diff(q, axis=0, prepend=q[:1] - 1.0))
+    for k in range(1, len(d)):
+        still = d[k] == 0
+        d[k, still] = d[k - 1, still]
+    return np.where(d == 0, 1.0, d)
+
+
+def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator) -> Measurements:
+    """Measurements of `design` on the truth robot, in the contract's layout."""
+    N = design.n_poses
+    aux = thermal_profile(truth, N)
+    q_true, eps = true_state(robot, truth, design.q, design.payload_kg, design.payload_at, aux,
+                             approach_directions(design.q))
+    wrench = sensor_wrench(robot, q_true, design.payload_kg, design.payload_at, truth.gravity, eps)
+    names = list(robot.targets)
+    targets = np.array([names.index(t) for t in design.targets])
+    y = target_positions(robot, q_true, eps)[:, targets]  # (N, nt_measured, 3)
+    y = y + rng.normal(0.0, truth.repeatability, (N, 1, 3)) + rng.normal(0.0, truth.tracker, y.shape)
+    pose = np.repeat(np.arange(N), len(targets))
+    aux_names = tuple(aux)
+    return Measurements(q=design.q, w=wrench, aux=np.column_stack([aux[a] for a in aux_names]) if aux_names
+                        else np.zeros((N, 0)), aux_names=aux_names, pose_ids=np.arange(N), pose=pose,
+                        target=np.tile(targets, N), xyz=y.reshape(-1, 3), source="simulated")

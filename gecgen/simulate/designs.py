@@ -1,0 +1,118 @@
+"""Measurement designs: which joint configurations and payloads are measured.
+
+A design is the sequence of poses in the order they are visited (backlash depends on it).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gecgen.model.kinematics import target_positions
+from gecgen.model.robot import Robot
+
+
+@dataclass(frozen=True)
+class Design:
+    """q (P, n) read joints in visiting order; payload_kg (P,); payload_at (3,) tool-frame point;
+    targets measured at every pose (names); group (P,) a label per pose (e.g. "a", "b")."""
+
+    q: np.ndarray
+    payload_kg: np.ndarray
+    payload_at: np.ndarray
+    targets: tuple[str, ...]
+    group: np.ndarray
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.q)
+
+
+def _limits(robot: Robot):
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    return lo, hi
+
+
+def with_payloads(q: np.ndarray, payloads_kg, group: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every configuration once per payload."""
+    payloads_kg = list(payloads_kg)
+    return (np.vstack([q] * len(payloads_kg)), np.repeat(payloads_kg, len(q)).astype(float),
+            np.array([group] * (len(q) * len(payloads_kg))))
+
+
+def random_design(robot: Robot, n_poses: int, rng: np.random.Generator, payloads_kg=(0.0,),
+                  payload_at=(0, 0, 0), targets=None) -> Design:
+    """Uniform within the joint limits (continuous joints within +-pi), a random payload per pose."""
+    lo, hi = _limits(robot)
+    q = rng.uniform(lo, hi, (n_poses, robot.n))
+    payload = rng.choice(np.asarray(payloads_kg, float), n_poses)
+    return Design(q, payload, np.asarray(payload_at, float), tuple(targets or robot.targets),
+                  np.array(["random"] * n_poses))
+
+
+def one_at_a_time(robot: Robot, steps: dict[int, float], payloads_kg=(0.0,), payload_at=(0, 0, 0),
+                  targets=None) -> Design:
+    """Each listed joint (1-based) moved alone from home over its limits in the given step; home is
+    measured with every joint's sweep, as a sweep starts there."""
+    lo, hi = _limits(robot)
+    rows = []
+    for j, step in steps.items():
+        k = int(np.floor(hi[j - 1] / step + 1e-9))
+        values = np.arange(-int(np.floor(-lo[j - 1] / step + 1e-9)), k + 1) * step
+        for v in values:
+            q = np.zeros(robot.n)
+            q[j - 1] = v
+            rows.append(q)
+    q, payload, group = with_payloads(np.array(rows), payloads_kg, "b")
+    return Design(q, payload, np.asarray(payload_at, float), tuple(targets or robot.targets), group)
+
+
+def treatment_volume_vertices(size=(0.50, 0.40, 0.50)) -> np.ndarray:
+    """The 8 vertices (tool frame, m) of the treatment volume: a 50 x 50 cm area on the couch
+    centred on the treatment point and 40 cm above it (tool y is up at home)."""
+    sx, sy, sz = size
+    return np.array([[x, y, z] for x in (-sx / 2, sx / 2) for y in (0.0, sy) for z in (-sz / 2, sz / 2)])
+
+
+def paper_pps(robot: Robot, payloads_kg=(0.0, 70.0), thetas_deg=range(-90, 91, 30), targets=("t1", "t2", "t3"),
+              steps=(0.050, 0.020, 0.025, np.radians(5.0))) -> Design:
+    """The seed paper's design for the PPS.
+
+    Set a: each vertex of the treatment volume placed at the isocenter for theta (joint 4) from -90
+    to 90 degrees in 30 degree steps, roll and pitch at 0; joints 1-3 translate the couch along
+    world X, Y, Z, so they follow in closed form. Set b: d1, d2, d3 and theta each moved alone from
+    home in 50 mm, 20 mm, 25 mm and 5 degree steps. Both with each payload (kg) at the treatment
+    point (the tool origin).
+    """
+    iso = np.array(robot.points["isocenter"])
+    rows = []
+    for theta in np.radians(list(thetas_deg)):
+        q0 = np.zeros(robot.n)
+        q0[3] = theta
+        for v in treatment_volume_vertices():
+            probe = _with_target(robot, v)
+            q = q0.copy()
+            q[:3] = iso - target_positions(probe, q0)[0, -1]
+            rows.append(q)
+    qa, pa, ga = with_payloads(np.array(rows), payloads_kg, "a")
+    b = one_at_a_time(robot, {1: steps[0], 2: steps[1], 3: steps[2], 4: steps[3]}, payloads_kg)
+    return Design(np.vstack([qa, b.q]), np.concatenate([pa, b.payload_kg]), np.zeros(3), tuple(targets),
+                  np.concatenate([ga, b.group]))
+
+
+def _with_target(robot: Robot, point) -> Robot:
+    from dataclasses import replace
+
+    return replace(robot, targets={**robot.targets, "_probe": tuple(float(x) for x in point)})
+
+
+def paper_split(design: Design, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Pose indices (train, validation): set b and a random half of set a's configurations (both
+    payloads of a configuration stay together) for training, the other half for validation."""
+    a = np.nonzero(design.group == "a")[0]
+    n_cfg = len(a) // max(1, len(np.unique(design.payload_kg[a])))
+    cfg = rng.permutation(n_cfg)[: n_cfg // 2]
+    val = a[np.isin(a % n_cfg, cfg)]
+    train = np.setdiff1d(np.arange(design.n_poses), val)
+    return train, val

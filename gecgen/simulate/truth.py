@@ -1,0 +1,233 @@
+"""Truth robots: a robot file plus physically motivated error sources, in SI units.
+
+Each source adds either a joint-angle error (the joint really sits at q_read + dq: encoder
+offset, gear eccentricity, backlash, compliance under gravity) or a generalized-error
+contribution d eps (rail waviness, cantilever bending, thermal growth) at every pose. The
+measured points are then the exact nonlinear chain at the true joints and errors, plus
+repeatability and tracker noise.
+
+A truth file (YAML) looks like
+
+    seed: 1
+    gravity: [0, -9.81, 0]                 # world, m/s^2
+    constant: {translation_std: 1.0e-3, rotation_std: 5.0e-4}   # or values: {"1.ex": 0.001}
+    joint_offsets: {std: 2.0e-4}            # or values: [..] per joint (m or rad)
+    masses: [{frame: 4, mass: 60, at: [0, 0, 0]}]              # link masses, kg, frame coordinates
+    sources:
+      - {type: sinusoid, variable: 1, error: "1.ey", amplitude: 3.0e-4, period: 0.45, phase: 0.3}
+      - {type: sinusoid, variable: 4, joint: 4, amplitude: 1.0e-4, period: 6.283185, phase: 0}
+      - {type: cantilever, joint: 3, offset: 0.735, flexibility: 1.1e-6, mass: 40,
+         deflection: "-3.ez", slope: "-3.ep"}
+      - {type: compliance, joint: 5, compliance: 2.0e-6}
+      - {type: backlash, joint: 2, width: 2.0e-4}
+      - {type: thermal, error: "1.ez", per_kelvin: 3.6e-5, reference: 20, start: 20, end: 26}
+    noise: {repeatability: 5.0e-5, tracker: 4.0e-5}
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gecgen.model.kinematics import constant, frames
+from gecgen.model.robot import Robot
+from gecgen.model.validation import require, require_keys
+
+
+@dataclass(frozen=True)
+class Source:
+    """One physical error source; `params` are its validated settings (SI units)."""
+
+    kind: str
+    params: dict
+
+
+@dataclass(frozen=True)
+class Truth:
+    constant: np.ndarray  # (6(n+1),) constant generalized errors
+    joint_offsets: np.ndarray  # (n,) m or rad
+    sources: tuple[Source, ...]
+    gravity: np.ndarray  # (3,) m/s^2 in the world frame
+    masses: tuple[dict, ...]  # {frame, mass (kg), at (3,) in that frame}
+    repeatability: float  # m, per pose (all targets of a pose move together)
+    tracker: float  # m, per measured point and coordinate
+    spec: dict = field(default_factory=dict)
+
+    @property
+    def aux_names(self) -> tuple[str, ...]:
+        return tuple(s.params["column"] for s in self.sources if s.kind == "thermal")
+
+
+_SOURCE_KEYS = {
+    "sinusoid": ({"variable", "amplitude", "period"}, {"phase", "error", "joint"}),
+    "cantilever": ({"joint", "flexibility"}, {"offset", "mass", "deflection", "slope"}),
+    "compliance": ({"joint", "compliance"}, set()),
+    "backlash": ({"joint", "width"}, set()),
+    "thermal": ({"error", "per_kelvin"}, {"reference", "start", "end", "column"}),
+}
+
+
+def _error_index(robot: Robot, text, where: str) -> tuple[int, float]:
+    """'-3.ez' -> (index of 3.ez in eps, sign -1)."""
+    require(isinstance(text, str), f"{where}: expected an error name such as \"1.ey\" or \"-3.ez\"")
+    sign = -1.0 if text.startswith("-") else 1.0
+    name = text.lstrip("+-")
+    names = robot.error_names()
+    require(name in names, f"{where}: unknown generalized error '{name}'; use FRAME.ERROR such as 1.ey (frames 0..{robot.n})")
+    return names.index(name), sign
+
+
+def _joint(robot: Robot, value, where: str) -> int:
+    require(isinstance(value, int) and 1 <= value <= robot.n, f"{where}: joint must be 1..{robot.n}, got {value!r}")
+    return value - 1
+
+
+def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
+    """Validate a truth spec (the parsed YAML) for `robot`; random parts are drawn from `seed`."""
+    require(isinstance(spec, dict), f"{where}: expected a mapping")
+    require_keys(spec, where, optional={"seed", "gravity", "constant", "joint_offsets", "masses", "sources", "noise",
+                                        "description"})
+    rng = np.random.default_rng(spec.get("seed", 0))
+    ne = robot.n_errors
+    const = np.zeros(ne)
+    c = spec.get("constant") or {}
+    require_keys(c, f"{where}: constant", optional={"translation_std", "rotation_std", "values"})
+    if "translation_std" in c or "rotation_std" in c:
+        std = np.tile([c.get("translation_std", 0.0)] * 3 + [c.get("rotation_std", 0.0)] * 3, robot.n + 1)
+        const += rng.normal(0.0, 1.0, ne) * std
+    for name, value in (c.get("values") or {}).items():
+        k, sign = _error_index(robot, name, f"{where}: constant.values")
+        const[k] = sign * float(value)
+    j = spec.get("joint_offsets") or {}
+    require_keys(j, f"{where}: joint_offsets", optional={"std", "values"})
+    offsets = rng.normal(0.0, j.get("std", 0.0), robot.n) if "std" in j else np.zeros(robot.n)
+    if "values" in j:
+        require(len(j["values"]) == robot.n, f"{where}: joint_offsets.values needs {robot.n} numbers")
+        offsets = np.array(j["values"], float)
+    sources = []
+    for k, s in enumerate(spec.get("sources") or []):
+        sw = f"{where}: sources[{k}]"
+        require(isinstance(s, dict) and s.get("type") in _SOURCE_KEYS,
+                f"{sw}: type must be one of {', '.join(_SOURCE_KEYS)}")
+        required, optional = _SOURCE_KEYS[s["type"]]
+        require_keys(s, sw, required=required | {"type"}, optional=optional)
+        p = dict(s)
+        if s["type"] == "sinusoid":
+            p["variable"] = _joint(robot, s["variable"], f"{sw}.variable")
+            require(("error" in s) != ("joint" in s), f"{sw}: give either error (a generalized error) or joint")
+            if "error" in s:
+                p["error"] = _error_index(robot, s["error"], f"{sw}.error")
+            else:
+                p["joint"] = _joint(robot, s["joint"], f"{sw}.joint")
+            require(float(s["period"]) > 0, f"{sw}.period must be positive")
+        elif s["type"] == "cantilever":
+            p["joint"] = _joint(robot, s["joint"], f"{sw}.joint")
+            require(robot.joints[p["joint"]].kind == "P", f"{sw}.joint: a cantilever grows with a prismatic joint")
+            for key in ("deflection", "slope"):
+                if key in s:
+                    p[key] = _error_index(robot, s[key], f"{sw}.{key}")
+        elif s["type"] in ("compliance", "backlash"):
+            p["joint"] = _joint(robot, s["joint"], f"{sw}.joint")
+            require(robot.joints[p["joint"]].kind == "R", f"{sw}.joint: {s['type']} needs a revolute joint")
+        else:
+            p["error"] = _error_index(robot, s["error"], f"{sw}.error")
+            p.setdefault("column", "temp_c")
+        sources.append(Source(s["type"], p))
+    noise = spec.get("noise") or {}
+    require_keys(noise, f"{where}: noise", optional={"repeatability", "tracker"})
+    masses = tuple(spec.get("masses") or ())
+    for k, m in enumerate(masses):
+        require(isinstance(m, dict), f"{where}: masses[{k}]: expected {{frame, mass, at}}")
+        require_keys(m, f"{where}: masses[{k}]", required={"frame", "mass"}, optional={"at"})
+    resolved = dict(spec)
+    resolved["constant"] = {"values": {n: float(v) for n, v in zip(robot.error_names(), const)}}
+    resolved["joint_offsets"] = {"values": offsets.tolist()}
+    return Truth(const, offsets, tuple(sources), np.array(spec.get("gravity", [0.0, 0.0, -9.81]), float), masses,
+                 float(noise.get("repeatability", 0.0)), float(noise.get("tracker", 0.0)), resolved)
+
+
+def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
+                  gravity: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
+    """What a force/torque sensor in robot.wrench_frame reads for a payload (N, 6): [F; r x F] in the
+    sensor frame, r the payload point (tool frame, m) relative to the sensor."""
+    F = frames(robot, q, eps)
+    S = F[-1] if robot.wrench_frame == "tool" else F[robot.wrench_frame]
+    tool = F[-1]
+    force_world = payload_kg[:, None] * gravity
+    force = np.einsum("nji,nj->ni", S[:, :3, :3], force_world)
+    point_world = np.einsum("nij,j->ni", tool[:, :3, :3], payload_at) + tool[:, :3, 3]
+    r = np.einsum("nji,nj->ni", S[:, :3, :3], point_world - S[:, :3, 3])
+    return np.column_stack([force, np.cross(r, force)])
+
+
+def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray,
+                    payload_at: np.ndarray) -> np.ndarray:
+    """Static torque about every revolute joint axis (N, n), N m, from the link masses beyond it and
+    the payload, on the nominal chain."""
+    F = frames(robot, q)
+    N = len(q)
+    points = []  # (mass (N,), world position (N, 3), first frame it rides on)
+    for m in truth.masses:
+        at = np.array(m.get("at", [0, 0, 0]), float)
+        W = F[m["frame"]]
+        points.append((np.full(N, float(m["mass"])), W[:, :3, :3] @ at + W[:, :3, 3], m["frame"]))
+    tool = F[-1]
+    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n + 1))
+    tau = np.zeros((N, robot.n))
+    for i, joint in enumerate(robot.joints):
+        if joint.kind != "R":
+            continue
+        J = F[i] @ constant(joint.pre)  # the frame the joint axis is expressed in
+        axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
+        for mass, pos, frame in points:
+            if frame >= i + 1:
+                moment = np.cross(pos - J[:, :3, 3], mass[:, None] * truth.gravity)
+                tau[:, i] += np.einsum("ni,ni->n", moment, axis)
+    return tau
+
+
+def true_state(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
+               aux: dict[str, np.ndarray], approach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """True joints (N, n) and generalized errors (N, 6(n+1)) at read joints q.
+
+    approach (N, n): sign of the last motion of each joint before the pose (for backlash)."""
+    N = len(q)
+    dq = np.tile(truth.joint_offsets, (N, 1))
+    eps = np.tile(truth.constant, (N, 1))
+    tau = None
+    for s in truth.sources:
+        p = s.params
+        if s.kind == "sinusoid":
+            value = p["amplitude"] * np.sin(2 * np.pi * q[:, p["variable"]] / p["period"] + p.get("phase", 0.0))
+            if "error" in p:
+                eps[:, p["error"][0]] += p["error"][1] * value
+            else:
+                dq[:, p["joint"]] += value
+        elif s.kind == "cantilever":
+            length = q[:, p["joint"]] + p.get("offset", 0.0)  # extension of the beam, m
+            weight = (p.get("mass", 0.0) + payload_kg) * np.linalg.norm(truth.gravity)
+            if "deflection" in p:  # tip deflection W L^3 / (3 EI), flexibility = 1 / EI
+                eps[:, p["deflection"][0]] += p["deflection"][1] * p["flexibility"] * weight * length ** 3 / 3
+            if "slope" in p:  # tip slope W L^2 / (2 EI)
+                eps[:, p["slope"][0]] += p["slope"][1] * p["flexibility"] * weight * length ** 2 / 2
+        elif s.kind == "compliance":
+            if tau is None:
+                tau = gravity_torques(robot, truth, q, payload_kg, payload_at)
+            dq[:, p["joint"]] += p["compliance"] * tau[:, p["joint"]]
+        elif s.kind == "backlash":
+            dq[:, p["joint"]] += 0.5 * p["width"] * approach[:, p["joint"]]
+        elif s.kind == "thermal":
+            require(p["column"] in aux, f"thermal source needs the auxiliary column '{p['column']}' in the design")
+            eps[:, p["error"][0]] += p["error"][1] * p["per_kelvin"] * (aux[p["column"]] - p.get("reference", 20.0))
+    return q + dq, eps
+
+
+def thermal_profile(truth: Truth, n_poses: int) -> dict[str, np.ndarray]:
+    """Temperatures over a measurement session: a linear drift from start to end (deg C)."""
+    out = {}
+    for s in truth.sources:
+        if s.kind == "thermal":
+            ref = s.params.get("reference", 20.0)
+            out[s.params["column"]] = np.linspace(s.params.get("start", ref), s.params.get("end", ref + 6.0), n_poses)
+    return out
+
