@@ -205,6 +205,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gecgen.simulate.cli import add_parser as add_simulate
 
     add_simulate(command)
+    from gecgen.model.wide_cli import add_parser as add_import
+
+    add_import(command)
 
     p = command("diagnose", cmd_diagnose, "trace the residual to missing effects, add them, refit, report")
     p.add_argument("robot")
