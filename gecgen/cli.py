@@ -53,6 +53,21 @@ def _identify_inputs(args):
     return robot, model, data, CompiledModel(robot, model)
 
 
+def _ridge(option: str, cm, data) -> tuple[float, list]:
+    """--ridge: a number, or 'auto' to choose it by 5-fold cross-validation on the training data."""
+    if option == "auto":
+        from gecgen.runtime.identify import choose_ridge
+
+        return choose_ridge(cm, data)
+    try:
+        value = float(option)
+    except ValueError:
+        raise ModelError(f"--ridge {option!r}: give a non-negative number or auto") from None
+    if value < 0:
+        raise ModelError(f"--ridge {option!r}: give a non-negative number or auto")
+    return value, []
+
+
 def cmd_identify(args) -> dict:
     from gecgen.runtime import calibration
     from gecgen.runtime.identify import identify
@@ -63,8 +78,10 @@ def cmd_identify(args) -> dict:
             if status:
                 status.update(f"Gauss-Newton iteration {it}: linearised residual {rms_mm:.4f} mm rms")
 
-        fit = identify(cm, data, registration_mode=args.register, progress=progress)
+        ridge, ridge_cv = _ridge(args.ridge, cm, data)
+        fit = identify(cm, data, registration_mode=args.register, progress=progress, ridge=ridge)
     calib = calibration.from_fit(robot, model, fit)
+    calib.report.update({"ridge": ridge, "ridge_cv": ridge_cv})
     out = Path(args.output or f"{robot.name}.calib.json")
     calibration.save(calib, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
@@ -186,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
     p.add_argument("--register", choices=["auto", "always", "never"], default="auto",
                    help="register the measurement frame onto the robot world first (auto: when far apart)")
+    p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
+                                               "(5-fold cross-validation on DATA); default 0, plain least squares")
 
     p = command("evaluate", cmd_evaluate, "position errors of new data before and after the calibration")
     p.add_argument("calibration")

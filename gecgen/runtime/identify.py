@@ -90,14 +90,36 @@ def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray |
     return R, m
 
 
-def damped_step(Rk: np.ndarray, z: np.ndarray, lam: float) -> np.ndarray:
-    """Levenberg-Marquardt step in scaled coordinates: min |Rk dx - z|^2 + lam |dx|^2 (lam 0: Gauss-Newton)."""
-    if lam == 0:
+def damped_step(Rk: np.ndarray, z: np.ndarray, lam: float, ridge: float = 0.0, x: np.ndarray | None = None) -> np.ndarray:
+    """Step dx in scaled coordinates minimising |Rk dx - z|^2 + ridge |x + dx|^2 + lam |dx|^2
+    (Levenberg-Marquardt damping lam, ridge prior on the coefficients x; both 0: Gauss-Newton)."""
+    if lam == 0 and ridge == 0:
         return solve_triangular(Rk, z)
     k = len(z)
-    R2 = np.linalg.qr(np.column_stack([np.vstack([Rk, np.sqrt(lam) * np.eye(k)]), np.concatenate([z, np.zeros(k)])]),
-                      mode="r")
+    A = np.vstack([Rk, np.sqrt(ridge) * np.eye(k), np.sqrt(lam) * np.eye(k)])
+    b = np.concatenate([z, -np.sqrt(ridge) * (x if x is not None else np.zeros(k)), np.zeros(k)])
+    R2 = np.linalg.qr(np.column_stack([A, b]), mode="r")
     return solve_triangular(R2[:k, :k], R2[:k, k])
+
+
+def choose_ridge(cm: CompiledModel, data: Measurements, grid=(0.0, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0),
+                 folds: int = 5, seed: int = 0) -> tuple[float, list[dict]]:
+    """The ridge of `grid` with the lowest k-fold cross-validated RMS point error over poses
+    (training data only), and the table {ridge, cv_rms_mm} it was chosen from."""
+    fold = np.random.default_rng(seed).permutation(data.n_poses) % folds
+    table = []
+    for ridge in grid:
+        sq, n = 0.0, 0
+        for f in range(folds):
+            train, test = data.subset(np.nonzero(fold != f)[0]), data.subset(np.nonzero(fold == f)[0])
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fit = identify(cm, train, ridge=ridge)
+            e = position_errors(cm, test, fit.registration.to_world(test.xyz), fit.c)
+            sq, n = sq + float(e @ e), n + len(e)
+        table.append({"ridge": ridge, "cv_rms_mm": 1e3 * np.sqrt(sq / n)})
+    best = min(table, key=lambda row: row["cv_rms_mm"])
+    return best["ridge"], table
 
 
 def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> np.ndarray:
@@ -139,11 +161,14 @@ def _registered(cm: CompiledModel, data: Measurements, mode: str) -> Registratio
 
 
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
-             step_tol_m: float = 1e-12, progress=None) -> Fit:
+             step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0) -> Fit:
     """Fit the error model of `cm` to `data`.
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms);
-    `progress(iteration, rms_mm)` is called after each step when given.
+    `progress(iteration, rms_mm)` is called after each step when given. `ridge` > 0 adds
+    ridge * |x|^2 to the least squares, x the coefficients scaled by their columns' norms (each
+    coefficient penalised by its effect on the data): a prior that keeps weakly excited
+    coefficients from growing where the data cannot hold them (choose it with `choose_ridge`).
     """
     notes = []
     registration = _registered(cm, data, registration_mode)
@@ -162,16 +187,17 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     converged, it, lam = False, 0, 0.0
     for it in range(1, max_iter + 1):
         R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
-        z = R[:k, k]
-        if np.linalg.norm(z) / np.sqrt(m) < step_tol_m:
+        Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
+        if np.linalg.norm(Rk @ damped_step(Rk, z, 0.0, ridge, x)) / np.sqrt(m) < step_tol_m:
             converged = True
             break
-        rss_now = float(z @ z + R[k, k] ** 2)
+        objective = float(z @ z + R[k, k] ** 2 + ridge * x @ x)
         for _ in range(16):
             trial = c.copy()
-            trial[kept] += damped_step(R[:k, :k], z, lam) / scale
+            trial[kept] += damped_step(Rk, z, lam, ridge, x) / scale
             rss_trial = float(np.sum(position_errors(cm, data, y, trial) ** 2))
-            if rss_trial < rss_now:
+            trial_objective = rss_trial + ridge * float(np.sum((trial[kept] * scale) ** 2))
+            if trial_objective < objective:
                 break
             lam = 1e-6 if lam == 0 else 10 * lam
         else:
@@ -181,7 +207,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
         c, lam = trial, (lam / 10 if lam > 1e-9 else 0.0)
         if progress:
             progress(it, 1e3 * np.sqrt(rss_trial / m))
-        if rss_now - rss_trial <= RSS_TOL * rss_now:  # stationary: further steps change nothing
+        if objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
             converged = True
             break
     if not converged and not notes:
@@ -192,8 +218,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     sv = np.linalg.svd(Rk, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     obs = float(np.exp(np.mean(np.log(np.maximum(sv, 1e-300)))) / np.sqrt(m))
-    Rinv = solve_triangular(Rk, np.eye(k))
-    cov = sigma ** 2 * (Rinv @ Rinv.T) / np.outer(scale, scale)
+    cov = sigma ** 2 * np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k)) / np.outer(scale, scale)
     std = np.full(nc, np.nan)
     std[kept] = np.sqrt(np.diag(cov))
     if cond > ILL_CONDITIONED:
