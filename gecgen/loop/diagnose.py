@@ -42,6 +42,8 @@ MIN_CV_GAIN = 0.01
 FOLDS = 5
 MAX_ROUNDS = 8
 PERIODS = 40
+#: a candidate's columns must keep this share of their squared norm outside the current model
+MIN_INDEPENDENCE = 1e-6
 #: fitted effects this similar (cosine) are indistinguishable on the data
 SAME_EFFECT = 0.95
 
@@ -132,7 +134,7 @@ def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.rand
     for i in moving:
         v, name, joint = data.q[:, i], f"q{i + 1}", robot.joints[i]
         top = max([k for k in range(1, 9) if f"{name}**{k}" in present or (k == 1 and name in present)], default=0)
-        for k in (top + 1, top + 2):
+        for k in range(1, top + 3):  # every order up to two above the model's highest
             add("polynomial", [name], [f"{name}**{k}" if k > 1 else name], [v ** k])
         if joint.kind == "R":
             add("trigonometric", [name], [f"sin({name})", f"cos({name})"], [np.sin(v), np.cos(v)])
@@ -154,8 +156,7 @@ def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.rand
     wrench = [k for k in range(6) if _range(data.w[:, k]) > 1e-9]
     for k in wrench:
         f, fn = data.w[:, k], WRENCH[k]
-        if fn not in present:
-            add("wrench", [fn], [fn], [f])
+        add("wrench", [fn], [fn], [f])
         for i in moving:
             name = f"q{i + 1}"
             add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
@@ -173,7 +174,7 @@ def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.rand
         if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):
             add("auxiliary", [a], [a], [v])
             add("auxiliary", [a], [f"{a}**2"], [v ** 2])
-    return [c for c in out if c.family == "geometric" or not (set(c.terms) & present)]
+    return out
 
 
 def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarray, sigma2: float,
@@ -200,7 +201,7 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarra
             G = Xs.T @ Xs - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
             scale = np.sqrt(np.maximum(np.diag(Xs.T @ Xs), 1e-300))
             Gs = G / np.outer(scale, scale)
-            if np.linalg.eigvalsh(Gs).min() < 1e-8:
+            if np.linalg.eigvalsh(Gs).min() < MIN_INDEPENDENCE:
                 continue  # (nearly) inside the current model: nothing new to add
             b = rX[s] / scale
             beta = np.linalg.solve(Gs, b)
@@ -315,12 +316,15 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
         base_cv = cv_rms(H, r, rows_pose, fold)
+        present = [{t.text for t in ts} for ts in rnd.model.terms]
         chosen, results = None, []
         # a missing constant error first (few candidates, so a mild multiplicity correction), then the rest
         for tier in (lambda c: c.family == "geometric", lambda c: c.family != "geometric"):
             indices = [k for k, c in enumerate(cands) if tier(c)]
             found = screen(J, rows_pose, r, Q, sigma2, [cands[k] for k in indices], errors)
-            found = [(drop, indices[ci], e, fitted) for drop, ci, e, fitted in found]
+            # a term the error already has (kept or eliminated) is never new, however its column moved
+            found = [(drop, indices[ci], e, fitted) for drop, ci, e, fitted in found
+                     if not set(cands[indices[ci]].terms) & present[e]]
             results += found
             n_tests = max(1, len(indices) * len(errors))
             tested += n_tests
