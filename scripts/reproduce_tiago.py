@@ -1,0 +1,182 @@
+"""Calibrate the real TIAGo from motion capture and write docs/real-data-tiago.md.
+
+    python scripts/reproduce_tiago.py      # needs ../shared/data/tiago-mocap
+
+Every number comes from the `gecgen` commands printed in the document; the validation file is
+only ever passed to `gecgen evaluate` and, for reporting, to `--val` of diagnose (which chooses
+nothing on it).
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from gecgen.model import load_robot
+from gecgen.model.measurements import read_measurements
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
+OUT = ROOT / "out" / "tiago"
+ROBOT = "robots/tiago.yaml"
+FIGAROH = {"base": (3.37, 4.87, 9), "offsets": (2.88, 4.23, 14), "full": (1.68, 3.22, 30)}
+MODELS = {"base": "robots/tiago.base.errors.yaml", "offsets": "robots/tiago.offsets.errors.yaml",
+          "full": "robots/tiago.errors.yaml"}
+commands: list[str] = []
+
+
+def gecgen(*args) -> dict:
+    commands.append("gecgen " + " ".join(os.path.relpath(a, ROOT) if isinstance(a, Path) else str(a) for a in args))
+    run = subprocess.run([sys.executable, "-m", "gecgen.cli", *map(str, args), "--json"], capture_output=True,
+                         text=True, cwd=ROOT)
+    if run.returncode:
+        raise SystemExit(run.stderr)
+    return json.loads(run.stdout)
+
+
+def main():
+    OUT.mkdir(parents=True, exist_ok=True)
+    files = {}
+    for day, name in (("train", "train_2021-11-30"), ("val", "validation_2021-11-26")):
+        for pts, keep in (("all", None), ("m1", "m1")):
+            out = OUT / f"{name}_{pts}.csv"
+            extra = ["--targets", keep] if keep else []
+            imp = gecgen("import", ROBOT, DATA / f"{name}.csv", "--mapping", "robots/tiago.import.yaml", *extra,
+                         "-o", out)
+            files[(day, pts)] = out
+            files[(day, "outside")] = imp["outside_limits"]
+    rows = []
+    for label, errors in MODELS.items():
+        for pts in ("m1", "all"):
+            for ridge in ("0", "auto"):
+                if ridge == "auto" and label != "full":
+                    continue
+                calib = OUT / f"{label}_{pts}_ridge{ridge}.calib.json"
+                fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", errors, "--ridge", ridge, "-o", calib)
+                ev = gecgen("evaluate", calib, files[("val", "m1")])
+                rows.append((label, pts, ridge, fit, ev))
+    diags = {}
+    for label in ("offsets", "full"):
+        for pts in ("m1", "all"):
+            new = OUT / f"{label}_{pts}.diagnosed.errors.yaml"
+            d = gecgen("diagnose", ROBOT, files[("train", pts)], "--val", files[("val", pts)], "--errors",
+                       MODELS[label], "-o", new, "--report", OUT / f"report_{label}_{pts}")
+            calib = OUT / f"{label}_{pts}.diagnosed.calib.json"
+            fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", new, "-o", calib)
+            ev = gecgen("evaluate", calib, files[("val", "m1")])
+            diags[(label, pts)] = (d, fit, ev)
+
+    robot = load_robot(ROOT / ROBOT)
+    train = read_measurements(files[("train", "m1")], robot)
+    val = read_measurements(files[("val", "m1")], robot)
+    lo, hi = train.q.min(0), train.q.max(0)
+    outside = ((val.q < lo - 0.05) | (val.q > hi + 0.05)).any(1)
+    wide = [f"{robot.joint_names[j]} {val.q[:, j].min():.2f}..{val.q[:, j].max():.2f} rad (training "
+            f"{lo[j]:.2f}..{hi[j]:.2f})" for j in range(robot.n)
+            if val.q[:, j].min() < lo[j] - 0.05 or val.q[:, j].max() > hi[j] + 0.05]
+
+    lines = ["# Real data: the TIAGo arm from motion capture", "",
+             "Data: `../shared/data/tiago-mocap` (figaroh-examples, 37 training postures of 2021-11-30, 62 validation "
+             "postures of 2021-11-26; four markers of one rigid body on the hand, in the frame of a body fixed to the "
+             "base). Robot: `robots/tiago.yaml` (the URDF's torso lift and seven arm joints, base_footprint to "
+             "arm_7_link; the marker body is a rigid tool whose placement frame 8's errors absorb). Regenerate "
+             "everything with `python scripts/reproduce_tiago.py`; the commands it runs are listed at the end.", "",
+             "## Reading the data", "",
+             "`gecgen import` turns the wide layout (four points per row, joint names as headers) into the contract's "
+             "measurement CSV through `robots/tiago.import.yaml`; every column is mapped, kept as an auxiliary signal "
+             "(`marker_std_mm`) or listed as ignored. Joint readings outside the URDF limits: "
+             + "; ".join(f"{day} row {o['row']}: {o['joint']} {o['value']:.5f}" for day in ("train", "val")
+                         for o in files[(day, "outside")])
+             + " (inside the reader's 1 mm / 1 mrad tolerance; reported, not clipped). "
+             "The motion-capture-to-base transform is registered (closed form on the nominal model, then frame 0's "
+             "errors); the marker points start from `scripts/tiago_marker_guess.py` (training file, nominal model) "
+             "and frame 8's errors refine them.", "",
+             "## Identification, next to figaroh", "",
+             "Position RMS / max in mm. Training on the training file only; validation = marker 1 of the validation "
+             "file (figaroh's figure). Point 1 = fit on marker 1 alone; all = fit on the four markers (the full hand "
+             "pose).", "",
+             "| model | fitted on | identifiable | training RMS | validation RMS (marker 1) | validation max | figaroh (params, train / val) |",
+             "|---|---|---|---|---|---|---|"]
+    for label, pts, ridge, fit, ev in rows:
+        fg = FIGAROH[label]
+        name = {"base": "base registration + marker point", "offsets": "+ joint offsets",
+                "full": "full geometric (6 per frame)"}[label] + (" + ridge (CV)" if ridge == "auto" else "")
+        ridge_note = f" (ridge {fit['ridge']:g})" if ridge == "auto" else ""
+        lines.append(f"| {name}{ridge_note} | {'point 1' if pts == 'm1' else 'all 4 points'} | {fit['n_identifiable']} | "
+                     f"{fit['train']['rms_mm']:.2f} | {ev['after']['rms_mm']:.2f} | {ev['after']['max_mm']:.2f} | "
+                     f"{fg[2]}: {fg[0]:.2f} / {fg[1]:.2f} |")
+    full_m1 = next(fit for label, pts, ridge, fit, ev in rows if (label, pts, ridge) == ("full", "m1", "0"))
+    lines += ["", "The two reduced models reproduce figaroh's figures to the printed digit with the same parameter "
+                  "counts (9 and 14): registration, redundancy analysis and fit agree with an independent "
+                  f"implementation on real data. For the full geometric model gecgen keeps {full_m1['n_identifiable']} "
+                  "parameters with one point (4R + 2P + 3 for 7 revolute joints and one prismatic) where figaroh keeps "
+                  f"30; the larger model fits the training data better ({full_m1['train']['rms_mm']:.2f} against "
+                  f"{FIGAROH['full'][0]} mm) and the validation data worse.", "",
+              "## Why validation is harder than training", "",
+              f"{int(outside.sum())} of the {val.n_poses} validation postures leave the joint ranges of the training "
+              f"file by more than 0.05 rad or m: {'; '.join(wide)}. A calibration extrapolates there, and those "
+              "postures carry most of the validation error (below).", ""]
+    full_all = OUT / "full_all_ridge0.calib.json"
+    per = _errors_by_range(full_all, files[("val", "m1")], outside)
+    lines += [f"Full geometric model fitted on all four points: validation RMS {per[0]:.2f} mm on the "
+              f"{int((~outside).sum())} postures inside the training ranges, {per[1]:.2f} mm on the "
+              f"{int(outside.sum())} outside.", "",
+              "## What is left in the residual: gecgen diagnose", "",
+              "Decisions on the training file only (chi-square with multiplicity correction and 5-fold "
+              "cross-validation over the training postures); `--val` only reports.", "",
+              "| start | fitted on | training CV RMS before -> after | validation RMS (marker 1) after refit | effects added |",
+              "|---|---|---|---|---|"]
+    for (label, pts), (d, fit, ev) in diags.items():
+        effects = "; ".join(f"{e['error']}: {', '.join(e['terms'])}" for e in d["effects"]) or "none"
+        lines.append(f"| {label} | {'point 1' if pts == 'm1' else 'all 4 points'} | "
+                     f"{d['rounds'][0]['cv_rms_mm']:.2f} -> {d['rounds'][-1]['cv_rms_mm']:.2f} | "
+                     f"{ev['after']['rms_mm']:.2f} | {effects} |")
+    lines += ["", "Joint numbering: q1 torso_lift, q2..q8 arm_1..arm_7; frame i sits after joint i, so `7.er` is a "
+                  "rotation about arm_6's axis, i.e. an arm_6 angle error.", "",
+              "## Against the target", ""] + _target_verdict(diags) + ["",
+              "## Commands", "", "```"] + commands + ["```"]
+    (ROOT / "docs" / "real-data-tiago.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def _target_verdict(diags) -> list[str]:
+    """Pick a pipeline on training data alone (lowest cross-validated training RMS among the runs fitted
+    on all four points) and say whether it meets figaroh's 3.22 mm; list any other run below it."""
+    target = FIGAROH["full"][1]
+    runs = {k: v for k, v in diags.items() if k[1] == "all"}
+    chosen = min(runs, key=lambda k: runs[k][0]["rounds"][-1]["cv_rms_mm"])
+    val = runs[chosen][2]["after"]["rms_mm"]
+    text = [f"Target: validation RMS on marker 1 below figaroh's {target} mm with a model chosen on the training file "
+            f"alone. The training file alone (lowest cross-validated training RMS among the four-point runs) picks "
+            f"diagnose from the {chosen[0]} model: {val:.2f} mm, which "
+            f"{'meets' if val < target else 'does not meet'} the target."]
+    others = [f"diagnose from the {k[0]} model on {'point 1' if k[1] == 'm1' else 'all four points'} "
+              f"({v[2]['after']['rms_mm']:.2f} mm)" for k, v in diags.items()
+              if k != chosen and v[2]["after"]["rms_mm"] < target]
+    if others:
+        text.append(f"Below the target as well: {'; '.join(others)}; but that was seen by comparing validation "
+                    "scores, so it is not claimed.")
+    text.append("Same-day cross-validation cannot see what changes between the two recording days, and the "
+                "validation postures reach joint ranges the training file never visits: more training postures "
+                "spread over the whole range is what this robot's calibration needs.")
+    return text
+
+
+def _errors_by_range(calib_path: Path, val_csv: Path, outside: np.ndarray) -> tuple[float, float]:
+    from gecgen.runtime import calibration
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.identify import position_errors
+
+    calib = calibration.load(calib_path)
+    val = read_measurements(val_csv, calib.robot)
+    e = 1e3 * position_errors(CompiledModel(calib.robot, calib.model), val, calib.registration.to_world(val.xyz),
+                              calib.c)
+    return float(np.sqrt(np.mean(e[~outside] ** 2))), float(np.sqrt(np.mean(e[outside] ** 2)))
+
+
+if __name__ == "__main__":
+    main()
