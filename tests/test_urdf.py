@@ -137,19 +137,25 @@ def test_chain_matches_independent_composition_of_urdf_transforms(arm, rng):
 
 
 # -- (b) J_e --------------------------------------------------------------------------------------
+@pytest.fixture(scope="module", params=["synthetic arm", "tiago"])
+def urdf_robot(request, arm):
+    return arm if request.param == "synthetic arm" else load_robot(ROBOTS / "tiago.yaml")
+
+
 @pytest.mark.parametrize("scale", [0.0, 0.02])
-def test_J_e_symbolic_and_compiled_match_finite_differences(arm, rng, scale):
-    fn = jacobian_function(arm)
-    cm = CompiledModel(arm, load_error_model(None, arm), backend="c")
-    for q in random_q(arm, rng, 3):
-        eps = rng.normal(0, scale, arm.n_errors)
-        fd = fd_jacobian(arm, q, eps)
+def test_J_e_symbolic_and_compiled_match_finite_differences(urdf_robot, rng, scale):
+    robot = urdf_robot
+    fn = jacobian_function(robot)
+    cm = CompiledModel(robot, load_error_model(None, robot), backend="c")
+    for q in random_q(robot, rng, 3):
+        eps = rng.normal(0, scale, robot.n_errors)
+        fd = fd_jacobian(robot, q, eps)
         assert np.abs(fd).max() > 0.1  # the check is not vacuous
         out = fn.evaluate(q=q, eps=eps)
-        np.testing.assert_allclose(out["p"], target_positions(arm, q, eps).ravel(), atol=1e-14)
-        np.testing.assert_allclose(out["J"].reshape(-1, arm.n_errors), fd, atol=1e-8)
+        np.testing.assert_allclose(out["p"], target_positions(robot, q, eps).ravel(), atol=1e-14)
+        np.testing.assert_allclose(out["J"].reshape(-1, robot.n_errors), fd, atol=1e-8)
         p, J = cm.J_e(q, eps)
-        np.testing.assert_allclose(p[0], target_positions(arm, q, eps)[0], atol=1e-14)
+        np.testing.assert_allclose(p[0], target_positions(robot, q, eps)[0], atol=1e-14)
         np.testing.assert_allclose(J[0], fd, atol=1e-8)
 
 
@@ -192,7 +198,8 @@ MALFORMED = {
                         "joint 'j1' origin xyz: '0.4m' is not a number"),
     "xyz with two numbers": (replaced('xyz="0.0 0.25 0.02"', 'xyz="0.0 0.25"'), {},
                              "joint 'j3' origin xyz: expected three numbers"),
-    "xyz not finite": (replaced('xyz="0.1 0.0 0.2"', 'xyz="0.1 nan 0.2"'), {}, "joint 'j4' origin xyz: 'nan' is not finite"),
+    "xyz not finite": (replaced('xyz="0.1 0.0 0.2"', 'xyz="0.1 nan 0.2"'), {},
+                       "joint 'j4' origin xyz: 'nan' is not finite"),
     "zero axis": (replaced('<axis xyz="0 -1 0"/>', '<axis xyz="0 0 0"/>'), {}, "joint 'j3': axis must not be zero"),
     "mimic joint": (replaced('<child link="link4"/>', '<child link="link4"/><mimic joint="j1"/>'), {},
                     "joint 'j4': mimic joints are not supported"),

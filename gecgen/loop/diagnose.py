@@ -385,4 +385,5 @@ def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], pa
     if not effects:
         lines.append("# nothing significant was left in the residual; the model is unchanged")
     spec = model.to_yaml_dict(robot)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text("\n".join(lines) + "\n" + yaml.safe_dump(spec, sort_keys=False, width=120))

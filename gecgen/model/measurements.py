@@ -154,6 +154,7 @@ def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrenc
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, "target", "x", "y", "z"]
     targets = list(robot.targets)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with Path(path).open("w", newline="") as fh:
         out = csv.writer(fh, lineterminator="\n")
         out.writerow(header)
@@ -212,6 +213,7 @@ def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = (
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):
     """The input rows with q1..qn replaced by q (P, n), full precision."""
     idx = {h: k for k, h in enumerate(commands.header)}
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with Path(path).open("w", newline="") as fh:
         out = csv.writer(fh, lineterminator="\n")
         out.writerow(commands.header)

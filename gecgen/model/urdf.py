@@ -1,14 +1,18 @@
 """Serial chains from URDF: the joints on the path from a base link to a tip link.
 
 Every moving joint (revolute, continuous, prismatic) becomes a frame that carries the six
-generalized errors; fixed joints fold into the next moving joint's origin (`pre`), those before
-the first moving joint into the base and those after the last into the tool. Meshes, inertias
-and everything else in the URDF are ignored.
+generalized errors. A joint's `<origin>` is `Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)` and its motion
+a rotation about, or translation along, its unit `<axis>` (default x) in the frame after the
+origin. Fixed joints fold into the next moving joint's origin (`pre`); those before the first
+moving joint and that joint's own origin form the base (so frame 0 is the first joint's frame at
+zero, as in DH), and those after the last moving joint form the tool. Meshes, inertias,
+transmissions and joints off the path are ignored.
 """
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
@@ -19,72 +23,132 @@ from gecgen.model.validation import ModelError, require
 MOVING = {"revolute": "R", "continuous": "R", "prismatic": "P"}
 
 
-def _floats(text: str | None, default: str, where: str) -> list[float]:
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One `<joint>` element of the tree: its name, type, parent and child link and the element."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    element: ET.Element
+
+
+def _number(text: str, where: str) -> float:
     try:
-        values = [float(v) for v in (text if text is not None else default).split()]
+        value = float(text)
     except ValueError:
-        raise ModelError(f"{where}: expected three numbers, got {text!r}") from None
-    require(len(values) == 3, f"{where}: expected three numbers, got {text!r}")
-    return values
+        raise ModelError(f"{where}: {text!r} is not a number; fix the URDF") from None
+    require(math.isfinite(value), f"{where}: {text!r} is not finite; fix the URDF")
+    return value
+
+
+def _triple(text: str | None, default: str, where: str) -> list[float]:
+    """Three numbers from an attribute such as xyz="0 0.1 0"; `default` when it is absent."""
+    words = (text if text is not None else default).split()
+    require(len(words) == 3, f"{where}: expected three numbers, got {text!r}; fix the URDF")
+    return [_number(w, where) for w in words]
 
 
 def _origin(joint: ET.Element, where: str) -> tuple[Elementary, ...]:
+    """The joint's `<origin>` as elementary transforms Trans(xyz) Rz(y) Ry(p) Rx(r) (zeros dropped)."""
     el = joint.find("origin")
-    xyz = _floats(None if el is None else el.get("xyz"), "0 0 0", f"{where} origin xyz")
-    rpy = _floats(None if el is None else el.get("rpy"), "0 0 0", f"{where} origin rpy")
+    xyz = _triple(None if el is None else el.get("xyz"), "0 0 0", f"{where} origin xyz")
+    rpy = _triple(None if el is None else el.get("rpy"), "0 0 0", f"{where} origin rpy")
     ops = [("Tx", xyz[0]), ("Ty", xyz[1]), ("Tz", xyz[2]), ("Rz", rpy[2]), ("Ry", rpy[1]), ("Rx", rpy[0])]
     return tuple((op, sp.Float(v, 17)) for op, v in ops if v != 0.0)
 
 
+def _axis(joint: ET.Element, where: str) -> tuple:
+    """The unit joint axis; components that are exactly 0 or +-1 stay exact so the chain prunes them."""
+    el = joint.find("axis")
+    axis = _triple(None if el is None else el.get("xyz"), "1 0 0", f"{where} axis xyz")
+    norm = math.sqrt(sum(a * a for a in axis))
+    require(norm > 0, f"{where}: axis must not be zero; give the direction of motion")
+    unit = [a / norm for a in axis]
+    return tuple(sp.Integer(int(u)) if u in (-1.0, 0.0, 1.0) else sp.Float(u, 17) for u in unit)
+
+
+def _limits(joint: ET.Element, jtype: str, where: str) -> tuple[float, float]:
+    """(lower, upper) in m or rad; a continuous joint has none."""
+    if jtype == "continuous":
+        return -math.inf, math.inf
+    el = joint.find("limit")
+    require(el is not None and el.get("lower") is not None and el.get("upper") is not None,
+            f"{where}: a {jtype} joint needs <limit lower=... upper=...>; add its joint limits")
+    lo, hi = _number(el.get("lower"), f"{where} limit lower"), _number(el.get("upper"), f"{where} limit upper")
+    require(lo < hi, f"{where}: limit lower {lo:g} must be below upper {hi:g}")
+    return lo, hi
+
+
+def _tree(root: ET.Element, where: str) -> tuple[set[str], dict[str, UrdfJoint]]:
+    """Link names and, for each child link, the joint above it (a URDF is a tree of links)."""
+    links = {el.get("name") for el in root.findall("link")}
+    above: dict[str, UrdfJoint] = {}
+    for el in root.findall("joint"):  # top-level only: <transmission> also holds <joint> elements
+        name = el.get("name")
+        jwhere = f"{where}: joint '{name}'"
+        require(name, f"{where}: a <joint> has no name; name every joint")
+        ends = {}
+        for end in ("parent", "child"):
+            tag = el.find(end)
+            ends[end] = None if tag is None else tag.get("link")
+            require(ends[end], f"{jwhere}: missing <{end} link=...>")
+            require(ends[end] in links, f"{jwhere}: {end} link '{ends[end]}' is not a <link> of this URDF; "
+                                        f"declare it or fix the name")
+        child = ends["child"]
+        require(child not in above, f"{jwhere}: link '{child}' is already the child of joint "
+                                    f"'{above[child].name if child in above else ''}'; a URDF is a tree")
+        above[child] = UrdfJoint(name, el.get("type"), ends["parent"], child, el)
+    return links, above
+
+
+def _path(above: dict[str, UrdfJoint], base_link: str, tip_link: str, where: str) -> list[UrdfJoint]:
+    """The joints from base_link down to tip_link, in order."""
+    path: list[UrdfJoint] = []
+    link = tip_link
+    while link != base_link:
+        require(link in above and len(path) < len(above),  # the length bound stops a cycle of links
+                f"{where}: tip_link '{tip_link}' is not below base_link '{base_link}'; choose links on one branch")
+        path.append(above[link])
+        link = above[link].parent
+    return path[::-1]
+
+
 def urdf_chain(path: Path, base_link: str, tip_link: str):
-    """(base ops, joints, tool ops) of the path base_link -> tip_link in a URDF file."""
+    """(base ops, joints, tool ops) of the path base_link -> tip_link in a URDF file.
+
+    Lengths in m, angles in rad; joints are `Joint(pre=origin, post=())` with their URDF names.
+    """
     where = str(path)
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ModelError(f"{where}: not valid XML ({exc})") from None
-    links = {el.get("name") for el in root.findall("link")}
+    links, above = _tree(root, where)
     for key, link in (("base_link", base_link), ("tip_link", tip_link)):
         require(link in links, f"{where}: {key} '{link}' is not a link of this URDF")
-    parent_joint = {el.find("child").get("link"): el for el in root.findall("joint")}
-    path_joints = []
-    link = tip_link
-    while link != base_link:
-        require(link in parent_joint, f"{where}: tip_link '{tip_link}' is not below base_link '{base_link}'")
-        joint = parent_joint[link]
-        path_joints.append(joint)
-        link = joint.find("parent").get("link")
-    path_joints.reverse()
 
-    pending: tuple[Elementary, ...] = ()
+    pending: tuple[Elementary, ...] = ()  # fixed transforms not yet folded into a frame
     base: tuple[Elementary, ...] | None = None
     joints = []
-    for el in path_joints:
-        name, jtype = el.get("name"), el.get("type")
-        jwhere = f"{where}: joint '{name}'"
-        origin = _origin(el, jwhere)
-        if jtype == "fixed":
+    for uj in _path(above, base_link, tip_link, where):
+        jwhere = f"{where}: joint '{uj.name}'"
+        origin = _origin(uj.element, jwhere)
+        if uj.type == "fixed":
             pending += origin
             continue
-        require(jtype in MOVING, f"{jwhere}: type '{jtype}' is not supported; use revolute, continuous, prismatic or fixed")
-        require(el.find("mimic") is None, f"{jwhere}: mimic joints are not supported; give the chain without them")
-        axis = _floats(None if el.find("axis") is None else el.find("axis").get("xyz"), "1 0 0", f"{jwhere} axis")
-        norm = math.sqrt(sum(a * a for a in axis))
-        require(norm > 0, f"{jwhere}: axis must not be zero")
-        limit = el.find("limit")
-        if jtype == "continuous":
-            lo, hi = -math.inf, math.inf
-        else:
-            require(limit is not None and limit.get("lower") is not None and limit.get("upper") is not None,
-                    f"{jwhere}: a {jtype} joint needs <limit lower=... upper=...>")
-            lo, hi = float(limit.get("lower")), float(limit.get("upper"))
+        require(uj.type in MOVING, f"{jwhere}: type '{uj.type}' is not supported on the chain; "
+                                   f"use revolute, continuous, prismatic or fixed")
+        require(uj.element.find("mimic") is None,
+                f"{jwhere}: mimic joints are not supported; give the chain without them")
+        lo, hi = _limits(uj.element, uj.type, jwhere)
         if base is None:
             base, pre = pending + origin, ()
         else:
             pre = pending + origin
         pending = ()
-        axis_exact = tuple(sp.Integer(int(a / norm)) if a / norm in (-1.0, 0.0, 1.0) else sp.Float(a / norm, 17)
-                           for a in axis)
-        joints.append(Joint(name=name, kind=MOVING[jtype], axis=axis_exact, pre=pre, post=(), lower=lo, upper=hi))
+        joints.append(Joint(name=uj.name, kind=MOVING[uj.type], axis=_axis(uj.element, jwhere), pre=pre, post=(),
+                            lower=lo, upper=hi))
     require(joints, f"{where}: no moving joint between '{base_link}' and '{tip_link}'")
     return base, tuple(joints), pending

@@ -1,57 +1,142 @@
 """Import wide measurement tables (one row per pose, several points per row) through a column map.
 
-Motion-capture exports and logs of other tools put every point of a pose on one row, with joint
-names as headers. A small YAML mapping says which column is what:
+Motion-capture exports and the logs of other tools put every point of a pose on one row, with
+joint names as headers. A small YAML mapping says which column is what:
 
-    pose: row                           # or the name of an integer pose-id column
-    joints: {q1: torso_lift_joint, q2: arm_1_joint}   # robot joint (q1.. or its name) -> column
-    targets: {m1: [x1, y1, z1], m2: [x2, y2, z2]}     # robot target -> its x, y, z columns
-    aux: [marker_std_mm]                # columns kept as auxiliary signals
-    ignore: [shipped_row, t_start_robot]              # columns deliberately dropped
+    pose: row                      # 'row' (pose ids 0, 1, ... in row order) or a column of integer ids
+    joints:                        # robot joint (q1..qn or its name) -> column; every joint is mapped
+      q1: torso_lift_joint
+      arm_1_joint: arm_1_joint
+    targets:                       # robot target -> its x, y, z columns (m)
+      m1: [x1, y1, z1]
+    wrench: {fz: force_z}          # optional: fx fy fz mx my mz -> column (sensor frame, N and N m)
+    aux: [marker_std_mm]           # optional: columns kept as auxiliary signals
+    ignore: [shipped_row]          # optional: columns deliberately dropped (absent ones are fine)
 
 Every column of the table must be mapped, kept as aux or ignored: nothing is dropped silently.
+Values are copied exactly (no unit conversion, no clipping); `read_measurements` applies the
+contract's checks (limits, millimetres) to the written file.
 """
 from __future__ import annotations
 
 import csv
-import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gecgen.model.errors import is_aux_name
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, read_yaml, require, require_keys
 
+#: columns of the contract's measurement file, which an aux column must not shadow
+CONTRACT_COLUMNS = ("pose", "target", "x", "y", "z", *WRENCH)
 
-def load_mapping(path: str | Path, robot: Robot) -> dict:
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which column of a wide table holds what; validated against one robot by `load_mapping`."""
+
+    pose: str  # "row" or the column of integer pose ids
+    joints: tuple[str, ...]  # the column of q1..qn, in robot order
+    targets: dict[str, tuple[str, str, str]]  # target name -> its x, y, z columns, in mapping order
+    wrench: dict[str, str]  # "fx".."mz" -> column
+    aux: tuple[str, ...]
+    ignore: tuple[str, ...]
+    source: str  # the mapping file, for messages
+
+    def columns(self) -> list[str]:
+        """Every column the mapping reads (ignored ones excluded), in mapping order."""
+        return [*([] if self.pose == "row" else [self.pose]), *self.joints,
+                *[c for xyz in self.targets.values() for c in xyz], *self.wrench.values(), *self.aux]
+
+
+def _names(value, where: str, what: str) -> list[str]:
+    require(isinstance(value, list) and all(isinstance(v, str) and v for v in value),
+            f"{where}: expected a list of {what}, got {value!r}")
+    return value
+
+
+def _mapping(value, where: str, what: str) -> dict:
+    require(isinstance(value, dict) and value, f"{where}: expected a mapping {what}, got {value!r}")
+    return value
+
+
+def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
+    """Read and validate a column-mapping YAML for `robot`; every problem names the file, key and fix."""
     path = Path(path)
-    spec = read_yaml(path, "column-mapping")
     where = str(path)
+    spec = read_yaml(path, "column-mapping")
     require(isinstance(spec, dict), f"{where}: expected a mapping with pose, joints, targets, aux, ignore")
-    require_keys(spec, where, required={"joints", "targets"}, optional={"pose", "aux", "ignore", "wrench", "description"})
-    joints = {}
-    for key, col in spec["joints"].items():
-        if key in robot.joint_names:
-            key = f"q{robot.joint_names.index(key) + 1}"
-        require(key in [f"q{i + 1}" for i in range(robot.n)],
-                f"{where}: joints: '{key}' is not a joint of {robot.name} (use q1..q{robot.n} or {', '.join(robot.joint_names)})")
-        joints[key] = str(col)
-    missing = [f"q{i + 1}" for i in range(robot.n) if f"q{i + 1}" not in joints]
+    require_keys(spec, where, required={"joints", "targets"},
+                 optional={"pose", "wrench", "aux", "ignore", "description"})
+
+    qnames = [f"q{i + 1}" for i in range(robot.n)]
+    joints: dict[str, str] = {}
+    for key, col in _mapping(spec["joints"], f"{where}: joints", "from joint to column").items():
+        q = qnames[robot.joint_names.index(key)] if key in robot.joint_names else key
+        require(q in qnames, f"{where}: joints: '{key}' is not a joint of {robot.name}; "
+                             f"use q1..q{robot.n} or {', '.join(robot.joint_names)}")
+        require(q not in joints, f"{where}: joints: '{key}' is mapped twice (as {q} and by name); keep one")
+        require(isinstance(col, str), f"{where}: joints.{key}: expected a column name, got {col!r}")
+        joints[q] = col
+    missing = [f"{q} ({name})" for q, name in zip(qnames, robot.joint_names) if q not in joints]
     require(not missing, f"{where}: joints: no column for {missing[0] if missing else ''}; map every joint")
-    for name, cols in spec["targets"].items():
+
+    targets = {}
+    for name, cols in _mapping(spec["targets"], f"{where}: targets", "from target to [x, y, z] columns").items():
         require(name in robot.targets, f"{where}: targets: '{name}' is not a target of {robot.name} "
-                                       f"({', '.join(robot.targets)})")
-        require(isinstance(cols, list) and len(cols) == 3, f"{where}: targets.{name}: expected [x, y, z] column names")
-    wrench = spec.get("wrench") or {}
-    for k in wrench:
+                                       f"({', '.join(robot.targets)}); add it to the robot file or fix the name")
+        require(len(_names(cols, f"{where}: targets.{name}", "three column names [x, y, z]")) == 3,
+                f"{where}: targets.{name}: expected three column names [x, y, z], got {cols!r}")
+        targets[name] = tuple(cols)
+
+    wrench = _mapping(spec["wrench"], f"{where}: wrench", "from fx..mz to column") if "wrench" in spec else {}
+    for k, col in wrench.items():
         require(k in WRENCH, f"{where}: wrench: '{k}' is not one of {', '.join(WRENCH)}")
-    return {"pose": spec.get("pose", "row"), "joints": joints, "targets": spec["targets"], "wrench": wrench,
-            "aux": list(spec.get("aux") or []), "ignore": list(spec.get("ignore") or []), "source": where}
+        require(isinstance(col, str), f"{where}: wrench.{k}: expected a column name, got {col!r}")
+
+    aux = _names(spec.get("aux") or [], f"{where}: aux", "column names")
+    for a in aux:
+        require(is_aux_name(a) and a not in CONTRACT_COLUMNS and a not in robot.joint_names,
+                f"{where}: aux: '{a}' cannot be an auxiliary signal (it is a contract, joint or reserved name, "
+                f"or not an identifier); list it under ignore")
+    ignore = _names(spec.get("ignore") or [], f"{where}: ignore", "column names")
+
+    mapping = ColumnMap(pose=spec.get("pose", "row"), joints=tuple(joints[q] for q in qnames), targets=targets,
+                        wrench=dict(wrench), aux=tuple(aux), ignore=tuple(ignore), source=where)
+    require(isinstance(mapping.pose, str) and mapping.pose,
+            f"{where}: pose: expected 'row' or the name of the pose-id column, got {mapping.pose!r}")
+    used = mapping.columns()
+    twice = [c for c in dict.fromkeys(used) if used.count(c) > 1] + [c for c in ignore if c in used]
+    require(not twice, f"{where}: column '{twice[0] if twice else ''}' is used twice (mapped, aux or ignored); "
+                       f"give each column one role")
+    return mapping
 
 
-def import_wide(path: str | Path, robot: Robot, mapping: dict) -> Measurements:
-    """Read a wide table into Measurements (rows of targets per pose, target order as mapped)."""
+def _numbers(cells: np.ndarray, col: str, where: str) -> np.ndarray:
+    """One column of text cells as finite floats; the first bad cell is refused with its row."""
+    values = np.empty(len(cells))
+    for r, text in enumerate(cells):
+        try:
+            values[r] = float(text)
+        except ValueError:
+            raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; fix the value") from None
+    bad = np.nonzero(~np.isfinite(values))[0]
+    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
+                          f"{cells[bad[0]] if len(bad) else ''!r} is not finite; fix or remove the row")
+    return values
+
+
+def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path) -> Measurements:
+    """Read a wide table (CSV, one row per pose) into Measurements.
+
+    `mapping` is a ColumnMap or the path of its YAML. Returns P poses (q (P, n), w (P, 6), aux
+    (P, len(mapping.aux))) and P * T measured points, pose by pose, targets in mapping order.
+    """
+    if not isinstance(mapping, ColumnMap):
+        mapping = load_mapping(mapping, robot)
     path = Path(path)
     where = str(path)
     require(path.is_file(), f"{where}: no such file")
@@ -59,38 +144,43 @@ def import_wide(path: str | Path, robot: Robot, mapping: dict) -> Measurements:
         reader = csv.reader(fh)
         header = [h.strip() for h in next(reader, [])]
         rows = list(reader)
+    require(len(set(header)) == len(header), f"{where}: row 1: duplicated column names in the header")
+    for col in mapping.columns():
+        require(col in header, f"{where}: row 1: no column '{col}' (named in {mapping.source}); "
+                               f"fix the mapping or the table")
+    unused = [h for h in header if h not in mapping.columns() and h not in mapping.ignore]
+    require(not unused, f"{where}: row 1: column '{unused[0] if unused else ''}' is neither mapped nor ignored in "
+                        f"{mapping.source}; map it, keep it under aux or list it under ignore")
     require(rows, f"{where}: no data rows after the header")
-    used = list(mapping["joints"].values()) + [c for cols in mapping["targets"].values() for c in cols]
-    used += list(mapping["wrench"].values()) + mapping["aux"] + ([] if mapping["pose"] == "row" else [mapping["pose"]])
-    for col in used:
-        require(col in header, f"{where}: row 1: no column '{col}' (named in {mapping['source']})")
-    leftover = [h for h in header if h not in used and h not in mapping["ignore"]]
-    require(not leftover, f"{where}: row 1: column '{leftover[0] if leftover else ''}' is neither mapped nor listed "
-                          f"under ignore in {mapping['source']}")
-    idx = {h: k for k, h in enumerate(header)}
+    short = [r for r, row in enumerate(rows) if len(row) != len(header)]
+    require(not short, f"{where}: row {short[0] + 2 if short else 0}: {len(rows[short[0]]) if short else 0} fields, "
+                       f"the header has {len(header)}")
+    table = np.array(rows, dtype=object)
 
     def column(col: str) -> np.ndarray:
-        out = np.empty(len(rows))
-        for r, row in enumerate(rows):
-            require(len(row) == len(header), f"{where}: row {r + 2}: {len(row)} fields, the header has {len(header)}")
-            try:
-                out[r] = float(row[idx[col]])
-            except ValueError:
-                raise ModelError(f"{where}: row {r + 2}, column '{col}': {row[idx[col]]!r} is not a number") from None
-            require(math.isfinite(out[r]), f"{where}: row {r + 2}, column '{col}': not finite; fix or remove the row")
-        return out
+        return _numbers(table[:, header.index(col)], col, where)
 
     P = len(rows)
-    q = np.column_stack([column(mapping["joints"][f"q{i + 1}"]) for i in range(robot.n)])
+    q = np.column_stack([column(c) for c in mapping.joints])
     w = np.zeros((P, 6))
-    for k, col in mapping["wrench"].items():
+    for k, col in mapping.wrench.items():
         w[:, WRENCH.index(k)] = column(col)
-    aux = np.column_stack([column(a) for a in mapping["aux"]]) if mapping["aux"] else np.zeros((P, 0))
-    ids = np.arange(P) if mapping["pose"] == "row" else column(mapping["pose"]).astype(int)
-    require(len(set(ids.tolist())) == P, f"{where}: column '{mapping['pose']}': pose ids repeat; one row per pose")
+    aux = np.column_stack([column(a) for a in mapping.aux]) if mapping.aux else np.zeros((P, 0))
+    if mapping.pose == "row":
+        ids = np.arange(P)
+    else:
+        raw = column(mapping.pose)
+        bad = np.nonzero(raw != np.round(raw))[0]
+        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{mapping.pose}': "
+                              f"not an integer pose id")
+        ids = raw.astype(np.int64)
+        _, first = np.unique(ids, return_index=True)
+        again = np.setdiff1d(np.arange(P), first)
+        require(not len(again), f"{where}: row {again[0] + 2 if len(again) else 0}, column '{mapping.pose}': "
+                                f"pose id repeats an earlier row; one row per pose")
     names = list(robot.targets)
-    targets = [names.index(t) for t in mapping["targets"]]
-    xyz = np.stack([np.column_stack([column(c) for c in mapping["targets"][t]]) for t in mapping["targets"]], axis=1)
-    return Measurements(q=q, w=w, aux=aux, aux_names=tuple(mapping["aux"]), pose_ids=ids,
-                        pose=np.repeat(np.arange(P), len(targets)), target=np.tile(targets, P),
-                        xyz=xyz.reshape(-1, 3), source=where)
+    xyz = np.stack([np.column_stack([column(c) for c in cols]) for cols in mapping.targets.values()], axis=1)
+    nt = len(mapping.targets)
+    return Measurements(q=q, w=w, aux=aux, aux_names=mapping.aux, pose_ids=ids,
+                        pose=np.repeat(np.arange(P), nt), target=np.tile([names.index(t) for t in mapping.targets], P),
+                        xyz=xyz.reshape(P * nt, 3), source=where)

@@ -1,38 +1,69 @@
-"""`gecgen import`: a wide table (several points per row) into the contract's measurement CSV."""
+"""`gecgen import ROBOT WIDE.csv --mapping MAP.yaml -o OUT.csv [--targets m1,m2] [--json]`.
+
+Converts a wide table (several points per row, see gecgen/model/wide.py) into the contract's
+measurement CSV. Joint readings outside the robot's limits are reported (JSON `outside_limits`
+and a warning on stderr), never clipped: the values are written as read.
+"""
 from __future__ import annotations
+
+import dataclasses
+import sys
 
 import numpy as np
 
 from gecgen.model import load_robot
-from gecgen.model.measurements import write_measurements
+from gecgen.model.measurements import Measurements, write_measurements
+from gecgen.model.robot import Robot
 from gecgen.model.validation import require
 from gecgen.model.wide import import_wide, load_mapping
 
 
 def add_parser(command):
+    """Register `import` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("import", run, "convert a wide table (points side by side) into a measurement CSV")
     p.add_argument("robot")
     p.add_argument("table", help="CSV with one row per pose")
     p.add_argument("--mapping", required=True, help="column mapping YAML (see gecgen/model/wide.py)")
     p.add_argument("--targets", help="comma-separated targets to keep (default: every mapped target)")
-    p.add_argument("-o", "--output", required=True)
+    p.add_argument("-o", "--output", required=True, help="measurement CSV to write (CONTRACTS.md section 3)")
+
+
+def keep_targets(robot: Robot, data: Measurements, option: str) -> Measurements:
+    """The rows of the targets named in `option` ("m1,m3"); every pose is kept."""
+    names = list(robot.targets)
+    keep = [t.strip() for t in option.split(",")]
+    for t in keep:
+        require(t in names, f"--targets: '{t}' is not a target of {robot.name} ({', '.join(names)})")
+    rows = np.isin(data.target, [names.index(t) for t in keep])
+    require(rows.any(), f"--targets {option}: the table measures none of these targets")
+    return dataclasses.replace(data, pose=data.pose[rows], target=data.target[rows], xyz=data.xyz[rows])
+
+
+def outside_limits(robot: Robot, data: Measurements) -> list[dict]:
+    """Every joint reading outside its limits: table row (header = 1), joint, value, limit, excess (m or rad)."""
+    lower, upper = [jt.lower for jt in robot.joints], [jt.upper for jt in robot.joints]
+    out = []
+    for r, j in np.argwhere((data.q < lower) | (data.q > upper)):
+        joint, value = robot.joints[j], float(data.q[r, j])
+        limit = joint.lower if value < joint.lower else joint.upper
+        out.append({"row": int(r) + 2, "joint": joint.name, "value": value, "limit": limit,
+                    "excess": abs(value - limit)})
+    return out
 
 
 def run(args) -> dict:
     robot = load_robot(args.robot)
-    data = import_wide(args.table, robot, load_mapping(args.mapping, robot))
+    mapping = load_mapping(args.mapping, robot)
+    data = import_wide(args.table, robot, mapping)
     if args.targets:
-        names = list(robot.targets)
-        keep = [t.strip() for t in args.targets.split(",")]
-        for t in keep:
-            require(t in names, f"--targets: '{t}' is not a target of {robot.name} ({', '.join(names)})")
-        rows = np.isin(data.target, [names.index(t) for t in keep])
-        data = type(data)(data.q, data.w, data.aux, data.aux_names, data.pose_ids, data.pose[rows], data.target[rows],
-                          data.xyz[rows], data.source)
-    write_measurements(args.output, robot, data, wrench=bool(np.any(data.w)))
-    lo = np.array([j.lower for j in robot.joints])
-    hi = np.array([j.upper for j in robot.joints])
-    outside = [{"row": int(r) + 2, "joint": robot.joint_names[j], "value": float(data.q[r, j])}
-               for r, j in np.argwhere((data.q < lo) | (data.q > hi))]
-    return {"robot": robot.name, "output": args.output, "poses": data.n_poses, "rows": len(data.xyz),
+        data = keep_targets(robot, data, args.targets)
+    write_measurements(args.output, robot, data, wrench=bool(mapping.wrench))
+    outside = outside_limits(robot, data)
+    if outside:
+        worst = max(outside, key=lambda o: o["excess"])
+        print(f"gecgen import: warning: {len(outside)} joint readings outside the limits of {robot.name}, kept as read "
+              f"(largest: {worst['joint']} = {worst['value']:g} beyond {worst['limit']:g} by {worst['excess']:.3g}, "
+              f"row {worst['row']})", file=sys.stderr)
+    return {"robot": robot.name, "output": str(args.output), "poses": data.n_poses, "rows": len(data.xyz),
+            "targets": sorted({list(robot.targets)[t] for t in data.target}, key=list(robot.targets).index),
             "outside_limits": outside}

@@ -67,6 +67,7 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
 
 
 def save(calib: Calibration, path: str | Path):
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(json.dumps(calib.to_dict(), indent=1) + "\n")
 
 
