@@ -173,12 +173,26 @@ def cmd_diagnose(args) -> dict:
     return result
 
 
+def _scalar(value) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
 def _print_human(result: dict):
+    """A short summary for a person; the full record (every list entry) is what --json prints."""
     for key, value in result.items():
-        if key == "eliminated":
-            print(f"eliminated: {len(value)} (use --json for the list with what each merged into)")
-        elif key not in ("identifiable",):
-            print(f"{key}: {value}")
+        if key == "identifiable":
+            continue
+        if key == "effects":
+            print(f"effects: {len(value)}")
+            for e in value:
+                print(f"  {e['error']}: {', '.join(e['terms'])} ({e['family']}; cross-validated gain "
+                      f"{e['gain_mm']:.4f} mm)")
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            print(f"{key}: {len(value)} (use --json for the list)")
+        elif isinstance(value, dict) and not any(isinstance(v, (dict, list)) for v in value.values()):
+            print(f"{key}: " + ", ".join(f"{k} {_scalar(v)}" for k, v in value.items()))
+        else:
+            print(f"{key}: {_scalar(value)}")
 
 
 def build_parser() -> argparse.ArgumentParser:
