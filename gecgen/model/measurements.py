@@ -6,7 +6,6 @@ the column and the fix. Nothing is dropped, clipped or guessed.
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +18,44 @@ from gecgen.model.validation import ModelError, require
 LIMIT_TOLERANCE = 1e-3
 #: measured positions farther than this from the robot's reach look like millimetres (m)
 MM_SUSPECT = 50.0
+
+
+def read_table(path: str | Path, what: str, expect: str) -> tuple[list[str], np.ndarray]:
+    """Header and cells (rows, columns; text) of a CSV. Refuses a missing or empty file, repeated
+    header names and rows whose field count differs from the header's; `what` names the file kind
+    in messages ("measurement file") and `expect` says what the header should hold."""
+    path = Path(path)
+    where = str(path)
+    require(path.is_file(), f"{where}: no such {what}")
+    with path.open(newline="") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        require(header, f"{where}: the file is empty; expected a header row with {expect}")
+        header = [h.strip() for h in header]
+        rows = list(reader)
+    require(len(set(header)) == len(header), f"{where}: row 1: duplicated column names in the header")
+    require(rows, f"{where}: no data rows after the header")
+    lengths = np.fromiter((len(r) for r in rows), int, len(rows))
+    bad = np.nonzero(lengths != len(header))[0]
+    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}: {lengths[bad[0]] if len(bad) else 0} "
+                          f"fields, the header has {len(header)}")
+    return header, np.array(rows, dtype=object)
+
+
+def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value") -> np.ndarray:
+    """One column of text cells (R,) as finite floats; the first bad cell is refused with its row."""
+    try:
+        values = cells.astype(float)
+    except ValueError:
+        for r, text in enumerate(cells):
+            try:
+                float(text)
+            except ValueError:
+                raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; {fix}") from None
+    bad = np.nonzero(~np.isfinite(values))[0]
+    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
+                          f"{cells[bad[0]] if len(bad) else ''!r} is not finite; fix or remove the row")
+    return values
 
 
 @dataclass(frozen=True)
@@ -62,18 +99,10 @@ class Measurements:
 
 
 def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = LIMIT_TOLERANCE) -> Measurements:
-    path = Path(path)
     where = str(path)
-    require(path.is_file(), f"{where}: no such measurement file")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        require(header, f"{where}: the file is empty; expected a header row with pose, q1..qn, target, x, y, z")
-        header = [h.strip() for h in header]
-        rows = list(reader)
-    require(len(set(header)) == len(header), f"{where}: row 1: duplicated column names in the header")
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     required = ["pose", *qcols, "target", "x", "y", "z"]
+    header, table = read_table(path, "measurement file", ", ".join(required))
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
     extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
@@ -81,29 +110,12 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
                          f"{robot.n} joints; remove it or use the right robot file")
     wcols = [c for c in WRENCH if c in header]
     aux_names = tuple(h for h in header if h not in required and h not in WRENCH)
-    require(rows, f"{where}: no data rows after the header")
-    lengths = np.fromiter((len(r) for r in rows), int, len(rows))
-    bad = np.nonzero(lengths != len(header))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}: {lengths[bad[0]] if len(bad) else 0} "
-                          f"fields, the header has {len(header)}")
-    table = np.array(rows, dtype=object)
     idx = {h: k for k, h in enumerate(header)}
 
     def column(col: str) -> np.ndarray:
-        cells = table[:, idx[col]]
-        try:
-            values = cells.astype(float)
-        except ValueError:
-            for r, text in enumerate(cells):
-                try:
-                    float(text)
-                except ValueError:
-                    raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; fix the "
-                                     f"value (auxiliary columns must be numeric)") from None
-        bad = np.nonzero(~np.isfinite(values))[0]
-        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
-                              f"{cells[bad[0]] if len(bad) else ''} is not finite; remove the row or fix it")
-        return values
+        fix = "fix the value" if col in required or col in WRENCH else "fix it or remove the column (auxiliary " \
+            "columns must be numeric)"
+        return numbers(table[:, idx[col]], col, where, fix)
 
     ids = column("pose")
     bad = np.nonzero(ids != np.round(ids))[0]
@@ -118,7 +130,7 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     target = np.array([tindex[t] for t in names])
     key = ids * len(targets) + target
     _, first = np.unique(key, return_index=True)
-    dup = np.setdiff1d(np.arange(len(rows)), first)
+    dup = np.setdiff1d(np.arange(len(table)), first)
     require(not len(dup), f"{where}: row {dup[0] + 2 if len(dup) else 0}: pose {ids[dup[0]] if len(dup) else 0} "
                           f"measures target '{names[dup[0]] if len(dup) else ''}' twice; keep one row")
     state_cols = [*qcols, *wcols, *aux_names]
@@ -180,34 +192,21 @@ class Commands:
 
 def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
     """A CSV of nominal joint commands q1..qn, optional wrench and the aux columns the model uses."""
-    path = Path(path)
     where = str(path)
-    require(path.is_file(), f"{where}: no such file of joint commands")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        header = [h.strip() for h in next(reader, [])]
-        rows = list(reader)
     qcols = [f"q{i + 1}" for i in range(robot.n)]
+    header, table = read_table(path, "file of joint commands", ", ".join(qcols))
     for col in (*qcols, *aux_names):
         require(col in header, f"{where}: row 1: missing column '{col}'")
-    require(rows, f"{where}: no data rows after the header")
-    idx = {h: k for k, h in enumerate(header)}
-    values = np.zeros((len(rows), len(header)))
-    for k, row in enumerate(rows):
-        require(len(row) == len(header), f"{where}: row {k + 2}: {len(row)} fields, the header has {len(header)}")
-        for col in (*qcols, *[c for c in WRENCH if c in idx], *aux_names):
-            try:
-                v = float(row[idx[col]])
-            except ValueError:
-                raise ModelError(f"{where}: row {k + 2}, column '{col}': {row[idx[col]]!r} is not a number") from None
-            require(math.isfinite(v), f"{where}: row {k + 2}, column '{col}': not finite")
-            values[k, idx[col]] = v
-    w = np.zeros((len(rows), 6))
+
+    def column(col: str) -> np.ndarray:
+        return numbers(table[:, header.index(col)], col, where)
+
+    w = np.zeros((len(table), 6))
     for j, c in enumerate(WRENCH):
-        if c in idx:
-            w[:, j] = values[:, idx[c]]
-    return Commands(values[:, [idx[c] for c in qcols]], w, values[:, [idx[a] for a in aux_names]], aux_names,
-                    header, rows)
+        if c in header:
+            w[:, j] = column(c)
+    aux = np.column_stack([column(a) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
+    return Commands(np.column_stack([column(c) for c in qcols]), w, aux, aux_names, header, table.tolist())
 
 
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):

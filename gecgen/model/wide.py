@@ -19,16 +19,15 @@ contract's checks (limits, millimetres) to the written file.
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gecgen.model.errors import is_aux_name
-from gecgen.model.measurements import Measurements
+from gecgen.model.measurements import Measurements, numbers, read_table
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.model.validation import ModelError, read_yaml, require, require_keys
+from gecgen.model.validation import read_yaml, require, require_keys
 
 #: columns of the contract's measurement file, which an aux column must not shadow
 CONTRACT_COLUMNS = ("pose", "target", "x", "y", "z", *WRENCH)
@@ -115,20 +114,6 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     return mapping
 
 
-def _numbers(cells: np.ndarray, col: str, where: str) -> np.ndarray:
-    """One column of text cells as finite floats; the first bad cell is refused with its row."""
-    values = np.empty(len(cells))
-    for r, text in enumerate(cells):
-        try:
-            values[r] = float(text)
-        except ValueError:
-            raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; fix the value") from None
-    bad = np.nonzero(~np.isfinite(values))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
-                          f"{cells[bad[0]] if len(bad) else ''!r} is not finite; fix or remove the row")
-    return values
-
-
 def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path) -> Measurements:
     """Read a wide table (CSV, one row per pose) into Measurements.
 
@@ -137,30 +122,19 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path)
     """
     if not isinstance(mapping, ColumnMap):
         mapping = load_mapping(mapping, robot)
-    path = Path(path)
     where = str(path)
-    require(path.is_file(), f"{where}: no such file")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        header = [h.strip() for h in next(reader, [])]
-        rows = list(reader)
-    require(len(set(header)) == len(header), f"{where}: row 1: duplicated column names in the header")
+    header, table = read_table(path, "file", "the column names of the mapping " + str(mapping.source))
     for col in mapping.columns():
         require(col in header, f"{where}: row 1: no column '{col}' (named in {mapping.source}); "
                                f"fix the mapping or the table")
     unused = [h for h in header if h not in mapping.columns() and h not in mapping.ignore]
     require(not unused, f"{where}: row 1: column '{unused[0] if unused else ''}' is neither mapped nor ignored in "
                         f"{mapping.source}; map it, keep it under aux or list it under ignore")
-    require(rows, f"{where}: no data rows after the header")
-    short = [r for r, row in enumerate(rows) if len(row) != len(header)]
-    require(not short, f"{where}: row {short[0] + 2 if short else 0}: {len(rows[short[0]]) if short else 0} fields, "
-                       f"the header has {len(header)}")
-    table = np.array(rows, dtype=object)
 
     def column(col: str) -> np.ndarray:
-        return _numbers(table[:, header.index(col)], col, where)
+        return numbers(table[:, header.index(col)], col, where)
 
-    P = len(rows)
+    P = len(table)
     q = np.column_stack([column(c) for c in mapping.joints])
     w = np.zeros((P, 6))
     for k, col in mapping.wrench.items():
