@@ -164,7 +164,7 @@ def test_cli_identify_evaluate_compensate_and_refusal(tmp_path, rng, capsys):
     assert lines[0] == "q1,q2,q3,q4,q5,q6,note" and lines[1].endswith(",7") and lines[1] != "0.1,0.0,0.2,0.3,0.01,-0.01,7"
     # a calibration is refused against a changed model
     d = json.loads(calib.read_text())
-    d["error_model"]["frames"]["1"]["ex"] = ["1", "q1"]
+    d["error_model"]["frames"]["1"] = {"ex": ["1", "q1"]}  # only errors beyond the constant are listed
     calib.write_text(json.dumps(d))
     with pytest.raises(ModelError, match="does not match"):
         calibration.load(calib)

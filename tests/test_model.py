@@ -4,6 +4,7 @@ import pytest
 from conftest import ROBOTS
 
 from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model.errors import error_model_from_dict
 from gecgen.model.kinematics import tool_pose
 
 
@@ -96,6 +97,14 @@ def test_term_language(tmp_path):
     assert [t.text for t in model.terms[6]] == ["1", "q1", "q1**2", "q1**3"]
     assert model.aux == ("temp_c",)
     assert len(model.coefficients) == 6 + 6 * 4 + 5 + 9
+    # names spell the terms as the file does (shorthands expanded readably), not sympy's canonical form
+    names = model.coefficient_names(robot)
+    assert "2.ey:sin(4*pi*q2/0.45)" in names and "2.ey:cos(2*pi*q2/0.45)" in names and "1.ex:q1**3" in names
+    assert "2.ey:sin(40*pi*q2/9)" not in names
+    # the model written back (as diagnose and calibrations do) reads back to the same terms and names
+    again = error_model_from_dict(model.to_yaml_dict(robot), robot, "<round trip>")
+    assert [[t.text for t in ts] for ts in again.terms] == [[t.text for t in ts] for ts in model.terms]
+    assert again.coefficient_names(robot) == names
 
 
 def test_shipped_default_models(shipped):

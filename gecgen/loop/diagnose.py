@@ -259,7 +259,8 @@ def _fit(robot, model, data, registration_mode) -> Round:
 def _with_terms(robot: Robot, model: ErrorModel, error: int, terms: tuple[str, ...], aux: tuple[str, ...]) -> ErrorModel:
     spec = model.to_yaml_dict(robot)
     frame, name = divmod(error, 6)
-    spec["frames"][frame][ERROR_NAMES[name]] += list(terms)
+    block = spec["frames"].setdefault(frame, {})
+    block[ERROR_NAMES[name]] = block.get(ERROR_NAMES[name], ["1"]) + list(terms)
     used_aux = sorted(set(spec.get("aux", [])) | {a for a in aux if any(a in t for t in terms)})
     if used_aux:
         spec["aux"] = used_aux

@@ -24,10 +24,12 @@ FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sqrt": sp.sqrt}
 
 @dataclass(frozen=True)
 class Term:
-    """One basis function; `text` is its canonical spelling in the variables q1..qn, fx.., aux."""
+    """One basis function. `text` is its canonical spelling in the variables q1..qn, fx.., aux (the
+    identity of the term); `label` is how the model file spells it (what people read in names)."""
 
     text: str
     expr: sp.Expr
+    label: str
 
 
 @dataclass(frozen=True)
@@ -38,7 +40,7 @@ class Coefficient:
     term: Term
 
     def name(self, robot: Robot) -> str:
-        return f"{robot.error_names()[self.error]}:{self.term.text}"
+        return f"{robot.error_names()[self.error]}:{self.term.label}"
 
 
 @dataclass(frozen=True)
@@ -66,12 +68,15 @@ class ErrorModel:
         return list(seen.values())
 
     def to_yaml_dict(self, robot: Robot) -> dict:
-        """A dict that `load_error_model` reads back into this model (explicit per error)."""
-        frames = {}
+        """A dict that `load_error_model` reads back into this model, terms spelled as written:
+        `default: ["1"]` and, under `frames`, only the errors whose terms differ from it."""
+        frames: dict[int, dict[str, list[str]]] = {}
         for i in range(robot.n + 1):
-            block = {e: [t.text for t in self.terms[6 * i + k]] for k, e in enumerate(ERROR_NAMES)}
-            frames[i] = block
-        out = {"default": ["1"], "frames": frames}
+            for k, e in enumerate(ERROR_NAMES):
+                labels = [t.label for t in self.terms[6 * i + k]]
+                if labels != ["1"]:
+                    frames.setdefault(i, {})[e] = labels
+        out: dict = {"default": ["1"], "frames": frames}
         if self.aux:
             out["aux"] = list(self.aux)
         return out
@@ -86,7 +91,8 @@ class _TermParser:
     def fail(self, text: str, why: str):
         raise ModelError(f"{self.where}: term {text!r}: {why}")
 
-    def parse(self, text) -> list[sp.Expr]:
+    def parse(self, text) -> list[tuple[sp.Expr, str]]:
+        """(expression, label) per basis term: one for a plain term, several for poly and fourier."""
         if isinstance(text, (int, float)) and not isinstance(text, bool):
             text = repr(text)
         if not isinstance(text, str):
@@ -99,19 +105,21 @@ class _TermParser:
             self.fail(text, "not a valid expression; use numbers, variables, + - * / **, sin, cos, sqrt, poly, fourier")
         if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in ("poly", "fourier"):
             return self.shorthand(text, tree)
-        return [self.expr(text, tree)]
+        return [(self.expr(text, tree), text.strip())]
 
-    def shorthand(self, text: str, node: ast.Call) -> list[sp.Expr]:
+    def shorthand(self, text: str, node: ast.Call) -> list[tuple[sp.Expr, str]]:
         if node.keywords:
             self.fail(text, "keyword arguments are not allowed")
         args = node.args
+        # how the labels spell the variable: as written, bracketed when it is an expression
+        var = (ast.unparse(args[0]) if isinstance(args[0], ast.Name) else f"({ast.unparse(args[0])})") if args else ""
         if node.func.id == "poly":
             if len(args) != 2:
                 self.fail(text, "poly takes (variable, order), e.g. poly(q1, 3)")
             v, k = self.expr(text, args[0]), self.number(text, args[1])
             if k != int(k) or not 1 <= k <= MAX_EXPONENT:
                 self.fail(text, f"poly order must be an integer 1..{MAX_EXPONENT}")
-            return [v ** j for j in range(1, int(k) + 1)]
+            return [(v ** j, var if j == 1 else f"{var}**{j}") for j in range(1, int(k) + 1)]
         if len(args) != 3:
             self.fail(text, "fourier takes (variable, period, harmonics), e.g. fourier(q1, 0.45, 2)")
         v, period, h = self.expr(text, args[0]), self.number(text, args[1]), self.number(text, args[2])
@@ -122,7 +130,8 @@ class _TermParser:
         out = []
         for j in range(1, int(h) + 1):
             arg = 2 * sp.pi * j * v / sp.Rational(repr(float(period)))
-            out += [sp.sin(arg), sp.cos(arg)]
+            spelled = f"{2 * j}*pi*{var}/{float(period)!r}"
+            out += [(sp.sin(arg), f"sin({spelled})"), (sp.cos(arg), f"cos({spelled})")]
         return out
 
     def number(self, text: str, node) -> float:
@@ -225,12 +234,12 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
         parser = _TermParser(symbols, w)
         out: dict[str, Term] = {}
         for item in items:
-            for expr in parser.parse(item):
+            for expr, label in parser.parse(item):
                 if expr.is_number:
                     require(expr == 1, f"{w}: term {item!r} is a constant; write the constant term as \"1\"")
                 text = _canonical(expr)
                 require(text not in out, f"{w}: term {item!r} repeats '{text}'; each term may appear once")
-                out[text] = Term(text, expr)
+                out[text] = Term(text, expr, "1" if expr == 1 else label)
         return tuple(out.values())
 
     default = parse_list(spec.get("default", ["1"]), f"{where}: default")
