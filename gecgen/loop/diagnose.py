@@ -382,7 +382,7 @@ def _scores(rnd: Round, data: Measurements, val: Measurements) -> dict:
 def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], path: str | Path):
     """The model as an error-model file, with a header naming what diagnose added."""
     lines = [f"# Error model of {robot.name} written by gecgen diagnose."]
-    lines += [f"# added: {e.error} <- {', '.join(e.terms)} (held-out gain {e.gain_mm:.4f} mm)" for e in effects]
+    lines += [f"# added: {e.error} <- {', '.join(e.terms)} (cross-validated gain {e.gain_mm:.4f} mm)" for e in effects]
     if not effects:
         lines.append("# nothing significant was left in the residual; the model is unchanged")
     spec = model.to_yaml_dict(robot)
