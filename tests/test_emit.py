@@ -90,3 +90,18 @@ def test_casadi_functions_emit_their_own_c(tmp_path, monkeypatch):
     cm._ca["J_e"].generate("j.c")
     build = subprocess.run(["cc", "-std=c99", "-c", "j.c", "-o", "j.o"], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr
+
+
+def test_without_a_c_compiler_the_casadi_form_is_used_and_said(monkeypatch, rng):
+    from gecgen.runtime import compiled
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    model = load_error_model(ROBOTS / "puma560.errors.yaml", robot)
+    c_model = CompiledModel(robot, model, "c")
+    monkeypatch.setattr(compiled, "compiler", lambda: None)
+    with pytest.warns(UserWarning, match="no C compiler found"):
+        fallback = CompiledModel(robot, model)
+    assert fallback.backend == "casadi"
+    q, eps = random_q(robot, rng, 4), rng.normal(0, 0.01, (4, robot.n_errors))
+    for a, b in zip(fallback.J_e(q, eps), c_model.J_e(q, eps)):
+        np.testing.assert_allclose(a, b, atol=1e-12)
