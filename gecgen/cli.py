@@ -53,19 +53,33 @@ def _identify_inputs(args):
     return robot, model, data, CompiledModel(robot, model)
 
 
-def _ridge(option: str, cm, data) -> tuple[float, list]:
-    """--ridge: a number, or 'auto' to choose it by 5-fold cross-validation on the training data."""
-    if option == "auto":
-        from gecgen.runtime.identify import choose_ridge
+def _fit_options(args, cm, data) -> tuple[dict, list]:
+    """--ridge and --rank-tol: each a number, or auto; the auto ones are chosen together by 5-fold
+    cross-validation on the training data. Returns the options for identify and the CV table."""
+    import numpy as np
 
-        return choose_ridge(cm, data)
-    try:
-        value = float(option)
-    except ValueError:
-        raise ModelError(f"--ridge {option!r}: give a non-negative number or auto") from None
-    if value < 0:
-        raise ModelError(f"--ridge {option!r}: give a non-negative number or auto")
-    return value, []
+    from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose
+
+    fixed, grids = {}, {}
+    # rank_tol is a share of a normalised column: at 1 or above nothing would be kept
+    for name, option, grid, upper in (("ridge", args.ridge, RIDGE_GRID, np.inf),
+                                      ("rank_tol", args.rank_tol, RANK_TOL_GRID, 1.0)):
+        if option is None:
+            continue  # identify's default
+        if option == "auto":
+            grids[name] = grid
+            continue
+        try:
+            fixed[name] = float(option)
+        except ValueError:
+            fixed[name] = np.nan
+        if not 0 <= fixed[name] < upper:
+            bound = "a non-negative number" if upper == np.inf else f"a number from 0 to below {upper:g}"
+            raise ModelError(f"--{name.replace('_', '-')} {option!r}: give {bound}, or auto")
+    if not grids:
+        return fixed, []
+    chosen, table = choose(cm, data, grids, **fixed)
+    return {**fixed, **chosen}, table
 
 
 def cmd_identify(args) -> dict:
@@ -78,10 +92,10 @@ def cmd_identify(args) -> dict:
             if status:
                 status.update(f"Gauss-Newton iteration {it}: linearised residual {rms_mm:.4f} mm rms")
 
-        ridge, ridge_cv = _ridge(args.ridge, cm, data)
-        fit = identify(cm, data, registration_mode=args.register, progress=progress, ridge=ridge)
+        options, cv_table = _fit_options(args, cm, data)
+        fit = identify(cm, data, registration_mode=args.register, progress=progress, **options)
     calib = calibration.from_fit(robot, model, fit)
-    calib.report.update({"ridge": ridge, "ridge_cv": ridge_cv})
+    calib.report.update({**options, "cv": cv_table})
     out = Path(args.output or f"{robot.name}.calib.json")
     calibration.save(calib, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
@@ -219,6 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="register the measurement frame onto the robot world first (auto: when far apart)")
     p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
                                                "(5-fold cross-validation on DATA); default 0, plain least squares")
+    p.add_argument("--rank-tol",
+                   help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
+                        "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
+                        "on DATA); default: exact dependencies only (1e-7)")
 
     p = command("evaluate", cmd_evaluate, "position errors of new data before and after the calibration")
     p.add_argument("calibration")

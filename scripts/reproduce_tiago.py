@@ -24,6 +24,8 @@ DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
 OUT = ROOT / "out" / "tiago"
 ROBOT = "robots/tiago.yaml"
 FIGAROH = {"base": (3.37, 4.87, 9), "offsets": (2.88, 4.23, 14), "full": (1.68, 3.22, 30)}
+#: identify options per variant of the full model (the reduced models are fitted plainly)
+VARIANTS = {"plain": (), "ridge": ("--ridge", "auto"), "rank_tol": ("--rank-tol", "auto")}
 MODELS = {"base": "robots/tiago.base.errors.yaml", "offsets": "robots/tiago.offsets.errors.yaml",
           "full": "robots/tiago.errors.yaml"}
 commands: list[str] = []
@@ -52,13 +54,21 @@ def main():
     rows = []
     for label, errors in MODELS.items():
         for pts in ("m1", "all"):
-            for ridge in ("0", "auto"):
-                if ridge == "auto" and label != "full":
-                    continue
-                calib = OUT / f"{label}_{pts}_ridge{ridge}.calib.json"
-                fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", errors, "--ridge", ridge, "-o", calib)
+            for variant in VARIANTS if label == "full" else ("plain",):
+                calib = OUT / f"{label}_{pts}_{variant}.calib.json"
+                fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", errors, *VARIANTS[variant], "-o",
+                             calib)
                 ev = gecgen("evaluate", calib, files[("val", "m1")])
-                rows.append((label, pts, ridge, fit, ev))
+                rows.append((label, pts, variant, fit, ev))
+    # every tolerance of the grid, so the document can show what the cross-validation chose from
+    by_tol = {}
+    for pts in ("m1", "all"):
+        auto = next(fit for label, p, variant, fit, ev in rows if (label, p, variant) == ("full", pts, "rank_tol"))
+        for row in auto["cv"]:
+            calib = OUT / f"full_{pts}_rank_tol{row['rank_tol']:g}.calib.json"
+            fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", MODELS["full"], "--rank-tol",
+                         f"{row['rank_tol']:g}", "-o", calib)
+            by_tol[(pts, row["rank_tol"])] = (row["cv_rms_mm"], fit, gecgen("evaluate", calib, files[("val", "m1")]))
     diags = {}
     for label in ("offsets", "full"):
         for pts in ("m1", "all"):
@@ -101,26 +111,27 @@ def main():
              "pose).", "",
              "| model | fitted on | identifiable | training RMS | validation RMS (marker 1) | validation max | figaroh (params, train / val) |",
              "|---|---|---|---|---|---|---|"]
-    for label, pts, ridge, fit, ev in rows:
+    for label, pts, variant, fit, ev in rows:
         fg = FIGAROH[label]
         name = {"base": "base registration + marker point", "offsets": "+ joint offsets",
-                "full": "full geometric (6 per frame)"}[label] + (" + ridge (CV)" if ridge == "auto" else "")
-        ridge_note = f" (ridge {fit['ridge']:g})" if ridge == "auto" else ""
-        lines.append(f"| {name}{ridge_note} | {'point 1' if pts == 'm1' else 'all 4 points'} | {fit['n_identifiable']} | "
+                "full": "full geometric (6 per frame)"}[label]
+        name += {"plain": "", "ridge": f" + ridge (CV: {fit.get('ridge', 0):g})",
+                 "rank_tol": f" + rank tolerance (CV: {fit.get('rank_tol', 0):g})"}[variant]
+        lines.append(f"| {name} | {'point 1' if pts == 'm1' else 'all 4 points'} | {fit['n_identifiable']} | "
                      f"{fit['train']['rms_mm']:.2f} | {ev['after']['rms_mm']:.2f} | {ev['after']['max_mm']:.2f} | "
                      f"{fg[2]}: {fg[0]:.2f} / {fg[1]:.2f} |")
-    full_m1 = next(fit for label, pts, ridge, fit, ev in rows if (label, pts, ridge) == ("full", "m1", "0"))
+    full_m1 = next(fit for label, pts, variant, fit, ev in rows if (label, pts, variant) == ("full", "m1", "plain"))
     lines += ["", "The two reduced models reproduce figaroh's figures to the printed digit with the same parameter "
                   "counts (9 and 14): registration, redundancy analysis and fit agree with an independent "
                   f"implementation on real data. For the full geometric model gecgen keeps {full_m1['n_identifiable']} "
                   "parameters with one point (4R + 2P + 3 for 7 revolute joints and one prismatic) where figaroh keeps "
                   f"30; the larger model fits the training data better ({full_m1['train']['rms_mm']:.2f} against "
-                  f"{FIGAROH['full'][0]} mm) and the validation data worse.", "",
+                  f"{FIGAROH['full'][0]} mm) and the validation data worse.", ""] + _weak_section(by_tol) + ["",
               "## Why validation is harder than training", "",
               f"{int(outside.sum())} of the {val.n_poses} validation postures leave the joint ranges of the training "
               f"file by more than 0.05 rad or m: {'; '.join(wide)}. A calibration extrapolates there, and those "
               "postures carry most of the validation error (below).", ""]
-    full_all = OUT / "full_all_ridge0.calib.json"
+    full_all = OUT / "full_all_plain.calib.json"
     per = _errors_by_range(full_all, files[("val", "m1")], outside)
     lines += [f"Full geometric model fitted on all four points: validation RMS {per[0]:.2f} mm on the "
               f"{int((~outside).sum())} postures inside the training ranges, {per[1]:.2f} mm on the "
@@ -137,29 +148,65 @@ def main():
                      f"{ev['after']['rms_mm']:.2f} | {effects} |")
     lines += ["", "Joint numbering: q1 torso_lift, q2..q8 arm_1..arm_7; frame i sits after joint i, so `7.er` is a "
                   "rotation about arm_6's axis, i.e. an arm_6 angle error.", "",
-              "## Against the target", ""] + _target_verdict(diags) + ["",
+              "## Against the target", ""] + _target_verdict(rows, by_tol, diags) + ["",
               "## Commands", "", "```"] + commands + ["```"]
     (ROOT / "docs" / "real-data-tiago.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
-def _target_verdict(diags) -> list[str]:
-    """Pick a pipeline on training data alone (lowest cross-validated training RMS among the runs fitted
-    on all four points) and say whether it meets figaroh's 3.22 mm; list any other run below it."""
+def _weak_section(by_tol) -> list[str]:
+    """The weakly determined parameters of the full model, and what a rank tolerance chosen by
+    cross-validation on the training file does with them (validation shown, never used)."""
+    tols = sorted({t for _, t in by_tol})
+    ranked = sorted((e for e in by_tol[("m1", tols[-1])][1]["eliminated"] if e["reason"] == "weak"),
+                    key=lambda e: e["share"])
+    weakest = "; ".join(f"{e['param']} {e['share']:.3f}" for e in ranked[:6])
+    lines = ["## Weakly determined parameters", "",
+             "Column-pivoted QR of the column-normalised H_e on the training file (marker 1) orders the full "
+             "model's 33 identifiable parameters from best to worst determined; the share of each normalised "
+             f"column outside the better-determined ones, weakest first: {weakest}. Held at zero by "
+             "`identify --rank-tol T` when below T; `--rank-tol auto` picks T by 5-fold cross-validation over "
+             "the training postures. Every T of the grid (the validation column is measured after the fact, for "
+             "reading only; the choice is the lowest training CV):", "",
+             "| fitted on | rank tolerance | parameters | training RMS | training CV RMS | validation RMS (marker 1) |",
+             "|---|---|---|---|---|---|"]
+    for (pts, tol), (cv, fit, ev) in by_tol.items():  # point 1 first, tolerances ascending
+        best = min(by_tol[(p, t)][0] for p, t in by_tol if p == pts)
+        mark = " (chosen)" if cv == best else ""
+        lines.append(f"| {'point 1' if pts == 'm1' else 'all 4 points'} | {tol:g}{mark} | {fit['n_identifiable']} | "
+                     f"{fit['train']['rms_mm']:.2f} | {cv:.2f} | {ev['after']['rms_mm']:.2f} |")
+    return lines
+
+
+def _target_verdict(rows, by_tol, diags) -> list[str]:
+    """Say whether each pipeline whose choices are all made on the training file meets figaroh's
+    3.22 mm: the rank tolerance chosen by cross-validation, and diagnose (the four-point run with the
+    lowest cross-validated training RMS); list anything else below the target, not claimed."""
     target = FIGAROH["full"][1]
+
+    def verdict(val):
+        return f"{val:.2f} mm, {'below' if val < target else 'not below'} the target"
+
+    text = [f"Target: validation RMS on marker 1 below figaroh's {target} mm with a model chosen on the training file "
+            "alone."]
+    chosen_tol = {(pts, variant): (fit, ev) for label, pts, variant, fit, ev in rows
+                  if label == "full" and variant == "rank_tol"}
+    for (pts, _), (fit, ev) in chosen_tol.items():
+        text.append(f"Full model, `--rank-tol auto`, fitted on {'point 1' if pts == 'm1' else 'all four points'}: "
+                    f"tolerance {fit['rank_tol']:g}, {fit['n_identifiable']} parameters, "
+                    f"{verdict(ev['after']['rms_mm'])}.")
     runs = {k: v for k, v in diags.items() if k[1] == "all"}
     chosen = min(runs, key=lambda k: runs[k][0]["rounds"][-1]["cv_rms_mm"])
-    val = runs[chosen][2]["after"]["rms_mm"]
-    text = [f"Target: validation RMS on marker 1 below figaroh's {target} mm with a model chosen on the training file "
-            f"alone. The training file alone (lowest cross-validated training RMS among the four-point runs) picks "
-            f"diagnose from the {chosen[0]} model: {val:.2f} mm, which "
-            f"{'meets' if val < target else 'does not meet'} the target."]
+    text.append(f"Diagnose, the four-point run with the lowest cross-validated training RMS (from the {chosen[0]} "
+                f"model): {verdict(runs[chosen][2]['after']['rms_mm'])}.")
     others = [f"diagnose from the {k[0]} model on {'point 1' if k[1] == 'm1' else 'all four points'} "
               f"({v[2]['after']['rms_mm']:.2f} mm)" for k, v in diags.items()
               if k != chosen and v[2]["after"]["rms_mm"] < target]
+    others += [f"rank tolerance {t:g} on {'point 1' if pts == 'm1' else 'all four points'} ({ev['after']['rms_mm']:.2f} mm)"
+               for (pts, t), (cv, fit, ev) in by_tol.items() if ev["after"]["rms_mm"] < target]
     if others:
-        text.append(f"Below the target as well: {'; '.join(others)}; but that was seen by comparing validation "
-                    "scores, so it is not claimed.")
+        text.append(f"Below the target but not chosen by the training file: {'; '.join(others)}. These were found "
+                    "by looking at validation scores, so they are not claimed.")
     text.append("Same-day cross-validation cannot see what changes between the two recording days, and the "
                 "validation postures reach joint ranges the training file never visits: more training postures "
                 "spread over the whole range is what this robot's calibration needs.")

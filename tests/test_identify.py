@@ -248,3 +248,37 @@ def test_recovered_coefficients_within_three_sigma_of_the_truth(rng):
     assert list(fit.redundancy.kept) == list(kept)
     z = (fit.c[kept] - truth[kept]) / fit.std[kept]
     assert np.all(np.abs(z) < 4.5) and np.mean(np.abs(z) < 3) >= 0.9, z
+
+
+def test_rank_tolerance_chosen_by_cross_validation_holds_weak_coefficients(tmp_path, rng, capsys):
+    """25 poses of one point with the wrist pitch barely moving: the exact fit gives the wrist's
+    weakly excited coefficients noise-driven values that extrapolate badly once the wrist moves;
+    `--rank-tol auto` (chosen on the training data) holds them at zero and predicts far better."""
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    truth = rng.normal(0, 5e-4, robot.n_errors)
+    n = 25
+    q = random_q(robot, rng, n)
+    q[:, 4] = rng.uniform(-0.03, 0.03, n)
+    y = target_positions(robot, q, truth)[:, 0] + rng.normal(0, 2e-4, (n, 3))
+    train = Measurements(q, np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n), np.arange(n), np.zeros(n, int), y,
+                         "sim")
+    write_measurements(tmp_path / "train.csv", robot, train)
+    write_measurements(tmp_path / "val.csv", robot, simulate(robot, 200, rng, truth, [0]))  # the wrist moves
+    constant = tmp_path / "const.errors.yaml"
+    constant.write_text('default: ["1"]\n')
+    val_rms = {}
+    for option in ("1e-7", "auto"):
+        calib = tmp_path / f"{option}.json"
+        assert main(["identify", str(ROBOTS / "puma560.yaml"), str(tmp_path / "train.csv"), "--errors", str(constant),
+                     "--rank-tol", option, "-o", str(calib), "--json"]) == 0
+        fit = json.loads(capsys.readouterr().out)
+        assert main(["evaluate", str(calib), str(tmp_path / "val.csv"), "--json"]) == 0
+        val_rms[option] = json.loads(capsys.readouterr().out)["after"]["rms_mm"]
+    weak = [e for e in fit["eliminated"] if e["reason"] == "weak"]
+    assert fit["rank_tol"] > 1e-7 and len(weak) > 0 and all(e["merged_into"] for e in weak)
+    assert fit["n_identifiable"] == 27 - len(weak) and len(fit["cv"]) == 7
+    assert val_rms["auto"] < 0.5 * val_rms["1e-7"]
+    for bad in ("1.5", "-0.1", "x"):
+        assert main(["identify", str(ROBOTS / "puma560.yaml"), str(tmp_path / "train.csv"), "--rank-tol", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--rank-tol" in err[0] and "auto" in err[0]

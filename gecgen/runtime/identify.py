@@ -5,11 +5,12 @@ modelled targets and H_e (J_e at eps(c) times the basis terms); the step solves 
 least-squares problem by Householder QR, damped (Levenberg-Marquardt) only when a full step
 would raise the residual, as it can when the data barely excites some coefficient. Rows are streamed through the QR in blocks of poses, so
 memory stays bounded by the block size whatever the number of poses (the R factor of [H | r] is
-all that is kept). Redundant and unexcited coefficients are found first (`redundancy`) and held
-at zero.
+all that is kept). Redundant and unexcited coefficients (and, with a rank tolerance, weakly
+determined ones) are found first (`redundancy`) and held at zero.
 """
 from __future__ import annotations
 
+import itertools
 import warnings
 from dataclasses import dataclass
 
@@ -19,7 +20,7 @@ from scipy.linalg import solve_triangular
 from gecgen.model.measurements import Measurements
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.redundancy import Redundancy, analyze, generic_design
+from gecgen.runtime.redundancy import RANK_TOL, Redundancy, analyze, generic_design
 from gecgen.runtime.registration import IDENTITY, Registration, register
 
 BLOCK_POSES = 2000
@@ -102,24 +103,38 @@ def damped_step(Rk: np.ndarray, z: np.ndarray, lam: float, ridge: float = 0.0, x
     return solve_triangular(R2[:k, :k], R2[:k, k])
 
 
-def choose_ridge(cm: CompiledModel, data: Measurements, grid=(0.0, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0),
-                 folds: int = 5, seed: int = 0) -> tuple[float, list[dict]]:
-    """The ridge of `grid` with the lowest k-fold cross-validated RMS point error over poses
-    (training data only), and the table {ridge, cv_rms_mm} it was chosen from."""
+#: candidate ridges and rank tolerances for `choose` (roughly half-decade steps; 0 and RANK_TOL: off)
+RIDGE_GRID = (0.0, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0)
+RANK_TOL_GRID = (RANK_TOL, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3)
+
+
+def cross_validated_rms(cm: CompiledModel, data: Measurements, folds: int = 5, seed: int = 0, **options) -> float:
+    """k-fold cross-validated RMS point error (mm) of `identify(..., **options)`. Folds split
+    poses, never the targets of one pose, so a held-out pose is wholly unseen."""
     fold = np.random.default_rng(seed).permutation(data.n_poses) % folds
+    sq, n = 0.0, 0
+    for f in range(folds):
+        train, test = data.subset(np.nonzero(fold != f)[0]), data.subset(np.nonzero(fold == f)[0])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = identify(cm, train, **options)
+        e = position_errors(cm, test, fit.registration.to_world(test.xyz), fit.c)
+        sq, n = sq + float(e @ e), n + len(e)
+    return 1e3 * np.sqrt(sq / n)
+
+
+def choose(cm: CompiledModel, data: Measurements, grids: dict[str, tuple], folds: int = 5, seed: int = 0,
+           **fixed) -> tuple[dict, list[dict]]:
+    """The combination of `identify` options from `grids` (name -> values, every combination tried)
+    with the lowest k-fold cross-validated RMS on the training data, and the table
+    [{option: value, ..., cv_rms_mm}] it was chosen from. `fixed` options apply to every fit."""
+    names = list(grids)
     table = []
-    for ridge in grid:
-        sq, n = 0.0, 0
-        for f in range(folds):
-            train, test = data.subset(np.nonzero(fold != f)[0]), data.subset(np.nonzero(fold == f)[0])
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                fit = identify(cm, train, ridge=ridge)
-            e = position_errors(cm, test, fit.registration.to_world(test.xyz), fit.c)
-            sq, n = sq + float(e @ e), n + len(e)
-        table.append({"ridge": ridge, "cv_rms_mm": 1e3 * np.sqrt(sq / n)})
+    for values in itertools.product(*(grids[name] for name in names)):
+        options = dict(zip(names, values))
+        table.append({**options, "cv_rms_mm": cross_validated_rms(cm, data, folds, seed, **options, **fixed)})
     best = min(table, key=lambda row: row["cv_rms_mm"])
-    return best["ridge"], table
+    return {name: best[name] for name in names}, table
 
 
 def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> np.ndarray:
@@ -161,14 +176,16 @@ def _registered(cm: CompiledModel, data: Measurements, mode: str) -> Registratio
 
 
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
-             step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0) -> Fit:
+             step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL) -> Fit:
     """Fit the error model of `cm` to `data`.
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms);
     `progress(iteration, rms_mm)` is called after each step when given. `ridge` > 0 adds
     ridge * |x|^2 to the least squares, x the coefficients scaled by their columns' norms (each
     coefficient penalised by its effect on the data): a prior that keeps weakly excited
-    coefficients from growing where the data cannot hold them (choose it with `choose_ridge`).
+    coefficients from growing where the data cannot hold them. `rank_tol` above the exact
+    RANK_TOL holds the weakly excited coefficients at zero instead (see `redundancy.analyze`).
+    Choose either with `choose`.
     """
     notes = []
     registration = _registered(cm, data, registration_mode)
@@ -177,7 +194,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     c = np.zeros(nc)
     targets = np.unique(data.target)
     R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, c))
-    red = analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets))
+    red = analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
     kept = np.array(red.kept, int)
     k = len(kept)
     if m <= k:

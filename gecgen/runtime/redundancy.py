@@ -13,6 +13,8 @@ a fixed preference order, so ties are broken the same way every time):
   catches the cross-redundancies polynomial terms add beyond the rules.
 * unexcited - independent at generic poses but dependent on the actual data (joints the data
   never moves, a wrench that never changes).
+* weak - only with a rank tolerance (`analyze(rank_tol=...)`, `identify --rank-tol`): independent
+  on the data, but so nearly dependent that the data cannot hold its value against the noise.
 
 "Merged into" is the least-squares representation of the eliminated column by the kept ones: a
 value c of the eliminated coefficient is indistinguishable from adding factor * c to each.
@@ -37,13 +39,15 @@ MERGE_REPORT_TOL = 1e-6
 class Eliminated:
     param: str
     index: int
-    reason: str  # "structural" or "unexcited"
+    reason: str  # "structural", "unexcited" or "weak"
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
+    share: float | None = None  # weak only: the part of its normalised column outside the kept ones
 
     def to_dict(self) -> dict:
-        return {"param": self.param, "reason": self.reason, "detail": self.detail,
-                "merged_into": [{"param": p, "factor": f} for p, f in self.merged_into]}
+        out = {"param": self.param, "reason": self.reason, "detail": self.detail,
+               "merged_into": [{"param": p, "factor": f} for p, f in self.merged_into]}
+        return out if self.share is None else {**out, "share": self.share}
 
 
 @dataclass(frozen=True)
@@ -61,9 +65,9 @@ class Redundancy:
         return len(self.kept)
 
     def to_dict(self) -> dict:
-        counts = {r: sum(e.reason == r for e in self.eliminated) for r in ("structural", "unexcited")}
+        counts = {r: sum(e.reason == r for e in self.eliminated) for r in ("structural", "unexcited", "weak")}
         return {"n_params": self.n_params, "n_identifiable": self.n_identifiable,
-                "n_structural": counts["structural"], "n_unexcited": counts["unexcited"],
+                "n_structural": counts["structural"], "n_unexcited": counts["unexcited"], "n_weak": counts["weak"],
                 "identifiable": [self.names[k] for k in self.kept],
                 "eliminated": [e.to_dict() for e in self.eliminated]}
 
@@ -124,6 +128,24 @@ def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL) 
     return sorted(kept), dependent
 
 
+def pivoted_order(A: np.ndarray, columns: list[int]) -> list[tuple[int, float]]:
+    """Column-pivoted Gram-Schmidt over `columns` of A (QR with column pivoting): each step takes
+    the column with the largest part outside those taken before. Returns (column, that part of
+    its normalised column) in the order taken; the parts never increase, so the trailing columns
+    are the coefficients the data determines worst."""
+    V = A[:, columns] / np.linalg.norm(A[:, columns], axis=0)
+    left = list(range(len(columns)))
+    out = []
+    while left:
+        r = np.linalg.norm(V[:, left], axis=0)
+        best = left[int(np.argmax(r))]
+        out.append((columns[best], float(r.max())))
+        left.remove(best)
+        v = V[:, best] / np.linalg.norm(V[:, best])
+        V[:, left] -= np.outer(v, v @ V[:, left])
+    return out
+
+
 def merged_into(A: np.ndarray, kept: list[int], dependent: list[int], names) -> dict[int, tuple]:
     """For each dependent column: ((kept name, factor), ...) largest contribution first."""
     if not dependent or not kept:
@@ -148,9 +170,14 @@ def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Genera
 
 
 def analyze(A_generic: np.ndarray, A_data: np.ndarray | None, robot: Robot, model: ErrorModel,
-            n_targets_measured: int) -> Redundancy:
+            n_targets_measured: int, rank_tol: float = RANK_TOL) -> Redundancy:
     """Structural analysis on A_generic (H_e rows at generic poses, or their R factor) and, with
-    A_data, what the data leaves unexcited. Both are m x nc with the model's coefficient columns."""
+    A_data, what the data leaves unexcited. Both are m x nc with the model's coefficient columns.
+
+    rank_tol above RANK_TOL is a numerical rank: of the coefficients left, those whose normalised
+    data column keeps less than rank_tol outside the better-excited ones (pivoted QR) are held at
+    zero as "weak". Their least-squares values would be mostly noise, and noise the model then
+    extrapolates to poses unlike the data's."""
     names = tuple(model.coefficient_names(robot))
     candidates = rule_candidates(robot, n_targets_measured)
     order = preference_order(robot, model, candidates)
@@ -170,4 +197,13 @@ def analyze(A_generic: np.ndarray, A_data: np.ndarray | None, robot: Robot, mode
             why = ("the data never excites it (zero column)" if not np.any(A_data[:, j])
                    else "the data cannot separate it from the kept parameters")
             eliminated[j] = Eliminated(names[j], j, "unexcited", why, merges[j])
+        if rank_tol > RANK_TOL and kept:
+            ranked = pivoted_order(A_data, kept)
+            weak = [(j, r) for j, r in ranked if r < rank_tol]
+            kept = sorted(j for j, r in ranked if r >= rank_tol)
+            merges = merged_into(A_data, kept, [j for j, _ in weak], names)
+            for j, r in weak:
+                why = (f"weakly excited: {r:.3g} of its normalised column lies outside the better-excited "
+                       f"parameters (rank tolerance {rank_tol:g})")
+                eliminated[j] = Eliminated(names[j], j, "weak", why, merges[j], r)
     return Redundancy(names, tuple(kept), tuple(eliminated[j] for j in sorted(eliminated)))
