@@ -8,6 +8,7 @@ of each robot is built once beforehand (the cache), as a user's second run would
 from __future__ import annotations
 
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -100,6 +101,7 @@ def main():
              ("identify", "constant model (42)", str(const), 100_000),
              ("diagnose", "constant model, rail waviness", str(const), 450),
              ("diagnose", "constant model, rail waviness", str(const), 5000)]
+    load_average = os.getloadavg()[0]  # other processes slow the threaded BLAS calls a lot
     rows = []
     for kind, label, errors, n in cases:
         data = tmp / f"pps_{n}.csv"
@@ -112,9 +114,11 @@ def main():
               f"total {r['total_s']:7.2f} s  peak {r['peak_mb']:7.0f} MB  {json.dumps({k: v for k, v in r.items() if k not in ('load_s', 'run_s', 'total_s', 'peak_mb')})}")
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     lines = ["## Runtime: identify and diagnose (simulated PPS, 3 targets per pose)", "",
-             f"Machine: {cpu}, {len(__import__('os').sched_getaffinity(0))} cores. "
+             f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores, load average "
+             f"{load_average:.1f} when the benchmark started. "
              "Regenerate: `python benchmarks/bench_runtime.py`. Each case runs in a fresh process with the "
-             "generated code already compiled (cache warm) and the modules imported; load = reading the CSV "
+             "generated code already compiled and its structural analysis cached (cache warm) and the modules "
+             "imported; load = reading the CSV "
              "and loading the model; "
              "peak = the process's maximum resident memory.", "",
              "| command | model | poses | load (s) | run (s) | total (s) | peak memory (MB) | result |",

@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.emit import render
 from gecgen.model.errors import ErrorModel
 from gecgen.model.robot import Robot
 
@@ -52,11 +51,21 @@ def model_key(robot: Robot, model: ErrorModel) -> str:
     return hashlib.sha256(spec.encode()).hexdigest()[:24]
 
 
-def shared_library(robot: Robot, model: ErrorModel) -> Path:
-    """The compiled generated C of a robot and error model; rendered and built only on a cache miss."""
-    lib = cache_dir() / f"{robot.name}-{model_key(robot, model)}.so"
+def write_atomically(path: Path, data: bytes):
+    """Write through a temporary file and a rename, so parallel processes never read a half-written file."""
+    part = path.with_suffix(f".{os.getpid()}.part")
+    part.write_bytes(data)
+    part.replace(path)
+
+
+def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
+    """The compiled generated C of a robot and error model (cache key `model_key`); rendered and
+    built only on a cache miss."""
+    lib = cache_dir() / f"{robot.name}-{key}.so"
     if lib.exists():
         return lib
+    from gecgen.emit import render  # the symbolic build and its printers: needed on a cache miss only
+
     files = render(robot, model)
     lib.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
@@ -67,9 +76,7 @@ def shared_library(robot: Robot, model: ErrorModel) -> Path:
                              capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"compiling the generated C for {robot.name} failed: {run.stderr.strip()}")
-        part = lib.with_suffix(f".{os.getpid()}.part")
-        shutil.copy(out, part)
-        part.replace(lib)  # atomic: parallel processes never load a half-written library
+        write_atomically(lib, out.read_bytes())
     return lib
 
 
@@ -95,6 +102,7 @@ class CompiledModel:
 
     def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
         self.robot, self.model = robot, model
+        self.key = model_key(robot, model)
         self.dims = Dims(robot.n, len(robot.targets), robot.n_errors, len(model.coefficients), len(model.aux))
         if backend == "auto":
             backend = "c" if compiler() else "casadi"
@@ -103,8 +111,10 @@ class CompiledModel:
                               "which is slower", stacklevel=2)
         self.backend = backend
         if backend == "c":
-            self._lib = ctypes.CDLL(str(shared_library(robot, model)))
+            self._lib = ctypes.CDLL(str(shared_library(robot, model, self.key)))
         elif backend == "casadi":
+            from gecgen.emit import render
+
             self._ca = load_casadi_module(render(robot, model), robot.name).functions()
         else:
             raise ValueError(f"unknown backend {backend!r}; use auto, c or casadi")

@@ -10,17 +10,20 @@ determined ones) are found first (`redundancy`) and held at zero.
 """
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.validation import ModelError
-from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.redundancy import RANK_TOL, Redundancy, analyze, generic_design
+from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
+from gecgen.runtime.redundancy import RANK_TOL, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
 
 BLOCK_POSES = 2000
@@ -160,14 +163,40 @@ def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> 
     return np.linalg.qr(A, mode="r")
 
 
+def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
+    """Structural analysis for the measured targets. It uses no data, so like the compiled code it
+    is cached by content (the model's key, the analysis code, numpy's version, the targets): a
+    warm run skips an H_e evaluation at generic poses, its QR, the rank test and the merges."""
+    h = hashlib.sha256(json.dumps([cm.key, np.__version__, targets.tolist()]).encode())
+    runtime = Path(__file__).resolve().parent
+    for source in (runtime / "identify.py", runtime / "redundancy.py", runtime.parent / "model" / "kinematics.py"):
+        h.update(source.read_bytes())
+    path = cache_dir() / f"{cm.robot.name}-structural-{h.hexdigest()[:24]}.json"
+    if path.exists():
+        return Redundancy.from_json(path.read_text())
+    red = structural(structural_matrix(cm, targets), cm.robot, cm.model, len(targets))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomically(path, red.to_json().encode())
+    return red
+
+
+def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray,
+                   rank_tol: float = RANK_TOL) -> tuple[Redundancy, np.ndarray, int]:
+    """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`); A0 (s+1, k+1), [H | r] at c = 0 over the
+    identifiable columns up to an orthogonal factor (s the structurally kept count); the number of
+    measured coordinates."""
+    targets = np.unique(data.target)
+    struct = _structural(cm, targets)
+    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)), np.array(struct.kept, int))
+    red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
+    return red, R0[:, [*np.searchsorted(struct.kept, red.kept), -1]], m
+
+
 def redundancy(cm: CompiledModel, data: Measurements | None = None, registration_mode: str = "auto") -> Redundancy:
     """Structural analysis for the targets the data measures (all robot targets without data)."""
     if data is None:
-        return analyze(structural_matrix(cm, np.arange(cm.dims.nt)), None, cm.robot, cm.model, cm.dims.nt)
-    targets = np.unique(data.target)
-    y = _registered(cm, data, registration_mode).to_world(data.xyz)
-    R0, _ = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)))
-    return analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets))
+        return _structural(cm, np.arange(cm.dims.nt))
+    return _data_analysis(cm, data, _registered(cm, data, registration_mode).to_world(data.xyz))[0]
 
 
 def _registered(cm: CompiledModel, data: Measurements, mode: str) -> Registration:
@@ -184,7 +213,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     ridge * |x|^2 to the least squares, x the coefficients scaled by their columns' norms (each
     coefficient penalised by its effect on the data): a prior that keeps weakly excited
     coefficients from growing where the data cannot hold them. `rank_tol` above the exact
-    RANK_TOL holds the weakly excited coefficients at zero instead (see `redundancy.analyze`).
+    RANK_TOL holds the weakly excited coefficients at zero instead (see `redundancy.unexcited`).
     Choose either with `choose`.
     """
     notes = []
@@ -192,26 +221,31 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     y = registration.to_world(data.xyz)
     nc = cm.dims.nc
     c = np.zeros(nc)
-    targets = np.unique(data.target)
-    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, c))
-    red = analyze(structural_matrix(cm, targets), R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
+    red, A0, m = _data_analysis(cm, data, y, rank_tol)
     kept = np.array(red.kept, int)
     k = len(kept)
     if m <= k:
         raise ModelError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
-    scale = np.linalg.norm(R0[:, kept], axis=0)
+    scale = np.linalg.norm(A0[:, :k], axis=0)
+    # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
+    # from this small matrix rather than from a second pass over the data
+    R = np.linalg.qr(np.column_stack([A0[:, :k] / scale, A0[:, k]]), mode="r")
+    stale = False  # True once c has moved on from the c that R was factored at
     converged, it, lam = False, 0, 0.0
     for it in range(1, max_iter + 1):
-        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+        if stale:
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+            stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
-        if np.linalg.norm(Rk @ damped_step(Rk, z, 0.0, ridge, x)) / np.sqrt(m) < step_tol_m:
+        full_step = damped_step(Rk, z, 0.0, ridge, x)
+        if np.linalg.norm(Rk @ full_step) / np.sqrt(m) < step_tol_m:
             converged = True
             break
         objective = float(z @ z + R[k, k] ** 2 + ridge * x @ x)
         for _ in range(16):
             trial = c.copy()
-            trial[kept] += damped_step(Rk, z, lam, ridge, x) / scale
+            trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
             rss_trial = float(np.sum(position_errors(cm, data, y, trial) ** 2))
             trial_objective = rss_trial + ridge * float(np.sum((trial[kept] * scale) ** 2))
             if trial_objective < objective:
@@ -221,7 +255,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             notes.append("the fit stalled: no step lowers the residual (strong nonlinearity or a poorly "
                          "excited model); the result is the last iterate")
             break
-        c, lam = trial, (lam / 10 if lam > 1e-9 else 0.0)
+        c, lam, stale = trial, (lam / 10 if lam > 1e-9 else 0.0), True
         if progress:
             progress(it, 1e3 * np.sqrt(rss_trial / m))
         if objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
@@ -229,7 +263,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             break
     if not converged and not notes:
         notes.append(f"Gauss-Newton did not converge in {max_iter} iterations; the result is the last iterate")
-    R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+    if stale:
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
     sigma = float(np.sqrt(rss / (m - k)))
     sv = np.linalg.svd(Rk, compute_uv=False)

@@ -13,7 +13,7 @@ a fixed preference order, so ties are broken the same way every time):
   catches the cross-redundancies polynomial terms add beyond the rules.
 * unexcited - independent at generic poses but dependent on the actual data (joints the data
   never moves, a wrench that never changes).
-* weak - only with a rank tolerance (`analyze(rank_tol=...)`, `identify --rank-tol`): independent
+* weak - only with a rank tolerance (`unexcited(rank_tol=...)`, `identify --rank-tol`): independent
   on the data, but so nearly dependent that the data cannot hold its value against the noise.
 
 "Merged into" is the least-squares representation of the eliminated column by the kept ones: a
@@ -21,7 +21,8 @@ value c of the eliminated coefficient is indistinguishable from adding factor * 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -71,6 +72,17 @@ class Redundancy:
                 "identifiable": [self.names[k] for k in self.kept],
                 "eliminated": [e.to_dict() for e in self.eliminated]}
 
+    def to_json(self) -> str:
+        """Every field, exactly (floats round-trip through JSON): the inverse of `from_json`."""
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> "Redundancy":
+        d = json.loads(text)
+        return cls(tuple(d["names"]), tuple(d["kept"]),
+                   tuple(Eliminated(**{**e, "merged_into": tuple(map(tuple, e["merged_into"]))})
+                         for e in d["eliminated"]))
+
 
 def rule_candidates(robot: Robot, n_targets_measured: int) -> dict[int, str]:
     """Generalized errors (eps index) the analytic rules eliminate, with the rule in words."""
@@ -110,12 +122,13 @@ def preference_order(robot: Robot, model: ErrorModel, candidates: dict[int, str]
 def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL) -> tuple[list[int], list[int]]:
     """Greedy rank test on the columns of A (m x nc) in `order`: (kept, dependent) indices."""
     norms = np.linalg.norm(A, axis=0)
-    Q = np.zeros((A.shape[0], 0))
+    basis = np.empty((A.shape[0], min(A.shape)))  # filled column by column: no regrowing copies
     kept, dependent = [], []
     for j in order:
         if norms[j] == 0:
             dependent.append(int(j))
             continue
+        Q = basis[:, :len(kept)]
         v = A[:, j] / norms[j]
         for _ in range(2):  # twice is enough (Kahan-Parlett) for orthogonality to working precision
             v = v - Q @ (Q.T @ v)
@@ -123,8 +136,8 @@ def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL) 
         if r < tol:
             dependent.append(int(j))
         else:
+            basis[:, len(kept)] = v / r
             kept.append(int(j))
-            Q = np.column_stack([Q, v / r])
     return sorted(kept), dependent
 
 
@@ -155,7 +168,8 @@ def merged_into(A: np.ndarray, kept: list[int], dependent: list[int], names) -> 
     out = {}
     for col, j in enumerate(dependent):
         share = np.abs(X[:, col]) * norms[kept] / max(norms[j], 1e-300)
-        idx = [i for i in np.argsort(-share) if share[i] > MERGE_REPORT_TOL][:8]
+        largest = np.argsort(-share)[:8]
+        idx = largest[share[largest] > MERGE_REPORT_TOL]
         out[j] = tuple((names[kept[i]], float(X[i, col])) for i in idx)
     return out
 
@@ -169,41 +183,51 @@ def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Genera
     return q, w, rng.normal(0, 1, (n_poses, n_aux))
 
 
-def analyze(A_generic: np.ndarray, A_data: np.ndarray | None, robot: Robot, model: ErrorModel,
-            n_targets_measured: int, rank_tol: float = RANK_TOL) -> Redundancy:
-    """Structural analysis on A_generic (H_e rows at generic poses, or their R factor) and, with
-    A_data, what the data leaves unexcited. Both are m x nc with the model's coefficient columns.
+def structural(A_generic: np.ndarray, robot: Robot, model: ErrorModel, n_targets_measured: int) -> Redundancy:
+    """Structural analysis on A_generic (H_e rows at generic poses, or their R factor; m x nc with
+    the model's coefficient columns)."""
+    names = tuple(model.coefficient_names(robot))
+    candidates = rule_candidates(robot, n_targets_measured)
+    kept, dependent = select_independent(A_generic, preference_order(robot, model, candidates))
+    merges = merged_into(A_generic, kept, dependent, names)
+    coefs = model.coefficients
+    eliminated = [Eliminated(names[j], j, "structural",
+                             candidates.get(coefs[j].error, "depends on other terms of the model at every pose"),
+                             merges[j]) for j in sorted(dependent)]
+    return Redundancy(names, tuple(kept), tuple(eliminated))
+
+
+def unexcited(red: Redundancy, A_data: np.ndarray, robot: Robot, model: ErrorModel,
+              n_targets_measured: int, rank_tol: float = RANK_TOL) -> Redundancy:
+    """`red` (the structural analysis) with what the data leaves unexcited. A_data (m x len(red.kept)):
+    H_e rows of the data, or their R factor, over the structurally kept columns only: a structurally
+    dependent coefficient depends on the others at every pose, so it needs no second test.
 
     rank_tol above RANK_TOL is a numerical rank: of the coefficients left, those whose normalised
     data column keeps less than rank_tol outside the better-excited ones (pivoted QR) are held at
     zero as "weak". Their least-squares values would be mostly noise, and noise the model then
     extrapolates to poses unlike the data's."""
-    names = tuple(model.coefficient_names(robot))
-    candidates = rule_candidates(robot, n_targets_measured)
-    order = preference_order(robot, model, candidates)
-    kept_g, dep_g = select_independent(A_generic, order)
-    eliminated = {}
-    merges = merged_into(A_generic, kept_g, dep_g, names)
-    coefs = model.coefficients
-    for j in dep_g:
-        detail = candidates.get(coefs[j].error, "depends on other terms of the model at every pose")
-        eliminated[j] = Eliminated(names[j], j, "structural", detail, merges[j])
-    kept = kept_g
-    if A_data is not None:
-        kept, dep_d = select_independent(A_data, order)
-        new = [j for j in dep_d if j not in eliminated]
-        merges = merged_into(A_data, kept, new, names)
-        for j in new:
-            why = ("the data never excites it (zero column)" if not np.any(A_data[:, j])
-                   else "the data cannot separate it from the kept parameters")
-            eliminated[j] = Eliminated(names[j], j, "unexcited", why, merges[j])
-        if rank_tol > RANK_TOL and kept:
-            ranked = pivoted_order(A_data, kept)
-            weak = [(j, r) for j, r in ranked if r < rank_tol]
-            kept = sorted(j for j, r in ranked if r >= rank_tol)
-            merges = merged_into(A_data, kept, [j for j, _ in weak], names)
-            for j, r in weak:
-                why = (f"weakly excited: {r:.3g} of its normalised column lies outside the better-excited "
-                       f"parameters (rank tolerance {rank_tol:g})")
-                eliminated[j] = Eliminated(names[j], j, "weak", why, merges[j], r)
-    return Redundancy(names, tuple(kept), tuple(eliminated[j] for j in sorted(eliminated)))
+    structural_kept = np.array(red.kept, int)
+    local = -np.ones(red.n_params, int)
+    local[structural_kept] = np.arange(len(structural_kept))
+    order = local[preference_order(robot, model, rule_candidates(robot, n_targets_measured))]
+    kept, dependent = select_independent(A_data, order[order >= 0])
+    merges = merged_into(A_data, kept, dependent, [red.names[j] for j in structural_kept])
+    eliminated = {e.index: e for e in red.eliminated}
+    for i in dependent:
+        why = ("the data never excites it (zero column)" if not np.any(A_data[:, i])
+               else "the data cannot separate it from the kept parameters")
+        j = int(structural_kept[i])
+        eliminated[j] = Eliminated(red.names[j], j, "unexcited", why, merges[i])
+    if rank_tol > RANK_TOL and kept:
+        ranked = pivoted_order(A_data, kept)
+        weak = [(i, r) for i, r in ranked if r < rank_tol]
+        kept = sorted(i for i, r in ranked if r >= rank_tol)
+        merges = merged_into(A_data, kept, [i for i, _ in weak], [red.names[j] for j in structural_kept])
+        for i, r in weak:
+            j = int(structural_kept[i])
+            why = (f"weakly excited: {r:.3g} of its normalised column lies outside the better-excited "
+                   f"parameters (rank tolerance {rank_tol:g})")
+            eliminated[j] = Eliminated(red.names[j], j, "weak", why, merges[i], r)
+    return Redundancy(red.names, tuple(int(structural_kept[i]) for i in kept),
+                      tuple(eliminated[j] for j in sorted(eliminated)))
