@@ -14,10 +14,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import warnings
+
 import numpy as np
 
-from gecgen.model import load_robot
-from gecgen.model.measurements import read_measurements
+from gecgen.loop.diagnose import diagnose
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.measurements import Measurements, read_measurements
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify, position_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
@@ -82,6 +87,11 @@ def main():
 
     robot = load_robot(ROOT / ROBOT)
     train = read_measurements(files[("train", "m1")], robot)
+    pipelines = {}
+    for pts in ("m1", "all"):
+        data = read_measurements(files[("train", pts)], robot)
+        for label, variant in PIPELINES:
+            pipelines[(label, pts, variant)] = pipeline_cv(robot, label, variant, data, train)
     val = read_measurements(files[("val", "m1")], robot)
     lo, hi = train.q.min(0), train.q.max(0)
     outside = ((val.q < lo - 0.05) | (val.q > hi + 0.05)).any(1)
@@ -148,10 +158,45 @@ def main():
                      f"{ev['after']['rms_mm']:.2f} | {effects} |")
     lines += ["", "Joint numbering: q1 torso_lift, q2..q8 arm_1..arm_7; frame i sits after joint i, so `7.er` is a "
                   "rotation about arm_6's axis, i.e. an arm_6 angle error.", "",
-              "## Against the target", ""] + _target_verdict(rows, by_tol, diags) + ["",
+              "## Against the target", ""] + _target_verdict(rows, by_tol, diags, pipelines) + ["",
               "## Commands", "", "```"] + commands + ["```"]
     (ROOT / "docs" / "real-data-tiago.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+#: every way of fitting a model that the training file may choose among (start model, identify variant
+#: or diagnose), each run whole inside every fold of the pipeline cross-validation
+PIPELINES = [("base", "plain"), ("offsets", "plain"), ("full", "plain"), ("full", "ridge"), ("full", "rank_tol"),
+             ("offsets", "diagnose"), ("full", "diagnose")]
+
+
+def fitted(robot, label: str, variant: str, data: Measurements):
+    """(compiled model, fit) of one pipeline on `data`: what the commands above do, in process."""
+    model = load_error_model(ROOT / MODELS[label], robot)
+    if variant == "diagnose":
+        final = diagnose(robot, model, data, data).final  # the second `data` is only reported on
+        return final.cm, final.fit
+    cm = CompiledModel(robot, model)
+    grids = {"ridge": {"ridge": RIDGE_GRID}, "rank_tol": {"rank_tol": RANK_TOL_GRID}}.get(variant)
+    options = choose(cm, data, grids)[0] if grids else {}
+    return cm, identify(cm, data, **options)
+
+
+def pipeline_cv(robot, label: str, variant: str, data: Measurements, m1: Measurements, folds: int = 5) -> float:
+    """5-fold cross-validated RMS (mm) on marker 1 of the training postures of a whole pipeline: in
+    each fold every choice the pipeline makes (CV-chosen ridge or tolerance, diagnose's terms) is
+    made again on the other folds' postures alone, so the score is that of the procedure, not of a
+    model already shaped by the postures it is scored on. `data` and `m1` hold the same postures."""
+    fold = np.random.default_rng(0).permutation(data.n_poses) % folds
+    sq, n = 0.0, 0
+    for f in range(folds):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # conditioning warnings of the fold fits; the score says it all
+            cm, fit = fitted(robot, label, variant, data.subset(np.nonzero(fold != f)[0]))
+        test = m1.subset(np.nonzero(fold == f)[0])
+        e = position_errors(cm, test, fit.registration.to_world(test.xyz), fit.c)
+        sq, n = sq + float(e @ e), n + len(e)
+    return 1e3 * float(np.sqrt(sq / n))
 
 
 def _weak_section(by_tol) -> list[str]:
@@ -178,38 +223,34 @@ def _weak_section(by_tol) -> list[str]:
     return lines
 
 
-def _target_verdict(rows, by_tol, diags) -> list[str]:
-    """Say whether each pipeline whose choices are all made on the training file meets figaroh's
-    3.22 mm: the rank tolerance chosen by cross-validation, and diagnose (the four-point run with the
-    lowest cross-validated training RMS); list anything else below the target, not claimed."""
+def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
+    """The model the training file chooses (lowest pipeline CV on marker 1) against figaroh's 3.22 mm;
+    every pipeline's validation is listed after the choice, for reading only."""
     target = FIGAROH["full"][1]
-
-    def verdict(val):
-        return f"{val:.2f} mm, {'below' if val < target else 'not below'} the target"
-
-    text = [f"Target: validation RMS on marker 1 below figaroh's {target} mm with a model chosen on the training file "
-            "alone."]
-    chosen_tol = {(pts, variant): (fit, ev) for label, pts, variant, fit, ev in rows
-                  if label == "full" and variant == "rank_tol"}
-    for (pts, _), (fit, ev) in chosen_tol.items():
-        text.append(f"Full model, `--rank-tol auto`, fitted on {'point 1' if pts == 'm1' else 'all four points'}: "
-                    f"tolerance {fit['rank_tol']:g}, {fit['n_identifiable']} parameters, "
-                    f"{verdict(ev['after']['rms_mm'])}.")
-    runs = {k: v for k, v in diags.items() if k[1] == "all"}
-    chosen = min(runs, key=lambda k: runs[k][0]["rounds"][-1]["cv_rms_mm"])
-    text.append(f"Diagnose, the four-point run with the lowest cross-validated training RMS (from the {chosen[0]} "
-                f"model): {verdict(runs[chosen][2]['after']['rms_mm'])}.")
-    others = [f"diagnose from the {k[0]} model on {'point 1' if k[1] == 'm1' else 'all four points'} "
-              f"({v[2]['after']['rms_mm']:.2f} mm)" for k, v in diags.items()
-              if k != chosen and v[2]["after"]["rms_mm"] < target]
-    others += [f"rank tolerance {t:g} on {'point 1' if pts == 'm1' else 'all four points'} ({ev['after']['rms_mm']:.2f} mm)"
-               for (pts, t), (cv, fit, ev) in by_tol.items() if ev["after"]["rms_mm"] < target]
-    if others:
-        text.append(f"Below the target but not chosen by the training file: {'; '.join(others)}. These were found "
-                    "by looking at validation scores, so they are not claimed.")
-    text.append("Same-day cross-validation cannot see what changes between the two recording days, and the "
-                "validation postures reach joint ranges the training file never visits: more training postures "
-                "spread over the whole range is what this robot's calibration needs.")
+    val = {(label, pts, variant): ev["after"]["rms_mm"] for label, pts, variant, fit, ev in rows}
+    val.update({(label, pts, "diagnose"): ev["after"]["rms_mm"] for (label, pts), (d, fit, ev) in diags.items()})
+    names = {"plain": "", "ridge": " + ridge (auto)", "rank_tol": " + rank tolerance (auto)",
+             "diagnose": " + diagnose"}
+    chosen = min(pipelines, key=pipelines.get)
+    text = [f"Target: validation RMS on marker 1 below figaroh's {target} mm with a model chosen on the training "
+            "file alone. The rule: every way of fitting a model above is run whole inside each of 5 folds of the 37 "
+            "training postures (its cross-validated ridge or tolerance, and diagnose's terms, chosen again on the "
+            "other four folds), and scored on marker 1 of the held-out postures; the pipeline with the lowest score "
+            "is the choice. It is the same for every pipeline and reads nothing of the validation file, but it is "
+            "not blind: it was written after the validation figures of earlier revisions of this study had been "
+            "seen (git history).", "",
+            "| pipeline | fitted on | training CV RMS, marker 1 (the choice) | validation RMS, marker 1 (read after) |",
+            "|---|---|---|---|"]
+    for key in sorted(pipelines, key=pipelines.get):
+        label, pts, variant = key
+        mark = " **(chosen)**" if key == chosen else ""
+        text.append(f"| {label}{names[variant]}{mark} | {'point 1' if pts == 'm1' else 'all 4 points'} | "
+                    f"{pipelines[key]:.2f} | {val[key]:.2f} |")
+    label, pts, variant = chosen
+    got = val[chosen]
+    text += ["", f"The training file chooses {label}{names[variant]} fitted on "
+                 f"{'point 1' if pts == 'm1' else 'all four points'}: validation RMS {got:.2f} mm on marker 1, "
+                 f"{'below' if got < target else 'not below'} figaroh's {target} mm."]
     return text
 
 
