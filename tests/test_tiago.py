@@ -63,3 +63,18 @@ def test_rank_tolerance_chosen_on_training_data(files, tmp_path, capsys):
     assert min(fit["cv"], key=lambda row: row["cv_rms_mm"])["rank_tol"] == 0.1
     ev = run(capsys, "evaluate", calib, files["val"])
     assert abs(ev["after"]["rms_mm"] - 4.90) < 0.006
+
+
+def test_diagnose_adds_only_what_cross_validates(files, tmp_path, capsys):
+    """diagnose on the real data: from the joint-offset model it adds the missing constant error first
+    and the refit predicts the other day better; from the full model nothing survives the
+    selection-aware cross-validation on 37 postures (docs/real-data-tiago.md)."""
+    for model, first in (("tiago.offsets.errors.yaml", "5.ex"), ("tiago.errors.yaml", None)):
+        out = tmp_path / f"{model}.diagnosed.yaml"
+        d = run(capsys, "diagnose", ROBOTS / "tiago.yaml", files["train"], "--val", files["val"], "--errors",
+                ROBOTS / model, "-o", out)
+        if first is None:
+            assert d["effects"] == [] and d["after"] == d["before"]
+        else:
+            assert d["effects"][0]["error"] == first and d["effects"][0]["terms"] == ["1"]
+            assert d["after"]["val_rms_mm"] < d["before"]["val_rms_mm"] - 0.5
