@@ -203,8 +203,10 @@ def _print_human(result: dict):
                       f"{e['gain_mm']:.4f} mm)")
         elif isinstance(value, list) and value and isinstance(value[0], dict):
             print(f"{key}: {len(value)} (use --json for the list)")
-        elif isinstance(value, dict) and not any(isinstance(v, (dict, list)) for v in value.values()):
-            print(f"{key}: " + ", ".join(f"{k} {_scalar(v)}" for k, v in value.items()))
+        elif isinstance(value, dict):
+            scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list))}
+            more = " (more with --json)" if len(scalars) < len(value) else ""
+            print(f"{key}: " + ", ".join(f"{k} {_scalar(v)}" for k, v in scalars.items()) + more)
         else:
             print(f"{key}: {_scalar(value)}")
 

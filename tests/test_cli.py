@@ -32,3 +32,13 @@ def test_failures_exit_non_zero_with_one_line(args, expect, tmp_path):
     assert run.returncode != 0 and run.stdout == ""
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and expect in lines[0], run.stderr
+
+
+def test_human_output_is_one_short_line_per_key():
+    """Without --json a person gets a summary: lists are counted, nested records flattened to their
+    scalars, so even the 12 eliminated coefficients and their merges take one line."""
+    run = gecgen("redundancy", ROBOTS / "puma560.yaml")
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert "n_identifiable: 30" in lines and "eliminated: 12 (use --json for the list)" in lines
+    assert all(len(line) < 200 for line in lines) and not any(line.startswith("identifiable:") for line in lines)
