@@ -120,3 +120,18 @@ def test_paper_design_with_undeclared_waviness_and_bending_meets_the_specificati
     assert {"q1"} in traced, traced  # the waviness, on the axis that carries it
     assert any({"q3", "fy"} <= v for v in traced), traced  # bending: extension times the payload's weight
     assert diag.before["val_max_mm"] > 0.5 > diag.after["val_max_mm"]
+
+
+def test_diagnose_adds_nothing_on_the_paper_design_with_per_pose_repeatability():
+    """Clean data in the seed paper's design: constant errors only, but 0.05 mm repeatability per pose
+    (all targets of a pose move together, so the residual is not independent per coordinate) and
+    0.04 mm tracker noise, sweeps of one axis at a time and two payloads. Nothing may be added."""
+    robot = load_robot(ROBOTS / "pps.yaml")
+    spec = {"seed": 7, "gravity": [0, -9.81, 0], "constant": {"translation_std": 1.5e-3, "rotation_std": 1.0e-3},
+            "noise": {"repeatability": 5.0e-5, "tracker": 4.0e-5}}
+    rng = np.random.default_rng(2)
+    design = paper_pps(robot)
+    data = simulate(robot, load_truth(spec, robot), design, rng)
+    train, val = paper_split(design, rng)
+    diag = diagnose(robot, load_error_model(None, robot), data.subset(train), data.subset(val))
+    assert diag.effects == [], [e.to_dict()["terms"] for e in diag.effects]
