@@ -157,7 +157,7 @@ def main():
 
     lines = [
         "# The seed paper's PPS experiment, reproduced on a simulated PPS", "",
-        "Regenerate every number and figure here with `python scripts/reproduce_paper.py` (about two minutes; "
+        "Regenerate every number and figure here with `python scripts/reproduce_paper.py` (23 s on the 2-core benchmark machine when idle; "
         "it runs the commands named below and the library behind them). The robot is `robots/pps.yaml`, the "
         "truth `robots/pps.truth.yaml`: constant generalized errors (1.5 mm, 1 mrad std), joint offsets, 0.3 mm "
         "rail waviness on the lateral axis, a couch cantilever that droops as the longitudinal axis extends, "

@@ -167,9 +167,9 @@ def main():
                  "cross-validation (each fold must find the effect on its own training postures and predict its "
                  "held-out ones better): what diagnose adds to the joint-offset model are missing constant errors"
                  + (f" and a term in {', '.join(v for v in traced if v != 'q6' and v != 'q7')}" if traced else "")
-                 + ", and to the full model nothing. An earlier revision without that check added Fourier terms in "
-                   "q4..q7 with sub-radian periods; they lowered the training fit and did not improve validation "
-                   "(this document's git history)."), "",
+                 + ", and to the full model nothing. An earlier revision without that check added up to eight "
+                   "Fourier pairs in joint variables (q1..q7, periods 0.12 to 4.6); they lowered the training fit and "
+                   "did not improve validation (this document's git history)."), "",
               "## Against the target", ""] + _target_verdict(rows, by_tol, diags, pipelines) + ["",
               "## Commands", "", "```"] + commands + ["```"]
     (ROOT / "docs" / "real-data-tiago.md").write_text("\n".join(lines) + "\n")

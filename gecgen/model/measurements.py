@@ -113,8 +113,8 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     idx = {h: k for k, h in enumerate(header)}
 
     def column(col: str) -> np.ndarray:
-        fix = "fix the value" if col in required or col in WRENCH else "fix it or remove the column (auxiliary " \
-            "columns must be numeric)"
+        contract = col in required or col in WRENCH
+        fix = "fix the value" if contract else "fix it or remove the column (auxiliary columns must be numeric)"
         return numbers(table[:, idx[col]], col, where, fix)
 
     ids = column("pose")

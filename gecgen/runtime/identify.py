@@ -182,9 +182,9 @@ def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
 
 def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray,
                    rank_tol: float = RANK_TOL) -> tuple[Redundancy, np.ndarray, int]:
-    """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`); A0 (s+1, k+1), [H | r] at c = 0 over the
-    identifiable columns up to an orthogonal factor (s the structurally kept count); the number of
-    measured coordinates."""
+    """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`);
+    A0 (s+1, k+1), [H | r] at c = 0 over the identifiable columns up to an orthogonal factor (s the
+    structurally kept count); the number of measured coordinates."""
     targets = np.unique(data.target)
     struct = _structural(cm, targets)
     R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)), np.array(struct.kept, int))

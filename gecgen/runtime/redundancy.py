@@ -208,11 +208,12 @@ def unexcited(red: Redundancy, A_data: np.ndarray, robot: Robot, model: ErrorMod
     zero as "weak". Their least-squares values would be mostly noise, and noise the model then
     extrapolates to poses unlike the data's."""
     structural_kept = np.array(red.kept, int)
+    names = [red.names[j] for j in structural_kept]  # A_data's columns
     local = -np.ones(red.n_params, int)
     local[structural_kept] = np.arange(len(structural_kept))
     order = local[preference_order(robot, model, rule_candidates(robot, n_targets_measured))]
     kept, dependent = select_independent(A_data, order[order >= 0])
-    merges = merged_into(A_data, kept, dependent, [red.names[j] for j in structural_kept])
+    merges = merged_into(A_data, kept, dependent, names)
     eliminated = {e.index: e for e in red.eliminated}
     for i in dependent:
         why = ("the data never excites it (zero column)" if not np.any(A_data[:, i])
@@ -223,7 +224,7 @@ def unexcited(red: Redundancy, A_data: np.ndarray, robot: Robot, model: ErrorMod
         ranked = pivoted_order(A_data, kept)
         weak = [(i, r) for i, r in ranked if r < rank_tol]
         kept = sorted(i for i, r in ranked if r >= rank_tol)
-        merges = merged_into(A_data, kept, [i for i, _ in weak], [red.names[j] for j in structural_kept])
+        merges = merged_into(A_data, kept, [i for i, _ in weak], names)
         for i, r in weak:
             j = int(structural_kept[i])
             why = (f"weakly excited: {r:.3g} of its normalised column lies outside the better-excited "
