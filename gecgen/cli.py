@@ -261,6 +261,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gecgen.model.wide_cli import add_parser as add_import
 
     add_import(command)
+    from gecgen.model.gravity_cli import add_parser as add_gravity
+
+    add_gravity(command)
 
     p = command("diagnose", cmd_diagnose, "trace the residual to missing effects, add them, refit, report")
     p.add_argument("robot")

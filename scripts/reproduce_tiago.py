@@ -29,10 +29,17 @@ DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
 OUT = ROOT / "out" / "tiago"
 ROBOT = "robots/tiago.yaml"
 FIGAROH = {"base": (3.37, 4.87, 9), "offsets": (2.88, 4.23, 14), "full": (1.68, 3.22, 30)}
-#: identify options per variant of the full model (the reduced models are fitted plainly)
+FIGAROH["elastic"] = FIGAROH["full"]  # figaroh has no elastic model: its full geometric one is the reference
+#: identify options per variant
 VARIANTS = {"plain": (), "ridge": ("--ridge", "auto"), "rank_tol": ("--rank-tol", "auto")}
 MODELS = {"base": "robots/tiago.base.errors.yaml", "offsets": "robots/tiago.offsets.errors.yaml",
-          "full": "robots/tiago.errors.yaml"}
+          "full": "robots/tiago.errors.yaml", "elastic": "robots/tiago.elastic.errors.yaml"}
+#: the variants fitted per model: the reduced models plainly, the larger ones also with CV-chosen priors
+FITS = {"base": ("plain",), "offsets": ("plain",), "full": ("plain", "ridge", "rank_tol"), "elastic": ("plain", "ridge")}
+NAMES = {"base": "base registration + marker point", "offsets": "+ joint offsets",
+         "full": "full geometric (6 per frame)", "elastic": "full geometric + gravity compliance"}
+#: the arm joints whose gravity torque changes with the posture (arm_1 turns about the vertical)
+LOADED = ",".join(f"arm_{k}_joint" for k in range(2, 8))
 commands: list[str] = []
 
 
@@ -50,16 +57,17 @@ def main():
     files = {}
     for day, name in (("train", "train_2021-11-30"), ("val", "validation_2021-11-26")):
         for pts, keep in (("all", None), ("m1", "m1")):
-            out = OUT / f"{name}_{pts}.csv"
+            out, joints = OUT / f"{name}_{pts}.csv", OUT / f"{name}_{pts}.joints.csv"
             extra = ["--targets", keep] if keep else []
             imp = gecgen("import", ROBOT, DATA / f"{name}.csv", "--mapping", "robots/tiago.import.yaml", *extra,
-                         "-o", out)
+                         "-o", joints)
+            files[(day, "gravity")] = gecgen("gravity", ROBOT, joints, "--joints", LOADED, "-o", out)
             files[(day, pts)] = out
             files[(day, "outside")] = imp["outside_limits"]
     rows = []
     for label, errors in MODELS.items():
         for pts in ("m1", "all"):
-            for variant in VARIANTS if label == "full" else ("plain",):
+            for variant in FITS[label]:
                 calib = OUT / f"{label}_{pts}_{variant}.calib.json"
                 fit = gecgen("identify", ROBOT, files[("train", pts)], "--errors", errors, *VARIANTS[variant], "-o",
                              calib)
@@ -75,7 +83,7 @@ def main():
                          f"{row['rank_tol']:g}", "-o", calib)
             by_tol[(pts, row["rank_tol"])] = (row["cv_rms_mm"], fit, gecgen("evaluate", calib, files[("val", "m1")]))
     diags = {}
-    for label in ("offsets", "full"):
+    for label in ("offsets", "full", "elastic"):
         for pts in ("m1", "all"):
             new = OUT / f"{label}_{pts}.diagnosed.errors.yaml"
             d = gecgen("diagnose", ROBOT, files[("train", pts)], "--val", files[("val", pts)], "--errors",
@@ -114,7 +122,11 @@ def main():
              + " (inside the reader's 1 mm / 1 mrad tolerance; reported, not clipped). "
              "The motion-capture-to-base transform is registered (closed form on the nominal model, then frame 0's "
              "errors); the marker points start from `scripts/tiago_marker_guess.py` (training file, nominal model) "
-             "and frame 8's errors refine them.", "",
+             "and frame 8's errors refine them. `gecgen gravity` then appends the static gravity torque on arm_2..arm_7 "
+             "(`tau_<joint>`, N m: the URDF's link masses at the measured joints, nominal kinematics), the load "
+             "signal of the elastic model and of diagnose; over the training postures: "
+             + "; ".join(f"{c} {files[('train', 'gravity')]['min'][c]:.2f}..{files[('train', 'gravity')]['max'][c]:.2f}"
+                         for c in files[("train", "gravity")]["columns"]) + ".", "",
              "## Identification, next to figaroh", "",
              "Position RMS / max in mm. Training on the training file only; validation = marker 1 of the validation "
              "file (figaroh's figure). Point 1 = fit on marker 1 alone; all = fit on the four markers (the full hand "
@@ -123,9 +135,7 @@ def main():
              "|---|---|---|---|---|---|---|"]
     for label, pts, variant, fit, ev in rows:
         fg = FIGAROH[label]
-        name = {"base": "base registration + marker point", "offsets": "+ joint offsets",
-                "full": "full geometric (6 per frame)"}[label]
-        name += {"plain": "", "ridge": f" + ridge (CV: {fit.get('ridge', 0):g})",
+        name = NAMES[label] + {"plain": "", "ridge": f" + ridge (CV: {fit.get('ridge', 0):g})",
                  "rank_tol": f" + rank tolerance (CV: {fit.get('rank_tol', 0):g})"}[variant]
         lines.append(f"| {name} | {'point 1' if pts == 'm1' else 'all 4 points'} | {fit['n_identifiable']} | "
                      f"{fit['train']['rms_mm']:.2f} | {ev['after']['rms_mm']:.2f} | {ev['after']['max_mm']:.2f} | "
@@ -141,11 +151,12 @@ def main():
               f"{int(outside.sum())} of the {val.n_poses} validation postures leave the joint ranges of the training "
               f"file by more than 0.05 rad or m: {'; '.join(wide)}. A calibration extrapolates there, and those "
               "postures carry most of the validation error (below).", ""]
-    full_all = OUT / "full_all_plain.calib.json"
-    per = _errors_by_range(full_all, files[("val", "m1")], outside)
-    lines += [f"Full geometric model fitted on all four points: validation RMS {per[0]:.2f} mm on the "
-              f"{int((~outside).sum())} postures inside the training ranges, {per[1]:.2f} mm on the "
-              f"{int(outside.sum())} outside.", "",
+    for label in ("full", "elastic"):
+        per = _errors_by_range(OUT / f"{label}_all_plain.calib.json", files[("val", "m1")], outside)
+        lines += [f"{NAMES[label][0].upper() + NAMES[label][1:]}, fitted on all four points: validation RMS "
+                  f"{per[0]:.2f} mm on the {int((~outside).sum())} postures inside the training ranges, "
+                  f"{per[1]:.2f} mm on the {int(outside.sum())} outside.", ""]
+    lines += [
               "## What is left in the residual: gecgen diagnose", "",
               "Decisions on the training file only (chi-square with multiplicity correction and 5-fold "
               "cross-validation over the training postures); `--val` only reports.", "",
@@ -156,20 +167,9 @@ def main():
         lines.append(f"| {label} | {'point 1' if pts == 'm1' else 'all 4 points'} | "
                      f"{d['rounds'][0]['cv_rms_mm']:.2f} -> {d['rounds'][-1]['cv_rms_mm']:.2f} | "
                      f"{ev['after']['rms_mm']:.2f} | {effects} |")
-    traced = sorted({v for d, fit, ev in diags.values() for e in d["effects"] for v in e["variables"]})
-    suspects = [v for v in traced if v in ("q6", "q7")]
     lines += ["", "Joint numbering: q1 torso_lift, q2..q8 arm_1..arm_7; frame i sits after joint i, so `7.er` is a "
                   "rotation about arm_6's axis, i.e. an arm_6 angle error. Upstream reports an encoder problem on "
-                  "arm_5 (q6) and free play in arm_6 (q7). "
-              + (f"Effects traced to {', '.join(suspects)} survive the selection-aware cross-validation."
-                 if suspects else
-                 "On these 37 training postures no effect in q6 or q7 survives diagnose's selection-aware "
-                 "cross-validation (each fold must find the effect on its own training postures and predict its "
-                 "held-out ones better): what diagnose adds to the joint-offset model are missing constant errors"
-                 + (f" and a term in {', '.join(v for v in traced if v != 'q6' and v != 'q7')}" if traced else "")
-                 + ", and to the full model nothing. An earlier revision without that check added up to eight "
-                   "Fourier pairs in joint variables (q1..q7, periods 0.12 to 4.6); they lowered the training fit and "
-                   "did not improve validation (this document's git history)."), "",
+                  "arm_5 (q6) and free play in arm_6 (q7)."] + _traced(diags) + [""] + _compliance_section(files) + ["",
               "## Against the target", ""] + _target_verdict(rows, by_tol, diags, pipelines) + ["",
               "## Commands", "", "```"] + commands + ["```"]
     (ROOT / "docs" / "real-data-tiago.md").write_text("\n".join(lines) + "\n")
@@ -179,7 +179,7 @@ def main():
 #: every way of fitting a model that the training file may choose among (start model, identify variant
 #: or diagnose), each run whole inside every fold of the pipeline cross-validation
 PIPELINES = [("base", "plain"), ("offsets", "plain"), ("full", "plain"), ("full", "ridge"), ("full", "rank_tol"),
-             ("offsets", "diagnose"), ("full", "diagnose")]
+             ("offsets", "diagnose"), ("full", "diagnose"), ("elastic", "plain"), ("elastic", "ridge")]
 
 
 def fitted(robot, label: str, variant: str, data: Measurements):
@@ -235,6 +235,57 @@ def _weak_section(by_tol) -> list[str]:
     return lines
 
 
+def _traced(diags) -> list[str]:
+    """What diagnose traced to a joint's gravity load, and to arm_5 or arm_6, in words."""
+    loads = {}
+    for (label, pts), (d, fit, ev) in diags.items():
+        for e in d["effects"]:
+            for v in e["variables"]:
+                if v.startswith("tau_") or v in ("q6", "q7"):
+                    loads.setdefault(f"`{e['error']}: {', '.join(e['terms'])}`", []).append(
+                        f"{label} ({'point 1' if pts == 'm1' else 'all 4 points'})")
+    if not loads:
+        return ["Nothing traced to a joint's gravity load or to q6, q7 survives diagnose's selection-aware "
+                "cross-validation on these 37 training postures."]
+    text = ["Traced to a joint's gravity load, or to q6 and q7: " + "; ".join(
+        f"{effect} from {', '.join(starts)}" for effect, starts in loads.items()) + "."]
+    if any(k.startswith("`7.er: tau_arm_6_joint") for k in loads):
+        text.append("That is arm_6's angle error growing with the gravity torque on arm_6: the free play upstream "
+                    "reports shows as a load-dependent angle (a joint with play settles on the side its load "
+                    "pushes it to).")
+    if not any("q6" in k or "tau_arm_5_joint" in k for k in loads):
+        text.append("Nothing is traced to arm_5 (q6 or its load): the encoder problem upstream reports does not show "
+                    "in these postures above what the other effects explain.")
+    return [" ".join(text)]
+
+
+def _compliance_section(files) -> list[str]:
+    """The gravity compliances of the elastic model fitted on all four points, with their significance."""
+    calib = json.loads((OUT / "elastic_all_plain.calib.json").read_text())
+    grav = files[("train", "gravity")]
+    robot = load_robot(ROOT / ROBOT)
+    tau6 = read_measurements(files[("train", "m1")], robot).aux_columns(("tau_arm_6_joint",))[:, 0]
+    lines = ["## Gravity load: the joint compliance the geometric model lacks", "",
+             "`robots/tiago.elastic.errors.yaml` is the full geometric model plus one compliance per loaded arm "
+             "joint: the joint's angle error (er of the frame after it) grows linearly with the gravity torque on "
+             "it, the seed paper's elastic error with the load computed from the URDF instead of measured. Fitted "
+             "on all four points of the training file:", "",
+             "| joint | compliance, mrad per N m | std | value / std | training torque, N m | angle swing, mrad |",
+             "|---|---|---|---|---|---|"]
+    for c in calib["coefficients"]:
+        if ":tau_" not in c["name"]:
+            continue
+        col = c["name"].split(":")[1]
+        lo, hi = grav["min"][col], grav["max"][col]
+        lines.append(f"| {col[4:]} | {1e3 * c['value']:.3f} | {1e3 * c['std']:.3f} | {abs(c['value']) / c['std']:.1f} | "
+                     f"{lo:.2f}..{hi:.2f} | {1e3 * abs(c['value']) * (hi - lo):.2f} |")
+    lines += ["", f"{int((tau6 < 0).sum())} of the {len(tau6)} training postures load arm_6 the same way (negative "
+                  "torque), so free play (an angle set by the sign of the load) and compliance (an angle proportional "
+                  "to it) cannot be told apart on them; the linear term is the simpler of the two and the one the "
+                  "data supports."]
+    return lines
+
+
 def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
     """The model the training file chooses (lowest pipeline CV on marker 1) against figaroh's 3.22 mm;
     every pipeline's validation is listed after the choice, for reading only."""
@@ -248,9 +299,12 @@ def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
             "file alone. The rule: every way of fitting a model above is run whole inside each of 5 folds of the 37 "
             "training postures (its cross-validated ridge or tolerance, and diagnose's terms, chosen again on the "
             "other four folds), and scored on marker 1 of the held-out postures; the pipeline with the lowest score "
-            "is the choice. It is the same for every pipeline and reads nothing of the validation file, but it is "
-            "not blind: it was written after the validation figures of earlier revisions of this study had been "
-            "seen (git history).", "",
+            "is the choice. It is the same for every pipeline and reads nothing of the validation file, but it was "
+            "written after the validation figures of earlier revisions of this study had been seen (git history). "
+            "The two elastic pipelines were added afterwards, for the free play upstream reports in arm_6 and the "
+            "seed paper's elastic errors; their training CV, and the choice the rule then makes, were recorded in "
+            "the commit that added `robots/tiago.elastic.errors.yaml` (4b0dbe3) before any validation figure of "
+            "them was computed.", "",
             "| pipeline | fitted on | training CV RMS, marker 1 (the choice) | validation RMS, marker 1 (read after) |",
             "|---|---|---|---|"]
     for key in sorted(pipelines, key=pipelines.get):
@@ -262,7 +316,10 @@ def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
     got = val[chosen]
     text += ["", f"The training file chooses {label}{names[variant]} fitted on "
                  f"{'point 1' if pts == 'm1' else 'all four points'}: validation RMS {got:.2f} mm on marker 1, "
-                 f"{'below' if got < target else 'not below'} figaroh's {target} mm."]
+                 + (f"below figaroh's {target} mm by {target - got:.2f} mm. A margin that small says the target is "
+                    "met as written, not that the model is decisively better than figaroh's on the other day: "
+                    "most of the validation error sits in the postures outside the training ranges (above)."
+                    if got < target else f"not below figaroh's {target} mm.")]
     return text
 
 

@@ -195,8 +195,11 @@ def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = (
     where = str(path)
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     header, table = read_table(path, "file of joint commands", ", ".join(qcols))
-    for col in (*qcols, *aux_names):
+    for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
+    for col in aux_names:
+        require(col in header, f"{where}: row 1: missing column '{col}', an auxiliary signal the error model uses; "
+                               f"add it" + (" (gecgen gravity writes tau_<joint> columns)" if col.startswith("tau_") else ""))
 
     def column(col: str) -> np.ndarray:
         return numbers(table[:, header.index(col)], col, where)

@@ -55,6 +55,8 @@ class Robot:
     points: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     source: str = ""
     source_hashes: dict[str, str] = field(default_factory=dict)
+    urdf: str = ""  # the URDF file a robot file names (its masses give gravity torques), else ""
+    base_link: str = ""
 
     @property
     def n(self) -> int:
@@ -202,4 +204,6 @@ def load_robot(path: str | Path) -> Robot:
               for k, p in (spec.get("points") or {}).items()}
     return Robot(name=name, joints=tuple(joints), base=base, tool=tool,
                  targets=_targets(spec["targets"], f"{where}: targets"), wrench_frame=wrench_frame,
-                 points=points, source=str(path), source_hashes=hashes)
+                 points=points, source=str(path), source_hashes=hashes,
+                 urdf=str(path.parent / str(spec["urdf"])) if "urdf" in spec else "",
+                 base_link=str(spec.get("base_link", "")) if "urdf" in spec else "")

@@ -6,7 +6,8 @@ a rotation about, or translation along, its unit `<axis>` (default x) in the fra
 origin. Fixed joints fold into the next moving joint's origin (`pre`); those before the first
 moving joint and that joint's own origin form the base (so frame 0 is the first joint's frame at
 zero, as in DH), and those after the last moving joint form the tool. Meshes, inertias,
-transmissions and joints off the path are ignored.
+transmissions and joints off the path are ignored by the chain; `load_mass_tree` reads the masses
+of every link below a base link, on the path or not, for gravity torques (`model.gravity`).
 """
 from __future__ import annotations
 
@@ -15,8 +16,10 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 
+from gecgen.model.kinematics import constant
 from gecgen.model.robot import Elementary, Joint
 from gecgen.model.validation import ModelError, require
 
@@ -81,6 +84,13 @@ def _limits(joint: ET.Element, jtype: str, where: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _parse(path: str | Path) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ModelError(f"{path}: not valid XML ({exc})") from None
+
+
 def _tree(root: ET.Element, where: str) -> tuple[set[str], dict[str, UrdfJoint]]:
     """Link names and, for each child link, the joint above it (a URDF is a tree of links)."""
     links = {el.get("name") for el in root.findall("link")}
@@ -121,10 +131,7 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
     Lengths in m, angles in rad; joints are `Joint(pre=origin, post=())` with their URDF names.
     """
     where = str(path)
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ModelError(f"{where}: not valid XML ({exc})") from None
+    root = _parse(path)
     links, above = _tree(root, where)
     for key, link in (("base_link", base_link), ("tip_link", tip_link)):
         require(link in links, f"{where}: {key} '{link}' is not a link of this URDF")
@@ -152,3 +159,55 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
                             lower=lo, upper=hi))
     require(joints, f"{where}: no moving joint between '{base_link}' and '{tip_link}'")
     return base, tuple(joints), pending
+
+
+@dataclass(frozen=True)
+class MassTree:
+    """The links below a base link, parents before children: for each, the joint above it (name,
+    kind "R" | "P" | "F" fixed, origin 4x4, unit axis (3,)) and its mass (kg) and centre of mass
+    (3,) in its own frame, m."""
+
+    links: tuple[str, ...]
+    parent: dict[str, str]
+    joint: dict[str, tuple[str, str, np.ndarray, np.ndarray]]
+    mass: dict[str, float]
+    com: dict[str, np.ndarray]
+    source: str
+
+
+def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
+    """Read the links below `base_link` of a URDF with their masses (links without `<inertial>`
+    are massless, as the URDF format says)."""
+    where = str(path)
+    root = _parse(path)
+    links, above = _tree(root, where)
+    require(base_link in links, f"{where}: base_link '{base_link}' is not a link of this URDF")
+    below: dict[str, list[str]] = {}
+    for child, uj in above.items():
+        below.setdefault(uj.parent, []).append(child)
+    order, todo = [], [base_link]
+    while todo:
+        link = todo.pop()
+        order.append(link)
+        todo.extend(sorted(below.get(link, [])))
+    joint = {}
+    for link in order[1:]:
+        uj = above[link]
+        jwhere = f"{where}: joint '{uj.name}'"
+        kind = MOVING.get(uj.type, "F")
+        axis = np.array([float(a) for a in _axis(uj.element, jwhere)]) if kind != "F" else np.zeros(3)
+        joint[link] = (uj.name, kind, constant(_origin(uj.element, jwhere)), axis)
+    mass, com = {}, {}
+    for el in root.findall("link"):
+        name, inertial = el.get("name"), el.find("inertial")
+        if (name not in joint and name != base_link) or inertial is None:
+            continue
+        lwhere = f"{where}: link '{name}' inertial"
+        m = inertial.find("mass")
+        require(m is not None and m.get("value") is not None, f"{lwhere}: no <mass value=...>; give the link's mass")
+        mass[name] = _number(m.get("value"), f"{lwhere} mass")
+        require(mass[name] >= 0, f"{lwhere}: mass {mass[name]:g} kg is negative; fix the URDF")
+        origin = inertial.find("origin")
+        com[name] = np.array(_triple(None if origin is None else origin.get("xyz"), "0 0 0", f"{lwhere} origin xyz"))
+    return MassTree(links=tuple(order), parent={k: above[k].parent for k in order[1:]}, joint=joint, mass=mass,
+                    com=com, source=where)

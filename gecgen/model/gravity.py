@@ -1,0 +1,75 @@
+"""Static gravity torques on the joints of a URDF robot: the load signal of elastic errors.
+
+The seed paper's elastic errors are linear in the measured wrench. A robot measured without a
+force sensor is loaded all the same: every link's weight pulls on every joint above it, and a
+compliant joint (harmonic drive, belt, long gear train) turns by an angle that grows with that
+torque. The torque is not measured but known from the URDF's `<inertial>` masses and the joint
+readings, so it can be written next to the joints as an auxiliary column `tau_<joint>` and used
+by error terms (`er: ["1", tau_arm_2_joint]`, a joint stiffness) and by `gecgen diagnose`.
+
+Convention: the torque (N m) gravity exerts about the joint's +axis, for a prismatic joint the
+force (N) along it; tau_i = -dV/dq_i with V the potential energy, which the tests check. Every
+link below the joint counts, branches off the chain included (a gripper's fingers, a camera), with
+their own moving joints held at zero. The nominal kinematics is used: the millimetres a
+calibration corrects change the torques far less than the uncertainty of the masses themselves.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gecgen.model.kinematics import joint_motion
+from gecgen.model.robot import Robot
+from gecgen.model.urdf import MassTree, load_mass_tree
+from gecgen.model.validation import require
+
+#: standard gravity in the base link's frame when the robot stands upright (z up), m/s^2
+UPRIGHT = (0.0, 0.0, -9.80665)
+
+
+def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
+                    gravity=UPRIGHT) -> np.ndarray:
+    """Torque (N m) or force (N) of gravity about/along each of `joints`, (P, len(joints)).
+
+    q: joint name -> readings (P,) for the joints that move (others are held at zero); gravity:
+    the acceleration (m/s^2) in the base link's frame."""
+    by_joint = {spec[0]: link for link, spec in tree.joint.items()}
+    for name in joints:
+        require(name in by_joint and tree.joint[by_joint[name]][1] != "F",
+                f"{tree.source}: '{name}' is not a moving joint below the base link; name one of "
+                f"{', '.join(s[0] for s in tree.joint.values() if s[1] != 'F')}")
+    P = len(next(iter(q.values())))
+    g = np.asarray(gravity, float)
+    world = {tree.links[0]: np.broadcast_to(np.eye(4), (P, 4, 4))}
+    placed = {}  # link -> the joint frame before its motion: the joint's position and axis live there
+    for link in tree.links[1:]:
+        name, kind, origin, axis = tree.joint[link]
+        placed[link] = world[tree.parent[link]] @ origin
+        motion = np.eye(4) if kind == "F" else joint_motion(axis, kind, np.asarray(q.get(name, np.zeros(P)), float))
+        world[link] = placed[link] @ motion
+    # mass and first moment of mass (sum m * c, world) of every subtree, leaves first
+    M = {link: tree.mass.get(link, 0.0) for link in tree.links}
+    S = {link: M[link] * (world[link][:, :3, :3] @ tree.com.get(link, np.zeros(3)) + world[link][:, :3, 3])
+         for link in tree.links}
+    for link in reversed(tree.links[1:]):
+        M[tree.parent[link]] += M[link]
+        S[tree.parent[link]] = S[tree.parent[link]] + S[link]
+    out = np.zeros((P, len(joints)))
+    for k, name in enumerate(joints):
+        link = by_joint[name]
+        require(M[link] > 0, f"{tree.source}: no link below joint '{name}' has a mass; give the links' "
+                             f"<inertial> masses or leave the joint out")
+        axis = placed[link][:, :3, :3] @ tree.joint[link][3]
+        if tree.joint[link][1] == "P":
+            out[:, k] = M[link] * axis @ g
+        else:  # sum over the subtree of (c - p) x m g = (S - M p) x g
+            arm = S[link] - M[link] * placed[link][:, :3, 3]
+            out[:, k] = np.einsum("pi,pi->p", axis, np.cross(arm, g))
+    return out
+
+
+def robot_gravity_torques(robot: Robot, q: np.ndarray, joints: list[str], gravity=UPRIGHT) -> np.ndarray:
+    """`gravity_torques` of a robot built from a URDF, q (P, n) in robot order, joints by name."""
+    require(robot.urdf, f"{robot.source}: gravity torques need the link masses of a URDF; this robot file "
+                        f"gives DH rows without masses (build the robot from its URDF)")
+    tree = load_mass_tree(robot.urdf, robot.base_link)
+    return gravity_torques(tree, dict(zip(robot.joint_names, q.T)), joints, gravity)

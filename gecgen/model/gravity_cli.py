@@ -1,0 +1,65 @@
+"""`gecgen gravity ROBOT TABLE.csv -o OUT.csv [--joints a,b] [--gravity gx,gy,gz] [--json]`.
+
+Appends the static gravity torque of chosen joints (gecgen/model/gravity.py) to any CSV with the
+joint columns q1..qn: a measurement file (before identify or diagnose) or a file of joint commands
+(before compensate, which needs the same signals as the fit). Every other cell is copied as read.
+"""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from gecgen.model import load_robot
+from gecgen.model.gravity import UPRIGHT, robot_gravity_torques
+from gecgen.model.measurements import numbers, read_table
+from gecgen.model.validation import ModelError, require
+
+
+def add_parser(command):
+    """Register `gravity` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("gravity", run, "append the static gravity torques of joints (URDF masses) as aux columns")
+    p.add_argument("robot", help="robot file built from a URDF (its <inertial> masses are used)")
+    p.add_argument("table", help="CSV with q1..qn: measurements or joint commands")
+    p.add_argument("-o", "--output", required=True, help="the table with tau_<joint> columns appended")
+    p.add_argument("--joints", help="comma-separated joint names (default: every joint of the robot)")
+    p.add_argument("--gravity", default=",".join(map(str, UPRIGHT)),
+                   help="gravity in the base link's frame, m/s^2 (default: %(default)s, the base upright)")
+
+
+def _gravity(text: str) -> tuple[float, float, float]:
+    try:
+        g = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ModelError(f"--gravity {text}: expected three numbers gx,gy,gz in m/s^2") from None
+    require(len(g) == 3 and all(np.isfinite(g)), f"--gravity {text}: expected three finite numbers gx,gy,gz in m/s^2")
+    return g
+
+
+def run(args) -> dict:
+    robot = load_robot(args.robot)
+    joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
+    for j in joints:
+        require(j in robot.joint_names, f"--joints: '{j}' is not a joint of {robot.name} ({', '.join(robot.joint_names)})")
+    qcols = [f"q{i + 1}" for i in range(robot.n)]
+    where = str(args.table)
+    header, table = read_table(args.table, "table", ", ".join(qcols))
+    for col in qcols:
+        require(col in header, f"{where}: row 1: missing column '{col}'")
+    new = [f"tau_{j}" for j in joints]
+    clash = [c for c in new if c in header]
+    require(not clash, f"{where}: row 1: column '{clash[0] if clash else ''}' is already there; "
+                       f"drop it or write from the table without it")
+    q = np.column_stack([numbers(table[:, header.index(c)], c, where) for c in qcols])
+    tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity))
+    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
+    with Path(args.output).open("w", newline="") as fh:
+        out = csv.writer(fh, lineterminator="\n")
+        out.writerow(header + new)
+        for row, t in zip(table.tolist(), tau.tolist()):
+            out.writerow(row + [repr(v) for v in t])
+    units = {c: "N" if robot.joints[robot.joint_names.index(j)].kind == "P" else "N m" for c, j in zip(new, joints)}
+    return {"robot": robot.name, "output": str(args.output), "rows": len(table), "columns": new,
+            "min": {c: float(v) for c, v in zip(new, tau.min(0))}, "max": {c: float(v) for c, v in zip(new, tau.max(0))},
+            "unit": units}
