@@ -95,11 +95,13 @@ def main():
 
     robot = load_robot(ROOT / ROBOT)
     train = read_measurements(files[("train", "m1")], robot)
-    pipelines = {}
+    # fold split 0 is the rule's; 1..3 show how much the choice depends on the split
+    pipelines = {seed: {} for seed in SPLITS}
     for pts in ("m1", "all"):
         data = read_measurements(files[("train", pts)], robot)
         for label, variant in PIPELINES:
-            pipelines[(label, pts, variant)] = pipeline_cv(robot, label, variant, data, train)
+            for seed in SPLITS:
+                pipelines[seed][(label, pts, variant)] = pipeline_cv(robot, label, variant, data, train, seed)
     val = read_measurements(files[("val", "m1")], robot)
     lo, hi = train.q.min(0), train.q.max(0)
     outside = ((val.q < lo - 0.05) | (val.q > hi + 0.05)).any(1)
@@ -153,11 +155,10 @@ def main():
               "postures carry most of the validation error (below).", ""]
     for label in ("full", "elastic"):
         per = _errors_by_range(OUT / f"{label}_all_plain.calib.json", files[("val", "m1")], outside)
-        lines += [f"{NAMES[label][0].upper() + NAMES[label][1:]}, fitted on all four points: validation RMS "
+        lines += [f"{NAMES[label].capitalize()}, fitted on all four points: validation RMS "
                   f"{per[0]:.2f} mm on the {int((~outside).sum())} postures inside the training ranges, "
                   f"{per[1]:.2f} mm on the {int(outside.sum())} outside.", ""]
-    lines += [
-              "## What is left in the residual: gecgen diagnose", "",
+    lines += ["## What is left in the residual: gecgen diagnose", "",
               "Decisions on the training file only (chi-square with multiplicity correction and 5-fold "
               "cross-validation over the training postures); `--val` only reports.", "",
               "| start | fitted on | training CV RMS before -> after | validation RMS (marker 1) after refit | effects added |",
@@ -178,6 +179,8 @@ def main():
 
 #: every way of fitting a model that the training file may choose among (start model, identify variant
 #: or diagnose), each run whole inside every fold of the pipeline cross-validation
+#: seeds of the pipeline CV's fold split: the first is the rule's
+SPLITS = (0, 1, 2, 3)
 PIPELINES = [("base", "plain"), ("offsets", "plain"), ("full", "plain"), ("full", "ridge"), ("full", "rank_tol"),
              ("offsets", "diagnose"), ("full", "diagnose"), ("elastic", "plain"), ("elastic", "ridge")]
 
@@ -194,12 +197,13 @@ def fitted(robot, label: str, variant: str, data: Measurements):
     return cm, identify(cm, data, **options)
 
 
-def pipeline_cv(robot, label: str, variant: str, data: Measurements, m1: Measurements, folds: int = 5) -> float:
+def pipeline_cv(robot, label: str, variant: str, data: Measurements, m1: Measurements, seed: int = 0,
+                folds: int = 5) -> float:
     """5-fold cross-validated RMS (mm) on marker 1 of the training postures of a whole pipeline: in
     each fold every choice the pipeline makes (CV-chosen ridge or tolerance, diagnose's terms) is
     made again on the other folds' postures alone, so the score is that of the procedure, not of a
     model already shaped by the postures it is scored on. `data` and `m1` hold the same postures."""
-    fold = np.random.default_rng(0).permutation(data.n_poses) % folds
+    fold = np.random.default_rng(seed).permutation(data.n_poses) % folds
     sq, n = 0.0, 0
     for f in range(folds):
         with warnings.catch_warnings():
@@ -286,9 +290,11 @@ def _compliance_section(files) -> list[str]:
     return lines
 
 
-def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
+def _target_verdict(rows, by_tol, diags, by_split) -> list[str]:
     """The model the training file chooses (lowest pipeline CV on marker 1) against figaroh's 3.22 mm;
-    every pipeline's validation is listed after the choice, for reading only."""
+    every pipeline's validation is listed after the choice, for reading only; then the choice
+    under the other fold splits."""
+    pipelines = by_split[SPLITS[0]]
     target = FIGAROH["full"][1]
     val = {(label, pts, variant): ev["after"]["rms_mm"] for label, pts, variant, fit, ev in rows}
     val.update({(label, pts, "diagnose"): ev["after"]["rms_mm"] for (label, pts), (d, fit, ev) in diags.items()})
@@ -320,6 +326,21 @@ def _target_verdict(rows, by_tol, diags, pipelines) -> list[str]:
                     "met as written, not that the model is decisively better than figaroh's on the other day: "
                     "most of the validation error sits in the postures outside the training ranges (above)."
                     if got < target else f"not below figaroh's {target} mm.")]
+    text += ["", "The same rule with the 37 postures split into folds differently (seed of the split; 0 is the "
+                 "rule's). Each row is a whole re-run of every pipeline above:", "",
+             "| split | chosen pipeline | fitted on | training CV RMS | runner-up (training CV) | validation RMS of the choice |",
+             "|---|---|---|---|---|---|"]
+    for seed, scores in by_split.items():
+        first, second = sorted(scores, key=scores.get)[:2]
+        text.append(f"| {seed} | {first[0]}{names[first[2]]} | {'point 1' if first[1] == 'm1' else 'all 4 points'} | "
+                    f"{scores[first]:.2f} | {second[0]}{names[second[2]]}, "
+                    f"{'point 1' if second[1] == 'm1' else 'all 4 points'} ({scores[second]:.2f}) | {val[first]:.2f} |")
+    choices = list(dict.fromkeys(min(scores, key=scores.get) for scores in by_split.values()))
+    worst = max(val[c] for c in choices)
+    text += ["", "Under every split the rule chooses " + " or ".join(
+        f"{c[0]}{names[c[2]]} fitted on {'point 1' if c[1] == 'm1' else 'all four points'}" for c in choices)
+        + f"; the worst of these on the validation day is {worst:.2f} mm, "
+        + ("below" if worst < target else "not below") + f" figaroh's {target} mm."]
     return text
 
 

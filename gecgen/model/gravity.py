@@ -24,6 +24,8 @@ from gecgen.model.validation import require
 
 #: standard gravity in the base link's frame when the robot stands upright (z up), m/s^2
 UPRIGHT = (0.0, 0.0, -9.80665)
+#: postures per block: every link's transforms are held for a block, a few MB whatever the table's length
+BLOCK = 2048
 
 
 def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
@@ -72,4 +74,5 @@ def robot_gravity_torques(robot: Robot, q: np.ndarray, joints: list[str], gravit
     require(robot.urdf, f"{robot.source}: gravity torques need the link masses of a URDF; this robot file "
                         f"gives DH rows without masses (build the robot from its URDF)")
     tree = load_mass_tree(robot.urdf, robot.base_link)
-    return gravity_torques(tree, dict(zip(robot.joint_names, q.T)), joints, gravity)
+    return np.concatenate([gravity_torques(tree, dict(zip(robot.joint_names, q[s:s + BLOCK].T)), joints, gravity)
+                           for s in range(0, len(q), BLOCK)])
