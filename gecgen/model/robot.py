@@ -177,6 +177,7 @@ def load_robot(path: str | Path) -> Robot:
     require(isinstance(name, str) and name.isidentifier(), f"{where}: name: {name!r} must be an identifier (it names C functions)")
     hashes = {path.name: file_hash(path)}
     base = _transform(spec.get("base"), f"{where}: base", deg)
+    urdf_path = None
     if "urdf" in spec:
         from gecgen.model.urdf import urdf_chain
 
@@ -205,5 +206,4 @@ def load_robot(path: str | Path) -> Robot:
     return Robot(name=name, joints=tuple(joints), base=base, tool=tool,
                  targets=_targets(spec["targets"], f"{where}: targets"), wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,
-                 urdf=str(path.parent / str(spec["urdf"])) if "urdf" in spec else "",
-                 base_link=str(spec.get("base_link", "")) if "urdf" in spec else "")
+                 urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "")
