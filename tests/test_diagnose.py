@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import ROBOTS
+from conftest import ROBOTS, random_q
 
 from gecgen.cli import main
 from gecgen.loop.diagnose import diagnose
@@ -148,7 +148,7 @@ def test_joint_compliance_under_gravity_is_traced_to_the_loaded_joint():
 
     def tiago_set(n_poses, seed):
         rng = np.random.default_rng(seed)
-        q = rng.uniform([j.lower for j in robot.joints], [j.upper for j in robot.joints], (n_poses, robot.n))
+        q = random_q(robot, rng, n_poses)
         tau = robot_gravity_torques(robot, q, joints)
         eps = np.tile(np.random.default_rng(7).normal(0, 5e-4, robot.n_errors), (n_poses, 1))
         eps[:, 5 * 6 + 4] += 3e-4 * tau[:, joints.index("arm_4_joint")]

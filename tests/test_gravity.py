@@ -92,14 +92,14 @@ def first_moment(tree, q) -> np.ndarray:
     world = {tree.links[0]: np.broadcast_to(np.eye(4), (P, 4, 4))}
     total = np.zeros((P, 3))
     for link in tree.links[1:]:
-        name, kind, origin, axis = tree.joint[link]
+        j = tree.joint[link]
         motion = np.broadcast_to(np.eye(4), (P, 4, 4)).copy()
-        v = q.get(name, np.zeros(P))
-        if kind == "R":
-            motion[:, :3, :3] = Rotation.from_rotvec(np.outer(v, axis)).as_matrix()
-        elif kind == "P":
-            motion[:, :3, 3] = np.outer(v, axis)
-        world[link] = world[tree.parent[link]] @ origin @ motion
+        v = q.get(j.name, np.zeros(P))
+        if j.kind == "R":
+            motion[:, :3, :3] = Rotation.from_rotvec(np.outer(v, j.axis)).as_matrix()
+        elif j.kind == "P":
+            motion[:, :3, 3] = np.outer(v, j.axis)
+        world[link] = world[tree.parent[link]] @ j.origin @ motion
     for link, m in tree.mass.items():
         if link in world:
             total += m * (world[link][:, :3, :3] @ tree.com[link] + world[link][:, :3, 3])

@@ -1,7 +1,6 @@
 """Real data end to end: import the TIAGo motion-capture files, register, identify, and match the
 figures figaroh (an independent implementation) published for the same data and models."""
 import json
-from pathlib import Path
 
 import pytest
 from conftest import ROBOTS, ROOT

@@ -34,19 +34,18 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
 
     q: joint name -> readings (P,) for the joints that move (others are held at zero); gravity:
     the acceleration (m/s^2) in the base link's frame."""
-    by_joint = {spec[0]: link for link, spec in tree.joint.items()}
+    by_joint = {j.name: link for link, j in tree.joint.items() if j.kind != "F"}
     for name in joints:
-        require(name in by_joint and tree.joint[by_joint[name]][1] != "F",
-                f"{tree.source}: '{name}' is not a moving joint below the base link; name one of "
-                f"{', '.join(s[0] for s in tree.joint.values() if s[1] != 'F')}")
+        require(name in by_joint, f"{tree.source}: '{name}' is not a moving joint below the base link; "
+                                  f"name one of {', '.join(by_joint)}")
     P = len(next(iter(q.values())))
     g = np.asarray(gravity, float)
     world = {tree.links[0]: np.broadcast_to(np.eye(4), (P, 4, 4))}
     placed = {}  # link -> the joint frame before its motion: the joint's position and axis live there
     for link in tree.links[1:]:
-        name, kind, origin, axis = tree.joint[link]
-        placed[link] = world[tree.parent[link]] @ origin
-        motion = np.eye(4) if kind == "F" else joint_motion(axis, kind, np.asarray(q.get(name, np.zeros(P)), float))
+        j = tree.joint[link]
+        placed[link] = world[tree.parent[link]] @ j.origin
+        motion = np.eye(4) if j.kind == "F" else joint_motion(j.axis, j.kind, np.asarray(q.get(j.name, np.zeros(P)), float))
         world[link] = placed[link] @ motion
     # mass and first moment of mass (sum m * c, world) of every subtree, leaves first
     M = {link: tree.mass.get(link, 0.0) for link in tree.links}
@@ -60,8 +59,8 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
         link = by_joint[name]
         require(M[link] > 0, f"{tree.source}: no link below joint '{name}' has a mass; give the links' "
                              f"<inertial> masses or leave the joint out")
-        axis = placed[link][:, :3, :3] @ tree.joint[link][3]
-        if tree.joint[link][1] == "P":
+        axis = placed[link][:, :3, :3] @ tree.joint[link].axis
+        if tree.joint[link].kind == "P":
             out[:, k] = M[link] * axis @ g
         else:  # sum over the subtree of (c - p) x m g = (S - M p) x g
             arm = S[link] - M[link] * placed[link][:, :3, 3]

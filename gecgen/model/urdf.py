@@ -15,6 +15,7 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import sympy as sp
@@ -161,15 +162,24 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
     return base, tuple(joints), pending
 
 
+class TreeJoint(NamedTuple):
+    """The joint above a link of a MassTree: kind "R", "P" or "F" (fixed, or any joint held still),
+    origin 4x4 (m), unit axis (3,) in the frame after the origin."""
+
+    name: str
+    kind: str
+    origin: np.ndarray
+    axis: np.ndarray
+
+
 @dataclass(frozen=True)
 class MassTree:
-    """The links below a base link, parents before children: for each, the joint above it (name,
-    kind "R" | "P" | "F" fixed, origin 4x4, unit axis (3,)) and its mass (kg) and centre of mass
-    (3,) in its own frame, m."""
+    """The links below a base link, parents before children: for each, the joint above it, and its
+    mass (kg) and centre of mass (3,) in its own frame, m."""
 
     links: tuple[str, ...]
     parent: dict[str, str]
-    joint: dict[str, tuple[str, str, np.ndarray, np.ndarray]]
+    joint: dict[str, TreeJoint]
     mass: dict[str, float]
     com: dict[str, np.ndarray]
     source: str
@@ -196,7 +206,7 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
         jwhere = f"{where}: joint '{uj.name}'"
         kind = MOVING.get(uj.type, "F")
         axis = np.array([float(a) for a in _axis(uj.element, jwhere)]) if kind != "F" else np.zeros(3)
-        joint[link] = (uj.name, kind, constant(_origin(uj.element, jwhere)), axis)
+        joint[link] = TreeJoint(uj.name, kind, constant(_origin(uj.element, jwhere)), axis)
     mass, com = {}, {}
     for el in root.findall("link"):
         name, inertial = el.get("name"), el.find("inertial")
