@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 from gecgen.model import ModelError, load_error_model, load_robot
@@ -60,7 +61,7 @@ def _fit_options(args, cm, data) -> tuple[dict, list]:
 
     from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose
 
-    fixed, grids = {}, {}
+    fixed, grids = {"loss": args.loss}, {}
     # rank_tol is a share of a normalised column: at 1 or above nothing would be kept
     for name, option, grid, upper in (("ridge", args.ridge, RIDGE_GRID, np.inf),
                                       ("rank_tol", args.rank_tol, RANK_TOL_GRID, 1.0)):
@@ -94,6 +95,8 @@ def cmd_identify(args) -> dict:
 
         options, cv_table = _fit_options(args, cm, data)
         fit = identify(cm, data, registration_mode=args.register, progress=progress, **options)
+    if fit.failures:
+        raise RuntimeError(f"the fit is not trustworthy, no calibration written: {fit.failures[0]}")
     calib = calibration.from_fit(robot, model, fit)
     calib.report.update({**options, "cv": cv_table})
     out = Path(args.output or f"{robot.name}.calib.json")
@@ -113,9 +116,21 @@ def cmd_evaluate(args) -> dict:
     data = read_measurements(args.data, calib.robot)
     cm = CompiledModel(calib.robot, calib.model)
     y = calib.registration.to_world(data.xyz)
+    outside = _extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))
     return {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(y),
             "before": summary(position_errors(cm, data, y, None)),
-            "after": summary(position_errors(cm, data, y, calib.c))}
+            "after": summary(position_errors(cm, data, y, calib.c)), "extrapolation": outside}
+
+
+def _extrapolation(calib, q, w, aux) -> dict:
+    """Poses outside the training ranges per input; a warning line says so when there are any."""
+    from gecgen.runtime import calibration
+
+    counts = calibration.extrapolation(calib, q, w, aux)
+    note = calibration.extrapolation_note(counts, len(q), calib.robot)
+    if note:
+        warnings.warn(note)
+    return counts
 
 
 def cmd_compensate(args) -> dict:
@@ -140,6 +155,7 @@ def cmd_compensate(args) -> dict:
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
     dq = q - cmds.q
     return {"robot": calib.robot.name, "output": str(args.output), "n_poses": len(q), "outside_limits_rows": outside,
+            "extrapolation": _extrapolation(calib, cmds.q, cmds.w, cmds.aux),
             "max_correction": {name: float(np.abs(dq[:, j]).max()) for j, name in enumerate(calib.robot.joint_names)}}
 
 
@@ -159,7 +175,7 @@ def cmd_redundancy(args) -> dict:
 
 def cmd_diagnose(args) -> dict:
     from gecgen.emit import generate
-    from gecgen.loop.diagnose import diagnose, write_error_model
+    from gecgen.loop.diagnose import diagnose, verdict, write_error_model
     from gecgen.model.measurements import read_measurements
 
     robot = load_robot(args.robot)
@@ -171,14 +187,16 @@ def cmd_diagnose(args) -> dict:
             if status:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
-        diag = diagnose(robot, model, data, val, registration_mode=args.register, progress=progress)
+        diag = diagnose(robot, model, data, val, registration_mode=args.register, progress=progress,
+                        noise_mm=args.noise_mm)
     out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
     generate(robot, diag.final.model, generated)
     result = {"robot": robot.name, "before": diag.before, "after": diag.after,
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
-              "rounds": diag.history, "candidates_tested": diag.candidates_tested,
+              "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
+              "verdict": verdict(diag.remaining),
               "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses"}
     if args.report:
         from gecgen.loop.report import write_report
@@ -191,12 +209,22 @@ def _scalar(value) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
+#: list entries a person sees one per line before the rest is left to --json
+MAX_LISTED = 20
+
+
 def _print_human(result: dict):
     """A short summary for a person; the full record (every list entry) is what --json prints."""
     for key, value in result.items():
-        if key == "identifiable":
+        if key in ("identifiable", "training_ranges"):
             continue
-        if key == "effects":
+        if key == "outliers":
+            print(f"outliers: {len(value)}" + (" (file row, pose, target, residual)" if value else ""))
+            for o in value[:MAX_LISTED]:
+                print(f"  row {o['row']}: pose {o['pose']} {o['target']} {o['residual_mm']:.3f} mm")
+            if len(value) > MAX_LISTED:
+                print(f"  ... {len(value) - MAX_LISTED} more (use --json for the list)")
+        elif key == "effects":
             print(f"effects: {len(value)}")
             for e in value:
                 print(f"  {e['error']}: {', '.join(e['terms'])} ({e['family']}; cross-validated gain "
@@ -235,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="register the measurement frame onto the robot world first (auto: when far apart)")
     p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
                                                "(5-fold cross-validation on DATA); default 0, plain least squares")
+    p.add_argument("--loss", choices=["cauchy", "huber", "l2"], default="cauchy",
+                   help="robust loss on each point's residual (default cauchy): points beyond the outlier limit are "
+                        "down-weighted and listed; l2 is plain least squares")
     p.add_argument("--rank-tol",
                    help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
@@ -274,19 +305,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", help="folder for report.md and its plots")
     p.add_argument("--register", choices=["auto", "always", "never"], default="auto")
+    p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "
+                                                   "remains is only noise (default: from repeated poses, if any)")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        result = args.fn(args)
-    except (ModelError, FileNotFoundError) as exc:
-        print(f"gecgen {args.command}: {exc}", file=sys.stderr)
-        return 2
-    except RuntimeError as exc:
-        print(f"gecgen {args.command}: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return 1
+    # warnings become one line each after the result, and none when the command fails: the
+    # failure's reason is then the one line on stderr
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            result = args.fn(args)
+        except (ModelError, FileNotFoundError) as exc:
+            print(f"gecgen {args.command}: {exc}", file=sys.stderr)
+            return 2
+        except RuntimeError as exc:
+            print(f"gecgen {args.command}: {str(exc).splitlines()[0]}", file=sys.stderr)
+            return 1
+    for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
+        print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
     if args.json:
         print(json.dumps(result, allow_nan=False))
     else:

@@ -7,7 +7,7 @@ import pytest
 from conftest import ROBOTS, random_q
 
 from gecgen.cli import main
-from gecgen.loop.diagnose import diagnose
+from gecgen.loop.diagnose import diagnose, noise_floor, verdict, what_remains
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, write_measurements
@@ -161,3 +161,46 @@ def test_joint_compliance_under_gravity_is_traced_to_the_loaded_joint():
     first = diag.effects[0]
     assert (first.error, first.variables) == ("5.er", ["tau_arm_4_joint"]), first.to_dict()
     assert diag.after["val_rms_mm"] < 1.3 * FLOOR_MM < 0.5 * diag.before["val_rms_mm"]
+
+
+def test_glitches_neither_hide_nor_become_effects():
+    """The rail waviness case with three tracker glitches in the training data (one point 50 mm
+    off, two points swapped between poses): the robust fit down-weights exactly those three, and
+    diagnose still finds the waviness and nothing else."""
+    robot = load_robot(ROBOTS / "pps.yaml")
+    train = dataset(robot, 300, 1, waviness, [0, 1, 2])
+    xyz = train.xyz.copy()
+    xyz[10, 0] += 0.05
+    xyz[[100, 700]] = xyz[[700, 100]]
+    glitched = Measurements(train.q, train.w, train.aux, (), train.pose_ids, train.pose, train.target, xyz, "sim")
+    diag = diagnose(robot, load_error_model(None, robot), glitched, dataset(robot, 100, 2, waviness, [0, 1, 2]))
+    assert {o.row for o in diag.final.fit.outliers} == {12, 102, 702}
+    assert diag.effects and all(set(e.variables) == {"q1"} for e in diag.effects), [e.to_dict() for e in diag.effects]
+    assert diag.after["val_rms_mm"] < 1.3 * FLOOR_MM
+    assert diag.remaining["outliers"] == 3 and all(p["residual_mm"] < 1 for p in diag.remaining["largest"])
+
+
+def test_the_model_covers_the_data_only_when_the_residual_is_noise():
+    robot = load_robot(ROBOTS / "pps.yaml")
+    train = dataset(robot, 300, 1, lambda *args: None, [0, 1, 2])
+    diag = diagnose(robot, load_error_model(None, robot), train, dataset(robot, 100, 2, lambda *a: None, [0, 1, 2]))
+    assert diag.remaining["covered"] is None and "cannot be decided" in verdict(diag.remaining)
+    right = what_remains(diag.final, train, None, noise_floor(train, 1e3 * NOISE))
+    assert right["covered"] and "covers the data" in verdict(right)
+    wrong = what_remains(diag.final, train, None, noise_floor(train, 0.5e3 * NOISE))
+    assert wrong["covered"] is False and "nothing in the candidate dictionary explains" in verdict(wrong)
+
+
+def test_noise_floor_from_repeated_poses(rng):
+    """Every pose measured twice (two pose ids, the same joints): the pooled spread of the repeats
+    is the tracker noise."""
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    q = np.repeat(random_q(robot, rng, 150), 2, axis=0)
+    n = len(q)
+    y = target_positions(robot, q)[:, :1]
+    xyz = y[:, 0] + rng.normal(0, NOISE, (n, 3))
+    data = Measurements(q, np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n), np.arange(n), np.zeros(n, int), xyz, "s")
+    floor = noise_floor(data)
+    assert floor["source"] == "repeated poses" and floor["dof"] == 3 * 150
+    assert abs(floor["noise_mm"] - 1e3 * NOISE) < 0.1 * 1e3 * NOISE
+    assert noise_floor(data.subset(np.arange(0, n, 2))) is None  # no repeats: unknown, not guessed

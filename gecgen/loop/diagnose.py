@@ -301,7 +301,9 @@ def _with_terms(robot: Robot, model: ErrorModel, error: int, terms: tuple[str, .
 
 
 def _linear_system(rnd: Round, data: Measurements, y: np.ndarray):
-    H, r = zip(*rows_H_and_residual(rnd.cm, data, y, rnd.fit.c))
+    """H over the kept columns and the residual, rows scaled by the robust fit's point weights, so
+    a glitch neither passes for an effect nor hides one."""
+    H, r = zip(*rows_H_and_residual(rnd.cm, data, y, rnd.fit.c, weights=rnd.fit.weights))
     return np.vstack(H)[:, list(rnd.fit.redundancy.kept)], np.concatenate(r)
 
 
@@ -321,18 +323,24 @@ class Diagnosis:
     before: dict
     after: dict
     history: list[dict]
+    remaining: dict
 
 
 def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
-             registration_mode: str = "auto", seed: int = 0, progress=None) -> Diagnosis:
-    """Run the loop; without `val`, a seeded fifth of the poses is held out for the report."""
+             registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None) -> Diagnosis:
+    """Run the loop; without `val`, a seeded fifth of the poses is held out for the report.
+    `noise_mm`: the measurement noise per coordinate (mm), when known; otherwise it is estimated
+    from repeated poses of `data`, if any. It decides whether what remains is only noise."""
     rng = np.random.default_rng(seed)
+    noise = noise_floor(data, noise_mm)
     if val is None:
         held = rng.permutation(data.n_poses)
         n_val = max(1, data.n_poses // 5)
         val, data = data.subset(np.sort(held[:n_val])), data.subset(np.sort(held[n_val:]))
     fold = _folds(data.n_poses, rng)
     rnd = first = _fit(robot, model, data, registration_mode)
+    if first.fit.failures:
+        raise RuntimeError(f"the declared model's fit is not trustworthy: {first.fit.failures[0]}")
     effects: list[Effect] = []
     history, tested = [], 0
     for round_no in range(1, MAX_ROUNDS + 1):
@@ -348,6 +356,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         eps = rnd.cm.eps(data.q, data.w, data.aux_columns(rnd.model.aux), rnd.fit.c)
         _, Jall = rnd.cm.J_e(data.q, eps)
         J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
+        J *= np.repeat(np.sqrt(rnd.fit.weights[order]), 3)[:, None]  # weighted as H and r are
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
         base_cv = cv_rms(H, r, rows_pose, fold)
         present = [{t.text for t in ts} for ts in rnd.model.terms]
@@ -392,13 +401,91 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
                 alternatives.append({"error": robot.error_names()[e2], "terms": list(cands[ci2].terms),
                                      "similarity": float(cos)})
         new_model = _with_terms(robot, rnd.model, e, c.terms, data.aux_names)
-        rnd = _fit(robot, new_model, data, registration_mode)
+        refit = _fit(robot, new_model, data, registration_mode)
+        if refit.fit.failures:
+            # an effect whose fit cannot be trusted is not added, however much it promised
+            history[-1]["refused"] = f"{history[-1]['accepted']}: {refit.fit.failures[0]}"
+            history[-1]["accepted"] = None
+            break
+        rnd = refit
         coefs = _effect_coefficients(robot, rnd, e, len(c.terms))
         effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), c.family,
                               1e3 * (base_cv - cv), p, coefs, alternatives[:5]))
     before = _scores(first, data, val)
     after = _scores(rnd, data, val)
-    return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history)
+    # the last round's CV is the final model's unless that round added an effect (the round cap)
+    final_cv = history[-1]["cv_rms_mm"] if history[-1]["accepted"] is None else None
+    remaining = what_remains(rnd, data, final_cv, noise)
+    return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining)
+
+
+def noise_floor(data: Measurements, noise_mm: float | None = None) -> dict | None:
+    """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
+    given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
+    wrench and aux, measuring the same target), else None (unknown)."""
+    if noise_mm is not None:
+        return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
+    state = np.column_stack([data.q, data.w, data.aux])
+    _, group = np.unique(state, axis=0, return_inverse=True)
+    key = group.ravel()[data.pose] * len(data.target) + data.target
+    _, point_group, size = np.unique(key, return_inverse=True, return_counts=True)
+    repeated = size[point_group] > 1
+    if not repeated.any():
+        return None
+    mean = np.zeros((len(size), 3))
+    np.add.at(mean, point_group, data.xyz)
+    mean /= size[:, None]
+    dev = data.xyz[repeated] - mean[point_group[repeated]]
+    dof = 3 * int(np.sum(size[size > 1] - 1))
+    return {"noise_mm": 1e3 * float(np.sqrt(np.sum(dev ** 2) / dof)), "source": "repeated poses", "dof": dof}
+
+
+#: the residual is consistent with the noise when an F test of their variances passes at this level
+NOISE_TEST_ALPHA = 0.01
+#: largest residual points listed when structure remains
+LARGEST = 5
+
+
+def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise: dict | None) -> dict:
+    """Whether the final residual is only noise, and what is left when it is not.
+
+    `covered` is True when the fit's residual sigma passes an F test against the noise floor,
+    False when it fails it, None when the noise is unknown (no repeated poses, no --noise-mm):
+    then nobody can say that the model covers the data, only that nothing in the dictionary
+    explains what remains."""
+    fit = rnd.fit
+    e = position_errors(rnd.cm, data, fit.registration.to_world(data.xyz), fit.c)
+    inliers = np.nonzero(e <= fit.outlier_limit_m)[0]  # outliers are counted, not ranked with the rest
+    top = inliers[np.argsort(-e[inliers])[:LARGEST]]
+    out = {"train_rms_mm": fit.train_inliers["rms_mm"], "cv_rms_mm": cv_rms_mm, "sigma_mm": 1e3 * fit.sigma_m,
+           "noise": noise, "covered": None, "outliers": len(fit.outliers),
+           "largest": [{"row": int(data.file_rows[r]), "pose": int(data.pose_ids[data.pose[r]]),
+                        "target": rnd.cm.robot.target_names[data.target[r]], "residual_mm": 1e3 * float(e[r])}
+                       for r in top]}
+    if noise is not None and noise["noise_mm"] > 0:
+        ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
+        dof_fit = max(3 * float(fit.weights.sum()) - fit.redundancy.n_identifiable, 1)
+        p = float(stats.chi2.sf(ratio * dof_fit, dof_fit) if noise["dof"] is None
+                  else stats.f.sf(ratio, dof_fit, noise["dof"]))
+        out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))
+    return out
+
+
+def verdict(remaining: dict) -> str:
+    """One sentence for a person on what the final model leaves in the data."""
+    r = remaining
+    if r["covered"]:
+        return (f"The residual ({r['sigma_mm']:.4f} mm per coordinate) is consistent with the measurement noise "
+                f"({r['noise']['noise_mm']:.4f} mm, {r['noise']['source']}): the model covers the data.")
+    largest = ", ".join(f"row {p['row']} ({p['residual_mm']:.3f} mm)" for p in r["largest"][:3])
+    cv = f", cross-validated {r['cv_rms_mm']:.4f} mm" if r["cv_rms_mm"] is not None else ""
+    outliers = f" without its {r['outliers']} outliers" if r["outliers"] else ""
+    what = f"Structure remains: training RMS{outliers} {r['train_rms_mm']:.4f} mm{cv}; largest residuals {largest}"
+    if r["covered"] is False:
+        return (f"{what}. The residual is {r['sigma_over_noise']:.2f}x the noise floor ({r['noise']['noise_mm']:.4f} mm, "
+                f"{r['noise']['source']}) and nothing in the candidate dictionary explains the rest.")
+    return (f"{what}. The noise floor is unknown (no repeated poses; give --noise-mm), so whether the model covers "
+            f"the data cannot be decided; nothing in the candidate dictionary explains the rest.")
 
 
 def _effect_coefficients(robot: Robot, rnd: Round, error: int, n_new: int) -> list[dict]:
@@ -421,7 +508,7 @@ def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], pa
     lines = [f"# Error model of {robot.name} written by gecgen diagnose."]
     lines += [f"# added: {e.error} <- {', '.join(e.terms)} (cross-validated gain {e.gain_mm:.4f} mm)" for e in effects]
     if not effects:
-        lines.append("# nothing significant was left in the residual; the model is unchanged")
+        lines.append("# diagnose found nothing in its candidate dictionary to add; the model is unchanged")
     spec = model.to_yaml_dict(robot)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text("\n".join(lines) + "\n" + yaml.safe_dump(spec, sort_keys=False, width=120))

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gecgen.loop.diagnose import Diagnosis, Round  # noqa: E402
+from gecgen.loop.diagnose import Diagnosis, Round, verdict  # noqa: E402
 from gecgen.model.measurements import Measurements  # noqa: E402
 from gecgen.model.robot import WRENCH  # noqa: E402
 from gecgen.runtime.identify import position_errors  # noqa: E402
@@ -61,7 +61,11 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS "
              "on the training data.", ""]
     if not diag.effects:
-        lines += ["Nothing significant is left in the residual: the declared model covers the data.", ""]
+        lines += ["diagnose added nothing to the declared model.", ""]
+    lines += [verdict(diag.remaining), ""]
+    if diag.remaining["outliers"]:
+        lines += [f"{diag.remaining['outliers']} training points were outliers of the robust fit (down-weighted, "
+                  f"listed by `gecgen identify`); they neither chose nor hid an effect.", ""]
     variables = []
     for k, eff in enumerate(diag.effects, 1):
         lines += [f"## Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", "",

@@ -64,7 +64,9 @@ class Measurements:
 
     q (P, n) m/rad; w (P, 6) N and N m in the sensor frame; aux (P, len(aux_names));
     pose_ids (P,) the file's pose ids; pose (R,) index into the poses; target (R,) index into
-    robot.targets; xyz (R, 3) measured world positions in m.
+    robot.targets; xyz (R, 3) measured world positions in m; row (R,) the line of each point in
+    its file (header = 1), None when the points were never read from a file (then they are
+    numbered as `write_measurements` would write them).
     """
 
     q: np.ndarray
@@ -76,10 +78,16 @@ class Measurements:
     target: np.ndarray
     xyz: np.ndarray
     source: str = ""
+    row: np.ndarray | None = None
 
     @property
     def n_poses(self) -> int:
         return self.q.shape[0]
+
+    @property
+    def file_rows(self) -> np.ndarray:
+        """(R,) the file line of each measured point (header = 1)."""
+        return self.row if self.row is not None else np.arange(len(self.xyz)) + 2
 
     def subset(self, poses: np.ndarray) -> "Measurements":
         """The measurements of the given pose indices (rows follow their poses)."""
@@ -88,7 +96,8 @@ class Measurements:
         remap = -np.ones(self.n_poses, int)
         remap[poses] = np.arange(len(poses))
         return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
-                            remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source)
+                            remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
+                            self.file_rows[keep])
 
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
@@ -158,7 +167,8 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     for k, c in enumerate(wcols):
         w[:, WRENCH.index(c)] = ps[:, robot.n + k]
     return Measurements(q=ps[:, :robot.n], w=w, aux=ps[:, robot.n + len(wcols):], aux_names=aux_names,
-                        pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where)
+                        pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where,
+                        row=np.arange(len(xyz)) + 2)
 
 
 def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrench: bool = True):

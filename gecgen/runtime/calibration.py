@@ -15,7 +15,7 @@ import numpy as np
 
 from gecgen import __version__
 from gecgen.model.errors import ErrorModel, error_model_from_dict
-from gecgen.model.robot import Robot, load_robot
+from gecgen.model.robot import WRENCH, Robot, load_robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.identify import Fit
 from gecgen.runtime.registration import Registration
@@ -62,8 +62,41 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
               "eliminated": [e.to_dict() for e in fit.redundancy.eliminated],
               "before": fit.before, "train": fit.train, "sigma_mm": 1e3 * fit.sigma_m,
               "condition_number": fit.condition_number, "observability_index": fit.observability_index,
-              "iterations": fit.iterations, "converged": fit.converged, "warnings": list(fit.warnings)}
+              "iterations": fit.iterations, "converged": fit.converged, "warnings": list(fit.warnings),
+              "loss": fit.loss, "outlier_limit_mm": 1e3 * fit.outlier_limit_m if np.isfinite(fit.outlier_limit_m) else None,
+              "outliers": [o.to_dict() for o in fit.outliers], "train_inliers": fit.train_inliers,
+              "training_ranges": fit.ranges}
     return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report)
+
+
+def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, int]:
+    """How many poses take each input outside the span it was fitted over ({name: poses}, only
+    the names with any): q (P, n), w (P, 6), aux (P, len(calib.model.aux)). There the model
+    extrapolates, and a polynomial term can grow without bound. A span-relative margin of 1e-9
+    keeps the training poses themselves inside."""
+    ranges = calib.report.get("training_ranges") or {}
+    names = [f"q{i + 1}" for i in range(calib.robot.n)] + list(WRENCH) + list(calib.model.aux)
+    values = np.column_stack([q, w, aux])
+    out = {}
+    for name, v in zip(names, values.T):
+        if name not in ranges:
+            continue
+        lo, hi = ranges[name]
+        margin = 1e-9 * max(hi - lo, abs(lo), abs(hi), 1e-300)
+        count = int(np.sum((v < lo - margin) | (v > hi + margin)))
+        if count:
+            out[name] = count
+    return out
+
+
+def extrapolation_note(counts: dict[str, int], n_poses: int, robot: Robot) -> str | None:
+    """One line for a person: how many poses leave the training ranges, per joint or signal."""
+    if not counts:
+        return None
+    label = {f"q{i + 1}": f"q{i + 1} ({j.name})" if j.name != f"q{i + 1}" else j.name for i, j in enumerate(robot.joints)}
+    parts = ", ".join(f"{label.get(n, n)} {k}" for n, k in counts.items())
+    return (f"extrapolation: poses outside the training ranges, per input: {parts} (of {n_poses}); "
+            f"the calibration is not validated there")
 
 
 def save(calib: Calibration, path: str | Path):

@@ -21,7 +21,9 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
+from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
+from gecgen.runtime import robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
 from gecgen.runtime.redundancy import RANK_TOL, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
@@ -29,15 +31,44 @@ from gecgen.runtime.registration import IDENTITY, Registration, register
 BLOCK_POSES = 2000
 #: condition number of the column-scaled kept H_e above which the fit is reported ill-posed
 ILL_CONDITIONED = 1e6
+#: ... and above which it is singular in double precision: the coefficients are not determined
+SINGULAR = 1e12
 #: relative decrease of the residual sum of squares per step below which the fit is stationary
 RSS_TOL = 1e-6  # 5e-7 of the RMS: far below anything a tracker resolves
+
+
+#: beyond these a generalized error is absurd (no real robot is that far from its model)
+ABSURD_TRANSLATION_M = 0.5
+ABSURD_ROTATION_RAD = 0.5
+#: more outliers than this share of the points suggests a missing effect rather than glitches
+OUTLIER_SHARE = 0.05
+
+
+@dataclass(frozen=True)
+class Outlier:
+    """A measured point the robust fit flagged: its file line (header = 1), pose id, target,
+    residual length (mm) and the weight it kept in the fit (1 = full)."""
+
+    row: int
+    pose: int
+    target: str
+    residual_mm: float
+    weight: float
+
+    def to_dict(self) -> dict:
+        return {"row": self.row, "pose": self.pose, "target": self.target, "residual_mm": self.residual_mm,
+                "weight": self.weight}
 
 
 @dataclass(frozen=True)
 class Fit:
     """Result of `identify`. c (nc,) all coefficients (eliminated ones 0); std (nc,) with NaN for
     eliminated; cov (k, k) over `redundancy.kept`; sigma_m the residual standard deviation per
-    coordinate (m); metrics in mm."""
+    coordinate (m), down-weighted points counted by their weight; metrics in mm over all points
+    (`train_inliers` without the outliers). weights (R,) the final weight of each point;
+    outlier_limit_m the residual length beyond which a point is an outlier (inf for l2); ranges
+    the span of each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with
+    `failures` must not be used: each says why."""
 
     c: np.ndarray
     std: np.ndarray
@@ -52,6 +83,17 @@ class Fit:
     before: dict
     train: dict
     warnings: tuple[str, ...]
+    failures: tuple[str, ...] = ()
+    loss: str = "l2"
+    outlier_limit_m: float = np.inf
+    weights: np.ndarray | None = None
+    outliers: tuple[Outlier, ...] = ()
+    train_inliers: dict | None = None
+    ranges: dict | None = None
+
+    @property
+    def trustworthy(self) -> bool:
+        return not self.failures
 
 
 def _poses_inputs(cm: CompiledModel, data: Measurements):
@@ -67,15 +109,21 @@ def _blocks(data: Measurements, block: int):
             yield b * block, min((b + 1) * block, data.n_poses), order[bounds[b]:bounds[b + 1]]
 
 
-def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES):
-    """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c."""
+def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES,
+                        weights: np.ndarray | None = None):
+    """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c; with
+    point weights (R,), each point's three rows are scaled by the square root of its weight."""
     q, w, aux = _poses_inputs(cm, data)
     nt = cm.dims.nt
     for start, stop, rows in _blocks(data, block):
         p, H = cm.model_targets(q[start:stop], w[start:stop], aux[start:stop], c, with_H=True)
         local = data.pose[rows] - start
         Hr = H.reshape(stop - start, nt, 3, -1)[local, data.target[rows]]
-        yield Hr.reshape(-1, H.shape[-1]), (y[rows] - p[local, data.target[rows]]).ravel()
+        r = y[rows] - p[local, data.target[rows]]
+        if weights is not None:
+            root = np.sqrt(weights[rows])[:, None]
+            Hr, r = Hr * root[:, :, None], r * root
+        yield Hr.reshape(-1, H.shape[-1]), r.ravel()
 
 
 def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray | None = None):
@@ -152,15 +200,19 @@ def summary(errors_m: np.ndarray) -> dict:
     return {"rms_mm": float(1e3 * np.sqrt(np.mean(errors_m ** 2))), "max_mm": float(1e3 * errors_m.max())}
 
 
-def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> np.ndarray:
-    """R factor of H_e at generic poses, rows of the measured targets only: the data-free design."""
+def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The data-free design for the measured targets: the R factor of H_e at generic poses (rows of
+    the measured targets only), and the lever arm of each generalized error (ne,): the RMS motion of
+    the measured points per unit error (m per m, m per rad) over those poses."""
     nc, ntm = cm.dims.nc, len(targets)
     n_poses = max(40, int(np.ceil(3 * nc / (3 * ntm))))
     q, w, aux = generic_design(cm.robot, cm.dims.naux, n_poses, np.random.default_rng(seed))
     _, H = cm.model_targets(q, w, aux, np.zeros(nc), with_H=True)
     rows = (3 * targets[:, None] + np.arange(3)).ravel()
     A = H[:, rows, :].reshape(-1, nc)
-    return np.linalg.qr(A, mode="r")
+    J = cm.J_e(q, np.zeros(cm.dims.ne))[1][:, rows, :]
+    lever = np.sqrt(np.sum(J ** 2, axis=1).mean(axis=0) / ntm)
+    return np.linalg.qr(A, mode="r"), lever
 
 
 def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
@@ -174,7 +226,7 @@ def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
     path = cache_dir() / f"{cm.robot.name}-structural-{h.hexdigest()[:24]}.json"
     if path.exists():
         return Redundancy.from_json(path.read_text())
-    red = structural(structural_matrix(cm, targets), cm.robot, cm.model, len(targets))
+    red = structural(*structural_matrix(cm, targets), cm.robot, cm.model, len(targets))
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomically(path, red.to_json().encode())
     return red
@@ -199,25 +251,61 @@ def redundancy(cm: CompiledModel, data: Measurements | None = None, registration
     return _data_analysis(cm, data, _registered(cm, data, registration_mode).to_world(data.xyz))[0]
 
 
-def _registered(cm: CompiledModel, data: Measurements, mode: str) -> Registration:
+def _registered(cm: CompiledModel, data: Measurements, mode: str, loss: str = "cauchy") -> Registration:
     p_nom = cm.nominal_targets(data.q)[data.pose, data.target]
-    return register(p_nom, data.xyz, mode)
+    return register(p_nom, data.xyz, mode, loss)
+
+
+def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.ndarray, kept: np.ndarray,
+                  converged: bool, why_not: str) -> list[str]:
+    """Reasons the fit is not to be trusted: no convergence, a coefficient without a finite
+    uncertainty, generalized errors no real robot has (over ABSURD_TRANSLATION_M or
+    ABSURD_ROTATION_RAD at a measured pose: the data cannot hold the coefficient)."""
+    out = [] if converged else [why_not]
+    names = cm.model.coefficient_names(cm.robot)
+    bad = [j for j in kept if not np.isfinite(std[j]) or not np.isfinite(c[j])]
+    if bad:
+        out.append(f"coefficient {names[bad[0]]} has no finite uncertainty ({len(bad)} such); the data cannot "
+                   f"determine it: check the redundancy analysis, measure poses that move it or drop its term")
+        return out
+    eps = np.abs(cm.eps(data.q, data.w, data.aux_columns(cm.model.aux), c)).max(axis=0)
+    limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n + 1)
+    if np.any(eps > limit):
+        e = int(np.argmax(eps / limit))
+        unit = "m" if e % 6 < 3 else "rad"
+        out.append(f"generalized error {cm.robot.error_names()[e]} reaches {eps[e]:.3g} {unit} at a measured pose "
+                   f"(limit {limit[e]:g} {unit}): no real robot is that far from its model; the data cannot hold "
+                   f"its coefficients (see their std) or the robot file does not describe this robot")
+    return out
+
+
+def _ranges(cm: CompiledModel, data: Measurements) -> dict[str, list[float]]:
+    """The span of every input the model was fitted over: joints, wrench, aux signals it uses."""
+    names = [f"q{i + 1}" for i in range(cm.robot.n)] + list(WRENCH) + list(cm.model.aux)
+    values = np.column_stack([data.q, data.w, data.aux_columns(cm.model.aux)])
+    return {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
 
 
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
-             step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL) -> Fit:
+             step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
+             loss: str = "cauchy") -> Fit:
     """Fit the error model of `cm` to `data`.
 
-    Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms);
-    `progress(iteration, rms_mm)` is called after each step when given. `ridge` > 0 adds
-    ridge * |x|^2 to the least squares, x the coefficients scaled by their columns' norms (each
-    coefficient penalised by its effect on the data): a prior that keeps weakly excited
-    coefficients from growing where the data cannot hold them. `rank_tol` above the exact
-    RANK_TOL holds the weakly excited coefficients at zero instead (see `redundancy.unexcited`).
-    Choose either with `choose`.
+    Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms) or
+    lowers the objective by a negligible share; `progress(iteration, rms_mm)` is called after each
+    step when given. `loss` (see `runtime.robust`): with `cauchy` (default) or `huber` every step
+    is a reweighted least-squares step, the registration too is robust, and the points beyond the
+    outlier limit are down-weighted and listed in `Fit.outliers`; `l2` is plain least squares.
+    `ridge` > 0 adds ridge * |x|^2 to the least squares, x the coefficients scaled by their
+    columns' norms (each coefficient penalised by its effect on the data): a prior that keeps
+    weakly excited coefficients from growing where the data cannot hold them. `rank_tol` above
+    the exact RANK_TOL holds the weakly excited coefficients at zero instead (see
+    `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
+    `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
     """
+    robust.check_loss(loss)
     notes = []
-    registration = _registered(cm, data, registration_mode)
+    registration = _registered(cm, data, registration_mode, loss)
     y = registration.to_world(data.xyz)
     nc = cm.dims.nc
     c = np.zeros(nc)
@@ -228,62 +316,89 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
         raise ModelError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
     scale = np.linalg.norm(A0[:, :k], axis=0)
-    # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
-    # from this small matrix rather than from a second pass over the data
-    R = np.linalg.qr(np.column_stack([A0[:, :k] / scale, A0[:, k]]), mode="r")
-    stale = False  # True once c has moved on from the c that R was factored at
-    converged, it, lam = False, 0, 0.0
+    e = position_errors(cm, data, y, c)
+    before = summary(e)
+    limit = robust.outlier_limit(e, loss)
+    w = robust.weights(e, limit, loss)
+    if loss == "l2":
+        # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
+        # from this small matrix rather than from a second pass over the data
+        R = np.linalg.qr(np.column_stack([A0[:, :k] / scale, A0[:, k]]), mode="r")
+        stale = False  # True once c (or the weights) moved on from those R was factored at
+    else:
+        stale = True
+    converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
     for it in range(1, max_iter + 1):
         if stale:
-            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w), kept, scale)
             stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
+        objective = robust.objective(e, limit, loss) + ridge * float(x @ x)
         full_step = damped_step(Rk, z, 0.0, ridge, x)
-        if np.linalg.norm(Rk @ full_step) / np.sqrt(m) < step_tol_m:
-            converged = True
+        predicted = np.linalg.norm(Rk @ full_step)
+        if predicted / np.sqrt(m) < step_tol_m or predicted ** 2 <= RSS_TOL * objective:
+            converged = True  # the step would change nothing a tracker resolves
             break
-        objective = float(z @ z + R[k, k] ** 2 + ridge * x @ x)
         for _ in range(16):
             trial = c.copy()
             trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
-            rss_trial = float(np.sum(position_errors(cm, data, y, trial) ** 2))
-            trial_objective = rss_trial + ridge * float(np.sum((trial[kept] * scale) ** 2))
+            e_trial = position_errors(cm, data, y, trial)
+            trial_objective = robust.objective(e_trial, limit, loss) + ridge * float(np.sum((trial[kept] * scale) ** 2))
             if trial_objective < objective:
                 break
             lam = 1e-6 if lam == 0 else 10 * lam
         else:
-            notes.append("the fit stalled: no step lowers the residual (strong nonlinearity or a poorly "
-                         "excited model); the result is the last iterate")
+            why_not = ("the fit stalled: no step lowers the residual (strong nonlinearity or a poorly excited "
+                       "model); measure poses that move the weak coefficients or reduce the model")
             break
-        c, lam, stale = trial, (lam / 10 if lam > 1e-9 else 0.0), True
+        c, e, lam, stale = trial, e_trial, (lam / 10 if lam > 1e-9 else 0.0), True
+        new_limit = robust.outlier_limit(e, loss)
+        settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
+        limit, w = new_limit, robust.weights(e, new_limit, loss)
         if progress:
-            progress(it, 1e3 * np.sqrt(rss_trial / m))
-        if objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
+            progress(it, 1e3 * np.sqrt(np.mean(e ** 2)))
+        if settled and objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
             converged = True
             break
-    if not converged and not notes:
-        notes.append(f"Gauss-Newton did not converge in {max_iter} iterations; the result is the last iterate")
     if stale:
-        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c), kept, scale)
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w), kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
-    sigma = float(np.sqrt(rss / (m - k)))
+    m_eff = 3 * float(w.sum())  # down-weighted points count for their weight
+    sigma = float(np.sqrt(rss / max(m_eff - k, 1)))
     sv = np.linalg.svd(Rk, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     obs = float(np.exp(np.mean(np.log(np.maximum(sv, 1e-300)))) / np.sqrt(m))
-    cov = sigma ** 2 * np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k)) / np.outer(scale, scale)
     std = np.full(nc, np.nan)
-    std[kept] = np.sqrt(np.diag(cov))
+    with np.errstate(all="ignore"):  # a singular system gives inf/NaN here, which is reported below
+        try:
+            cov = sigma ** 2 * np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k)) / np.outer(scale, scale)
+        except np.linalg.LinAlgError:
+            cov = np.full((k, k), np.inf)
+        std[kept] = np.sqrt(np.abs(np.diag(cov)))
+    failures = _fit_failures(cm, data, c, std, kept, converged, why_not)
+    if cond > SINGULAR:
+        failures.append(f"H_e is numerically singular on this data (condition number {cond:.3g} of the scaled "
+                        f"kept columns): some coefficients are not determined; see the redundancy analysis")
     if cond > ILL_CONDITIONED:
         notes.append(f"ill-conditioned: condition number {cond:.3g} of the scaled H_e; some coefficients are "
                      f"barely excited (see std), measure poses that move them or drop their terms")
     if m - k < k:
         notes.append(f"few measurements: {m} coordinates for {k} coefficients; uncertainties are large")
-    for note in notes:
+    flagged = np.nonzero(e > limit)[0]
+    outliers = tuple(Outlier(int(data.file_rows[r]), int(data.pose_ids[data.pose[r]]),
+                             cm.robot.target_names[data.target[r]], 1e3 * float(e[r]), float(w[r]))
+                     for r in flagged[np.argsort(-e[flagged])])
+    if len(flagged) > OUTLIER_SHARE * len(e):
+        notes.append(f"{len(flagged)} of {len(e)} points are outliers: more than glitches usually make; the model "
+                     f"may lack an effect (run diagnose) or the data mixes set-ups")
+    for note in [*failures, *notes]:
         warnings.warn(note, stacklevel=2)
+    inliers = e <= limit
     return Fit(c=c, std=std, cov=cov, redundancy=red, registration=registration, sigma_m=sigma,
                condition_number=cond, observability_index=obs, iterations=it, converged=converged,
-               before=summary(position_errors(cm, data, y, None)), train=summary(position_errors(cm, data, y, c)),
-               warnings=tuple(notes))
+               before=before, train=summary(e), warnings=tuple(notes), failures=tuple(failures),
+               loss=loss, outlier_limit_m=float(limit), weights=w, outliers=outliers,
+               train_inliers=summary(e[inliers]) if inliers.any() else summary(e), ranges=_ranges(cm, data))
 
 
 def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarray:
@@ -296,4 +411,4 @@ def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarr
     return np.sqrt(var.reshape(len(Hk), cm.dims.nt, 3).sum(-1))
 
 
-__all__ = ["Fit", "IDENTITY", "identify", "position_errors", "prediction_std", "redundancy", "summary"]
+__all__ = ["Fit", "IDENTITY", "Outlier", "identify", "position_errors", "prediction_std", "redundancy", "summary"]

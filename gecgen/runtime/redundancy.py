@@ -32,6 +32,14 @@ from gecgen.model.robot import ERROR_NAMES, Robot
 
 #: a normalised column whose part orthogonal to the kept ones is below this is dependent
 RANK_TOL = 1e-7
+#: a column shorter than this share of the longest is zero up to rounding (entries are O(1) m per
+#: unit error, rounding leaves O(1e-16)); legitimate small columns (high powers of short joint
+#: travels) stay far above it
+ZERO_COLUMN = 1e-12
+#: a generalized error that moves the measured points by less than this per unit (m per m, m per
+#: rad: a lever arm of 10 nm) is invisible to them; what a URDF's rounded angles leave (1e-10) is not
+#: a lever arm, and no real one is shorter than a micrometre
+BLIND_LEVER_M = 1e-8
 #: merged-into entries contributing less than this (relative) are not listed
 MERGE_REPORT_TOL = 1e-6
 
@@ -119,13 +127,26 @@ def preference_order(robot: Robot, model: ErrorModel, candidates: dict[int, str]
     return np.array(sorted(range(len(coefs)), key=lambda j: key[j]))
 
 
-def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL) -> tuple[list[int], list[int]]:
-    """Greedy rank test on the columns of A (m x nc) in `order`: (kept, dependent) indices."""
+def zero_columns(A: np.ndarray) -> np.ndarray:
+    """(nc,) True where a column of A is zero up to rounding: below ZERO_COLUMN times the largest.
+
+    This must be decided before columns are normalised: a point on the last joint's axis cannot
+    see a rotation about that axis, so that column is 1e-16 (rounding noise), and scaled to unit
+    length the noise looks like an independent direction (a coefficient of 1e11 rad follows)."""
     norms = np.linalg.norm(A, axis=0)
+    return norms <= ZERO_COLUMN * max(float(norms.max(initial=0.0)), np.finfo(float).tiny)
+
+
+def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL,
+                       blind: np.ndarray | None = None) -> tuple[list[int], list[int]]:
+    """Greedy rank test on the columns of A (m x nc) in `order`: (kept, dependent) indices.
+    Columns marked in `blind` (nc,) are dependent whatever their rounding noise says."""
+    norms = np.linalg.norm(A, axis=0)
+    zero = zero_columns(A) if blind is None else zero_columns(A) | blind
     basis = np.empty((A.shape[0], min(A.shape)))  # filled column by column: no regrowing copies
     kept, dependent = [], []
     for j in order:
-        if norms[j] == 0:
+        if zero[j]:
             dependent.append(int(j))
             continue
         Q = basis[:, :len(kept)]
@@ -183,16 +204,22 @@ def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Genera
     return q, w, rng.normal(0, 1, (n_poses, n_aux))
 
 
-def structural(A_generic: np.ndarray, robot: Robot, model: ErrorModel, n_targets_measured: int) -> Redundancy:
+def structural(A_generic: np.ndarray, lever: np.ndarray, robot: Robot, model: ErrorModel,
+               n_targets_measured: int) -> Redundancy:
     """Structural analysis on A_generic (H_e rows at generic poses, or their R factor; m x nc with
-    the model's coefficient columns)."""
+    the model's coefficient columns) and each generalized error's lever arm there (ne,), m per m or
+    rad: an error below BLIND_LEVER_M moves no measured point (a rotation about an axis through the
+    only measured point), whatever rounding leaves in its columns."""
     names = tuple(model.coefficient_names(robot))
     candidates = rule_candidates(robot, n_targets_measured)
-    kept, dependent = select_independent(A_generic, preference_order(robot, model, candidates))
-    merges = merged_into(A_generic, kept, dependent, names)
     coefs = model.coefficients
+    blind = np.array([lever[c.error] < BLIND_LEVER_M for c in coefs], bool)
+    kept, dependent = select_independent(A_generic, preference_order(robot, model, candidates), blind=blind)
+    merges = merged_into(A_generic, kept, dependent, names)
     eliminated = [Eliminated(names[j], j, "structural",
-                             candidates.get(coefs[j].error, "depends on other terms of the model at every pose"),
+                             candidates.get(coefs[j].error,
+                                            f"the measured points cannot see it (lever arm {lever[coefs[j].error]:.2g} m)"
+                                            if blind[j] else "depends on other terms of the model at every pose"),
                              merges[j]) for j in sorted(dependent)]
     return Redundancy(names, tuple(kept), tuple(eliminated))
 
@@ -215,8 +242,9 @@ def unexcited(red: Redundancy, A_data: np.ndarray, robot: Robot, model: ErrorMod
     kept, dependent = select_independent(A_data, order[order >= 0])
     merges = merged_into(A_data, kept, dependent, names)
     eliminated = {e.index: e for e in red.eliminated}
+    zero = zero_columns(A_data)
     for i in dependent:
-        why = ("the data never excites it (zero column)" if not np.any(A_data[:, i])
+        why = ("the data never excites it (zero column)" if zero[i]
                else "the data cannot separate it from the kept parameters")
         j = int(structural_kept[i])
         eliminated[j] = Eliminated(red.names[j], j, "unexcited", why, merges[i])

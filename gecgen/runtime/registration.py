@@ -3,6 +3,9 @@
 A laser tracker or motion-capture system reports points in its own frame, y = R p + t with p in
 the robot world. The closed form (Kabsch/Umeyama without scale) on the nominal model brings the
 data into the robot world; what is left is small and belongs to frame 0's generalized errors.
+A few gross points (a row swapped with another pose's, metres away) would tilt a least-squares
+registration and every residual with it, so the closed form is iterated with robust weights
+(`runtime.robust`): the gross points fall out of it before the fit starts.
 """
 from __future__ import annotations
 
@@ -11,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.validation import ModelError
+from gecgen.runtime import robust
 
 #: beyond these the measurement frame counts as "far" and is registered before the fit
 FAR_ANGLE_RAD = np.radians(1.0)
@@ -45,20 +49,43 @@ class Registration:
 IDENTITY = Registration(np.eye(3), np.zeros(3), False)
 
 
-def kabsch(p: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R, t minimising |y - (R p + t)| over points p, y (N, 3)."""
-    pc, yc = p.mean(0), y.mean(0)
-    U, _, Vt = np.linalg.svd((y - yc).T @ (p - pc))
+def kabsch(p: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """R, t minimising sum w |y - (R p + t)|^2 over points p, y (N, 3), weights w (N,) (default 1)."""
+    w = np.ones(len(p)) if w is None else w
+    pc, yc = w @ p / w.sum(), w @ y / w.sum()
+    U, _, Vt = np.linalg.svd((w[:, None] * (y - yc)).T @ (p - pc))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
     R = U @ D @ Vt
     return R, yc - R @ pc
 
 
-def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto") -> Registration:
+#: reweighted closed-form solves of a robust registration (weights settle within a few)
+ROBUST_PASSES = 20
+
+
+def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
+    """`kabsch` iterated with robust point weights (`runtime.robust`); plain Kabsch for l2."""
+    R, t = kabsch(p, y)
+    if loss == "l2":
+        return R, t
+    for _ in range(ROBUST_PASSES):
+        e = np.linalg.norm(y - p @ R.T - t, axis=1)
+        a = robust.outlier_limit(e, loss)
+        if not a > 0:  # an exact fit: nothing to reweight
+            break
+        R_new, t_new = kabsch(p, y, robust.weights(e, a, loss))
+        moved = np.abs(R_new - R).max() + np.abs(t_new - t).max()
+        R, t = R_new, t_new
+        if moved < 1e-12:
+            break
+    return R, t
+
+
+def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str = "cauchy") -> Registration:
     """Registration of measured points y onto nominal model points (N, 3).
 
     mode: "auto" applies it when the frames are far apart (over 1 degree or 20 mm), "always",
-    or "never" (the data is already in the robot world frame).
+    or "never" (the data is already in the robot world frame). loss: see `runtime.robust`.
     """
     if mode not in ("auto", "always", "never"):
         raise ValueError(f"registration mode {mode!r}: use auto, always or never")
@@ -66,6 +93,6 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto") -> Regist
         if mode == "always":
             raise ModelError("registration needs at least three non-collinear measured points; use --register never")
         return IDENTITY
-    R, t = kabsch(p_nominal, y)
+    R, t = robust_kabsch(p_nominal, y, loss)
     far = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
     return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)))

@@ -1,0 +1,213 @@
+"""Trustworthy identification on data with glitches: robust fitting names and survives them, an
+absurd or undetermined fit is a failure, and what a measured point cannot see is eliminated.
+
+The robot is the issue's: a 200-pose industrial6r simulation (its truth file: geometric errors
+plus shoulder and elbow compliance under gravity) fitted with the default model, validated on 200
+other poses."""
+import json
+
+import numpy as np
+import pytest
+from conftest import ROBOTS, random_q
+
+from gecgen.cli import main
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.kinematics import target_positions
+from gecgen.model.measurements import Measurements, write_measurements
+from gecgen.model.validation import read_yaml
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import _fit_failures, identify, position_errors, redundancy
+from gecgen.runtime.registration import Registration
+from gecgen.simulate import load_truth, random_design, simulate
+
+DATA = ROBOTS.parent / "tests" / "data"
+
+
+@pytest.fixture(scope="module")
+def arm():
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth"), robot)
+    train = simulate(robot, truth, random_design(robot, 200, np.random.default_rng(1)), np.random.default_rng(1))
+    val = simulate(robot, truth, random_design(robot, 200, np.random.default_rng(2)), np.random.default_rng(2))
+    cm = CompiledModel(robot, load_error_model(ROBOTS / "industrial6r.errors.yaml", robot))
+    return robot, cm, train, val
+
+
+def val_rms_mm(cm, fit, val) -> float:
+    e = position_errors(cm, val, fit.registration.to_world(val.xyz), fit.c)
+    return float(1e3 * np.sqrt(np.mean(e ** 2)))
+
+
+def with_xyz(data: Measurements, xyz: np.ndarray) -> Measurements:
+    return Measurements(data.q, data.w, data.aux, data.aux_names, data.pose_ids, data.pose, data.target, xyz,
+                        data.source, data.row)
+
+
+def one_row_50mm(xyz, rng):
+    xyz[17, 0] += 0.05
+    return [17]
+
+
+def two_rows_swapped(xyz, rng):  # the rows of poses 40 and 140: their points are 1.5 m apart
+    xyz[[40, 140]] = xyz[[140, 40]]
+    return [40, 140]
+
+
+def one_percent_5mm(xyz, rng):
+    rows = rng.choice(len(xyz), len(xyz) // 100, replace=False)
+    xyz[rows] += 0.005 * rng.normal(size=(len(rows), 3)) / np.sqrt(3) + [0.005, 0, 0]
+    return list(rows)
+
+
+@pytest.fixture(scope="module")
+def clean(arm):
+    robot, cm, train, val = arm
+    fit = identify(cm, train)
+    return fit, val_rms_mm(cm, fit, val)
+
+
+def test_clean_data_fits_exactly_as_least_squares(arm, clean):
+    robot, cm, train, val = arm
+    fit, rms = clean
+    plain = identify(cm, train, loss="l2")
+    assert fit.outliers == () and np.all(fit.weights == 1) and fit.trustworthy
+    assert abs(rms - val_rms_mm(cm, plain, val)) <= 0.01 * rms
+
+
+@pytest.mark.parametrize("corrupt", [one_row_50mm, two_rows_swapped, one_percent_5mm])
+def test_glitches_are_named_and_do_not_move_the_fit(arm, clean, corrupt):
+    robot, cm, train, val = arm
+    xyz = train.xyz.copy()
+    rows = corrupt(xyz, np.random.default_rng(3))
+    bad = with_xyz(train, xyz)
+    fit = identify(cm, bad)
+    assert fit.trustworthy, fit.failures
+    assert sorted(o.row for o in fit.outliers) == sorted(r + 2 for r in rows)  # file lines, header = 1
+    assert all(o.weight < 0.1 and o.residual_mm > 4 for o in fit.outliers)
+    assert val_rms_mm(cm, fit, val) <= 1.05 * clean[1]
+
+
+def test_least_squares_is_moved_by_one_glitch(arm, clean):
+    """What the robust loss prevents: the check above can fail."""
+    robot, cm, train, val = arm
+    xyz = train.xyz.copy()
+    one_row_50mm(xyz, None)
+    plain = identify(cm, with_xyz(train, xyz), loss="l2")
+    assert plain.outliers == () and val_rms_mm(cm, plain, val) > 2 * clean[1]
+
+
+def test_a_gross_mismatch_does_not_tilt_the_registration(arm):
+    """The tracker frame is 30 degrees and 2 m away, and two rows are swapped: the registration
+    comes from the other points, and the swapped rows are still the only outliers."""
+    robot, cm, train, val = arm
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    R, t = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), np.array([2.0, -0.5, 0.3])
+    xyz = train.xyz @ R.T + t
+    rows = two_rows_swapped(xyz, None)
+    fit = identify(cm, with_xyz(train, xyz))
+    assert fit.registration.applied
+    assert np.abs(fit.registration.R - R).max() < 1e-3 and np.abs(fit.registration.t - t).max() < 3e-3
+    assert sorted(o.row for o in fit.outliers) == [r + 2 for r in rows]
+
+
+def test_cli_lists_outliers_in_json_and_for_a_person(arm, tmp_path, capsys):
+    robot, cm, train, val = arm
+    xyz = train.xyz.copy()
+    one_row_50mm(xyz, None)
+    write_measurements(tmp_path / "bad.csv", robot, with_xyz(train, xyz))
+    args = ["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "bad.csv"), "-o", str(tmp_path / "c.json")]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [(o["row"], o["pose"], o["target"]) for o in out["outliers"]] == [(19, 17, "smr")]
+    assert 49 < out["outliers"][0]["residual_mm"] < 51 and out["loss"] == "cauchy"
+    assert main([*args]) == 0
+    assert "  row 19: pose 17 smr" in capsys.readouterr().out
+    assert main([*args, "--loss", "l2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["outliers"] == []
+
+
+def test_absurd_or_undetermined_values_are_failures(arm):
+    robot, cm, train, val = arm
+    kept = np.arange(cm.dims.nc)
+    c, std = np.zeros(cm.dims.nc), np.full(cm.dims.nc, 1e-6)
+    names = cm.model.coefficient_names(robot)
+    assert _fit_failures(cm, train, c, std, kept, True, "") == []
+    rotation = names.index("3.ep:1")
+    c[rotation] = 0.7  # rad: no robot is that far from its model
+    assert "3.ep reaches 0.7 rad" in _fit_failures(cm, train, c, std, kept, True, "")[0]
+    c[rotation], std[rotation] = 0.0, np.nan
+    assert "3.ep:1 has no finite uncertainty" in _fit_failures(cm, train, c, std, kept, True, "")[0]
+    assert _fit_failures(cm, train, c, np.full(cm.dims.nc, 1e-6), kept, False, "did not converge") == ["did not converge"]
+
+
+def test_cli_refuses_an_untrustworthy_fit_with_one_line(arm, tmp_path, capsys):
+    """Least squares on the swapped rows gives generalized errors no robot has: identify fails with
+    the reason and writes no calibration."""
+    robot, cm, train, val = arm
+    xyz = train.xyz.copy()
+    two_rows_swapped(xyz, None)
+    write_measurements(tmp_path / "swap.csv", robot, with_xyz(train, xyz))
+    out = tmp_path / "c.json"
+    assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "swap.csv"), "-o", str(out),
+                 "--loss", "l2", "--json"]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and not out.exists()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "not trustworthy" in lines[0] and "reaches" in lines[0], captured.err
+
+
+def test_a_point_on_the_last_axis_cannot_see_rotations_about_it(rng):
+    """UR10 from its URDF, one point at the flange centre, on joint 6's axis: 4 x 6 + 3 = 27 for a
+    generic point, less joint 6's angle and the rotation of frame 5 about the same axis, 25. The
+    URDF's rounded angles leave that column at 1.5e-10 instead of 0; scaled to unit length it once
+    passed for an independent direction and got a value of 1e11 rad."""
+    robot = load_robot(DATA / "ur10" / "ur10.yaml")
+    cm = CompiledModel(robot, load_error_model(None, robot))
+    assert redundancy(cm).n_identifiable == 25
+    q = random_q(robot, rng, 60)
+    eps = rng.normal(0, 5e-4, robot.n_errors)
+    xyz = target_positions(robot, q, eps)[:, 0] + rng.normal(0, 3e-5, (60, 3))
+    data = Measurements(q, np.zeros((60, 6)), np.zeros((60, 0)), (), np.arange(60), np.arange(60),
+                        np.zeros(60, int), xyz, "sim")
+    fit = identify(cm, data)
+    assert fit.trustworthy and fit.redundancy.n_identifiable == 25, fit.failures
+    assert fit.condition_number < 1e6 and np.nanmax(np.abs(fit.c)) < 0.1
+    assert fit.train["rms_mm"] < 0.1
+
+
+def test_evaluate_and_compensate_say_where_they_extrapolate(arm, tmp_path, capsys):
+    robot, cm, train, val = arm
+    write_measurements(tmp_path / "train.csv", robot, train)
+    calib = tmp_path / "c.json"
+    assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "train.csv"), "-o", str(calib)]) == 0
+    ranges = json.loads(calib.read_text())["training_ranges"]
+    assert ranges["q2"] == [float(train.q[:, 1].min()), float(train.q[:, 1].max())]
+    capsys.readouterr()
+    inside = train.subset(np.arange(20))
+    write_measurements(tmp_path / "inside.csv", robot, inside)
+    assert main(["evaluate", str(calib), str(tmp_path / "inside.csv"), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["extrapolation"] == {} and captured.err == ""
+    q = inside.q.copy()
+    q[:3, 1] = train.q[:, 1].max() + 0.01  # three poses beyond the training span of joint 2
+    q[0, 2] = train.q[:, 2].min() - 0.01
+    moved = Measurements(q, inside.w, inside.aux, (), inside.pose_ids, inside.pose, inside.target, inside.xyz, "m")
+    write_measurements(tmp_path / "outside.csv", robot, moved)
+    assert main(["evaluate", str(calib), str(tmp_path / "outside.csv"), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["extrapolation"] == {"q2": 3, "q3": 1}
+    assert "q2 (a2) 3, q3 (a3) 1 (of 20)" in captured.err
+    (tmp_path / "cmds.csv").write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(map(repr, q[0].tolist())) + "\n")
+    assert main(["compensate", str(calib), str(tmp_path / "cmds.csv"), "-o", str(tmp_path / "out.csv"),
+                 "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["extrapolation"] == {"q2": 1, "q3": 1} and "extrapolation" in captured.err
+
+
+def test_registration_maps_back(arm):
+    """The robust closed form is still exact on exact data (a guard on the weighted Kabsch)."""
+    robot, cm, train, val = arm
+    p = cm.nominal_targets(train.q)[train.pose, train.target]
+    R = Registration(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([1.0, 2, 3]), True)
+    fit = identify(cm, with_xyz(train, p @ R.R.T + R.t), loss="cauchy")
+    assert np.allclose(fit.registration.R, R.R, atol=1e-12) and np.allclose(fit.registration.t, R.t, atol=1e-12)
