@@ -492,7 +492,9 @@ def _effect_coefficients(robot: Robot, rnd: Round, error: int, n_new: int) -> li
     """Fitted value and standard deviation of the n_new terms just added to `error`."""
     new = {t.text for t in rnd.model.terms[error][-n_new:]}
     names = rnd.model.coefficient_names(robot)
-    return [{"name": names[j], "value": float(rnd.fit.c[j]), "std": float(rnd.fit.std[j])}
+    # a term the refit eliminated (merged into others) has no std of its own: null, not NaN
+    return [{"name": names[j], "value": float(rnd.fit.c[j]),
+             "std": float(rnd.fit.std[j]) if np.isfinite(rnd.fit.std[j]) else None}
             for j, c in enumerate(rnd.model.coefficients) if c.error == error and c.term.text in new]
 
 

@@ -71,7 +71,8 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
         lines += [f"## Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", "",
                   f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.", "",
                   "| coefficient | value | std |", "|---|---|---|"]
-        lines += [f"| `{c['name']}` | {c['value']:.6g} | {c['std']:.2g} |" for c in eff.coefficients]
+        lines += [f"| `{c['name']}` | {c['value']:.6g} | {'eliminated' if c['std'] is None else format(c['std'], '.2g')} |"
+                  for c in eff.coefficients]
         if eff.alternatives:
             lines += ["", "Indistinguishable on this data (the same fitted effect):", ""]
             lines += [f"- {alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
