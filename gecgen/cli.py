@@ -300,7 +300,7 @@ def check_outputs(args):
     """One-line refusal of an output that names a folder where a file is meant, a file where a
     folder is meant, or a place that cannot be written: before the work, not after it."""
     for option, (what, folder) in OUTPUTS.get(args.command, {}).items():
-        path = getattr(args, option)
+        path = getattr(args, option, None)
         if path is None:
             continue  # not written, or a default in the working folder
         if folder:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-hypothesis = pytest.importorskip("hypothesis")
+pytest.importorskip("hypothesis")
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 

@@ -1421,7 +1421,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
             if (norm_try < norm) break;
         }
         if (!(norm_try < norm)) {
-            /* every trial overflowed (a step of NaN or inf): that is no convergence problem */
+            /* even the shortest trial overflowed (a step of NaN or inf): no convergence problem */
             if (!isfinite(norm_try)) return nonfinite(q_cmd, q_out, iterations, it);
             if (iterations) *iterations = it;
             return GECGEN_NOT_CONVERGED;
