@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from gecgen.runtime.compiled import NONFINITE, OK
+
 pytest.importorskip("hypothesis")
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 NAME = "pps"  # prismatic and revolute joints, and error terms in the wrench
-OK, NONFINITE = 0, 4
 
 # Reads cases "max_iter tol q[NQ] w[6] aux[NAUX] c[NC]" until end of input; prints per case
 # "status iterations q_out[NQ] deviation", the deviation being the largest entry of the modelled

@@ -60,7 +60,7 @@ def _usable_cache(wanted: Path) -> Path:
         return fallback
 
 
-def sha256_file(path: Path) -> str:
+def _sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -91,7 +91,7 @@ def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
     lib = cache_dir() / f"{robot.name}-{key}.so"
     digest = lib.with_name(lib.name + ".sha256")
     try:
-        if sha256_file(lib) == digest.read_text().strip():
+        if _sha256_file(lib) == digest.read_text().strip():
             return lib
     except OSError:
         pass  # no entry, or half of one: built below
@@ -250,7 +250,7 @@ def load_casadi_module(files: dict[str, str], name: str):
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
     path = cache_dir() / f"{name}_casadi_{digest}.py"
     try:
-        intact = sha256_file(path)[:20] == digest
+        intact = _sha256_file(path)[:20] == digest
     except OSError:
         intact = False
     if not intact:
