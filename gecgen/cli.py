@@ -11,6 +11,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from gecgen.files import check_output_dir, check_output_file
 from gecgen.model import ModelError, load_error_model, load_robot
 
 
@@ -138,18 +139,22 @@ def cmd_compensate(args) -> dict:
 
     from gecgen.model.measurements import read_commands, write_commands
     from gecgen.runtime import calibration
-    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
 
-    calib = calibration.load(args.calibration)
+    if args.max_iter < 0:
+        raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
+    calib = calibration.load(args.calibration)  # refuses non-finite coefficients, naming the first
     cmds = read_commands(args.poses, calib.robot, calib.model.aux)
     cm = CompiledModel(calib.robot, calib.model)
     q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
-    failed = np.nonzero((status == 1) | (status == 2))[0]
+    failed = np.nonzero(np.isin(status, FAILED))[0]
     if len(failed):
-        raise RuntimeError(f"{args.poses}: row {failed[0] + 2}: the correction did not converge "
-                           f"({len(failed)} rows); the command may be near a singularity")
+        k = failed[0]
+        why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
+               if status[k] == NONFINITE else "the correction did not converge; the command may be near a singularity")
+        raise RuntimeError(f"{args.poses}: row {k + 2}: {why} ({len(failed)} rows failed)")
     write_commands(args.output, calib.robot, cmds, q)
-    outside = [int(k) + 2 for k in np.nonzero(status == 3)[0]]
+    outside = [int(k) + 2 for k in np.nonzero(status == OUTSIDE_LIMITS)[0]]
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
@@ -310,20 +315,47 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: per command, the options naming what it writes: option -> (what, is a folder)
+OUTPUTS = {
+    "generate": {"output": ("generated code", True)},
+    "identify": {"output": ("calibration", False)},
+    "compensate": {"output": ("corrected commands", False)},
+    "diagnose": {"output": ("error model", False), "generated": ("generated code", True), "report": ("report", True)},
+    "simulate": {"output": ("measurements", False), "val_out": ("validation measurements", False),
+                 "truth_out": ("truth file", False)},
+    "import": {"output": ("measurements", False)},
+    "gravity": {"output": ("table", False)},
+}
+
+
+def check_outputs(args):
+    """One-line refusal of an output that names a folder where a file is meant, a file where a
+    folder is meant, or a place that cannot be written: before the work, not after it."""
+    for option, (what, folder) in OUTPUTS.get(args.command, {}).items():
+        path = getattr(args, option, None)
+        if path is None:
+            continue  # not written, or a default in the working folder
+        if folder:
+            check_output_dir(path, what)
+        else:
+            check_output_file(path, what)
+
+
+def _os_reason(exc: OSError) -> str:
+    """`path: reason` of an OSError, as one line."""
+    reason = exc.strerror or str(exc)
+    return (f"{exc.filename}: {reason}" if exc.filename else reason).splitlines()[0]
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the
     # failure's reason is then the one line on stderr
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        try:
-            result = args.fn(args)
-        except (ModelError, FileNotFoundError) as exc:
-            print(f"gecgen {args.command}: {exc}", file=sys.stderr)
-            return 2
-        except RuntimeError as exc:
-            print(f"gecgen {args.command}: {str(exc).splitlines()[0]}", file=sys.stderr)
-            return 1
+        code, result = _run(args)
+    if code:
+        return code
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
     if args.json:
@@ -331,6 +363,22 @@ def main(argv: list[str] | None = None) -> int:
     else:
         _print_human(result)
     return 0
+
+
+def _run(args) -> tuple[int, dict | None]:
+    """Run a parsed command: (0, its result), or (exit code, None) after one line on stderr."""
+    try:
+        check_outputs(args)
+        return 0, args.fn(args)
+    except ModelError as exc:
+        print(f"gecgen {args.command}: {exc}", file=sys.stderr)
+        return 2, None
+    except OSError as exc:
+        print(f"gecgen {args.command}: {_os_reason(exc)}", file=sys.stderr)
+        return 2, None
+    except RuntimeError as exc:
+        print(f"gecgen {args.command}: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 1, None
 
 
 if __name__ == "__main__":

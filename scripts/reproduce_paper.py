@@ -29,7 +29,7 @@ from gecgen.model import load_error_model, load_robot  # noqa: E402
 from gecgen.model.kinematics import target_positions  # noqa: E402
 from gecgen.model.measurements import Measurements, read_measurements  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402
-from gecgen.runtime.compiled import CompiledModel  # noqa: E402
+from gecgen.runtime.compiled import FAILED, CompiledModel  # noqa: E402
 from gecgen.runtime.identify import identify, position_errors, summary  # noqa: E402
 from gecgen.simulate import load_truth, simulate  # noqa: E402
 from gecgen.simulate.designs import Design  # noqa: E402
@@ -53,8 +53,8 @@ def compensated_errors(robot, truth, cm, c, val: Measurements, rng) -> np.ndarra
     """Command the truth robot to the compensated joints of every validation pose and measure the
     targets again (repeatability and tracker noise included): |measured - wanted| per point (m)."""
     q_cmp, status = cm.compensate(val.q, val.w, None, c)
-    if np.any((status == 1) | (status == 2)):
-        raise RuntimeError("compensation did not converge for some validation poses")
+    if np.isin(status, FAILED).any():
+        raise RuntimeError("compensation failed (no convergence, or not finite) for some validation poses")
     payload = np.linalg.norm(val.w[:, :3], axis=1) / np.linalg.norm(truth.gravity)
     names = list(robot.targets)
     targets = tuple(names[k] for k in np.unique(val.target))

@@ -8,9 +8,9 @@ import pytest
 from conftest import ROBOTS
 
 
-def gecgen(*args, cwd=None):
+def gecgen(*args, cwd=None, env=None):
     return subprocess.run([sys.executable, "-m", "gecgen.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
+                          cwd=cwd, env=env)
 
 
 def test_json_output_is_exactly_one_object(tmp_path):

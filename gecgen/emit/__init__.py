@@ -18,6 +18,7 @@ from gecgen.emit.c.printer import element as c_element
 from gecgen.emit.casadi.printer import CasadiPrinter
 from gecgen.emit.casadi.printer import element as casadi_element
 from gecgen.emit.printing import straight_line
+from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.robot import Robot
 from gecgen.symbolic.chain import all_functions
@@ -89,10 +90,8 @@ def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = N
 
 
 def generate(robot: Robot, model: ErrorModel, outdir: str | Path) -> dict[str, str]:
-    """Write the generated files into outdir (created if needed); returns them."""
+    """Write the generated files into outdir (created if needed), each atomically; returns them."""
     files = render(robot, model)
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
     for name, text in files.items():
-        (outdir / name).write_text(text)
+        write_atomically(Path(outdir) / name, text)
     return files

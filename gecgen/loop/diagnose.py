@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 from scipy import stats
 
+from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.measurements import Measurements
@@ -512,5 +513,4 @@ def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], pa
     if not effects:
         lines.append("# diagnose found nothing in its candidate dictionary to add; the model is unchanged")
     spec = model.to_yaml_dict(robot)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text("\n".join(lines) + "\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
+    write_atomically(path, "\n".join(lines) + "\n" + yaml.safe_dump(spec, sort_keys=False, width=120))

@@ -1,6 +1,7 @@
 """The human report of a diagnosis: Markdown with PNG plots (matplotlib, no display needed)."""
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import matplotlib
@@ -9,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gecgen.files import write_atomically  # noqa: E402
 from gecgen.loop.diagnose import Diagnosis, Round, verdict  # noqa: E402
 from gecgen.model.measurements import Measurements  # noqa: E402
 from gecgen.model.robot import WRENCH  # noqa: E402
@@ -43,14 +45,15 @@ def residual_plot(diag: Diagnosis, data: Measurements, variable: str, path: Path
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=110)
     plt.close(fig)
+    write_atomically(path, png.getvalue())
 
 
 def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors_out: str) -> Path:
     """Write report.md and one PNG per traced variable into outdir; returns the Markdown path."""
     outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
     b, a = diag.before, diag.after
     lines = [f"# gecgen diagnose: {diag.robot.name}", "",
              f"Training data: {data.source} ({data.n_poses} poses). New error model: `{errors_out}`.", "",
@@ -86,6 +89,4 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
     lines += ["## Rounds", "", "| round | training RMS (mm) | CV RMS (mm) | candidates | accepted |", "|---|---|---|---|---|"]
     lines += [f"| {h['round']} | {h['train_rms_mm']:.4f} | {h['cv_rms_mm']:.4f} | {h['candidates']} | {h['accepted'] or '-'} |"
               for h in diag.history]
-    path = outdir / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_atomically(outdir / "report.md", "\n".join(lines) + "\n")

@@ -6,14 +6,11 @@ joint columns q1..qn: a measurement file (before identify or diagnose) or a file
 """
 from __future__ import annotations
 
-import csv
-from pathlib import Path
-
 import numpy as np
 
 from gecgen.model import load_robot
 from gecgen.model.gravity import UPRIGHT, robot_gravity_torques
-from gecgen.model.measurements import numbers, read_table
+from gecgen.model.measurements import numbers, read_table, write_csv
 from gecgen.model.validation import ModelError, require
 
 
@@ -53,12 +50,8 @@ def run(args) -> dict:
                        f"drop it or write from the table without it")
     q = np.column_stack([numbers(table[:, header.index(c)], c, where) for c in qcols])
     tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity))
-    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-    with Path(args.output).open("w", newline="") as fh:
-        out = csv.writer(fh, lineterminator="\n")
-        out.writerow(header + new)
-        for row, t in zip(table.tolist(), tau.tolist()):
-            out.writerow(row + [repr(v) for v in t])
+    write_csv(args.output, header + new,
+              (row + [repr(v) for v in t] for row, t in zip(table.tolist(), tau.tolist())))
     units = {c: "N" if robot.joints[robot.joint_names.index(j)].kind == "P" else "N m" for c, j in zip(new, joints)}
     return {"robot": robot.name, "output": str(args.output), "rows": len(table), "columns": new,
             "min": {c: float(v) for c, v in zip(new, tau.min(0))}, "max": {c: float(v) for c, v in zip(new, tau.max(0))},

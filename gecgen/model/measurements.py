@@ -6,11 +6,13 @@ the column and the fix. Nothing is dropped, clipped or guessed.
 from __future__ import annotations
 
 import csv
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gecgen.files import write_atomically
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 
@@ -176,15 +178,19 @@ def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrenc
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, "target", "x", "y", "z"]
     targets = list(robot.targets)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with Path(path).open("w", newline="") as fh:
-        out = csv.writer(fh, lineterminator="\n")
-        out.writerow(header)
-        for r in range(len(data.pose)):
-            k = data.pose[r]
-            out.writerow([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
-                          *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
-                          targets[data.target[r]], *map(repr, data.xyz[r].tolist())])
+    write_csv(path, header, ([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
+                              *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
+                              targets[data.target[r]], *map(repr, data.xyz[r].tolist())]
+                             for r, k in enumerate(data.pose)))
+
+
+def write_csv(path: str | Path, header: list[str], rows) -> Path:
+    """A CSV of header and rows (iterables of cells), written atomically; returns the path."""
+    text = io.StringIO()
+    out = csv.writer(text, lineterminator="\n")
+    out.writerow(header)
+    out.writerows(rows)
+    return write_atomically(path, text.getvalue())
 
 
 @dataclass(frozen=True)
@@ -225,12 +231,10 @@ def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = (
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):
     """The input rows with q1..qn replaced by q (P, n), full precision."""
     idx = {h: k for k, h in enumerate(commands.header)}
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with Path(path).open("w", newline="") as fh:
-        out = csv.writer(fh, lineterminator="\n")
-        out.writerow(commands.header)
-        for row, qi in zip(commands.rows, q):
-            row = list(row)
-            for j in range(robot.n):
-                row[idx[f"q{j + 1}"]] = repr(float(qi[j]))
-            out.writerow(row)
+    rows = []
+    for row, qi in zip(commands.rows, q):
+        row = list(row)
+        for j in range(robot.n):
+            row[idx[f"q{j + 1}"]] = repr(float(qi[j]))
+        rows.append(row)
+    write_csv(path, commands.header, rows)

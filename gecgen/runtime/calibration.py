@@ -2,18 +2,24 @@
 
 A calibration records the robot file and the error model it was fitted with (by content hash)
 and refuses to load against anything else, so coefficients can never be applied to the wrong
-chain or basis.
+chain or basis. The robot file is recorded by its absolute path and by its path relative to the
+calibration's folder, so a checkout that moved (calibration and robot files together) still loads.
+Every number a calibration applies is checked on load: finite coefficients and covariance, a
+proper rotation and a finite translation for the registration.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gecgen import __version__
+from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot, load_robot
 from gecgen.model.validation import ModelError, require
@@ -69,6 +75,14 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
     return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report)
 
 
+#: keys every calibration file holds; the rest, but for these three, is its report
+REQUIRED = ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
+            "covariance", "registration")
+NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", *REQUIRED}
+#: R^T R may differ from the identity by this much (JSON keeps R to full precision)
+ROTATION_TOL = 1e-6
+
+
 def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, int]:
     """How many poses take each input outside the span it was fitted over ({name: poses}, only
     the names with any): q (P, n), w (P, 6), aux (P, len(calib.model.aux)). There the model
@@ -100,35 +114,91 @@ def extrapolation_note(counts: dict[str, int], n_poses: int, robot: Robot) -> st
 
 
 def save(calib: Calibration, path: str | Path):
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps(calib.to_dict(), indent=1) + "\n")
+    """Write the calibration JSON (atomically), with the robot file also relative to its folder."""
+    path = Path(path)
+    d = calib.to_dict()
+    d["robot_file_relative"] = os.path.relpath(d["robot_file"], path.parent.resolve())
+    write_atomically(path, json.dumps(d, indent=1) + "\n")
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _finite_array(value, shape: tuple[int, ...]) -> np.ndarray | None:
+    """value (nested JSON lists) as a float array of the given shape when every entry is a finite
+    number; None otherwise."""
+    try:
+        a = np.array(value, dtype=object)
+    except ValueError:  # ragged nesting
+        return None
+    return a.astype(float) if a.shape == shape and all(_finite(x) for x in a.ravel()) else None
+
+
+def _robot(d: dict, path: Path) -> Robot:
+    """The robot file at its recorded absolute path, else relative to the calibration's folder:
+    the first whose content hashes match the calibration's."""
+    where = str(path)
+    candidates = [Path(str(d["robot_file"]))]
+    if isinstance(d.get("robot_file_relative"), str):
+        candidates.append((path.parent / d["robot_file_relative"]).resolve())
+    found = [c for c in candidates if c.is_file()]
+    require(found, f"{where}: the robot file {' and '.join(map(str, candidates))} is missing; restore it "
+                   f"next to the calibration as it was, or identify again")
+    for candidate in found:
+        robot = load_robot(candidate)
+        if robot.source_hashes == d["robot_hashes"]:
+            return robot
+    raise ModelError(f"{where}: the robot file {found[0]} changed since this calibration was made; identify again")
+
+
+def _registration(d, where: str) -> Registration:
+    fix = "identify again (or restore the file)"
+    require(isinstance(d, dict) and "applied" in d, f"{where}: registration: expected rotation, translation and "
+                                                    f"applied; {fix}")
+    R, t = _finite_array(d.get("rotation"), (3, 3)), _finite_array(d.get("translation"), (3,))
+    require(R is not None and np.abs(R.T @ R - np.eye(3)).max() <= ROTATION_TOL and np.linalg.det(R) > 0,
+            f"{where}: registration.rotation is not a proper rotation (3 x 3 finite numbers with R^T R = I within "
+            f"{ROTATION_TOL:g} and det +1); {fix}")
+    require(t is not None, f"{where}: registration.translation: expected three finite numbers (m); {fix}")
+    return Registration(R, t, bool(d["applied"]))
 
 
 def load(path: str | Path) -> Calibration:
-    """Read a calibration; refused when its robot file changed or its model does not match."""
+    """Read a calibration; refused when its robot file changed, its model does not match or any
+    number it applies is not finite (one line naming the file, the key and the fix)."""
     path = Path(path)
     where = str(path)
     require(path.is_file(), f"{where}: no such calibration file")
     try:
         d = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ModelError(f"{where}: not a calibration file (invalid JSON: {exc})") from None
-    for key in ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
-                "covariance", "registration"):
+    require(isinstance(d, dict), f"{where}: not a calibration file (a JSON object is expected)")
+    for key in REQUIRED:
         require(key in d, f"{where}: missing key '{key}'; not a gecgen calibration file")
-    robot = load_robot(d["robot_file"])
-    require(robot.source_hashes == d["robot_hashes"],
-            f"{where}: the robot file {d['robot_file']} changed since this calibration was made; identify again")
+    robot = _robot(d, path)
     spec = dict(d["error_model"])
     spec["frames"] = {int(k): v for k, v in spec.get("frames", {}).items()}  # JSON keys are strings
     model = error_model_from_dict(spec, robot, f"{where}: error_model")
     names = model.coefficient_names(robot)
-    require(model_hash(robot, model) == d["error_model_hash"] and names == [c["name"] for c in d["coefficients"]],
+    entries = d["coefficients"]
+    require(isinstance(entries, list) and all(isinstance(x, dict) and {"name", "value", "std"} <= set(x) for x in entries)
+            and model_hash(robot, model) == d["error_model_hash"] and names == [x["name"] for x in entries],
             f"{where}: the error model does not match its coefficients; the file was edited or made by another version")
-    c = np.array([x["value"] for x in d["coefficients"]])
-    std = np.array([np.nan if x["std"] is None else x["std"] for x in d["coefficients"]])
-    report = {k: v for k, v in d.items() if k not in ("gecgen_version", "robot", "robot_file", "robot_hashes",
-                                                       "error_model", "error_model_hash", "coefficients", "kept",
-                                                       "covariance", "registration")}
-    return Calibration(robot, model, c, std, tuple(d["kept"]), np.array(d["covariance"]),
-                       Registration.from_dict(d["registration"]), report)
+    fix = "identify again (a calibration holds finite numbers only)"
+    for x in entries:
+        require(_finite(x["value"]), f"{where}: coefficient '{x['name']}': value {json.dumps(x['value'])} is not "
+                                     f"a finite number; {fix}")
+        require(x["std"] is None or _finite(x["std"]), f"{where}: coefficient '{x['name']}': std "
+                                                       f"{json.dumps(x['std'])} is neither a finite number nor null; {fix}")
+    kept = d["kept"]
+    require(isinstance(kept, list) and all(isinstance(k, int) and 0 <= k < len(names) for k in kept)
+            and len(set(kept)) == len(kept), f"{where}: kept: expected distinct coefficient indices; {fix}")
+    cov = _finite_array(d["covariance"], (len(kept), len(kept)))
+    require(cov is not None, f"{where}: covariance: expected a {len(kept)} x {len(kept)} matrix (the kept "
+                             f"coefficients) of finite numbers; {fix}")
+    c = np.array([x["value"] for x in entries], dtype=float)
+    std = np.array([np.nan if x["std"] is None else x["std"] for x in entries], dtype=float)
+    report = {k: v for k, v in d.items() if k not in NOT_REPORT}
+    return Calibration(robot, model, c, std, tuple(kept), cov, _registration(d["registration"], where), report)

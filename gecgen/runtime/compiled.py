@@ -2,11 +2,16 @@
 
 The C source is built once per content hash with the system compiler into a cache folder
 (`$GECGEN_CACHE`, default `~/.cache/gecgen`) and loaded with ctypes. Without a C compiler the
-same functions come from the generated CasADi module, and a warning says so.
+same functions come from the generated CasADi module, and a warning says so. Every cache entry is
+checked against its content hash before it is used: a truncated or corrupt entry is rebuilt,
+never loaded. A cache folder that cannot be written is replaced, with a warning, by a fresh
+temporary folder for the rest of the run.
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
+import functools
 import hashlib
 import importlib.util
 import json
@@ -21,14 +26,42 @@ from pathlib import Path
 
 import numpy as np
 
+from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.robot import Robot
 
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
 
+#: status codes of `CompiledModel.compensate`: the generated C's GECGEN_ codes
+OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE = range(5)
+#: the codes whose q is no correction (OUTSIDE_LIMITS is one, but leaves the joint limits)
+FAILED = (NOT_CONVERGED, SINGULAR, NONFINITE)
+
 
 def cache_dir() -> Path:
-    return Path(os.environ.get("GECGEN_CACHE", Path.home() / ".cache" / "gecgen"))
+    """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written."""
+    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen"))
+
+
+@functools.cache
+def _usable_cache(wanted: Path) -> Path:
+    """wanted, created if needed, when a file can be created in it; else a fresh temporary folder,
+    removed at exit (one warning per run and folder: the cache only saves time)."""
+    try:
+        wanted.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=wanted).close()
+        return wanted
+    except OSError as exc:
+        fallback = Path(tempfile.mkdtemp(prefix="gecgen-cache-"))
+        atexit.register(shutil.rmtree, fallback, ignore_errors=True)
+        warnings.warn(f"the cache folder {wanted} cannot be written ({exc.strerror}); compiling into {fallback} "
+                      f"for this run instead (set GECGEN_CACHE to a writable folder to keep the compiled code)",
+                      stacklevel=3)
+        return fallback
+
+
+def _sha256_file(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def compiler() -> str | None:
@@ -51,23 +84,20 @@ def model_key(robot: Robot, model: ErrorModel) -> str:
     return hashlib.sha256(spec.encode()).hexdigest()[:24]
 
 
-def write_atomically(path: Path, data: bytes):
-    """Write through a temporary file and a rename, so parallel processes never read a half-written file."""
-    part = path.with_suffix(f".{os.getpid()}.part")
-    part.write_bytes(data)
-    part.replace(path)
-
-
 def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
     """The compiled generated C of a robot and error model (cache key `model_key`); rendered and
-    built only on a cache miss."""
+    built only on a cache miss. An entry is used only when its sidecar `.sha256`, written after the
+    library, matches the library's bytes: loading a truncated library would crash the process."""
     lib = cache_dir() / f"{robot.name}-{key}.so"
-    if lib.exists():
-        return lib
+    digest = lib.with_name(lib.name + ".sha256")
+    try:
+        if _sha256_file(lib) == digest.read_text().strip():
+            return lib
+    except OSError:
+        pass  # no entry, or half of one: built below
     from gecgen.emit import render  # the symbolic build and its printers: needed on a cache miss only
 
     files = render(robot, model)
-    lib.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         for fname in (f"{robot.name}.c", f"{robot.name}.h"):
             Path(tmp, fname).write_text(files[fname])
@@ -76,7 +106,9 @@ def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
                              capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"compiling the generated C for {robot.name} failed: {run.stderr.strip()}")
-        write_atomically(lib, out.read_bytes())
+        data = out.read_bytes()
+    write_atomically(lib, data)
+    write_atomically(digest, hashlib.sha256(data).hexdigest() + "\n")
     return lib
 
 
@@ -193,8 +225,12 @@ class CompiledModel:
         return out
 
     def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11):
-        """Corrected joint commands (N, nq) and status codes (N,) (0 ok, 1 not converged,
-        2 singular, 3 outside the joint limits)."""
+        """Corrected joint commands (N, nq) and status codes (N,) for nominal commands q_cmd (N, nq)
+        (m or rad), residual tolerance tol (m; 1 rad counts as 1 m). The codes, per row:
+        OK (0) converged inside the joint limits; NOT_CONVERGED (1) the last iterate;
+        SINGULAR (2) the joint Jacobian is singular at the returned iterate; OUTSIDE_LIMITS (3)
+        converged, outside the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0,
+        max_iter < 0 or the computation overflowed, and the row holds q_cmd unchanged."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
         if self.backend == "casadi":
@@ -208,13 +244,17 @@ class CompiledModel:
 
 
 def load_casadi_module(files: dict[str, str], name: str):
-    """Import the generated CasADi module from its text (written to the cache first)."""
+    """Import the generated CasADi module from its text (written to the cache first; its name
+    carries the text's hash, and an entry whose bytes do not match it is written again)."""
     text = files[f"{name}_casadi.py"]
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
     path = cache_dir() / f"{name}_casadi_{digest}.py"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not path.exists():
-        path.write_text(text)
+    try:
+        intact = _sha256_file(path)[:20] == digest
+    except OSError:
+        intact = False
+    if not intact:
+        write_atomically(path, text)
     spec = importlib.util.spec_from_file_location(f"gecgen_generated_{name}_{digest}", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module

@@ -224,11 +224,16 @@ def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
     for source in (runtime / "identify.py", runtime / "redundancy.py", runtime.parent / "model" / "kinematics.py"):
         h.update(source.read_bytes())
     path = cache_dir() / f"{cm.robot.name}-structural-{h.hexdigest()[:24]}.json"
-    if path.exists():
-        return Redundancy.from_json(path.read_text())
+    try:
+        red = Redundancy.from_json(path.read_text())
+        # a cached entry must at least partition this model's coefficients, or it is recomputed
+        if red.names == tuple(cm.model.coefficient_names(cm.robot)) and \
+                sorted([*red.kept, *(e.index for e in red.eliminated)]) == list(range(cm.dims.nc)):
+            return red
+    except (OSError, ValueError, KeyError, TypeError):
+        pass  # no entry, or a truncated or foreign one: recomputed and replaced below
     red = structural(*structural_matrix(cm, targets), cm.robot, cm.model, len(targets))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(path, red.to_json().encode())
+    write_atomically(path, red.to_json())
     return red
 
 

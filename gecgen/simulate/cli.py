@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from gecgen.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import write_measurements
@@ -52,7 +53,7 @@ def run(args) -> dict:
     else:
         write_measurements(args.output, robot, data)
     if args.truth_out:
-        Path(args.truth_out).write_text(yaml.safe_dump(truth.spec, sort_keys=False))
+        write_atomically(args.truth_out, yaml.safe_dump(truth.spec, sort_keys=False))
         files["truth"] = args.truth_out
     nominal = target_positions(robot, data.q)[data.pose, data.target]
     err = np.linalg.norm(data.xyz - nominal, axis=1)

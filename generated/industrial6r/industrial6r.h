@@ -25,10 +25,15 @@ extern "C" {
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES
-#define GECGEN_OK 0             /* converged, inside the joint limits */
-#define GECGEN_NOT_CONVERGED 1  /* iteration cap reached; q_out holds the last iterate */
-#define GECGEN_SINGULAR 2       /* the joint Jacobian is singular at an iterate */
-#define GECGEN_OUTSIDE_LIMITS 3 /* converged, but the corrected joints leave the limits */
+#define GECGEN_OK 0             /* converged, inside the joint limits; q_out is the correction */
+#define GECGEN_NOT_CONVERGED 1  /* no convergence in max_iter steps; q_out holds the last iterate */
+#define GECGEN_SINGULAR 2       /* the joint Jacobian is singular at an iterate; q_out holds that iterate */
+#define GECGEN_OUTSIDE_LIMITS 3 /* converged, but q_out (the correction) leaves the joint limits */
+#endif
+/* Separately guarded: a header of an older gecgen may already have defined the codes above. */
+#ifndef GECGEN_NONFINITE
+#define GECGEN_NONFINITE 4      /* an input is NaN or infinite, tol is not > 0, max_iter < 0, or the
+                                   computation overflowed; q_out holds a copy of q_cmd */
 #endif
 
 /* Joint limits (m or rad). */
@@ -73,7 +78,8 @@ void industrial6r_J_e_batch(int n, const double *q, const double *eps, double *p
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
  * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
  * max_iter steps until the pose residual is below tol (m). Returns a GECGEN_ status code and the
- * number of iterations used in *iterations (may be NULL). */
+ * number of iterations used in *iterations (may be NULL). q_out is always written (see the codes);
+ * GECGEN_OK promises finite joints whose residual is at most tol. */
 int industrial6r_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations);
 

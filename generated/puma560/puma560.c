@@ -1741,15 +1741,37 @@ static int newton_step(const double *Jq, const double *r, double *dq)
     return 1;
 }
 
+/* 1 when all n entries of a are finite (a may be NULL when n is 0). */
+static int all_finite(const double *a, int n)
+{
+    int k;
+    for (k = 0; k < n; ++k)
+        if (!isfinite(a[k])) return 0;
+    return 1;
+}
+
+/* GECGEN_NONFINITE with q_out reset to q_cmd: the caller never sees a half-computed command. */
+static int nonfinite(const double *q_cmd, double *q_out, int *iterations, int it)
+{
+    memcpy(q_out, q_cmd, sizeof(double) * NQ);
+    if (iterations) *iterations = it;
+    return GECGEN_NONFINITE;
+}
+
 int puma560_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations)
 {
     double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], norm;
     int it, j, halvings;
+    /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
+     * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
+    if (!all_finite(q_cmd, NQ) || !all_finite(w, 6) || !all_finite(aux, NAUX) || !all_finite(c, NC)
+        || !isfinite(tol) || !(tol > 0.0) || max_iter < 0)
+        return nonfinite(q_cmd, q_out, iterations, 0);
     puma560_fk(q_cmd, Tn);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
     norm = pose_residual(q_out, w, aux, c, Tn, r, Jq);
-    for (it = 0; norm > tol; ++it) {
+    for (it = 0; isfinite(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
         if (it == max_iter) {
             if (iterations) *iterations = it;
@@ -1766,6 +1788,8 @@ int puma560_compensate(const double *q_cmd, const double *w, const double *aux, 
             if (norm_try < norm) break;
         }
         if (!(norm_try < norm)) {
+            /* even the shortest trial overflowed (a step of NaN or inf): no convergence problem */
+            if (!isfinite(norm_try)) return nonfinite(q_cmd, q_out, iterations, it);
             if (iterations) *iterations = it;
             return GECGEN_NOT_CONVERGED;
         }
@@ -1774,6 +1798,7 @@ int puma560_compensate(const double *q_cmd, const double *w, const double *aux, 
         memcpy(Jq, J_try, sizeof(J_try));
         norm = norm_try;
     }
+    if (!isfinite(norm) || !all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, iterations, it);
     if (iterations) *iterations = it;
     for (j = 0; j < NQ; ++j)
         if (q_out[j] < puma560_q_min[j] || q_out[j] > puma560_q_max[j]) return GECGEN_OUTSIDE_LIMITS;

@@ -1,0 +1,68 @@
+"""Writing files safely: every file gecgen writes goes through `write_atomically`, and every
+output a command names is checked by `check_output_file` or `check_output_dir` before any work.
+
+Below every pipeline layer (model, emit, runtime and loop all write files), so it imports
+nothing of gecgen but the error type.
+"""
+from __future__ import annotations
+
+import os
+import secrets
+from pathlib import Path
+
+from gecgen.model.validation import ModelError
+
+
+def write_atomically(path: str | Path, data: bytes | str) -> Path:
+    """Write `data` (text is UTF-8) to path through a uniquely named temporary file in the same
+    folder and a rename, creating the folder if needed: a reader, a parallel process or a crash
+    never sees a half-written file, only the old one or the new one. Returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    part = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    try:
+        # os.open with mode 0o666 leaves the permissions to the umask, as a plain open() would
+        fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
+        os.replace(part, path)
+    except OSError as exc:
+        part.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the target, not the temporary
+    return path
+
+
+def _nearest_existing(path: Path) -> Path:
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _require_writable_folder(folder: Path, path: Path, what: str):
+    """`folder` must exist as a folder we may create entries in, or be creatable: its nearest
+    existing ancestor must be such a folder."""
+    anchor = _nearest_existing(folder.absolute())
+    if not anchor.is_dir():
+        raise ModelError(f"{path}: cannot write the {what}: {anchor} is a file, not a folder; choose another location")
+    if not os.access(anchor, os.W_OK | os.X_OK):
+        raise ModelError(f"{path}: cannot write the {what} into {anchor} (permission denied); "
+                         f"choose a writable location")
+
+
+def check_output_file(path: str | Path, what: str) -> Path:
+    """Refuse, before any work, an output file (`what`: "calibration", ...) that names a folder or
+    lies where nothing can be written: a one-line ModelError naming the path and the fix."""
+    path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"{path}: is a folder; give a file name for the {what}")
+    _require_writable_folder(path.parent, path, what)
+    return path
+
+
+def check_output_dir(path: str | Path, what: str) -> Path:
+    """Refuse, before any work, an output folder that is a file or lies where nothing can be written."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ModelError(f"{path}: is a file; give a folder for the {what}")
+    _require_writable_folder(path, path, what)
+    return path

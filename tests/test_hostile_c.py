@@ -1,0 +1,128 @@
+"""The shipped C compensation under hostile numbers (NaN, infinities, 1e308, subnormals, silly
+tolerances and iteration caps), built with AddressSanitizer and UBSan: a non-finite or invalid
+input is always GECGEN_NONFINITE with q_out a copy of q_cmd, and GECGEN_OK always means finite
+joints that put the modelled tool where the nominal one is."""
+import json
+import math
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from gecgen.runtime.compiled import NONFINITE, OK
+
+pytest.importorskip("hypothesis")
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+NAME = "pps"  # prismatic and revolute joints, and error terms in the wrench
+
+# Reads cases "max_iter tol q[NQ] w[6] aux[NAUX] c[NC]" until end of input; prints per case
+# "status iterations q_out[NQ] deviation", the deviation being the largest entry of the modelled
+# tool pose at q_out minus the nominal tool pose at q_cmd (rows 1-3 of the 4x4 matrices).
+DRIVER = r"""
+#include <math.h>
+#include <stdio.h>
+#include "%(name)s.h"
+static int read_all(double *a, int n)
+{
+    int k;
+    for (k = 0; k < n; ++k)
+        if (scanf("%%lf", &a[k]) != 1) return 0;
+    return 1;
+}
+int main(void)
+{
+    double tol, q[%(N)s_NQ], w[6], aux[%(N)s_NAUX + 1], c[%(N)s_NC], qo[%(N)s_NQ];
+    double eps[%(N)s_NE], Tn[16], T[16], Jq[6 * %(N)s_NQ];
+    int max_iter, it, k;
+    while (scanf("%%d %%lf", &max_iter, &tol) == 2 && read_all(q, %(N)s_NQ) && read_all(w, 6)
+           && read_all(aux, %(N)s_NAUX) && read_all(c, %(N)s_NC)) {
+        const double *a = %(N)s_NAUX ? aux : NULL;
+        double dev = 0.0;
+        int st = %(name)s_compensate(q, w, a, c, max_iter, tol, qo, &it);
+        if (st == GECGEN_OK) {
+            %(name)s_fk(q, Tn);
+            %(name)s_eps(qo, w, a, c, eps);
+            %(name)s_tool_jacobian(qo, eps, T, Jq);
+            for (k = 0; k < 12; ++k) dev = fmax(dev, fabs(T[k] - Tn[k]));
+        }
+        printf("%%d %%d", st, it);
+        for (k = 0; k < %(N)s_NQ; ++k) printf(" %%.17g", qo[k]);
+        printf(" %%.17g\n", dev);
+    }
+    return 0;
+}
+"""
+
+HOSTILE = [math.nan, -math.nan, math.inf, -math.inf, 1e308, -1e308, 1.7976931348623157e308, 5e-324, -5e-324,
+           2.2250738585072014e-308, 1e-310, 0.0, -0.0]
+
+
+@pytest.fixture(scope="session")
+def driver(tmp_path_factory):
+    """The driver built once against the shipped generated/pps, under the sanitizers."""
+    cc = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    if cc is None:
+        pytest.skip("no C compiler")
+    tmp = tmp_path_factory.mktemp("hostile")
+    (tmp / "driver.c").write_text(DRIVER % {"name": NAME, "N": NAME.upper()})
+    flags = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-g", "-fsanitize=address,undefined",
+             "-fno-sanitize-recover=all", f"-I{ROOT / 'generated' / NAME}"]
+    build = subprocess.run([cc, *flags, "driver.c", str(ROOT / "generated" / NAME / f"{NAME}.c"), "-o", "driver",
+                            "-lm"], cwd=tmp, capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    return tmp / "driver"
+
+
+MANIFEST = json.loads((ROOT / "generated" / NAME / "manifest.json").read_text())
+NQ, NC = len(MANIFEST["joints"]), len(MANIFEST["coefficients"])
+LO, HI = np.array(MANIFEST["limits"]).T
+SMALL_C = np.random.default_rng(0).normal(0, 1, NC)  # a plausible calibration's shape, scaled per case
+
+hostile = st.sampled_from(HOSTILE) | st.floats(allow_nan=True, allow_infinity=True)
+
+
+def with_hostile(base, n):
+    """A vector: base with up to three entries replaced by hostile numbers."""
+    return st.builds(lambda b, hits: [hits.get(k, v) for k, v in enumerate(b)], base,
+                     st.dictionaries(st.integers(0, n - 1), hostile, max_size=3))
+
+
+cases = st.fixed_dictionaries({
+    "max_iter": st.sampled_from([50, 0, 1, 3, -1, -2 ** 31, 2 ** 31 - 1]),
+    "tol": st.sampled_from([1e-11, 1e-9, 1e-6, 1e-3, 1.0, 1e300, 5e-324, 0.0, -1e-9]) | hostile,
+    "q": with_hostile(st.lists(st.floats(0, 1), min_size=NQ, max_size=NQ).map(lambda u: list(LO + (HI - LO) * np.array(u))), NQ),
+    "w": with_hostile(st.lists(st.floats(-1000, 1000), min_size=6, max_size=6), 6),
+    "c": with_hostile(st.sampled_from([0.0, 1e-6, 1e-4]).map(lambda s: list(s * SMALL_C)), NC),
+})
+
+
+def run_cases(driver, batch):
+    text = "".join(f"{case['max_iter']} " + " ".join(map(float.hex, [case["tol"], *case["q"], *case["w"], *case["c"]]))
+                   + "\n" for case in batch)
+    run = subprocess.run([str(driver)], input=text, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stderr == "", run.stderr[-3000:]
+    rows = [line.split() for line in run.stdout.splitlines()]
+    assert len(rows) == len(batch)
+    return [(int(r[0]), np.array([float(x) for x in r[2:2 + NQ]]), float(r[-1])) for r in rows]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(cases, min_size=1, max_size=12))
+def test_compensate_never_reports_success_it_did_not_achieve(driver, batch):
+    for case, (status, q_out, deviation) in zip(batch, run_cases(driver, batch)):
+        inputs = np.array([case["tol"], *case["q"], *case["w"], *case["c"]])
+        invalid = not np.isfinite(inputs).all() or not case["tol"] > 0 or case["max_iter"] < 0
+        q_cmd = np.array(case["q"])
+        if invalid:
+            assert status == NONFINITE, case
+        if status == NONFINITE:
+            np.testing.assert_array_equal(q_out, q_cmd)  # NaN matches NaN here
+        if status == OK:
+            assert np.isfinite(q_out).all() and ((LO <= q_out) & (q_out <= HI)).all(), case
+            # position rows within tol; a rotation by theta changes entries by up to sqrt(2) sin(theta)
+            assert deviation <= 1.5 * case["tol"], (deviation, case)
+        assert status in range(5)
