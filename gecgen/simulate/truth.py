@@ -13,13 +13,16 @@ A truth file (YAML) looks like
     constant: {translation_std: 1.0e-3, rotation_std: 5.0e-4}   # or values: {"1.ex": 0.001}
     joint_offsets: {std: 2.0e-4}            # or values: [..] per joint (m or rad)
     masses: [{frame: 4, mass: 60, at: [0, 0, 0]}]              # link masses, kg, frame coordinates
+                                            # or `masses: urdf`: the URDF's <inertial> masses, gravity
+                                            # then given in the base link's frame
     sources:
       - {type: sinusoid, variable: 1, error: "1.ey", amplitude: 3.0e-4, period: 0.45, phase: 0.3}
       - {type: sinusoid, variable: 4, joint: 4, amplitude: 1.0e-4, period: 6.283185, phase: 0}
       - {type: cantilever, joint: 3, offset: 0.735, flexibility: 1.1e-6, mass: 40,
          deflection: "-3.ez", slope: "-3.ep"}
       - {type: compliance, joint: 5, compliance: 2.0e-6}
-      - {type: backlash, joint: 2, width: 2.0e-4}
+      - {type: backlash, joint: 2, width: 2.0e-4}    # half the width, on the side of the last motion
+      - {type: play, joint: 6, width: 1.0e-3}        # free play: half the width, on the side the load pushes
       - {type: thermal, error: "1.ez", per_kelvin: 3.6e-5, reference: 20, start: 20, end: 26}
     noise: {repeatability: 5.0e-5, tracker: 4.0e-5}
 """
@@ -29,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gecgen.model.gravity import robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.robot import Robot
 from gecgen.model.validation import require, require_keys
@@ -48,7 +52,7 @@ class Truth:
     joint_offsets: np.ndarray  # (n,) m or rad
     sources: tuple[Source, ...]
     gravity: np.ndarray  # (3,) m/s^2 in the world frame
-    masses: tuple[dict, ...]  # {frame, mass (kg), at (3,) in that frame}
+    masses: tuple[dict, ...] | str  # {frame, mass (kg), at (3,) in that frame}, or "urdf"
     repeatability: float  # m, per pose (all targets of a pose move together)
     tracker: float  # m, per measured point and coordinate
     spec: dict = field(default_factory=dict)
@@ -63,6 +67,7 @@ _SOURCE_KEYS = {
     "cantilever": ({"joint", "flexibility"}, {"offset", "mass", "deflection", "slope"}),
     "compliance": ({"joint", "compliance"}, set()),
     "backlash": ({"joint", "width"}, set()),
+    "play": ({"joint", "width"}, set()),
     "thermal": ({"error", "per_kelvin"}, {"reference", "start", "end", "column"}),
 }
 
@@ -126,7 +131,7 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
             for key in ("deflection", "slope"):
                 if key in s:
                     p[key] = _error_index(robot, s[key], f"{sw}.{key}")
-        elif s["type"] in ("compliance", "backlash"):
+        elif s["type"] in ("compliance", "backlash", "play"):
             p["joint"] = _joint(robot, s["joint"], f"{sw}.joint")
             require(robot.joints[p["joint"]].kind == "R", f"{sw}.joint: {s['type']} needs a revolute joint")
         else:
@@ -135,8 +140,13 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
         sources.append(Source(s["type"], p))
     noise = spec.get("noise") or {}
     require_keys(noise, f"{where}: noise", optional={"repeatability", "tracker"})
-    masses = tuple(spec.get("masses") or ())
-    for k, m in enumerate(masses):
+    masses = spec.get("masses") or []
+    if masses == "urdf":
+        require(robot.urdf, f"{where}: masses: urdf needs a robot built from a URDF")
+    else:
+        require(isinstance(masses, list), f"{where}: masses: a list of {{frame, mass, at}}, or urdf")
+        masses = tuple(masses)
+    for k, m in enumerate(() if masses == "urdf" else masses):
         require(isinstance(m, dict), f"{where}: masses[{k}]: expected {{frame, mass, at}}")
         require_keys(m, f"{where}: masses[{k}]", required={"frame", "mass"}, optional={"at"})
     resolved = dict(spec)
@@ -167,13 +177,16 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
     F = frames(robot, q)
     N = len(q)
     points = []  # (mass (N,), world position (N, 3), first frame it rides on)
-    for m in truth.masses:
+    tau = np.zeros((N, robot.n))
+    if truth.masses == "urdf":
+        revolute = [i for i, j in enumerate(robot.joints) if j.kind == "R"]
+        tau[:, revolute] = robot_gravity_torques(robot, q, [robot.joints[i].name for i in revolute], truth.gravity)
+    for m in () if truth.masses == "urdf" else truth.masses:
         at = np.array(m.get("at", [0, 0, 0]), float)
         W = F[m["frame"]]
         points.append((np.full(N, float(m["mass"])), W[:, :3, :3] @ at + W[:, :3, 3], m["frame"]))
     tool = F[-1]
     points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n + 1))
-    tau = np.zeros((N, robot.n))
     for i, joint in enumerate(robot.joints):
         if joint.kind != "R":
             continue
@@ -210,10 +223,11 @@ def true_state(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray
                 eps[:, p["deflection"][0]] += p["deflection"][1] * p["flexibility"] * weight * length ** 3 / 3
             if "slope" in p:  # tip slope W L^2 / (2 EI)
                 eps[:, p["slope"][0]] += p["slope"][1] * p["flexibility"] * weight * length ** 2 / 2
-        elif s.kind == "compliance":
+        elif s.kind in ("compliance", "play"):
             if tau is None:
                 tau = gravity_torques(robot, truth, q, payload_kg, payload_at)
-            dq[:, p["joint"]] += p["compliance"] * tau[:, p["joint"]]
+            load = tau[:, p["joint"]]
+            dq[:, p["joint"]] += p["compliance"] * load if s.kind == "compliance" else 0.5 * p["width"] * np.sign(load)
         elif s.kind == "backlash":
             dq[:, p["joint"]] += 0.5 * p["width"] * approach[:, p["joint"]]
         elif s.kind == "thermal":
