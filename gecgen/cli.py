@@ -193,7 +193,7 @@ def cmd_diagnose(args) -> dict:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
         diag = diagnose(robot, model, data, val, registration_mode=args.register, progress=progress,
-                        noise_mm=args.noise_mm)
+                        noise_mm=args.noise_mm, max_rounds=args.max_rounds)
     out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
@@ -310,6 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", help="folder for report.md and its plots")
     p.add_argument("--register", choices=["auto", "always", "never"], default="auto")
+    p.add_argument("--max-rounds", type=int, default=50,
+                   help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
     p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "
                                                    "remains is only noise (default: from repeated poses, if any)")
     return parser

@@ -32,36 +32,24 @@ import yaml
 from scipy import stats
 
 from gecgen.files import write_atomically
+from gecgen.loop.dictionary import candidates, refine_period
+from gecgen.loop.screening import MIN_CV_GAIN, Hit, cv_rms, folds, passing, screen, selection_cv_rms
 from gecgen.model.errors import ErrorModel, error_model_from_dict
-from gecgen.model.kinematics import constant, frames
 from gecgen.model.measurements import Measurements
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, identify, position_errors, rows_H_and_residual, summary
 
-#: family-wise false-alarm rate of one screening round
-ALPHA = 1e-3
-#: a candidate must lower the cross-validated RMS by at least this fraction
-MIN_CV_GAIN = 0.01
-FOLDS = 5
-MAX_ROUNDS = 8
-PERIODS = 40
-#: a candidate's columns must keep this share of their squared norm outside the current model
-MIN_INDEPENDENCE = 1e-6
+#: rounds at most: a safety net, not the stopping rule (that is the statistics)
+MAX_ROUNDS = 50
 #: the strongest (candidate, error) pairs among which each cross-validation fold makes its own choice
 SHORTLIST = 200
+#: choices that fail the selection check before a tier is given up
+SELECTION_TRIES = 3
+#: candidates still listed as correlating with the final residual
+CORRELATES = 5
 #: fitted effects this similar (cosine) are indistinguishable on the data
 SAME_EFFECT = 0.95
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A group of new terms, all in the variables `variables`, for one generalized error."""
-
-    family: str
-    variables: tuple[str, ...]
-    terms: tuple[str, ...]
-    values: np.ndarray  # (P, len(terms)) term values per pose
 
 
 @dataclass
@@ -79,200 +67,6 @@ class Effect:
         return {"error": self.error, "variables": self.variables, "terms": self.terms, "family": self.family,
                 "gain_mm": self.gain_mm, "p_value": self.p_value, "coefficients": self.coefficients,
                 "indistinguishable": self.alternatives}
-
-
-def _range(v: np.ndarray) -> float:
-    return float(v.max() - v.min()) if len(v) else 0.0
-
-
-def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[int, ...]]:
-    """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow)."""
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
-    q = rng.uniform(lo, hi, (16, robot.n))
-    W = frames(robot, q)
-    axes = [W[i][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
-            for i, j in enumerate(robot.joints)]
-    groups, run = [], [0]
-    for i in range(1, robot.n):
-        both_r = robot.joints[i].kind == robot.joints[run[-1]].kind == "R"
-        if both_r and np.allclose(np.cross(axes[run[-1]], axes[i]), 0, atol=1e-9):
-            run.append(i)
-        else:
-            if len(run) > 1:
-                groups.append(tuple(run))
-            run = [i]
-    if len(run) > 1:
-        groups.append(tuple(run))
-    return groups
-
-
-def fourier_candidate(name: str, v: np.ndarray, period: float) -> Candidate:
-    """sin and cos of 2 pi v / period (period rounded to 4 significant digits, as written)."""
-    period = float(f"{period:.4g}")
-    a = 2 * np.pi * v / period
-    return Candidate("fourier", (name,), (f"sin(2*pi*{name}/{period:g})", f"cos(2*pi*{name}/{period:g})"),
-                     np.column_stack([np.sin(a), np.cos(a)]))
-
-
-def refine_period(best: Candidate, data: Measurements, screen_one) -> Candidate:
-    """A fine scan of periods around a Fourier winner of the coarse scan (one grid step each way)."""
-    name = best.variables[0]
-    v = data.q[:, int(name[1:]) - 1]
-    period = float(best.terms[0].split("/")[-1].rstrip(")"))
-    span = _range(v)
-    step = (2 * span / max(span / 60, 1e-12)) ** (1 / (PERIODS - 1))
-    fine = [fourier_candidate(name, v, p) for p in np.geomspace(period / step, period * step, 41)]
-    return max(fine, key=screen_one)
-
-
-def candidates(robot: Robot, model: ErrorModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
-    """Every candidate term group the data can support (variables that actually vary)."""
-    out: list[Candidate] = []
-    present = {t.text for ts in model.terms for t in ts}
-
-    def add(family, variables, terms, values):
-        out.append(Candidate(family, tuple(variables), tuple(terms), np.column_stack(values)))
-
-    moving = [i for i in range(robot.n) if _range(data.q[:, i]) > 1e-9]
-    # a constant generalized error the model leaves out (screen() only pairs it with errors that lack it)
-    add("geometric", [], ["1"], [np.ones(data.n_poses)])
-    for i in moving:
-        v, name, joint = data.q[:, i], f"q{i + 1}", robot.joints[i]
-        top = max([k for k in range(1, 9) if f"{name}**{k}" in present or (k == 1 and name in present)], default=0)
-        for k in range(1, top + 3):  # every order up to two above the model's highest
-            add("polynomial", [name], [f"{name}**{k}" if k > 1 else name], [v ** k])
-        if joint.kind == "R":
-            add("trigonometric", [name], [f"sin({name})", f"cos({name})"], [np.sin(v), np.cos(v)])
-            add("trigonometric", [name], [f"sin(2*{name})", f"cos(2*{name})"], [np.sin(2 * v), np.cos(2 * v)])
-        span = _range(v)
-        if joint.kind == "P" or span < np.pi:
-            distinct = np.unique(v)
-            spacing = np.median(np.diff(distinct)) if len(distinct) > 2 else span / 2
-            # at least four distinct values of the variable per period, or a sinusoid can alias through the data
-            shortest = max(2.5 * spacing, span / 60, 4 * span / max(len(distinct), 1))
-            for period in np.geomspace(shortest, 2 * span, PERIODS) if 2 * span > shortest else ():
-                out.append(fourier_candidate(name, v, period))
-    for group in parallel_joint_groups(robot, rng):
-        for a, b in zip(group, group[1:]):
-            names = [f"q{a + 1}", f"q{b + 1}"]
-            s = data.q[:, a] + data.q[:, b]
-            add("trigonometric", names, [f"sin({names[0]} + {names[1]})", f"cos({names[0]} + {names[1]})"],
-                [np.sin(s), np.cos(s)])
-    wrench = [k for k in range(6) if _range(data.w[:, k]) > 1e-9]
-    for k in wrench:
-        f, fn = data.w[:, k], WRENCH[k]
-        add("wrench", [fn], [fn], [f])
-        for i in moving:
-            name = f"q{i + 1}"
-            add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
-            add("wrench x joint", [fn, name], [f"{fn}*{name}**2"], [f * data.q[:, i] ** 2])
-    force = np.linalg.norm(data.w[:, :3], axis=1)
-    # only when the force turns in the sensor frame does its magnitude differ from one component
-    if sum(_range(data.w[:, k]) > 0.01 * _range(force) for k in range(3)) > 1:
-        # the payload's weight, whatever direction the sensor sees it in
-        magnitude = "sqrt(fx**2 + fy**2 + fz**2)"
-        add("payload", ["payload"], [magnitude], [force])
-        for i in moving:
-            add("payload x joint", ["payload", f"q{i + 1}"], [f"{magnitude}*q{i + 1}"], [force * data.q[:, i]])
-    for k, a in enumerate(data.aux_names):
-        v = data.aux[:, k]
-        if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):
-            add("auxiliary", [a], [a], [v])
-            add("auxiliary", [a], [f"{a}**2"], [v ** 2])
-    return out
-
-
-def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarray, sigma2: float,
-           cands: list[Candidate], errors: list[int]) -> list[tuple[float, int, int, np.ndarray]]:
-    """(drop in RSS, candidate index, error index, projected fitted effect (3R,)) for every pair.
-
-    J (3R, ne) is J_e at the current fit for the measured rows; rows_pose (3R,) the pose of each
-    row; resid (3R,) is orthogonal to the columns of Q (3R, k).
-    """
-    results = []
-    F = np.concatenate([c.values for c in cands], axis=1)[rows_pose]  # (3R, total columns)
-    sizes = [c.values.shape[1] for c in cands]
-    starts = np.cumsum([0] + sizes)
-    for e in errors:
-        X = J[:, e:e + 1] * F  # all candidate columns for error e
-        norms = np.linalg.norm(X, axis=0)
-        if not np.any(norms > 0):
-            continue
-        QtX = Q.T @ X
-        rX = resid @ X
-        for ci, c in enumerate(cands):
-            s = slice(starts[ci], starts[ci + 1])
-            Xs = X[:, s]
-            G = Xs.T @ Xs - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
-            scale = np.sqrt(np.maximum(np.diag(Xs.T @ Xs), 1e-300))
-            Gs = G / np.outer(scale, scale)
-            if np.linalg.eigvalsh(Gs).min() < MIN_INDEPENDENCE:
-                continue  # (nearly) inside the current model: nothing new to add
-            b = rX[s] / scale
-            beta = np.linalg.solve(Gs, b)
-            drop = float(b @ beta)
-            if drop > 9 * sigma2:  # cheap pre-filter; the real test follows
-                fitted = (Xs - Q @ QtX[:, s]) @ (beta / scale)
-                results.append((drop, ci, e, fitted))
-    results.sort(key=lambda t: -t[0])
-    return results
-
-
-def _folds(n_poses: int, rng: np.random.Generator) -> np.ndarray:
-    return rng.permutation(n_poses) % FOLDS
-
-
-def _held_out_sq(X: np.ndarray, r: np.ndarray, test: np.ndarray) -> float:
-    """Squared error on the `test` rows of the correction X dc ~ r fitted on the other rows."""
-    scale = np.maximum(np.linalg.norm(X[~test], axis=0), 1e-300)
-    dc = np.linalg.lstsq(X[~test] / scale, r[~test], rcond=None)[0] / scale
-    return float(np.sum((r[test] - X[test] @ dc) ** 2))
-
-
-def cv_rms(H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray) -> float:
-    """k-fold cross-validated RMS point error (m) of a linear correction H dc ~ r (3R rows)."""
-    sq = sum(_held_out_sq(H, r, fold[rows_pose] == f) for f in range(FOLDS))
-    return float(np.sqrt(sq / (len(r) / 3)))
-
-
-def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
-                     cands: list[Candidate], shortlist: list[tuple[int, int]]) -> float:
-    """k-fold cross-validated RMS point error (m) of the choice itself: in each fold the screening
-    runs on the training part alone, its strongest candidate is added, and the held-out poses are
-    predicted. The best of thousands of candidates always fits the poses it was picked on better
-    than new ones; only an effect that wins on the other folds' poses too is real. The folds
-    choose among `shortlist`, the (candidate, error) pairs strongest on all poses: a pair far down
-    that list does not win on four fifths of them."""
-    by_error: dict[int, list[int]] = {}
-    for ci, e in shortlist:
-        by_error.setdefault(e, []).append(ci)
-    sq = 0.0
-    for f in range(FOLDS):
-        test = fold[rows_pose] == f
-        Ht, rt = H[~test], r[~test]
-        Q = np.linalg.qr(Ht / np.maximum(np.linalg.norm(Ht, axis=0), 1e-300))[0]
-        resid = rt - Q @ (Q.T @ rt)
-        sigma2 = float(resid @ resid) / max(len(rt) - H.shape[1], 1)
-        best = max(((drop, cis[ci], e) for e, cis in by_error.items()
-                    for drop, ci, _, _ in screen(J[~test], rows_pose[~test], resid, Q, sigma2,
-                                                  [cands[k] for k in cis], [e])), default=None)
-        X = H if best is None else np.column_stack([H, J[:, best[2]:best[2] + 1] * cands[best[1]].values[rows_pose]])
-        sq += _held_out_sq(X, r, test)
-    return float(np.sqrt(sq / (len(r) / 3)))
-
-
-def _first_accepted(found, cands, J, H, r, rows_pose, fold, sigma2, n_tests, base_cv):
-    """The strongest candidate that passes the corrected chi-square test and lowers the CV RMS."""
-    for drop, ci, e, fitted in found[:8]:
-        p = float(stats.chi2.sf(drop / sigma2, len(cands[ci].terms)))
-        if p * n_tests > ALPHA:
-            return None  # sorted by drop: nothing further can pass either
-        X = J[:, e:e + 1] * cands[ci].values[rows_pose]
-        cv = cv_rms(np.column_stack([H, X]), r, rows_pose, fold)
-        if cv < (1 - MIN_CV_GAIN) * base_cv:
-            return drop, ci, e, fitted, p, cv
-    return None
 
 
 @dataclass
@@ -327,24 +121,40 @@ class Diagnosis:
     remaining: dict
 
 
+def _choose(found: list[Hit], cands, J, H, r, rows_pose, fold, n_tests: int, base_cv: float):
+    """The first candidate, most significant first, that passes the corrected chi-square test,
+    lowers the cross-validated RMS, and whose choice cross-validates (`selection_cv_rms`): when a
+    choice fails that check the next one is tried, with the failed one out of the folds' shortlist.
+    Returns (hit, p, selection cv) or None."""
+    shortlist = [(h.candidate, h.error) for h in found[:SHORTLIST]]
+    for hit, p, _ in passing(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv)[:SELECTION_TRIES]:
+        cv = selection_cv_rms(J, H, r, rows_pose, fold, cands, shortlist)
+        if cv < (1 - MIN_CV_GAIN) * base_cv:
+            return hit, p, cv  # the gain reported is that of the choice, not of the winner
+        shortlist.remove((hit.candidate, hit.error))
+    return None
+
+
 def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
-             registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None) -> Diagnosis:
+             registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None,
+             max_rounds: int = MAX_ROUNDS) -> Diagnosis:
     """Run the loop; without `val`, a seeded fifth of the poses is held out for the report.
     `noise_mm`: the measurement noise per coordinate (mm), when known; otherwise it is estimated
-    from repeated poses of `data`, if any. It decides whether what remains is only noise."""
+    from repeated poses of `data`, if any. It decides whether what remains is only noise. The loop
+    stops when nothing passes the statistics, or after `max_rounds`."""
     rng = np.random.default_rng(seed)
     noise = noise_floor(data, noise_mm)
     if val is None:
         held = rng.permutation(data.n_poses)
         n_val = max(1, data.n_poses // 5)
         val, data = data.subset(np.sort(held[:n_val])), data.subset(np.sort(held[n_val:]))
-    fold = _folds(data.n_poses, rng)
+    fold = folds(data.n_poses, rng)
     rnd = first = _fit(robot, model, data, registration_mode)
     if first.fit.failures:
         raise RuntimeError(f"the declared model's fit is not trustworthy: {first.fit.failures[0]}")
     effects: list[Effect] = []
-    history, tested = [], 0
-    for round_no in range(1, MAX_ROUNDS + 1):
+    history, tested, correlates = [], 0, []
+    for round_no in range(1, max_rounds + 1):
         if progress:
             progress(round_no, rnd.fit.train["rms_mm"])
         y = rnd.fit.registration.to_world(data.xyz)
@@ -353,7 +163,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         Q = np.linalg.qr(H / np.linalg.norm(H, axis=0))[0]
         m, k = len(r), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
-        cands = candidates(robot, rnd.model, data, rng)
+        cands = candidates(rnd.cm, data, rng)
         eps = rnd.cm.eps(data.q, data.w, data.aux_columns(rnd.model.aux), rnd.fit.c)
         _, Jall = rnd.cm.J_e(data.q, eps)
         J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
@@ -367,39 +177,39 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             indices = [k for k, c in enumerate(cands) if tier(c)]
             found = screen(J, rows_pose, r, Q, sigma2, [cands[k] for k in indices], errors)
             # a term the error already has (kept or eliminated) is never new, however its column moved
-            found = [(drop, indices[ci], e, fitted) for drop, ci, e, fitted in found
-                     if not set(cands[indices[ci]].terms) & present[e]]
+            found = [Hit(h.drop, h.log_p, indices[h.candidate], h.error, h.fitted) for h in found
+                     if not set(cands[indices[h.candidate]].terms) & present[h.error]]
             results += found
-            n_tests = max(1, len(indices) * len(errors))
+            n_tests = max(1, sum(len(errors) if cands[k].errors is None else len(cands[k].errors) for k in indices))
             tested += n_tests
-            chosen = _first_accepted(found, cands, J, H, r, rows_pose, fold, sigma2, n_tests, base_cv)
+            chosen = _choose(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv)
             if chosen:
-                cv = selection_cv_rms(J, H, r, rows_pose, fold, cands, [(ci, e) for _, ci, e, _ in found[:SHORTLIST]])
-                if cv < (1 - MIN_CV_GAIN) * base_cv:
-                    chosen = (*chosen[:5], cv)  # the gain reported is that of the choice, not of the winner
-                    break
-                chosen = None
-        results.sort(key=lambda t: -t[0])
+                break
+        results.sort(key=lambda h: h.log_p)
         history.append({"round": round_no, "train_rms_mm": rnd.fit.train["rms_mm"], "cv_rms_mm": 1e3 * base_cv,
-                        "candidates": len(cands) * len(errors), "accepted": None})
+                        "candidates": n_tests, "accepted": None})
         if chosen is None:
+            correlates = [{"error": robot.error_names()[h.error], "terms": list(cands[h.candidate].terms),
+                           "family": cands[h.candidate].family, "log10_p": h.log_p / np.log(10)}
+                          for h in results[:CORRELATES]]
             break
-        drop, ci, e, fitted, p, cv = chosen
-        c = cands[ci]
+        hit, p, cv = chosen
+        e, c = hit.error, cands[hit.candidate]
         if c.family == "fourier":
             def drop_of(cand, e=e):
                 found = screen(J, rows_pose, r, Q, 0.0, [cand], [e])
-                return found[0][0] if found else 0.0
+                return found[0].drop if found else 0.0
             c = refine_period(c, data, drop_of)
         history[-1]["accepted"] = f"{robot.error_names()[e]}: {', '.join(c.terms)}"
-        alternatives, seen = [], {(e, cands[ci].terms)}
-        for d2, ci2, e2, f2 in results[:200]:
-            if (e2, cands[ci2].terms) in seen or d2 < 0.5 * drop:
+        alternatives, seen = [], {(e, cands[hit.candidate].terms)}
+        for h in results[:200]:
+            key = (h.error, cands[h.candidate].terms)
+            if key in seen or h.drop < 0.5 * hit.drop:
                 continue
-            seen.add((e2, cands[ci2].terms))
-            cos = abs(f2 @ fitted) / (np.linalg.norm(f2) * np.linalg.norm(fitted))
+            seen.add(key)
+            cos = abs(h.fitted @ hit.fitted) / (np.linalg.norm(h.fitted) * np.linalg.norm(hit.fitted))
             if cos > SAME_EFFECT:
-                alternatives.append({"error": robot.error_names()[e2], "terms": list(cands[ci2].terms),
+                alternatives.append({"error": robot.error_names()[h.error], "terms": list(key[1]),
                                      "similarity": float(cos)})
         new_model = _with_terms(robot, rnd.model, e, c.terms, data.aux_names)
         refit = _fit(robot, new_model, data, registration_mode)
@@ -416,7 +226,8 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     after = _scores(rnd, data, val)
     # the last round's CV is the final model's unless that round added an effect (the round cap)
     final_cv = history[-1]["cv_rms_mm"] if history[-1]["accepted"] is None else None
-    remaining = what_remains(rnd, data, final_cv, noise)
+    remaining = {**what_remains(rnd, data, final_cv, noise), "correlates": correlates,
+                 "stopped": "round cap" if history[-1]["accepted"] else "nothing passes the statistics"}
     return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining)
 
 

@@ -1,0 +1,200 @@
+"""The candidate dictionary of diagnose: what a generalized error may lack, as groups of terms
+each tested as one (their columns together, degrees of freedom counted).
+
+Two kinds. Kinematic shapes (`kinematic_candidates`) are offered to every generalized error.
+Physical effects (`load_candidates`) are derived from the chain, not listed by shape: each joint
+has one generalized error that turns (or slides) about its own axis, found geometrically, and the
+compiler gives the loads it carries (`CompiledModel.load_signals`: the static gravity regressor's
+base columns, the torque of the measured wrench, the gravity torque from known masses). Then
+
+* joint compliance: the joint's own error times its loads (a harmonic drive twisting under
+  the arm's weight, with the masses unknown: the regressor columns; or known: one torque);
+* link bending: the other five errors of that frame times the same loads;
+* free play: the sign of the load on the joint's own error (the joint sits against the side of its
+  play that the load pushes it to).
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from gecgen.loop.screening import Candidate
+from gecgen.model.errors import ErrorModel
+from gecgen.model.kinematics import constant, frames
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.runtime.compiled import CompiledModel
+
+#: periods scanned per joint for Fourier pairs
+PERIODS = 40
+#: a load signal's name: function(joint[, column])
+SIGNAL = re.compile(r"^(\w+)\((q\d+)\s*(?:,\s*(\d+))?\)$")
+
+
+def _range(v: np.ndarray) -> float:
+    return float(v.max() - v.min()) if len(v) else 0.0
+
+
+def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[int, ...]]:
+    """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow)."""
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    q = rng.uniform(lo, hi, (16, robot.n))
+    W = frames(robot, q)
+    axes = [W[i][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
+            for i, j in enumerate(robot.joints)]
+    groups, run = [], [0]
+    for i in range(1, robot.n):
+        both_r = robot.joints[i].kind == robot.joints[run[-1]].kind == "R"
+        if both_r and np.allclose(np.cross(axes[run[-1]], axes[i]), 0, atol=1e-9):
+            run.append(i)
+        else:
+            if len(run) > 1:
+                groups.append(tuple(run))
+            run = [i]
+    if len(run) > 1:
+        groups.append(tuple(run))
+    return groups
+
+
+def fourier_candidate(name: str, v: np.ndarray, period: float) -> Candidate:
+    """sin and cos of 2 pi v / period (period rounded to 4 significant digits, as written)."""
+    period = float(f"{period:.4g}")
+    a = 2 * np.pi * v / period
+    return Candidate("fourier", (name,), (f"sin(2*pi*{name}/{period:g})", f"cos(2*pi*{name}/{period:g})"),
+                     np.column_stack([np.sin(a), np.cos(a)]))
+
+
+def refine_period(best: Candidate, data: Measurements, screen_one) -> Candidate:
+    """A fine scan of periods around a Fourier winner of the coarse scan (one grid step each way)."""
+    name = best.variables[0]
+    v = data.q[:, int(name[1:]) - 1]
+    period = float(best.terms[0].split("/")[-1].rstrip(")"))
+    span = _range(v)
+    step = (2 * span / max(span / 60, 1e-12)) ** (1 / (PERIODS - 1))
+    fine = [fourier_candidate(name, v, p) for p in np.geomspace(period / step, period * step, 41)]
+    return max(fine, key=screen_one)
+
+
+def kinematic_candidates(robot: Robot, model: ErrorModel, data: Measurements,
+                         rng: np.random.Generator) -> list[Candidate]:
+    """Shapes of errors in the joints, wrench and aux signals, offered to every generalized error:
+    a missing constant, powers (cross-joint coupling included: a joint's angle error times another
+    joint's angle is a power of that joint on that error), Fourier pairs over a scan of periods
+    (rail waviness), sin/cos of one and of twice a revolute angle (eccentricity), of sums of
+    parallel-axis joints (gravity on planar arms), wrench and payload times a joint, aux signals
+    (thermal growth, drift)."""
+    out: list[Candidate] = []
+    present = {t.text for ts in model.terms for t in ts}
+
+    def add(family, variables, terms, values):
+        out.append(Candidate(family, tuple(variables), tuple(terms), np.column_stack(values)))
+
+    moving = [i for i in range(robot.n) if _range(data.q[:, i]) > 1e-9]
+    # a constant generalized error the model leaves out (screen() only pairs it with errors that lack it)
+    add("geometric", [], ["1"], [np.ones(data.n_poses)])
+    for i in moving:
+        v, name, joint = data.q[:, i], f"q{i + 1}", robot.joints[i]
+        top = max([k for k in range(1, 9) if f"{name}**{k}" in present or (k == 1 and name in present)], default=0)
+        for k in range(1, top + 3):  # every order up to two above the model's highest
+            add("polynomial", [name], [f"{name}**{k}" if k > 1 else name], [v ** k])
+        if joint.kind == "R":
+            add("trigonometric", [name], [f"sin({name})", f"cos({name})"], [np.sin(v), np.cos(v)])
+            add("trigonometric", [name], [f"sin(2*{name})", f"cos(2*{name})"], [np.sin(2 * v), np.cos(2 * v)])
+        span = _range(v)
+        if joint.kind == "P" or span < np.pi:
+            distinct = np.unique(v)
+            spacing = np.median(np.diff(distinct)) if len(distinct) > 2 else span / 2
+            # at least four distinct values of the variable per period, or a sinusoid can alias through the data
+            shortest = max(2.5 * spacing, span / 60, 4 * span / max(len(distinct), 1))
+            for period in np.geomspace(shortest, 2 * span, PERIODS) if 2 * span > shortest else ():
+                out.append(fourier_candidate(name, v, period))
+    for group in parallel_joint_groups(robot, rng):
+        for a, b in zip(group, group[1:]):
+            names = [f"q{a + 1}", f"q{b + 1}"]
+            s = data.q[:, a] + data.q[:, b]
+            add("trigonometric", names, [f"sin({names[0]} + {names[1]})", f"cos({names[0]} + {names[1]})"],
+                [np.sin(s), np.cos(s)])
+    wrench = [k for k in range(6) if _range(data.w[:, k]) > 1e-9]
+    for k in wrench:
+        f, fn = data.w[:, k], WRENCH[k]
+        add("wrench", [fn], [fn], [f])
+        for i in moving:
+            name = f"q{i + 1}"
+            add("wrench x joint", [fn, name], [f"{fn}*{name}"], [f * data.q[:, i]])
+            add("wrench x joint", [fn, name], [f"{fn}*{name}**2"], [f * data.q[:, i] ** 2])
+    force = np.linalg.norm(data.w[:, :3], axis=1)
+    # only when the force turns in the sensor frame does its magnitude differ from one component
+    if sum(_range(data.w[:, k]) > 0.01 * _range(force) for k in range(3)) > 1:
+        # the payload's weight, whatever direction the sensor sees it in
+        magnitude = "sqrt(fx**2 + fy**2 + fz**2)"
+        add("payload", ["payload"], [magnitude], [force])
+        for i in moving:
+            add("payload x joint", ["payload", f"q{i + 1}"], [f"{magnitude}*q{i + 1}"], [force * data.q[:, i]])
+    for k, a in enumerate(data.aux_names):
+        v = data.aux[:, k]
+        if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):
+            add("auxiliary", [a], [a], [v])
+            add("auxiliary", [a], [f"{a}**2"], [v ** 2])
+    return out
+
+
+
+
+def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
+    """Joint index (0-based) -> the generalized error (eps index) that moves exactly as the joint
+    does: a rotation about (revolute) or translation along (prismatic) the joint's axis, through a
+    point on it, at the frame after the joint or, failing that, the frame before it. Decided at
+    generic poses on the nominal chain; a joint with neither has no entry."""
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    F = frames(robot, rng.uniform(lo, hi, (8, robot.n)))
+    out = {}
+    for i, joint in enumerate(robot.joints):
+        J = F[i] @ constant(joint.pre)
+        axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
+        for f in (i + 1, i):
+            W = F[f]
+            # column k of a frame is the axis of translation e{x,y,z}[k] and of rotation (ep, es, er)[k]
+            for k in range(3):
+                parallel = np.allclose(np.cross(W[:, :3, k], axis), 0, atol=1e-9)
+                through = joint.kind == "P" or np.allclose(np.cross(W[:, :3, 3] - J[:, :3, 3], axis), 0, atol=1e-9)
+                if parallel and through:
+                    name = ("ex", "ey", "ez")[k] if joint.kind == "P" else ("ep", "es", "er")[k]
+                    out[i] = 6 * f + ERROR_NAMES.index(name)
+                    break
+            if i in out:
+                break
+    return out
+
+
+def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
+    """Joint compliance, link bending and free play (see the module docstring) for every joint
+    whose own error exists and whose loads vary over the data."""
+    names, values = cm.load_signals(data.q, data.w)
+    by_joint: dict[int, dict[str, list[int]]] = {}
+    for k, name in enumerate(names):
+        m = SIGNAL.match(name)
+        if m and _range(values[:, k]) > 1e-12 * max(1.0, float(np.abs(values[:, k]).max())):
+            by_joint.setdefault(int(m.group(2)[1:]) - 1, {}).setdefault(m.group(1), []).append(k)
+    out: list[Candidate] = []
+    for i, e in own_errors(cm.robot, rng).items():
+        loads = by_joint.get(i, {})
+        frame = e // 6
+        others = tuple(6 * frame + k for k in range(6) if 6 * frame + k != e)
+        joint = (f"q{i + 1}",)
+        # unknown masses: the regressor's columns and the wrench torque together; known: one torque
+        groups = [loads.get("gravity", []) + loads.get("wrench_torque", []), loads.get("gravity_torque", [])]
+        for cols in (g for g in groups if g):
+            terms, v = tuple(names[k] for k in cols), values[:, cols]
+            out.append(Candidate("joint compliance", joint, terms, v, (e,)))
+            out.append(Candidate("link bending", joint, terms, v, others))
+        for k in loads.get("gravity_torque") or loads.get("gravity", []):
+            out.append(Candidate("free play", joint, (f"sign({names[k]})",), np.sign(values[:, [k]]), (e,)))
+    return out
+
+
+def candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
+    """The whole dictionary for the current model on this data."""
+    return kinematic_candidates(cm.robot, cm.model, data, rng) + load_candidates(cm, data, rng)
