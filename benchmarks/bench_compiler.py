@@ -1,4 +1,5 @@
-"""Compiler benchmark: generate time per robot, and J_e / H_e per pose in C, CasADi and numpy.
+"""Compiler benchmark: generate time per robot, J_e / H_e per pose in C, CasADi and numpy, and the
+load signals (NAME_loads) per pose in C next to J_e.
 
     python benchmarks/bench_compiler.py      # prints a table, updates docs/benchmarks.md
 
@@ -60,31 +61,45 @@ DRIVER = r"""
 #include <stdio.h>
 #include <time.h>
 #include "%(name)s.h"
+static double seconds(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
 int main(void) {
     static double q[%(N)s_NQ], e[%(N)s_NE], p[3 * %(N)s_NT], J[3 * %(N)s_NT * %(N)s_NE];
-    double sum = 0.0, best = 1e30;
+    static double w[6] = {10, -20, 300, 1, -2, 3}, L[%(N)s_NL + 1];
+    double sum = 0.0, best_J = 1e30, best_L = 1e30, t;
     int rep, i, k;
     for (rep = 0; rep < 5; ++rep) {
-        struct timespec a, b;
-        clock_gettime(CLOCK_MONOTONIC, &a);
+        t = seconds();
         for (i = 0; i < 200000; ++i) {
             for (k = 0; k < %(N)s_NQ; ++k) q[k] = 1e-5 * i + 0.3 * k;
             for (k = 0; k < %(N)s_NE; ++k) e[k] = 1e-4 * k;
             %(name)s_J_e(q, e, p, J);
             sum += J[i %% (3 * %(N)s_NT * %(N)s_NE)];
         }
-        clock_gettime(CLOCK_MONOTONIC, &b);
-        double us = ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / 200000 / 1e3;
-        if (us < best) best = us;
+        t = (seconds() - t) / 200000 * 1e6;
+        if (t < best_J) best_J = t;
+        t = seconds();
+        for (i = 0; i < 200000; ++i) {
+            for (k = 0; k < %(N)s_NQ; ++k) q[k] = 1e-5 * i + 0.3 * k;
+            %(name)s_loads(q, w, L);
+            sum += L[i %% (%(N)s_NL + 1)];
+        }
+        t = (seconds() - t) / 200000 * 1e6;
+        if (t < best_L) best_L = t;
     }
-    printf("%%.4f %%g\n", best, sum);
+    printf("%%.4f %%.4f %%g\n", best_J, best_L, sum);
     return 0;
 }
 """
 
 
-def c_loop_seconds(files: dict, name: str) -> float:
-    """J_e per pose in a plain C loop (one pose's arrays reused, as in a controller), best of 5 x 200,000."""
+def c_loop_seconds(files: dict, name: str) -> tuple[float, float]:
+    """J_e and the load signals per pose in a plain C loop (one pose's arrays reused, as in a
+    controller), each the best of 5 x 200,000."""
     with tempfile.TemporaryDirectory() as tmp:
         for f in (f"{name}.c", f"{name}.h"):
             Path(tmp, f).write_text(files[f])
@@ -93,7 +108,7 @@ def c_loop_seconds(files: dict, name: str) -> float:
         subprocess.run([compiler(), *flags, "-D_POSIX_C_SOURCE=199309L", "driver.c", f"{name}.c", "-o", "driver",
                         "-lm"], cwd=tmp, check=True)
         out = subprocess.run(["./driver"], cwd=tmp, check=True, capture_output=True, text=True).stdout
-        return float(out.split()[0]) * 1e-6
+        return float(out.split()[0]) * 1e-6, float(out.split()[1]) * 1e-6
 
 
 def fd_jacobian(robot, q, h=1e-7):
@@ -125,21 +140,26 @@ def main():
         eps = rng.normal(0, 1e-3, (n_je, robot.n_errors))
         c = rng.normal(0, 1e-5, len(model.coefficients))
         w = rng.normal(0, 50, (n_h, 6))
-        c_loop = c_loop_seconds(files, name)
+        c_loop, c_loads = c_loop_seconds(files, name)
+        n_loads = len(c_model.load_signals(q[:1])[0])
         c_je = best(lambda: c_model.J_e(q, eps)) / n_je
         c_h = best(lambda: c_model.model_targets(q[:n_h], w, None, c, with_H=True)) / n_h
         mapped = ca_model._ca["J_e"].map(n_ca)
         qT, eT = q[:n_ca].T.copy(), eps[:n_ca].T.copy()
         ca_je = best(lambda: mapped(qT, eT), 3) / n_ca
         fd = best(lambda: fd_jacobian(robot, q[:n_fd]), 3) / n_fd
-        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, c_loop, c_je, c_h, ca_je, fd))
+        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, c_loop, c_je, c_h, ca_je, fd,
+                     n_loads, c_loads))
         print(f"{name:13s} targets {len(robot.targets)} coefficients {len(model.coefficients):4d} | generate "
               f"{gen:5.2f} s (symbolic+render {symbolic:4.2f} s) | cc {comp:5.2f} s | J_e C loop {1e6 * c_loop:6.3f} us, "
               f"C batch {1e6 * c_je:6.3f} us, "
-              f"CasADi {1e6 * ca_je:6.2f} us, numpy FD {1e6 * fd:8.1f} us | H_e C {1e6 * c_h:6.2f} us")
+              f"CasADi {1e6 * ca_je:6.2f} us, numpy FD {1e6 * fd:8.1f} us | H_e C {1e6 * c_h:6.2f} us | "
+              f"{n_loads} loads C loop {1e6 * c_loads:6.3f} us ({c_loads / c_loop:.2f} x J_e)")
+    load_average = os.getloadavg()[0]  # other processes on the machine inflate the times
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
     lines = ["## Compiler: generate, and J_e / H_e per pose", "",
-             f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores. Regenerate: `python benchmarks/bench_compiler.py`. "
+             f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores, load average {load_average:.1f} at the end. "
+             "Regenerate: `python benchmarks/bench_compiler.py`. "
              "Each robot with its default error model (`robots/NAME.errors.yaml`). `generate` = a fresh "
              "`gecgen generate` process (imports, parsing, symbolic build, rendering, writing), best of 3; cc = "
              f"compiling the generated C with `{' '.join(CFLAGS)}`. C loop = a C driver calling NAME_J_e on one pose's "
@@ -147,16 +167,18 @@ def main():
              "several batched calls: C through ctypes over 20,000 poses (J_e; the batch writes 3 nt x 6(n+1) doubles "
              "per pose to memory) and 2,000 poses (H_e, at eps(c), wrench included), "
              "CasADi's `Function.map` over 20,000 poses, and numpy central finite differences of the exact chain over "
-             "2,000 poses.", "",
+             "2,000 poses. Loads = NAME_loads (every load signal the robot supports: wrench torques, "
+             "gravity regressor columns) in the same C loop as J_e.", "",
              "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | J_e C loop (us) | "
-             "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | H_e C batch (us) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, nt, nc, gen, sym, comp, c_loop, c_je, c_h, ca_je, fd in rows:
+             "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | H_e C batch (us) | "
+             "load signals | loads C loop (us) | loads / J_e (C loop) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, nt, nc, gen, sym, comp, c_loop, c_je, c_h, ca_je, fd, n_loads, c_loads in rows:
         lines.append(f"| {name} | {nt} | {nc} | {gen:.2f} | {sym:.2f} | {comp:.2f} | {1e6 * c_loop:.3f} | "
                      f"{1e6 * c_je:.3f} | {1e6 * ca_je:.2f} | {1e6 * fd:.1f} | {ca_je / c_je:.0f} | {fd / c_je:.0f} | "
-                     f"{1e6 * c_h:.2f} |")
+                     f"{1e6 * c_h:.2f} | {n_loads} | {1e6 * c_loads:.3f} | {c_loads / c_loop:.2f} |")
     lines += ["", "Targets: generate <= 10 s for a 6-joint robot with its default error model; C J_e <= 1 us per "
-                  "pose for a 6-joint robot with 3 targets (puma560)."]
+                  "pose for a 6-joint robot with 3 targets (puma560); the load signals <= 2 x J_e per pose."]
     write_section("compiler", "\n".join(lines))
 
 

@@ -10,7 +10,7 @@ from gecgen.cli import main
 from gecgen.emit import render
 from gecgen.model import load_error_model, load_robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.symbolic.chain import all_functions
+from gecgen.symbolic.functions import all_functions
 
 
 def test_c_casadi_and_sympy_agree(shipped, rng):
@@ -30,6 +30,11 @@ def test_c_casadi_and_sympy_agree(shipped, rng):
     pa, Ha = ca_model.model_targets(q, w, None, coef, with_H=True)
     np.testing.assert_allclose(pc, pa, atol=1e-12)
     np.testing.assert_allclose(Hc, Ha, atol=1e-12)
+    (names, Lc), (names_ca, La) = c_model.load_signals(q, w), ca_model.load_signals(q, w)
+    assert names == names_ca and Lc.shape == (3, len(names)) and len(names) > robot.n
+    np.testing.assert_allclose(Lc, La, atol=1e-12)
+    for i in range(3):
+        np.testing.assert_allclose(Lc[i], fns["loads"].evaluate(q=q[i], w=w[i])["L"], atol=1e-12)
 
 
 def test_generate_is_deterministic_and_generated_folder_is_current(tmp_path):
@@ -51,6 +56,7 @@ DRIVER = r"""
 int main(void) {
     double q[%(N)s_NQ], w[6] = {10, -20, 300, 1, -2, 3}, c[%(N)s_NC], eps[%(N)s_NE];
     double p[3 * %(N)s_NT], J[3 * %(N)s_NT * %(N)s_NE], H[3 * %(N)s_NT * %(N)s_NC], T[16], qo[%(N)s_NQ];
+    double L[%(N)s_NL];
     int k, it, st;
     for (k = 0; k < %(N)s_NQ; ++k) q[k] = 0.5 * (%(name)s_q_min[k] + %(name)s_q_max[k]) + 0.01 * k;
     for (k = 0; k < %(N)s_NC; ++k) c[k] = 1e-5 * ((k %% 7) - 3);
@@ -59,6 +65,7 @@ int main(void) {
     %(name)s_J_e(q, eps, p, J);
     %(name)s_H_e(q, w, NULL, eps, H);
     %(name)s_model_batch(1, q, w, NULL, c, p, H);
+    %(name)s_loads_batch(1, q, w, L);
     st = %(name)s_compensate(q, w, NULL, c, 30, 1e-11, qo, &it);
     printf("status %%d iterations %%d x %%.6f\n", st, it, T[3]);
     return st == GECGEN_NOT_CONVERGED || st == GECGEN_SINGULAR;

@@ -20,8 +20,9 @@ from gecgen.emit.casadi.printer import element as casadi_element
 from gecgen.emit.printing import straight_line
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
+from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot
-from gecgen.symbolic.chain import all_functions
+from gecgen.symbolic.functions import all_functions
 from gecgen.symbolic.program import Function
 
 HERE = Path(__file__).parent
@@ -49,7 +50,10 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     coef_error = [c.error for c in coefs]
     coef_term = [terms.index(c.term.text) for c in coefs]
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
-    return dict(name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
+    loads = catalog(robot)
+    return dict(nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
+                gravity=[repr(float(v)) for v in robot.gravity],
+                name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
                 nq=robot.n, nt=len(robot.targets), ne=robot.n_errors, nc=len(coefs), nf=len(terms),
                 naux=len(model.aux), joint_names=list(robot.joint_names), target_names=list(robot.target_names),
                 aux_names=list(model.aux), q_min=[_c_literal(j.lower) for j in robot.joints],
@@ -81,6 +85,7 @@ def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = N
         error_model={Path(model.source).name: model.source_hash} if model.source_hash else {"<constant>": ""},
         joints=list(robot.joint_names), targets=list(robot.target_names), aux=list(model.aux),
         errors=robot.error_names(), terms=ctx["terms"], coefficients=model.coefficient_names(robot),
+        load_signals=[name for name, _ in ctx["loads"]],
         coef_error=ctx["coef_error_flat"], coef_term=ctx["coef_term_flat"],
         limits=[[j.lower, j.upper] for j in robot.joints],
         files={k: hashlib.sha256(v.encode()).hexdigest() for k, v in sorted(files.items())},

@@ -1,8 +1,9 @@
 """Error-model files: which basis terms f(q, w, aux) multiply each generalized error.
 
 `eps_e = sum_j c_j f_j(q, w, aux)` (the seed paper's Eq. 5). Terms are parsed from a whitelist of
-Python expression syntax (numbers, variables, + - * / **, sin, cos, and the shorthands poly and
-fourier) into sympy; user text is never evaluated.
+Python expression syntax (numbers, variables, + - * / **, sin, cos, sqrt, sign, abs, the load
+signals of `model.loads` and the shorthands poly, fourier and gravity) into sympy; user text is never
+evaluated.
 """
 from __future__ import annotations
 
@@ -14,12 +15,14 @@ from pathlib import Path
 
 import sympy as sp
 
+from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import ModelError, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
-FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sqrt": sp.sqrt}
+FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sqrt": sp.sqrt, "sign": sp.sign, "abs": sp.Abs}
+ALLOWED = "use numbers, variables, + - * / **, sin, cos, sqrt, sign, abs, poly, fourier and the load signals"
 
 
 @dataclass(frozen=True)
@@ -83,10 +86,10 @@ class ErrorModel:
 
 
 class _TermParser:
-    """Turns one term string into sympy expressions (a list: poly and fourier expand)."""
+    """Turns one term string into sympy expressions (a list: poly, fourier and gravity(J) expand)."""
 
-    def __init__(self, symbols: dict[str, sp.Symbol], where: str):
-        self.symbols, self.where = symbols, where
+    def __init__(self, symbols: dict[str, sp.Symbol], where: str, loads: LoadTerms):
+        self.symbols, self.where, self.loads = symbols, where, loads
 
     def fail(self, text: str, why: str):
         raise ModelError(f"{self.where}: term {text!r}: {why}")
@@ -102,9 +105,11 @@ class _TermParser:
         try:
             tree = ast.parse(text.strip(), mode="eval").body
         except SyntaxError:
-            self.fail(text, "not a valid expression; use numbers, variables, + - * / **, sin, cos, sqrt, poly, fourier")
+            self.fail(text, f"not a valid expression; {ALLOWED}")
         if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in ("poly", "fourier"):
             return self.shorthand(text, tree)
+        if self.loads.is_shorthand(tree):
+            return self.loads.expand(text, tree, self.fail)
         return [(self.expr(text, tree), text.strip())]
 
     def shorthand(self, text: str, node: ast.Call) -> list[tuple[sp.Expr, str]]:
@@ -168,9 +173,11 @@ class _TermParser:
             if len(node.args) != 1 or node.keywords:
                 self.fail(text, f"{node.func.id} takes one argument")
             return FUNCTIONS[node.func.id](self.expr(text, node.args[0]))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in LOAD_FUNCTIONS:
+            return self.loads.symbol(text, node, self.fail)
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("poly", "fourier"):
             self.fail(text, f"{node.func.id}(...) must stand alone as a whole term")
-        self.fail(text, f"'{ast.unparse(node)}' is not allowed; use numbers, variables, + - * / **, sin, cos, sqrt, poly, fourier")
+        self.fail(text, f"'{ast.unparse(node)}' is not allowed; {ALLOWED}")
 
 
 def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
@@ -228,10 +235,11 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
                        f"(q, eps, w, aux, c, f, p, J, T, Jq, t<k>); rename the data column")
     aux_all = tuple(dict.fromkeys(list(declared) + [a for a in aux_columns if a not in symbols and is_aux_name(a)]))
     symbols = variables(robot, aux_all)
+    loads = LoadTerms(robot, symbols)
 
     def parse_list(items, w) -> tuple[Term, ...]:
         require(isinstance(items, list), f"{w}: expected a list of terms such as [\"1\", \"q1\"]")
-        parser = _TermParser(symbols, w)
+        parser = _TermParser(symbols, w, loads)
         out: dict[str, Term] = {}
         for item in items:
             for expr, label in parser.parse(item):

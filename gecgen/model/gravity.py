@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gecgen.model.kinematics import joint_motion
+from gecgen.model.kinematics import frames, joint_motion
 from gecgen.model.robot import Robot
 from gecgen.model.urdf import MassTree, load_mass_tree
 from gecgen.model.validation import require
@@ -68,10 +68,20 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
     return out
 
 
-def robot_gravity_torques(robot: Robot, q: np.ndarray, joints: list[str], gravity=UPRIGHT) -> np.ndarray:
-    """`gravity_torques` of a robot built from a URDF, q (P, n) in robot order, joints by name."""
+def base_link_gravity(robot: Robot, tree: MassTree) -> np.ndarray:
+    """The robot file's `gravity` (world, m/s^2) in the URDF base link's frame, (3,): the world is the
+    base link's frame turned by the file's `base`. Joint 1's child link sits at the chain's frame 1."""
+    link1 = next(link for link, j in tree.joint.items() if j.name == robot.joints[0].name)
+    world = frames(robot, np.zeros((1, robot.n)))[1][0] @ np.linalg.inv(tree.rest_poses()[link1])
+    return world[:3, :3].T @ np.array([float(v) for v in robot.gravity])
+
+
+def robot_gravity_torques(robot: Robot, q: np.ndarray, joints: list[str], gravity=None) -> np.ndarray:
+    """`gravity_torques` of a robot built from a URDF, q (P, n) in robot order, joints by name;
+    gravity in the base link's frame (default: the robot file's `gravity`)."""
     require(robot.urdf, f"{robot.source}: gravity torques need the link masses of a URDF; this robot file "
                         f"gives DH rows without masses (build the robot from its URDF)")
     tree = load_mass_tree(robot.urdf, robot.base_link)
+    gravity = base_link_gravity(robot, tree) if gravity is None else gravity
     return np.concatenate([gravity_torques(tree, dict(zip(robot.joint_names, q[s:s + BLOCK].T)), joints, gravity)
                            for s in range(0, len(q), BLOCK)])

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from gecgen.model import load_robot
-from gecgen.model.gravity import UPRIGHT, robot_gravity_torques
+from gecgen.model.gravity import robot_gravity_torques
 from gecgen.model.measurements import numbers, read_table, write_csv
 from gecgen.model.validation import ModelError, require
 
@@ -21,8 +21,8 @@ def add_parser(command):
     p.add_argument("table", help="CSV with q1..qn: measurements or joint commands")
     p.add_argument("-o", "--output", required=True, help="the table with tau_<joint> columns appended")
     p.add_argument("--joints", help="comma-separated joint names (default: every joint of the robot)")
-    p.add_argument("--gravity", default=",".join(map(str, UPRIGHT)),
-                   help="gravity in the base link's frame, m/s^2 (default: %(default)s, the base upright)")
+    p.add_argument("--gravity", help="gravity in the base link's frame, m/s^2 (default: the robot file's `gravity`, "
+                                     "which is 0,0,-9.80665 in its world unless it says otherwise)")
 
 
 def _gravity(text: str) -> tuple[float, float, float]:
@@ -49,7 +49,7 @@ def run(args) -> dict:
     require(not clash, f"{where}: row 1: column '{clash[0] if clash else ''}' is already there; "
                        f"drop it or write from the table without it")
     q = np.column_stack([numbers(table[:, header.index(c)], c, where) for c in qcols])
-    tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity))
+    tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity) if args.gravity else None)
     write_csv(args.output, header + new,
               (row + [repr(v) for v in t] for row, t in zip(table.tolist(), tau.tolist())))
     units = {c: "N" if robot.joints[robot.joint_names.index(j)].kind == "P" else "N m" for c, j in zip(new, joints)}

@@ -27,6 +27,8 @@ Elementary = tuple
 
 WRENCH = ("fx", "fy", "fz", "mx", "my", "mz")
 ERROR_NAMES = ("ex", "ey", "ez", "es", "er", "ep")
+#: standard gravity, m/s^2, in the robot file's world frame unless the file's `gravity` says otherwise
+GRAVITY = (0, 0, -9.80665)
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,7 @@ class Robot:
     source_hashes: dict[str, str] = field(default_factory=dict)
     urdf: str = ""  # the URDF file a robot file names (its masses give gravity torques), else ""
     base_link: str = ""
+    gravity: tuple = tuple(sp.Rational(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
 
     @property
     def n(self) -> int:
@@ -169,7 +172,7 @@ def load_robot(path: str | Path) -> Robot:
     require(isinstance(spec, dict), f"{where}: expected a mapping at the top level")
     require_keys(spec, where, required={"name", "targets"},
                  optional={"description", "angle_unit", "base", "tool", "joints", "urdf", "base_link",
-                           "tip_link", "wrench_frame", "points"})
+                           "tip_link", "wrench_frame", "points", "gravity"})
     unit = spec.get("angle_unit", "rad")
     require(unit in ("deg", "rad"), f"{where}: angle_unit: {unit!r}; use deg or rad")
     deg = unit == "deg"
@@ -206,4 +209,5 @@ def load_robot(path: str | Path) -> Robot:
     return Robot(name=name, joints=tuple(joints), base=base, tool=tool,
                  targets=_targets(spec["targets"], f"{where}: targets"), wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,
-                 urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "")
+                 urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
+                 gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))

@@ -184,6 +184,13 @@ class MassTree:
     com: dict[str, np.ndarray]
     source: str
 
+    def rest_poses(self) -> dict[str, np.ndarray]:
+        """Every link's pose (4x4, m) in the base link's frame with all joints at zero."""
+        pose = {self.links[0]: np.eye(4)}
+        for link in self.links[1:]:
+            pose[link] = pose[self.parent[link]] @ self.joint[link].origin
+        return pose
+
 
 def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
     """Read the links below `base_link` of a URDF with their masses (links without `<inertial>`

@@ -28,6 +28,7 @@ import numpy as np
 
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
+from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot
 
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
@@ -72,8 +73,8 @@ def _emitter_hash() -> str:
     """Hash of the code that decides what is generated: a change to it invalidates the cache."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for path in sorted([*root.glob("symbolic/*.py"), *root.glob("emit/**/*.py"), *root.glob("emit/**/*.j2"),
-                        root / "model" / "errors.py", root / "model" / "robot.py", root / "model" / "urdf.py"]):
+    model = [root / "model" / f for f in ("errors.py", "robot.py", "urdf.py", "loads.py", "kinematics.py")]
+    for path in sorted([*root.glob("symbolic/*.py"), *root.glob("emit/**/*.py"), *root.glob("emit/**/*.j2"), *model]):
         h.update(path.read_bytes())
     return h.hexdigest()
 
@@ -207,6 +208,18 @@ class CompiledModel:
         p, J = np.empty((N, d.nt, 3)), np.empty((N, 3 * d.nt, d.ne))
         self._fn("J_e_batch")(ctypes.c_int(N), _ptr(q), _ptr(eps), _ptr(p), _ptr(J))
         return p, J
+
+    def load_signals(self, q, w=None) -> tuple[list[str], np.ndarray]:
+        """Every load signal the robot supports at joints q (N, nq) and wrenches w (N, 6) (zero when
+        None): their names, exactly the term-language spellings (`gecgen.model.loads`), and values
+        (N, L) in N m (N for a prismatic joint; gravity columns per kg and per kg m)."""
+        q, w, _, N = self._poses(q, w, np.zeros(self.dims.naux))  # the loads need no aux signals
+        names = catalog(self.robot).names
+        if self.backend == "casadi":
+            return names, self._casadi("loads", N, q, w)[0].reshape(N, len(names))
+        out = np.empty((N, len(names)))
+        self._fn("loads_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(out))
+        return names, out
 
     def nominal_targets(self, q):
         """Target positions (N, nt, 3) of the nominal model."""

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from gecgen.model.errors import ErrorModel, joint_symbols
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Elementary, Robot
+from gecgen.model.errors import joint_symbols
+from gecgen.model.robot import ERROR_NAMES, Elementary, Robot
 from gecgen.symbolic.program import Builder, Function
 
 
@@ -200,19 +200,3 @@ def tool_jacobian_function(robot: Robot) -> Function:
     return b.function("tool_jacobian", "Tool pose T (4x4 row-major) with errors eps and its geometric "
                       "Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},
                       {"T": out, "Jq": [x for row in Jq for x in row]})
-
-
-def basis_function(robot: Robot, model: ErrorModel) -> Function:
-    """Values f (n_terms) of the distinct basis terms at joints q, wrench w (6) and aux signals."""
-    b = Builder()
-    q = joint_symbols(robot)
-    w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
-    aux = tuple(sp.Symbol(n, real=True) for n in model.aux)
-    f = [b.let(t.expr) for t in model.unique_terms()]
-    return b.function("basis", "Distinct basis terms f of the error model at joints q, wrench w "
-                      "(fx fy fz mx my mz) and auxiliary signals aux.", {"q": q, "w": w, "aux": aux}, {"f": f})
-
-
-def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
-    return [fk_function(robot), targets_function(robot), jacobian_function(robot),
-            tool_jacobian_function(robot), basis_function(robot, model)]

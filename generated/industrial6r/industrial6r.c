@@ -11,6 +11,7 @@
 #define NC INDUSTRIAL6R_NC
 #define NF INDUSTRIAL6R_NF
 #define NAUX INDUSTRIAL6R_NAUX
+#define NL INDUSTRIAL6R_NL
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 
@@ -1242,13 +1243,203 @@ void industrial6r_basis(const double *q, const double *w, const double *aux, dou
     f[18] = t5;
 }
 
+void industrial6r_loads(const double *q, const double *w, double *L)
+{
+    (void)q;
+    (void)w;
+    const double t0 = cos(q[0]);
+    const double t1 = sin(q[0]);
+    const double t2 = 0.35*t0;
+    const double t3 = 0.35*t1;
+    const double t4 = cos(q[1]);
+    const double t5 = sin(q[1]);
+    const double t6 = t0*t4;
+    const double t7 = -t0*t5;
+    const double t8 = t1*t4;
+    const double t9 = -t1*t5;
+    const double t10 = t2 + 1.15*t7;
+    const double t11 = t3 + 1.15*t9;
+    const double t12 = 0.675 - 1.15*t4;
+    const double t13 = cos(q[2]);
+    const double t14 = sin(q[2]);
+    const double t15 = t13*t7 - t14*t6;
+    const double t16 = -t13*t6 - t14*t7;
+    const double t17 = t13*t9 - t14*t8;
+    const double t18 = -t13*t8 - t14*t9;
+    const double t19 = -t13*t4 + t14*t5;
+    const double t20 = t13*t5 + t14*t4;
+    const double t21 = t10 - 0.041*t15;
+    const double t22 = t11 - 0.041*t17;
+    const double t23 = t12 - 0.041*t19;
+    const double t24 = cos(q[3]);
+    const double t25 = sin(q[3]);
+    const double t26 = t1*t25 + t15*t24;
+    const double t27 = t1*t24 - t15*t25;
+    const double t28 = -t0*t25 + t17*t24;
+    const double t29 = -t0*t24 - t17*t25;
+    const double t30 = t19*t24;
+    const double t31 = -t19*t25;
+    const double t32 = t16 + t21;
+    const double t33 = t18 + t22;
+    const double t34 = t20 + t23;
+    const double t35 = cos(q[4]);
+    const double t36 = sin(q[4]);
+    const double t37 = t16*t36 + t26*t35;
+    const double t38 = t16*t35 - t26*t36;
+    const double t39 = t18*t36 + t28*t35;
+    const double t40 = t18*t35 - t28*t36;
+    const double t41 = t20*t36 + t30*t35;
+    const double t42 = t20*t35 - t30*t36;
+    const double t43 = cos(q[5]);
+    const double t44 = sin(q[5]);
+    const double t45 = t27*t44 + t37*t43;
+    const double t46 = t27*t43 - t37*t44;
+    const double t47 = t29*t44 + t39*t43;
+    const double t48 = t29*t43 - t39*t44;
+    const double t49 = t31*t44 + t41*t43;
+    const double t50 = t31*t43 - t41*t44;
+    const double t51 = t32 + 0.215*t38;
+    const double t52 = t33 + 0.215*t40;
+    const double t53 = t34 + 0.215*t42;
+    const double t54 = t38*w[2] + t45*w[0] + t46*w[1];
+    const double t55 = t40*w[2] + t47*w[0] + t48*w[1];
+    const double t56 = t42*w[2] + t49*w[0] + t50*w[1];
+    const double t57 = t38*w[5] + t45*w[3] + t46*w[4];
+    const double t58 = t40*w[5] + t47*w[3] + t48*w[4];
+    const double t59 = t42*w[5] + t49*w[3] + t50*w[4];
+    const double t60 = t51*t55 - t52*t54 + t59;
+    const double t61 = -t2 + t51;
+    const double t62 = -t3 + t52;
+    const double t63 = t53 - 0.675;
+    const double t64 = t0*(t54*t63 - t56*t61 + t58) - t1*(-t55*t63 + t56*t62 + t57);
+    const double t65 = -t10 + t51;
+    const double t66 = -t11 + t52;
+    const double t67 = -t12 + t53;
+    const double t68 = t0*(t54*t67 - t56*t65 + t58) - t1*(-t55*t67 + t56*t66 + t57);
+    const double t69 = -t21 + t51;
+    const double t70 = -t22 + t52;
+    const double t71 = -t23 + t53;
+    const double t72 = t16*(-t55*t71 + t56*t70 + t57) + t18*(t54*t71 - t56*t69 + t58) + t20*(-t54*t70 + t55*t69 + t59);
+    const double t73 = -t32 + t51;
+    const double t74 = -t33 + t52;
+    const double t75 = -t34 + t53;
+    const double t76 = -t27*(-t55*t75 + t56*t74 + t57) - t29*(t54*t75 - t56*t73 + t58) - t31*(-t54*t74 + t55*t73 + t59);
+    const double t77 = t38*(-t55*t75 + t56*t74 + t57) + t40*(t54*t75 - t56*t73 + t58) + t42*(-t54*t74 + t55*t73 + t59);
+    const double t78 = 9.80665*t0;
+    const double t79 = 9.80665*t1;
+    const double t80 = t78*(t10 - t2) + t79*(t11 - t3);
+    const double t81 = -t6*t78 - t79*t8;
+    const double t82 = t78*(-t2 + t21) + t79*(t22 - t3);
+    const double t83 = t16*t78 + t18*t79;
+    const double t84 = t26*t78 + t28*t79;
+    const double t85 = -t27*t78 - t29*t79;
+    const double t86 = t37*t78 + t39*t79;
+    const double t87 = t38*t78 + t40*t79;
+    const double t88 = t45*t78 + t47*t79;
+    const double t89 = t46*t78 + t48*t79;
+    const double t90 = t78*(-t10 + t21) + t79*(-t11 + t22);
+    const double t91 = 9.80665*t18;
+    const double t92 = -9.80665*t16;
+    const double t93 = t26*t91 + t28*t92;
+    const double t94 = -t27*t91 - t29*t92;
+    const double t95 = t37*t91 + t39*t92;
+    const double t96 = t38*t91 + t40*t92;
+    const double t97 = t45*t91 + t47*t92;
+    const double t98 = t46*t91 + t48*t92;
+    const double t99 = -9.80665*t29;
+    const double t100 = 9.80665*t27;
+    const double t101 = t100*t39 + t37*t99;
+    const double t102 = t100*t40 + t38*t99;
+    const double t103 = t100*t47 + t45*t99;
+    const double t104 = t100*t48 + t46*t99;
+    const double t105 = 9.80665*t40;
+    const double t106 = -9.80665*t38;
+    const double t107 = t105*t45 + t106*t47;
+    const double t108 = t105*t46 + t106*t48;
+    L[0] = t60;
+    L[1] = t64;
+    L[2] = t68;
+    L[3] = t72;
+    L[4] = t76;
+    L[5] = t77;
+    L[6] = t80;
+    L[7] = t81;
+    L[8] = t82;
+    L[9] = t83;
+    L[10] = t84;
+    L[11] = t85;
+    L[12] = t86;
+    L[13] = t87;
+    L[14] = t88;
+    L[15] = t89;
+    L[16] = t90;
+    L[17] = t83;
+    L[18] = t84;
+    L[19] = t85;
+    L[20] = t86;
+    L[21] = t87;
+    L[22] = t88;
+    L[23] = t89;
+    L[24] = t93;
+    L[25] = t94;
+    L[26] = t95;
+    L[27] = t96;
+    L[28] = t97;
+    L[29] = t98;
+    L[30] = t101;
+    L[31] = t102;
+    L[32] = t103;
+    L[33] = t104;
+    L[34] = t107;
+    L[35] = t108;
+}
+
+void industrial6r_basis_at_loads(const double *q, const double *w, const double *aux, const double *L, double *f)
+{
+    (void)q;
+    (void)w;
+    (void)aux;
+    (void)L;
+    const double t0 = q[0]*q[0];
+    const double t1 = q[1]*q[1];
+    const double t2 = q[2]*q[2];
+    const double t3 = q[3]*q[3];
+    const double t4 = q[4]*q[4];
+    const double t5 = q[5]*q[5];
+    f[0] = 1.0;
+    f[1] = q[0];
+    f[2] = t0;
+    f[3] = w[0];
+    f[4] = w[1];
+    f[5] = w[2];
+    f[6] = w[3];
+    f[7] = w[4];
+    f[8] = w[5];
+    f[9] = q[1];
+    f[10] = t1;
+    f[11] = q[2];
+    f[12] = t2;
+    f[13] = q[3];
+    f[14] = t3;
+    f[15] = q[4];
+    f[16] = t4;
+    f[17] = q[5];
+    f[18] = t5;
+}
+
+/* eps from the basis terms f and the coefficients c. */
+static void combine(const double *f, const double *c, double *eps)
+{
+    int k;
+    for (k = 0; k < NE; ++k) eps[k] = 0.0;
+    for (k = 0; k < NC; ++k) eps[industrial6r_coef_error[k]] += c[k] * f[industrial6r_coef_term[k]];
+}
+
 void industrial6r_eps(const double *q, const double *w, const double *aux, const double *c, double *eps)
 {
     double f[NF];
-    int k;
     industrial6r_basis(q, w, aux, f);
-    for (k = 0; k < NE; ++k) eps[k] = 0.0;
-    for (k = 0; k < NC; ++k) eps[industrial6r_coef_error[k]] += c[k] * f[industrial6r_coef_term[k]];
+    combine(f, c, eps);
 }
 
 void industrial6r_H_e(const double *q, const double *w, const double *aux, const double *eps, double *H)
@@ -1306,6 +1497,13 @@ void industrial6r_J_e_batch(int n, const double *q, const double *eps, double *p
         industrial6r_J_e(row(q, i, NQ), row(eps, i, NE), p + (size_t)i * 3 * NT, J + (size_t)i * 3 * NT * NE);
 }
 
+void industrial6r_loads_batch(int n, const double *q, const double *w, double *L)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        industrial6r_loads(row(q, i, NQ), row(w, i, 6), L + (size_t)i * NL);
+}
+
 /* Solve the symmetric positive definite m x m system A x = b in place (Cholesky); 0 if singular. */
 static int cholesky_solve(double A[NS][NS], double *b, int m)
 {
@@ -1332,14 +1530,16 @@ static int cholesky_solve(double A[NS][NS], double *b, int m)
     return 1;
 }
 
-/* Pose residual of the modelled robot at q against the wanted tool pose Tn: r = [dp; rotation
- * vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq (6 x NQ); returns |r|. */
-static double pose_residual(const double *q, const double *w, const double *aux, const double *c,
+/* Pose residual of the modelled robot at q, with the load signals L, against the wanted tool pose
+ * Tn: r = [dp; rotation vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq
+ * (6 x NQ); returns |r|. */
+static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
                             const double *Tn, double *r, double *Jq)
 {
-    double eps[NE], T[16], norm = 0.0;
+    double f[NF], eps[NE], T[16], norm = 0.0;
     int i, k;
-    industrial6r_eps(q, w, aux, c, eps);
+    industrial6r_basis_at_loads(q, w, aux, L, f);
+    combine(f, c, eps);
     industrial6r_tool_jacobian(q, eps, T, Jq);
     for (i = 0; i < 3; ++i) {
         int u = (i + 1) % 3, v = (i + 2) % 3;
@@ -1394,7 +1594,7 @@ static int nonfinite(const double *q_cmd, double *q_out, int *iterations, int it
 int industrial6r_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations)
 {
-    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], norm;
+    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], L[NL > 0 ? NL : 1], norm;
     int it, j, halvings;
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
@@ -1402,8 +1602,11 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
         || !isfinite(tol) || !(tol > 0.0) || max_iter < 0)
         return nonfinite(q_cmd, q_out, iterations, 0);
     industrial6r_fk(q_cmd, Tn);
+    /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
+     * a sign(load) term would otherwise have no fixed point when the correction crosses its change */
+    industrial6r_loads(q_cmd, w, L);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
-    norm = pose_residual(q_out, w, aux, c, Tn, r, Jq);
+    norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
     for (it = 0; isfinite(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
         if (it == max_iter) {
@@ -1417,7 +1620,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
         /* backtrack so every step lowers the residual: the solution stays on the branch of q_cmd */
         for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
             for (j = 0; j < NQ; ++j) q_try[j] = q_out[j] + alpha * dq[j];
-            norm_try = pose_residual(q_try, w, aux, c, Tn, r_try, J_try);
+            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
             if (norm_try < norm) break;
         }
         if (!(norm_try < norm)) {

@@ -7,6 +7,44 @@
  * Wrench w (6): fx fy fz mx my mz in the sensor frame.
  * Auxiliary signals aux (INDUSTRIAL6R_NAUX): none (pass NULL).
  * Generalized errors eps (INDUSTRIAL6R_NE): frame i errors ex ey ez es er ep at 6i..6i+5.
+ * Load signals L (INDUSTRIAL6R_NL), computed on the nominal chain with gravity (0.0, 0.0, -9.80665) m/s^2
+ * in the world; each name is the term-language spelling an error model uses:
+ *   L[0] wrench_torque(q1): torque of the measured wrench on joint q1 (a1), N m
+ *   L[1] wrench_torque(q2): torque of the measured wrench on joint q2 (a2), N m
+ *   L[2] wrench_torque(q3): torque of the measured wrench on joint q3 (a3), N m
+ *   L[3] wrench_torque(q4): torque of the measured wrench on joint q4 (a4), N m
+ *   L[4] wrench_torque(q5): torque of the measured wrench on joint q5 (a5), N m
+ *   L[5] wrench_torque(q6): torque of the measured wrench on joint q6 (a6), N m
+ *   L[6] gravity(q2,1): gravity on joint q2 (a2) of a unit mass at the origin of frame 2, N m per kg
+ *   L[7] gravity(q2,2): gravity on joint q2 (a2) of a unit first moment along the y axis of frame 2, N m per kg m
+ *   L[8] gravity(q2,3): gravity on joint q2 (a2) of a unit mass at the origin of frame 3, N m per kg
+ *   L[9] gravity(q2,4): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 3, N m per kg m
+ *   L[10] gravity(q2,5): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 4, N m per kg m
+ *   L[11] gravity(q2,6): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 4, N m per kg m
+ *   L[12] gravity(q2,7): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 5, N m per kg m
+ *   L[13] gravity(q2,8): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 5, N m per kg m
+ *   L[14] gravity(q2,9): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[15] gravity(q2,10): gravity on joint q2 (a2) of a unit first moment along the y axis of frame 6, N m per kg m
+ *   L[16] gravity(q3,1): gravity on joint q3 (a3) of a unit mass at the origin of frame 3, N m per kg
+ *   L[17] gravity(q3,2): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 3, N m per kg m
+ *   L[18] gravity(q3,3): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 4, N m per kg m
+ *   L[19] gravity(q3,4): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 4, N m per kg m
+ *   L[20] gravity(q3,5): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 5, N m per kg m
+ *   L[21] gravity(q3,6): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 5, N m per kg m
+ *   L[22] gravity(q3,7): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[23] gravity(q3,8): gravity on joint q3 (a3) of a unit first moment along the y axis of frame 6, N m per kg m
+ *   L[24] gravity(q4,1): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 4, N m per kg m
+ *   L[25] gravity(q4,2): gravity on joint q4 (a4) of a unit first moment along the z axis of frame 4, N m per kg m
+ *   L[26] gravity(q4,3): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 5, N m per kg m
+ *   L[27] gravity(q4,4): gravity on joint q4 (a4) of a unit first moment along the z axis of frame 5, N m per kg m
+ *   L[28] gravity(q4,5): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[29] gravity(q4,6): gravity on joint q4 (a4) of a unit first moment along the y axis of frame 6, N m per kg m
+ *   L[30] gravity(q5,1): gravity on joint q5 (a5) of a unit first moment along the x axis of frame 5, N m per kg m
+ *   L[31] gravity(q5,2): gravity on joint q5 (a5) of a unit first moment along the z axis of frame 5, N m per kg m
+ *   L[32] gravity(q5,3): gravity on joint q5 (a5) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[33] gravity(q5,4): gravity on joint q5 (a5) of a unit first moment along the y axis of frame 6, N m per kg m
+ *   L[34] gravity(q6,1): gravity on joint q6 (a6) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[35] gravity(q6,2): gravity on joint q6 (a6) of a unit first moment along the y axis of frame 6, N m per kg m
  * No function allocates memory or keeps state; all are safe to call from any thread.
  */
 #ifndef GECGEN_INDUSTRIAL6R_H
@@ -22,6 +60,7 @@ extern "C" {
 #define INDUSTRIAL6R_NC 330
 #define INDUSTRIAL6R_NF 19
 #define INDUSTRIAL6R_NAUX 0
+#define INDUSTRIAL6R_NL 36
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES
@@ -53,6 +92,10 @@ void industrial6r_J_e(const double *q, const double *eps, double *p, double *J);
 void industrial6r_tool_jacobian(const double *q, const double *eps, double *T, double *Jq);
 /* Distinct basis terms f of the error model at joints q, wrench w (fx fy fz mx my mz) and auxiliary signals aux. */
 void industrial6r_basis(const double *q, const double *w, const double *aux, double *f);
+/* Load signals L (INDUSTRIAL6R_NL, listed above) at joints q and wrench w (fx fy fz mx my mz): N m, N along a prismatic joint; gravity columns N m per kg and per kg m. */
+void industrial6r_loads(const double *q, const double *w, double *L);
+/* Basis terms f as industrial6r_basis computes them, with the load signals L (INDUSTRIAL6R_NL, as industrial6r_loads returns them) given instead of computed from q and w. */
+void industrial6r_basis_at_loads(const double *q, const double *w, const double *aux, const double *L, double *f);
 
 /* Generalized errors eps = sum_k c_k f_k(q, w, aux) for coefficients c (INDUSTRIAL6R_NC). */
 void industrial6r_eps(const double *q, const double *w, const double *aux, const double *c, double *eps);
@@ -75,11 +118,15 @@ void industrial6r_model_batch(int n, const double *q, const double *w, const dou
 /* n poses: target positions p (n x 3 NT) and J_e (n x 3 NT x NE) at per-pose errors eps (n x NE). */
 void industrial6r_J_e_batch(int n, const double *q, const double *eps, double *p, double *J);
 
+/* n poses: load signals L (n x NL) at joints q (n x NQ) and wrenches w (n x 6). */
+void industrial6r_loads_batch(int n, const double *q, const double *w, double *L);
+
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
  * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
- * max_iter steps until the pose residual is below tol (m). Returns a GECGEN_ status code and the
- * number of iterations used in *iterations (may be NULL). q_out is always written (see the codes);
- * GECGEN_OK promises finite joints whose residual is at most tol. */
+ * max_iter steps until the pose residual is below tol (m). The load signals are held at their
+ * values at q_cmd (so a term such as sign(gravity_torque(q6)) takes the command's sign). Returns a
+ * GECGEN_ status code and the number of iterations used in *iterations (may be NULL). q_out is
+ * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol. */
 int industrial6r_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations);
 

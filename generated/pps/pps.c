@@ -11,6 +11,7 @@
 #define NC PPS_NC
 #define NF PPS_NF
 #define NAUX PPS_NAUX
+#define NL PPS_NL
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 
@@ -1792,13 +1793,117 @@ void pps_basis(const double *q, const double *w, const double *aux, double *f)
     f[18] = t5;
 }
 
+void pps_loads(const double *q, const double *w, double *L)
+{
+    (void)q;
+    (void)w;
+    const double t0 = cos(q[3]);
+    const double t1 = sin(q[3]);
+    const double t2 = q[1] + 0.45;
+    const double t3 = cos(q[4]);
+    const double t4 = sin(q[4]);
+    const double t5 = t0*t3;
+    const double t6 = -t0*t4;
+    const double t7 = -t1*t3;
+    const double t8 = t1*t4;
+    const double t9 = q[0] + 0.4*t1;
+    const double t10 = q[2] + 0.4*t0;
+    const double t11 = cos(q[5]);
+    const double t12 = sin(q[5]);
+    const double t13 = t1*t12 + t11*t6;
+    const double t14 = t1*t11 - t12*t6;
+    const double t15 = t11*t3;
+    const double t16 = -t12*t3;
+    const double t17 = t0*t12 + t11*t8;
+    const double t18 = t0*t11 - t12*t8;
+    const double t19 = 0.15*t13 + 0.4*t14 + t9;
+    const double t20 = 0.15*t15 + 0.4*t16 + t2;
+    const double t21 = t10 + 0.15*t17 + 0.4*t18;
+    const double t22 = t13*w[1] + t14*w[2] + t5*w[0];
+    const double t23 = t15*w[1] + t16*w[2] + t4*w[0];
+    const double t24 = t17*w[1] + t18*w[2] + t7*w[0];
+    const double t25 = t13*w[4] + t14*w[5] + t5*w[3];
+    const double t26 = t15*w[4] + t16*w[5] + t4*w[3];
+    const double t27 = t17*w[4] + t18*w[5] + t7*w[3];
+    const double t28 = -q[0] + t19;
+    const double t29 = -q[2] + t21;
+    const double t30 = t22*t29 - t24*t28 + t26;
+    const double t31 = -t2 + t20;
+    const double t32 = t0*(-t22*t31 + t23*t28 + t27) + t1*(-t23*t29 + t24*t31 + t25);
+    const double t33 = t19 - t9;
+    const double t34 = -t10 + t21;
+    const double t35 = t4*(t22*t34 - t24*t33 + t26) + t5*(-t23*t34 + t24*t31 + t25) + t7*(-t22*t31 + t23*t33 + t27);
+    const double t36 = -9.80665*t0;
+    const double t37 = 9.80665*t1;
+    const double t38 = t36*t6 + t37*t8;
+    const double t39 = t36*t5 + t37*t7;
+    const double t40 = t13*t36 + t17*t37;
+    const double t41 = t14*t36 + t18*t37;
+    const double t42 = -9.80665*t7;
+    const double t43 = 9.80665*t5;
+    const double t44 = t13*t42 + t17*t43;
+    const double t45 = t14*t42 + t18*t43;
+    L[0] = t22;
+    L[1] = t23;
+    L[2] = t24;
+    L[3] = t30;
+    L[4] = t32;
+    L[5] = t35;
+    L[6] = -9.80665;
+    L[7] = t38;
+    L[8] = t39;
+    L[9] = t40;
+    L[10] = t41;
+    L[11] = t44;
+    L[12] = t45;
+}
+
+void pps_basis_at_loads(const double *q, const double *w, const double *aux, const double *L, double *f)
+{
+    (void)q;
+    (void)w;
+    (void)aux;
+    (void)L;
+    const double t0 = q[0]*q[0];
+    const double t1 = q[1]*q[1];
+    const double t2 = q[2]*q[2];
+    const double t3 = q[3]*q[3];
+    const double t4 = q[4]*q[4];
+    const double t5 = q[5]*q[5];
+    f[0] = 1.0;
+    f[1] = q[0];
+    f[2] = t0;
+    f[3] = w[0];
+    f[4] = w[1];
+    f[5] = w[2];
+    f[6] = w[3];
+    f[7] = w[4];
+    f[8] = w[5];
+    f[9] = q[1];
+    f[10] = t1;
+    f[11] = q[2];
+    f[12] = t2;
+    f[13] = q[3];
+    f[14] = t3;
+    f[15] = q[4];
+    f[16] = t4;
+    f[17] = q[5];
+    f[18] = t5;
+}
+
+/* eps from the basis terms f and the coefficients c. */
+static void combine(const double *f, const double *c, double *eps)
+{
+    int k;
+    for (k = 0; k < NE; ++k) eps[k] = 0.0;
+    for (k = 0; k < NC; ++k) eps[pps_coef_error[k]] += c[k] * f[pps_coef_term[k]];
+}
+
 void pps_eps(const double *q, const double *w, const double *aux, const double *c, double *eps)
 {
     double f[NF];
-    int k;
     pps_basis(q, w, aux, f);
-    for (k = 0; k < NE; ++k) eps[k] = 0.0;
-    for (k = 0; k < NC; ++k) eps[pps_coef_error[k]] += c[k] * f[pps_coef_term[k]];
+    combine(f, c, eps);
 }
 
 void pps_H_e(const double *q, const double *w, const double *aux, const double *eps, double *H)
@@ -1856,6 +1961,13 @@ void pps_J_e_batch(int n, const double *q, const double *eps, double *p, double 
         pps_J_e(row(q, i, NQ), row(eps, i, NE), p + (size_t)i * 3 * NT, J + (size_t)i * 3 * NT * NE);
 }
 
+void pps_loads_batch(int n, const double *q, const double *w, double *L)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        pps_loads(row(q, i, NQ), row(w, i, 6), L + (size_t)i * NL);
+}
+
 /* Solve the symmetric positive definite m x m system A x = b in place (Cholesky); 0 if singular. */
 static int cholesky_solve(double A[NS][NS], double *b, int m)
 {
@@ -1882,14 +1994,16 @@ static int cholesky_solve(double A[NS][NS], double *b, int m)
     return 1;
 }
 
-/* Pose residual of the modelled robot at q against the wanted tool pose Tn: r = [dp; rotation
- * vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq (6 x NQ); returns |r|. */
-static double pose_residual(const double *q, const double *w, const double *aux, const double *c,
+/* Pose residual of the modelled robot at q, with the load signals L, against the wanted tool pose
+ * Tn: r = [dp; rotation vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq
+ * (6 x NQ); returns |r|. */
+static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
                             const double *Tn, double *r, double *Jq)
 {
-    double eps[NE], T[16], norm = 0.0;
+    double f[NF], eps[NE], T[16], norm = 0.0;
     int i, k;
-    pps_eps(q, w, aux, c, eps);
+    pps_basis_at_loads(q, w, aux, L, f);
+    combine(f, c, eps);
     pps_tool_jacobian(q, eps, T, Jq);
     for (i = 0; i < 3; ++i) {
         int u = (i + 1) % 3, v = (i + 2) % 3;
@@ -1944,7 +2058,7 @@ static int nonfinite(const double *q_cmd, double *q_out, int *iterations, int it
 int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations)
 {
-    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], norm;
+    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], L[NL > 0 ? NL : 1], norm;
     int it, j, halvings;
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
@@ -1952,8 +2066,11 @@ int pps_compensate(const double *q_cmd, const double *w, const double *aux, cons
         || !isfinite(tol) || !(tol > 0.0) || max_iter < 0)
         return nonfinite(q_cmd, q_out, iterations, 0);
     pps_fk(q_cmd, Tn);
+    /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
+     * a sign(load) term would otherwise have no fixed point when the correction crosses its change */
+    pps_loads(q_cmd, w, L);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
-    norm = pose_residual(q_out, w, aux, c, Tn, r, Jq);
+    norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
     for (it = 0; isfinite(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
         if (it == max_iter) {
@@ -1967,7 +2084,7 @@ int pps_compensate(const double *q_cmd, const double *w, const double *aux, cons
         /* backtrack so every step lowers the residual: the solution stays on the branch of q_cmd */
         for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
             for (j = 0; j < NQ; ++j) q_try[j] = q_out[j] + alpha * dq[j];
-            norm_try = pose_residual(q_try, w, aux, c, Tn, r_try, J_try);
+            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
             if (norm_try < norm) break;
         }
         if (!(norm_try < norm)) {

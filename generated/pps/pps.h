@@ -7,6 +7,21 @@
  * Wrench w (6): fx fy fz mx my mz in the sensor frame.
  * Auxiliary signals aux (PPS_NAUX): none (pass NULL).
  * Generalized errors eps (PPS_NE): frame i errors ex ey ez es er ep at 6i..6i+5.
+ * Load signals L (PPS_NL), computed on the nominal chain with gravity (0.0, -9.80665, 0.0) m/s^2
+ * in the world; each name is the term-language spelling an error model uses:
+ *   L[0] wrench_torque(q1): force of the measured wrench on joint q1 (lateral), N
+ *   L[1] wrench_torque(q2): force of the measured wrench on joint q2 (vertical), N
+ *   L[2] wrench_torque(q3): force of the measured wrench on joint q3 (longitudinal), N
+ *   L[3] wrench_torque(q4): torque of the measured wrench on joint q4 (theta), N m
+ *   L[4] wrench_torque(q5): torque of the measured wrench on joint q5 (roll), N m
+ *   L[5] wrench_torque(q6): torque of the measured wrench on joint q6 (pitch), N m
+ *   L[6] gravity(q2,1): gravity on joint q2 (vertical) of a unit mass at the origin of frame 2, N per kg
+ *   L[7] gravity(q5,1): gravity on joint q5 (roll) of a unit first moment along the x axis of frame 5, N m per kg m
+ *   L[8] gravity(q5,2): gravity on joint q5 (roll) of a unit first moment along the z axis of frame 5, N m per kg m
+ *   L[9] gravity(q5,3): gravity on joint q5 (roll) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[10] gravity(q5,4): gravity on joint q5 (roll) of a unit first moment along the y axis of frame 6, N m per kg m
+ *   L[11] gravity(q6,1): gravity on joint q6 (pitch) of a unit first moment along the x axis of frame 6, N m per kg m
+ *   L[12] gravity(q6,2): gravity on joint q6 (pitch) of a unit first moment along the y axis of frame 6, N m per kg m
  * No function allocates memory or keeps state; all are safe to call from any thread.
  */
 #ifndef GECGEN_PPS_H
@@ -22,6 +37,7 @@ extern "C" {
 #define PPS_NC 330
 #define PPS_NF 19
 #define PPS_NAUX 0
+#define PPS_NL 13
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES
@@ -53,6 +69,10 @@ void pps_J_e(const double *q, const double *eps, double *p, double *J);
 void pps_tool_jacobian(const double *q, const double *eps, double *T, double *Jq);
 /* Distinct basis terms f of the error model at joints q, wrench w (fx fy fz mx my mz) and auxiliary signals aux. */
 void pps_basis(const double *q, const double *w, const double *aux, double *f);
+/* Load signals L (PPS_NL, listed above) at joints q and wrench w (fx fy fz mx my mz): N m, N along a prismatic joint; gravity columns N m per kg and per kg m. */
+void pps_loads(const double *q, const double *w, double *L);
+/* Basis terms f as pps_basis computes them, with the load signals L (PPS_NL, as pps_loads returns them) given instead of computed from q and w. */
+void pps_basis_at_loads(const double *q, const double *w, const double *aux, const double *L, double *f);
 
 /* Generalized errors eps = sum_k c_k f_k(q, w, aux) for coefficients c (PPS_NC). */
 void pps_eps(const double *q, const double *w, const double *aux, const double *c, double *eps);
@@ -75,11 +95,15 @@ void pps_model_batch(int n, const double *q, const double *w, const double *aux,
 /* n poses: target positions p (n x 3 NT) and J_e (n x 3 NT x NE) at per-pose errors eps (n x NE). */
 void pps_J_e_batch(int n, const double *q, const double *eps, double *p, double *J);
 
+/* n poses: load signals L (n x NL) at joints q (n x NQ) and wrenches w (n x 6). */
+void pps_loads_batch(int n, const double *q, const double *w, double *L);
+
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
  * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
- * max_iter steps until the pose residual is below tol (m). Returns a GECGEN_ status code and the
- * number of iterations used in *iterations (may be NULL). q_out is always written (see the codes);
- * GECGEN_OK promises finite joints whose residual is at most tol. */
+ * max_iter steps until the pose residual is below tol (m). The load signals are held at their
+ * values at q_cmd (so a term such as sign(gravity_torque(q6)) takes the command's sign). Returns a
+ * GECGEN_ status code and the number of iterations used in *iterations (may be NULL). q_out is
+ * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol. */
 int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations);
 

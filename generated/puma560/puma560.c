@@ -11,6 +11,7 @@
 #define NC PUMA560_NC
 #define NF PUMA560_NF
 #define NAUX PUMA560_NAUX
+#define NL PUMA560_NL
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 
@@ -1609,13 +1610,168 @@ void puma560_basis(const double *q, const double *w, const double *aux, double *
     f[0] = 1.0;
 }
 
+void puma560_loads(const double *q, const double *w, double *L)
+{
+    (void)q;
+    (void)w;
+    const double t0 = cos(q[0]);
+    const double t1 = sin(q[0]);
+    const double t2 = cos(q[1]);
+    const double t3 = sin(q[1]);
+    const double t4 = t0*t2;
+    const double t5 = -t0*t3;
+    const double t6 = t1*t2;
+    const double t7 = -t1*t3;
+    const double t8 = 0.4318*t4;
+    const double t9 = 0.4318*t6;
+    const double t10 = 0.4318*t3;
+    const double t11 = cos(q[2]);
+    const double t12 = sin(q[2]);
+    const double t13 = t11*t4 + t12*t5;
+    const double t14 = t11*t5 - t12*t4;
+    const double t15 = t11*t6 + t12*t7;
+    const double t16 = t11*t7 - t12*t6;
+    const double t17 = t11*t3 + t12*t2;
+    const double t18 = t11*t2 - t12*t3;
+    const double t19 = 0.15005*t1 + 0.0203*t13 + t8;
+    const double t20 = -0.15005*t0 + 0.0203*t15 + t9;
+    const double t21 = t10 + 0.0203*t17;
+    const double t22 = cos(q[3]);
+    const double t23 = sin(q[3]);
+    const double t24 = -t1*t23 + t13*t22;
+    const double t25 = -t1*t22 - t13*t23;
+    const double t26 = t0*t23 + t15*t22;
+    const double t27 = t0*t22 - t15*t23;
+    const double t28 = t17*t22;
+    const double t29 = -t17*t23;
+    const double t30 = 0.4318*t14 + t19;
+    const double t31 = 0.4318*t16 + t20;
+    const double t32 = 0.4318*t18 + t21;
+    const double t33 = cos(q[4]);
+    const double t34 = sin(q[4]);
+    const double t35 = t14*t34 + t24*t33;
+    const double t36 = t14*t33 - t24*t34;
+    const double t37 = t16*t34 + t26*t33;
+    const double t38 = t16*t33 - t26*t34;
+    const double t39 = t18*t34 + t28*t33;
+    const double t40 = t18*t33 - t28*t34;
+    const double t41 = cos(q[5]);
+    const double t42 = sin(q[5]);
+    const double t43 = t25*t42 + t35*t41;
+    const double t44 = t25*t41 - t35*t42;
+    const double t45 = t27*t42 + t37*t41;
+    const double t46 = t27*t41 - t37*t42;
+    const double t47 = t29*t42 + t39*t41;
+    const double t48 = t29*t41 - t39*t42;
+    const double t49 = t36*w[2] + t43*w[0] + t44*w[1];
+    const double t50 = t38*w[2] + t45*w[0] + t46*w[1];
+    const double t51 = t40*w[2] + t47*w[0] + t48*w[1];
+    const double t52 = t36*w[5] + t43*w[3] + t44*w[4];
+    const double t53 = t38*w[5] + t45*w[3] + t46*w[4];
+    const double t54 = t40*w[5] + t47*w[3] + t48*w[4];
+    const double t55 = t30*t50 - t31*t49 + t54;
+    const double t56 = -t0*(-t30*t51 + t32*t49 + t53) + t1*(t31*t51 - t32*t50 + t52);
+    const double t57 = t30 - t8;
+    const double t58 = t31 - t9;
+    const double t59 = -t10 + t32;
+    const double t60 = -t0*(t49*t59 - t51*t57 + t53) + t1*(-t50*t59 + t51*t58 + t52);
+    const double t61 = -t19 + t30;
+    const double t62 = -t20 + t31;
+    const double t63 = -t21 + t32;
+    const double t64 = t14*(-t50*t63 + t51*t62 + t52) + t16*(t49*t63 - t51*t61 + t53) + t18*(-t49*t62 + t50*t61 + t54);
+    const double t65 = -t25*t52 - t27*t53 - t29*t54;
+    const double t66 = t36*t52 + t38*t53 + t40*t54;
+    const double t67 = -9.80665*t0;
+    const double t68 = -9.80665*t1;
+    const double t69 = t67*t8 + t68*t9;
+    const double t70 = t5*t67 + t68*t7;
+    const double t71 = t19*t67 + t20*t68;
+    const double t72 = t14*t67 + t16*t68;
+    const double t73 = t24*t67 + t26*t68;
+    const double t74 = -t25*t67 - t27*t68;
+    const double t75 = t35*t67 + t37*t68;
+    const double t76 = t36*t67 + t38*t68;
+    const double t77 = t43*t67 + t45*t68;
+    const double t78 = t44*t67 + t46*t68;
+    const double t79 = t67*(t19 - t8) + t68*(t20 - t9);
+    const double t80 = 9.80665*t16;
+    const double t81 = -9.80665*t14;
+    const double t82 = t24*t80 + t26*t81;
+    const double t83 = -t25*t80 - t27*t81;
+    const double t84 = t35*t80 + t37*t81;
+    const double t85 = t36*t80 + t38*t81;
+    const double t86 = t43*t80 + t45*t81;
+    const double t87 = t44*t80 + t46*t81;
+    const double t88 = -9.80665*t27;
+    const double t89 = 9.80665*t25;
+    const double t90 = t35*t88 + t37*t89;
+    const double t91 = t36*t88 + t38*t89;
+    const double t92 = t43*t88 + t45*t89;
+    const double t93 = t44*t88 + t46*t89;
+    const double t94 = 9.80665*t38;
+    const double t95 = -9.80665*t36;
+    const double t96 = t43*t94 + t45*t95;
+    const double t97 = t44*t94 + t46*t95;
+    L[0] = t55;
+    L[1] = t56;
+    L[2] = t60;
+    L[3] = t64;
+    L[4] = t65;
+    L[5] = t66;
+    L[6] = t69;
+    L[7] = t70;
+    L[8] = t71;
+    L[9] = t72;
+    L[10] = t73;
+    L[11] = t74;
+    L[12] = t75;
+    L[13] = t76;
+    L[14] = t77;
+    L[15] = t78;
+    L[16] = t79;
+    L[17] = t72;
+    L[18] = t73;
+    L[19] = t74;
+    L[20] = t75;
+    L[21] = t76;
+    L[22] = t77;
+    L[23] = t78;
+    L[24] = t82;
+    L[25] = t83;
+    L[26] = t84;
+    L[27] = t85;
+    L[28] = t86;
+    L[29] = t87;
+    L[30] = t90;
+    L[31] = t91;
+    L[32] = t92;
+    L[33] = t93;
+    L[34] = t96;
+    L[35] = t97;
+}
+
+void puma560_basis_at_loads(const double *q, const double *w, const double *aux, const double *L, double *f)
+{
+    (void)q;
+    (void)w;
+    (void)aux;
+    (void)L;
+    f[0] = 1.0;
+}
+
+/* eps from the basis terms f and the coefficients c. */
+static void combine(const double *f, const double *c, double *eps)
+{
+    int k;
+    for (k = 0; k < NE; ++k) eps[k] = 0.0;
+    for (k = 0; k < NC; ++k) eps[puma560_coef_error[k]] += c[k] * f[puma560_coef_term[k]];
+}
+
 void puma560_eps(const double *q, const double *w, const double *aux, const double *c, double *eps)
 {
     double f[NF];
-    int k;
     puma560_basis(q, w, aux, f);
-    for (k = 0; k < NE; ++k) eps[k] = 0.0;
-    for (k = 0; k < NC; ++k) eps[puma560_coef_error[k]] += c[k] * f[puma560_coef_term[k]];
+    combine(f, c, eps);
 }
 
 void puma560_H_e(const double *q, const double *w, const double *aux, const double *eps, double *H)
@@ -1673,6 +1829,13 @@ void puma560_J_e_batch(int n, const double *q, const double *eps, double *p, dou
         puma560_J_e(row(q, i, NQ), row(eps, i, NE), p + (size_t)i * 3 * NT, J + (size_t)i * 3 * NT * NE);
 }
 
+void puma560_loads_batch(int n, const double *q, const double *w, double *L)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        puma560_loads(row(q, i, NQ), row(w, i, 6), L + (size_t)i * NL);
+}
+
 /* Solve the symmetric positive definite m x m system A x = b in place (Cholesky); 0 if singular. */
 static int cholesky_solve(double A[NS][NS], double *b, int m)
 {
@@ -1699,14 +1862,16 @@ static int cholesky_solve(double A[NS][NS], double *b, int m)
     return 1;
 }
 
-/* Pose residual of the modelled robot at q against the wanted tool pose Tn: r = [dp; rotation
- * vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq (6 x NQ); returns |r|. */
-static double pose_residual(const double *q, const double *w, const double *aux, const double *c,
+/* Pose residual of the modelled robot at q, with the load signals L, against the wanted tool pose
+ * Tn: r = [dp; rotation vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq
+ * (6 x NQ); returns |r|. */
+static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
                             const double *Tn, double *r, double *Jq)
 {
-    double eps[NE], T[16], norm = 0.0;
+    double f[NF], eps[NE], T[16], norm = 0.0;
     int i, k;
-    puma560_eps(q, w, aux, c, eps);
+    puma560_basis_at_loads(q, w, aux, L, f);
+    combine(f, c, eps);
     puma560_tool_jacobian(q, eps, T, Jq);
     for (i = 0; i < 3; ++i) {
         int u = (i + 1) % 3, v = (i + 2) % 3;
@@ -1761,7 +1926,7 @@ static int nonfinite(const double *q_cmd, double *q_out, int *iterations, int it
 int puma560_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations)
 {
-    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], norm;
+    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], L[NL > 0 ? NL : 1], norm;
     int it, j, halvings;
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
@@ -1769,8 +1934,11 @@ int puma560_compensate(const double *q_cmd, const double *w, const double *aux, 
         || !isfinite(tol) || !(tol > 0.0) || max_iter < 0)
         return nonfinite(q_cmd, q_out, iterations, 0);
     puma560_fk(q_cmd, Tn);
+    /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
+     * a sign(load) term would otherwise have no fixed point when the correction crosses its change */
+    puma560_loads(q_cmd, w, L);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
-    norm = pose_residual(q_out, w, aux, c, Tn, r, Jq);
+    norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
     for (it = 0; isfinite(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
         if (it == max_iter) {
@@ -1784,7 +1952,7 @@ int puma560_compensate(const double *q_cmd, const double *w, const double *aux, 
         /* backtrack so every step lowers the residual: the solution stays on the branch of q_cmd */
         for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
             for (j = 0; j < NQ; ++j) q_try[j] = q_out[j] + alpha * dq[j];
-            norm_try = pose_residual(q_try, w, aux, c, Tn, r_try, J_try);
+            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
             if (norm_try < norm) break;
         }
         if (!(norm_try < norm)) {

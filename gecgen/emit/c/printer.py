@@ -20,6 +20,11 @@ class CPrinter(C99CodePrinter):
     def _print_Rational(self, expr):
         return self._print_Float(expr)
 
+    def _print_sign(self, expr):
+        # 1, 0 or -1 without a branch (copysign would give 1 at 0, where sign is 0)
+        x = self._print(expr.args[0])
+        return f"(({x} > 0.0) - ({x} < 0.0))"
+
     def _print_Pow(self, expr):
         base, exp = expr.args
         if exp.is_Integer and 1 <= abs(int(exp)) <= 4:

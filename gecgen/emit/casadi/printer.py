@@ -11,7 +11,10 @@ class CasadiPrinter(PythonCodePrinter):
     def _print_Function(self, expr):
         return f"ca.{expr.func.__name__}({', '.join(self._print(a) for a in expr.args)})"
 
-    _print_sin = _print_cos = _print_Function
+    _print_sin = _print_cos = _print_sign = _print_Function
+
+    def _print_Abs(self, expr):
+        return f"ca.fabs({self._print(expr.args[0])})"
 
     def _print_Pi(self, expr):
         return "ca.pi"

@@ -1,0 +1,305 @@
+"""Load signals: the torques that the measured wrench and gravity put on each joint, as basis terms.
+
+A compliant joint (harmonic drive, belt, long gear train) or one with play turns with the load it
+carries. These functions of the term language give that load from the joints and the wrench, so an
+error model can carry `er: ["1", "gravity_torque(q6)"]` (a joint stiffness) or
+`er: ["sign(gravity_torque(q6))"]` (free play):
+
+| spelling | value (J a joint name or q<k>) |
+|---|---|
+| `wrench_torque(J)` | (J(q)^T w)_J: the torque (N m; N for a prismatic joint) of the measured wrench on joint J |
+| `gravity(J, r)` | column r of joint J's static gravity regressor, reduced to independent columns (no masses needed) |
+| `gravity(J)` | shorthand for `gravity(J, 1) .. gravity(J, r_J)` |
+| `gravity_torque(J)` | the static gravity torque on joint J from a URDF's masses, tau = -dV/dq (N m or N) |
+
+The canonical spelling (a Term's text, and the names `CompiledModel.load_signals` returns) writes
+the joint as q<k> with no spaces: `wrench_torque(q2)`, `gravity(q2,1)`, `gravity_torque(q6)`. In
+sympy each is a real Symbol of that name; the generated code computes it from the nominal chain
+(`gecgen.symbolic.loads`). This module decides which signals a robot supports, and the constants
+they need: which regressor columns are independent (a numerical rank test at generic poses, fixed
+seed, so the emitted columns are fixed) and the masses each frame carries.
+
+The gravity regressor of joint J: a unit mass at the origin of frame i (i >= J), and a unit first
+moment of mass along each of frame i's axes, produce the torques
+
+    revolute:   (p_i - o_J) . u,   R_i[:, k] . u   with u = g x a_J   (a . (r x m g) = m r . (g x a))
+    prismatic:  a_J . g,           0
+
+(a_J, o_J the joint's world axis and a point on it, g the robot file's `gravity`). Every body the
+joint carries is rigid with one frame i >= J (fixed URDF links, the tool, branches off the chain
+with their joints held at zero), so its mass and first moment are a combination of frame i's four
+columns: these 4 (n - J + 1) candidates span joint J's row of the full regressor restricted to the
+masses and first moments, and the rank test keeps the first independent ones in that order.
+"""
+from __future__ import annotations
+
+import ast
+import re
+from dataclasses import dataclass
+
+import numpy as np
+import sympy as sp
+
+from gecgen.model.kinematics import constant, frames
+from gecgen.model.robot import Robot
+from gecgen.model.urdf import load_mass_tree
+from gecgen.model.validation import ModelError
+
+LOAD_FUNCTIONS = ("wrench_torque", "gravity", "gravity_torque")
+#: a candidate column is independent when its part outside the earlier ones exceeds this fraction of
+#: the joint's largest column (the redundancy analysis's exact-dependency level)
+RANK_TOL = 1e-7
+#: the rank test's generic poses: uniform within the joint limits (clipped to +-pi), fixed seed
+SEED, MIN_POSES = 20240611, 64
+
+
+def load_symbol(name: str) -> sp.Symbol:
+    """The sympy symbol of a load signal, by canonical spelling (e.g. 'gravity(q2,1)')."""
+    return sp.Symbol(name, real=True)
+
+
+def dot(u, v):
+    return sum(x * y for x, y in zip(u, v))
+
+
+def cross3(u, v) -> tuple:
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+def regressor_columns(let, kind: str, a, o, carried, g) -> list:
+    """Candidate gravity-regressor columns of one joint, four per carried frame, in the order
+    [unit mass at the origin, unit first moment along x, y, z]: N m (N for kind "P") per kg and
+    per kg m. a, o: the joint's world axis and a point on it; carried: (R rows, p) world poses of
+    frames J..n; g: gravity (m/s^2, world). Entries are sympy expressions (let = Builder.let) or
+    numpy arrays over poses (let = identity): one formula for the rank test and the emitted code."""
+    if kind == "P":
+        along = let(dot(a, g))
+        return [c for _ in carried for c in (along, 0, 0, 0)]
+    u = tuple(let(x) for x in cross3(g, a))
+    cols = []
+    for R, p in carried:
+        cols.append(let(dot([p[k] - o[k] for k in range(3)], u)))
+        cols += [let(dot([R[k][j] for k in range(3)], u)) for j in range(3)]
+    return cols
+
+
+@dataclass(frozen=True)
+class Signal:
+    """One load signal: its canonical name, kind (one of LOAD_FUNCTIONS), joint (1-based) and, for
+    gravity, the index of its column among the joint's candidates."""
+
+    name: str
+    kind: str
+    joint: int
+    column: int = -1
+
+
+@dataclass(frozen=True)
+class LoadCatalog:
+    """The load signals one robot supports, in the order the generated `NAME_loads` returns them:
+    wrench_torque by joint, gravity by joint and column, gravity_torque by joint.
+
+    params[i]: (mass kg, first moment kg m in frame i's coordinates) of everything rigid with frame
+    i, flat as 4 numbers (URDF robots; empty otherwise). why_not: canonical name of a spelling
+    that is refused -> the reason (gravity(qJ) stands for the joint's gravity columns)."""
+
+    signals: tuple[Signal, ...]
+    params: tuple[tuple[float, ...], ...]
+    why_not: dict
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.signals]
+
+    def by_name(self, name: str) -> Signal | None:
+        return next((s for s in self.signals if s.name == name), None)
+
+    def gravity_rank(self, joint: int) -> int:
+        return sum(1 for s in self.signals if s.kind == "gravity" and s.joint == joint)
+
+    def describe(self, s: Signal, robot: Robot) -> str:
+        """What a signal is, with its unit, in one line (the generated header lists them)."""
+        joint = robot.joints[s.joint - 1]
+        where = f"joint q{s.joint} ({joint.name})"
+        unit = "N" if joint.kind == "P" else "N m"
+        if s.kind == "wrench_torque":
+            return f"{'force' if joint.kind == 'P' else 'torque'} of the measured wrench on {where}, {unit}"
+        if s.kind == "gravity_torque":
+            return f"static gravity {'force' if joint.kind == 'P' else 'torque'} on {where} from the URDF masses " \
+                   f"(-dV/dq), {unit}"
+        frame, k = s.joint + s.column // 4, s.column % 4
+        load = "a unit mass at the origin of" if k == 0 else f"a unit first moment along the {'xyz'[k - 1]} axis of"
+        return f"gravity on {where} of {load} frame {frame}, {unit} per {'kg' if k == 0 else 'kg m'}"
+
+
+_CATALOGS: dict[tuple, LoadCatalog] = {}
+
+
+def catalog(robot: Robot) -> LoadCatalog:
+    """The robot's load signals; computed once per robot content (kinematics, gravity, files)."""
+    key = (robot.joints, robot.base, robot.tool, robot.gravity, robot.wrench_frame, robot.urdf,
+           robot.base_link, tuple(sorted(robot.source_hashes.items())))
+    if key not in _CATALOGS:
+        _CATALOGS[key] = _build_catalog(robot)
+    return _CATALOGS[key]
+
+
+def generic_poses(robot: Robot) -> np.ndarray:
+    """(P, n) joint values for the rank test: deterministic, away from special postures."""
+    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
+    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    return np.random.default_rng(SEED).uniform(lo, hi, (max(MIN_POSES, 8 * robot.n + 8), robot.n))
+
+
+def _numeric_columns(robot: Robot, q: np.ndarray) -> list[np.ndarray]:
+    """Per joint, its candidate columns at poses q: (P, 4 (n - J + 1))."""
+    W = frames(robot, q)[:robot.n + 1]
+    g = np.array([float(v) for v in robot.gravity])
+    poses = [(tuple(tuple(T[:, r, c] for c in range(3)) for r in range(3)), tuple(T[:, r, 3] for r in range(3)))
+             for T in W]
+    out = []
+    for J, joint in enumerate(robot.joints, start=1):
+        F = W[J - 1] @ constant(joint.pre)
+        a = F[:, :3, :3] @ np.array([float(v) for v in joint.axis])
+        cols = regressor_columns(lambda x: x, joint.kind, a.T, F[:, :3, 3].T, poses[J:], g)
+        out.append(np.column_stack([np.broadcast_to(c, len(q)) for c in cols]))
+    return out
+
+
+def _independent(Y: np.ndarray, g: float) -> list[int]:
+    """Indices of the columns of Y (P poses) that are independent of the columns before them
+    (Gram-Schmidt, twice for accuracy), relative to Y's largest column and at least to |g| sqrt(P),
+    the size of a unit first moment's column: the rounding of a float pi/2 in the chain leaves
+    columns of 1e-15 that are no load."""
+    scale = max(np.linalg.norm(Y, axis=0).max(initial=0.0), g * np.sqrt(len(Y)))
+    Q, keep = np.zeros((len(Y), 0)), []
+    for k in range(Y.shape[1]):
+        r = Y[:, k].copy()
+        for _ in range(2):
+            r -= Q @ (Q.T @ r)
+        if np.linalg.norm(r) > RANK_TOL * scale:
+            keep.append(k)
+            Q = np.column_stack([Q, r / np.linalg.norm(r)])
+    return keep
+
+
+def frame_params(robot: Robot) -> tuple[tuple[float, ...], ...]:
+    """Per frame 0..n, (m, m cx, m cy, m cz) of every URDF link rigid with it (kg, kg m, frame i's
+    coordinates); off-chain joints held at zero. Links above joint 1 count for no joint: frame 0 is 0."""
+    tree = load_mass_tree(robot.urdf, robot.base_link)
+    rest = tree.rest_poses()
+    frame_of_joint = {j.name: i for i, j in enumerate(robot.joints, start=1)}
+    anchor, link_of_frame = {tree.links[0]: 0}, {}
+    for link in tree.links[1:]:
+        i = frame_of_joint.get(tree.joint[link].name)
+        if i is not None:
+            link_of_frame[i] = link
+        anchor[link] = anchor[tree.parent[link]] if i is None else i
+    params = np.zeros((robot.n + 1, 4))
+    for link, m in tree.mass.items():
+        i = anchor[link]
+        if i:
+            T = np.linalg.solve(rest[link_of_frame[i]], rest[link])
+            params[i] += m * np.r_[1.0, T[:3, :3] @ tree.com[link] + T[:3, 3]]
+    return tuple(tuple(float(v) for v in row) for row in params)
+
+
+def _build_catalog(robot: Robot) -> LoadCatalog:
+    n = robot.n
+    sensor = n if robot.wrench_frame == "tool" else robot.wrench_frame
+    signals = [Signal(f"wrench_torque(q{J})", "wrench_torque", J) for J in range(1, sensor + 1)]
+    why_not = {}
+    for J in range(sensor + 1, n + 1):
+        why_not[f"wrench_torque(q{J})"] = (f"the wrench is measured in frame {sensor}, which joint q{J} does not move"
+                                           + (f"; use wrench_torque(q1) .. wrench_torque(q{sensor})" if sensor else ""))
+    Y = _numeric_columns(robot, generic_poses(robot))
+    for J, joint in enumerate(robot.joints, start=1):
+        keep = _independent(Y[J - 1], float(sp.sqrt(sum(v * v for v in robot.gravity))))
+        signals += [Signal(f"gravity(q{J},{r})", "gravity", J, k) for r, k in enumerate(keep, start=1)]
+        if not keep:
+            unloaded = "its axis is along gravity" if joint.kind == "R" else "it moves across gravity"
+            why_not[f"gravity(q{J})"] = why_not[f"gravity_torque(q{J})"] = \
+                f"gravity loads joint q{J} ({joint.name}) in no posture ({unloaded}); drop the term"
+    params: tuple = ()
+    if not robot.urdf:
+        for J in range(1, n + 1):
+            why_not.setdefault(f"gravity_torque(q{J})", f"needs link masses, which {robot.source or 'this robot'} "
+                                                        f"does not give (DH rows); use gravity(q{J}) (unknown masses) "
+                                                        f"or build the robot from its URDF")
+    else:
+        try:
+            params = frame_params(robot)
+        except ModelError as exc:  # only gravity_torque needs the inertials: other terms stay usable
+            params, reason = (), str(exc)
+            for J in range(1, n + 1):
+                why_not.setdefault(f"gravity_torque(q{J})", reason)
+        for J in range(1, n + 1):
+            if f"gravity_torque(q{J})" in why_not:
+                continue
+            pi = np.concatenate(params[J:])
+            if np.linalg.norm(Y[J - 1] @ pi) <= RANK_TOL * np.linalg.norm(Y[J - 1]) * np.linalg.norm(pi):
+                why_not[f"gravity_torque(q{J})"] = (f"the URDF's masses put no gravity torque on joint q{J} "
+                                                    f"({robot.joints[J - 1].name}); drop the term")
+            else:
+                signals.append(Signal(f"gravity_torque(q{J})", "gravity_torque", J))
+    return LoadCatalog(tuple(signals), params, why_not)
+
+
+class LoadTerms:
+    """The load functions of the term parser for one robot: `symbol` for a call inside a term,
+    `expand` for the shorthand gravity(J). `symbols` maps the names a term may use to sympy symbols
+    (joints are q<k>). Errors go through the parser's `fail(text, why)`."""
+
+    def __init__(self, robot: Robot, symbols: dict):
+        self.robot, self.symbols = robot, symbols
+
+    @staticmethod
+    def is_shorthand(node) -> bool:
+        return (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "gravity"
+                and len(node.args) == 1)
+
+    def _joint(self, text: str, node, fail) -> int:
+        s = self.symbols.get(node.id) if isinstance(node, ast.Name) else None
+        if s is None or not re.fullmatch(r"q\d+", s.name):
+            fail(text, f"'{ast.unparse(node)}' is not a joint of {self.robot.name}; use a joint name or "
+                       f"q1..q{self.robot.n}")
+        return int(s.name[1:])
+
+    def _call(self, text: str, node, fail) -> tuple[str, int, list]:
+        f, args = node.func.id, node.args
+        if node.keywords:
+            fail(text, "keyword arguments are not allowed")
+        if not args or len(args) > (2 if f == "gravity" else 1):
+            fail(text, "gravity takes (joint) or (joint, column), e.g. gravity(q2) or gravity(q2, 1)"
+                 if f == "gravity" else f"{f} takes one joint, e.g. {f}(q2)")
+        return f, self._joint(text, args[0], fail), args[1:]
+
+    def _refuse_if_unsupported(self, text: str, name: str, fail):
+        reason = catalog(self.robot).why_not.get(name)
+        if reason:
+            fail(text, reason)
+
+    def symbol(self, text: str, node, fail) -> sp.Symbol:
+        f, J, rest = self._call(text, node, fail)
+        if f == "gravity":
+            if not rest:
+                fail(text, f"gravity(q{J}) expands into several terms and must stand alone; inside an expression "
+                           f"write one column, gravity(q{J}, r)")
+            self._refuse_if_unsupported(text, f"gravity(q{J})", fail)
+            rank = catalog(self.robot).gravity_rank(J)
+            r = rest[0].value if isinstance(rest[0], ast.Constant) else None
+            if not (isinstance(r, int) and not isinstance(r, bool) and 1 <= r <= rank):
+                fail(text, f"joint q{J} has {rank} independent gravity column{'s' * (rank > 1)}: use gravity(q{J}, 1)"
+                           f"{f' .. gravity(q{J}, {rank})' if rank > 1 else ''}, or gravity(q{J}) for all")
+            return load_symbol(f"gravity(q{J},{r})")
+        name = f"{f}(q{J})"
+        self._refuse_if_unsupported(text, name, fail)
+        return load_symbol(name)
+
+    def expand(self, text: str, node, fail) -> list[tuple[sp.Expr, str]]:
+        """gravity(J) -> (symbol, label) of each of joint J's columns, labelled with J as written."""
+        _, J, _ = self._call(text, node, fail)
+        self._refuse_if_unsupported(text, f"gravity(q{J})", fail)
+        written = ast.unparse(node.args[0])
+        return [(load_symbol(f"gravity(q{J},{r})"), f"gravity({written}, {r})")
+                for r in range(1, catalog(self.robot).gravity_rank(J) + 1)]

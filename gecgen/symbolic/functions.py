@@ -1,0 +1,41 @@
+"""Every function the emitters print for one robot and error model."""
+from __future__ import annotations
+
+import sympy as sp
+
+from gecgen.model.errors import ErrorModel, joint_symbols
+from gecgen.model.loads import catalog, load_symbol
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.symbolic.chain import fk_function, jacobian_function, targets_function, tool_jacobian_function
+from gecgen.symbolic.loads import load_values, loads_function
+from gecgen.symbolic.program import Builder, Function
+
+
+def basis_function(robot: Robot, model: ErrorModel, loads_given: bool = False) -> Function:
+    """Values f (n_terms) of the distinct basis terms at joints q, wrench w (6) and aux signals.
+
+    The load signals the terms use are computed from q and w on the nominal chain, or, with
+    `loads_given`, read from an input L (every signal of the robot, as `loads` returns them):
+    compensation holds them at the command's values while it moves the joints."""
+    b = Builder()
+    q = joint_symbols(robot)
+    w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
+    aux = tuple(sp.Symbol(n, real=True) for n in model.aux)
+    terms = model.unique_terms()
+    names = catalog(robot).names
+    if loads_given:
+        L = tuple(load_symbol(n) for n in names)
+        f = [b.let(t.expr) for t in terms]
+        return b.function("basis_at_loads", f"Basis terms f as {robot.name}_basis computes them, with the load "
+                          f"signals L ({robot.name.upper()}_NL, as {robot.name}_loads returns them) given instead of "
+                          f"computed from q and w.", {"q": q, "w": w, "aux": aux, "L": L}, {"f": f})
+    used = set().union(*(t.expr.free_symbols for t in terms))
+    values = load_values(b, robot, q, w, [n for n in names if load_symbol(n) in used])
+    f = [b.let(t.expr.xreplace(values)) for t in terms]
+    return b.function("basis", "Distinct basis terms f of the error model at joints q, wrench w "
+                      "(fx fy fz mx my mz) and auxiliary signals aux.", {"q": q, "w": w, "aux": aux}, {"f": f})
+
+
+def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
+    return [fk_function(robot), targets_function(robot), jacobian_function(robot), tool_jacobian_function(robot),
+            basis_function(robot, model), loads_function(robot), basis_function(robot, model, loads_given=True)]

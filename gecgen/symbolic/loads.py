@@ -1,0 +1,69 @@
+"""The load signals of `gecgen.model.loads` as straight-line code on the nominal chain.
+
+One forward pass of the nominal chain gives every joint's world axis and every frame's pose; each
+signal is then a few dot and cross products:
+
+    wrench_torque(J) = a_J . (m + (p_s - o_J) x f)   (revolute)   a_J . f   (prismatic)
+
+with f, m the wrench rotated from the sensor frame into the world and p_s the sensor frame's
+origin; gravity(J, r) is a kept column of `model.loads.regressor_columns`, and gravity_torque(J)
+the sum of all of joint J's columns times the masses and first moments of the frames it carries.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from gecgen.model.errors import joint_symbols
+from gecgen.model.loads import catalog, cross3, dot, load_symbol, regressor_columns
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.symbolic.chain import apply, build_chain
+from gecgen.symbolic.program import Builder, Function
+
+
+def load_values(b: Builder, robot: Robot, q, w, names) -> dict[sp.Symbol, sp.Expr]:
+    """load symbol -> its value (an expression in q and w built with b) for the signals `names`
+    (canonical spellings the robot supports). Builds nothing when names is empty."""
+    if not names:
+        return {}
+    cat = catalog(robot)
+    chain = build_chain(b, robot, q, None)
+    axes = [apply(b, F, joint.axis, point=False) for joint, F in zip(robot.joints, chain.joint_frames)]
+    carried = [(P.R, P.p) for P in chain.post]
+    columns: dict[int, list] = {}
+
+    def joint_columns(J: int) -> list:
+        if J not in columns:
+            columns[J] = regressor_columns(b.let, robot.joints[J - 1].kind, axes[J - 1],
+                                           chain.joint_frames[J - 1].p, carried[J:], robot.gravity)
+        return columns[J]
+
+    sensor = chain.tool if robot.wrench_frame == "tool" else chain.post[robot.wrench_frame]
+    force, moment = apply(b, sensor, w[:3], point=False), apply(b, sensor, w[3:], point=False)
+    out = {}
+    for name in names:
+        s = cat.by_name(name)
+        a, o = axes[s.joint - 1], chain.joint_frames[s.joint - 1].p
+        if s.kind == "wrench_torque":
+            if robot.joints[s.joint - 1].kind == "P":
+                value = dot(a, force)
+            else:
+                lever = tuple(b.let(sensor.p[k] - o[k]) for k in range(3))
+                value = dot(a, [moment[k] + c for k, c in enumerate(cross3(lever, force))])
+        elif s.kind == "gravity":
+            value = joint_columns(s.joint)[s.column]
+        else:
+            params = [v for row in cat.params[s.joint:] for v in row]
+            value = sum(p * c for p, c in zip(params, joint_columns(s.joint)) if p)
+        out[load_symbol(name)] = b.let(value)
+    return out
+
+
+def loads_function(robot: Robot) -> Function:
+    """Every load signal the robot supports, L (NL), at joints q and wrench w."""
+    b, q = Builder(), joint_symbols(robot)
+    w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
+    names = catalog(robot).names
+    values = load_values(b, robot, q, w, names)
+    return b.function("loads", f"Load signals L ({robot.name.upper()}_NL, listed above) at joints q and wrench w "
+                      "(fx fy fz mx my mz): N m, N along a prismatic joint; gravity columns N m per kg and per kg m.",
+                      {"q": q, "w": w}, {"L": [values[load_symbol(n)] for n in names]})
