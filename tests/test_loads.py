@@ -328,3 +328,22 @@ def test_sign_and_abs_in_strict_c_and_sign_of_zero_is_zero(tmp_path):
                               10 * L[:, names.index("wrench_torque(q1)")]])
     assert f[0, 1] == 0.0 and f[0, 3] == 0.0
     np.testing.assert_allclose(f, expect, rtol=1e-14, atol=1e-14)
+
+
+def test_gravity_torque_needs_the_inertials_and_a_mass_below_the_joint(tmp_path):
+    """A URDF whose inertials are broken keeps its other load terms; a massless arm has no torque."""
+    import re
+
+    from test_gravity import arm_urdf
+
+    (tmp_path / "arm.yaml").write_text("name: arm\nurdf: arm.urdf\nbase_link: base\ntip_link: hand\n"
+                                       "targets: {t: [0.1, 0, 0]}\n")
+    arm_urdf(tmp_path / "arm.urdf", hand_mass="<mass/>")
+    robot = load_robot(tmp_path / "arm.yaml")
+    assert error_model_from_dict({"default": ["gravity(elbow)", "wrench_torque(elbow)"]}, robot, "m")
+    with pytest.raises(ModelError, match=r"term 'gravity_torque\(elbow\)': .*link 'hand' inertial: no <mass value"):
+        error_model_from_dict({"default": ["gravity_torque(elbow)"]}, robot, "m")
+    path = arm_urdf(tmp_path / "arm.urdf")
+    path.write_text(re.sub(r'<mass value="[^"]*"/>', '<mass value="0"/>', path.read_text()))
+    with pytest.raises(ModelError, match=r"the URDF's masses put no gravity torque on joint q1 \(shoulder\)"):
+        error_model_from_dict({"default": ["gravity_torque(shoulder)"]}, load_robot(tmp_path / "arm.yaml"), "m")
