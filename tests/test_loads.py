@@ -224,13 +224,15 @@ def test_gravity_command_agrees_with_the_emitted_torques_and_follows_the_robot_f
     wall.write_text((ROBOTS / "panda.yaml").read_text().replace("urdf: panda/panda.urdf", f"urdf: {robot.urdf}")
                     + "base: {rotation: [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]}\ngravity: [-9.80665, 0, 0]\n")
     wall_robot = load_robot(wall)
-    wall_names, wall_L = CompiledModel(wall_robot, error_model_from_dict(CONSTANT, wall_robot, "<c>"), "c").load_signals(q)
+    wall_model = CompiledModel(wall_robot, error_model_from_dict(CONSTANT, wall_robot, "<c>"), "c")
+    wall_names, wall_L = wall_model.load_signals(q)
     assert wall_names == names
     np.testing.assert_allclose(wall_L[:, [names.index(f"gravity_torque(q{j})") for j in range(2, 8)]], expected,
                                atol=1e-12)
     for robot_file in (ROBOTS / "panda.yaml", wall):
         out = tmp_path / f"{robot_file.stem}.csv"
-        assert main(["gravity", str(robot_file), str(table), "--joints", ",".join(joints), "-o", str(out), "--json"]) == 0
+        args = ["gravity", str(robot_file), str(table), "--joints", ",".join(joints), "-o", str(out), "--json"]
+        assert main(args) == 0
         assert json.loads(capsys.readouterr().out)["columns"] == [f"tau_{j}" for j in joints]
         tau = np.array([[float(v) for v in row[robot.n:]] for row in list(csv.reader(out.open()))[1:]])
         np.testing.assert_allclose(tau, expected, rtol=1e-12, atol=1e-12)
