@@ -148,8 +148,8 @@ def main():
         qT, eT = q[:n_ca].T.copy(), eps[:n_ca].T.copy()
         ca_je = best(lambda: mapped(qT, eT), 3) / n_ca
         fd = best(lambda: fd_jacobian(robot, q[:n_fd]), 3) / n_fd
-        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, c_loop, c_je, c_h, ca_je, fd,
-                     n_loads, c_loads))
+        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, c_loop, c_je, c_h, ca_je,
+                     fd, n_loads, c_loads))
         print(f"{name:13s} targets {len(robot.targets)} coefficients {len(model.coefficients):4d} | generate "
               f"{gen:5.2f} s (symbolic+render {symbolic:4.2f} s) | cc {comp:5.2f} s | J_e C loop {1e6 * c_loop:6.3f} us, "
               f"C batch {1e6 * c_je:6.3f} us, "
@@ -170,8 +170,8 @@ def main():
              "2,000 poses. Loads = NAME_loads (every load signal the robot supports: wrench torques, "
              "gravity regressor columns) in the same C loop as J_e.", "",
              "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | J_e C loop (us) | "
-             "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | H_e C batch (us) | "
-             "load signals | loads C loop (us) | loads / J_e (C loop) |",
+             "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | "
+             "H_e C batch (us) | load signals | loads C loop (us) | loads / J_e (C loop) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, nt, nc, gen, sym, comp, c_loop, c_je, c_h, ca_je, fd, n_loads, c_loads in rows:
         lines.append(f"| {name} | {nt} | {nc} | {gen:.2f} | {sym:.2f} | {comp:.2f} | {1e6 * c_loop:.3f} | "

@@ -224,13 +224,15 @@ def test_gravity_command_agrees_with_the_emitted_torques_and_follows_the_robot_f
     wall.write_text((ROBOTS / "panda.yaml").read_text().replace("urdf: panda/panda.urdf", f"urdf: {robot.urdf}")
                     + "base: {rotation: [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]}\ngravity: [-9.80665, 0, 0]\n")
     wall_robot = load_robot(wall)
-    wall_names, wall_L = CompiledModel(wall_robot, error_model_from_dict(CONSTANT, wall_robot, "<c>"), "c").load_signals(q)
+    wall_model = CompiledModel(wall_robot, error_model_from_dict(CONSTANT, wall_robot, "<c>"), "c")
+    wall_names, wall_L = wall_model.load_signals(q)
     assert wall_names == names
     np.testing.assert_allclose(wall_L[:, [names.index(f"gravity_torque(q{j})") for j in range(2, 8)]], expected,
                                atol=1e-12)
     for robot_file in (ROBOTS / "panda.yaml", wall):
         out = tmp_path / f"{robot_file.stem}.csv"
-        assert main(["gravity", str(robot_file), str(table), "--joints", ",".join(joints), "-o", str(out), "--json"]) == 0
+        args = ["gravity", str(robot_file), str(table), "--joints", ",".join(joints), "-o", str(out), "--json"]
+        assert main(args) == 0
         assert json.loads(capsys.readouterr().out)["columns"] == [f"tau_{j}" for j in joints]
         tau = np.array([[float(v) for v in row[robot.n:]] for row in list(csv.reader(out.open()))[1:]])
         np.testing.assert_allclose(tau, expected, rtol=1e-12, atol=1e-12)
@@ -328,3 +330,22 @@ def test_sign_and_abs_in_strict_c_and_sign_of_zero_is_zero(tmp_path):
                               10 * L[:, names.index("wrench_torque(q1)")]])
     assert f[0, 1] == 0.0 and f[0, 3] == 0.0
     np.testing.assert_allclose(f, expect, rtol=1e-14, atol=1e-14)
+
+
+def test_gravity_torque_needs_the_inertials_and_a_mass_below_the_joint(tmp_path):
+    """A URDF whose inertials are broken keeps its other load terms; a massless arm has no torque."""
+    import re
+
+    from test_gravity import arm_urdf
+
+    (tmp_path / "arm.yaml").write_text("name: arm\nurdf: arm.urdf\nbase_link: base\ntip_link: hand\n"
+                                       "targets: {t: [0.1, 0, 0]}\n")
+    arm_urdf(tmp_path / "arm.urdf", hand_mass="<mass/>")
+    robot = load_robot(tmp_path / "arm.yaml")
+    assert error_model_from_dict({"default": ["gravity(elbow)", "wrench_torque(elbow)"]}, robot, "m")
+    with pytest.raises(ModelError, match=r"term 'gravity_torque\(elbow\)': .*link 'hand' inertial: no <mass value"):
+        error_model_from_dict({"default": ["gravity_torque(elbow)"]}, robot, "m")
+    path = arm_urdf(tmp_path / "arm.urdf")
+    path.write_text(re.sub(r'<mass value="[^"]*"/>', '<mass value="0"/>', path.read_text()))
+    with pytest.raises(ModelError, match=r"the URDF's masses put no gravity torque on joint q1 \(shoulder\)"):
+        error_model_from_dict({"default": ["gravity_torque(shoulder)"]}, load_robot(tmp_path / "arm.yaml"), "m")

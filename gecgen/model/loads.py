@@ -47,7 +47,7 @@ from gecgen.model.validation import ModelError
 
 LOAD_FUNCTIONS = ("wrench_torque", "gravity", "gravity_torque")
 #: a candidate column is independent when its part outside the earlier ones exceeds this fraction of
-#: the joint's largest column (the redundancy analysis's exact-dependency level)
+#: the joint's largest column (the redundancy analysis's exact-dependency level; see _independent)
 RANK_TOL = 1e-7
 #: the rank test's generic poses: uniform within the joint limits (clipped to +-pi), fixed seed
 SEED, MIN_POSES = 20240611, 64
@@ -236,8 +236,8 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
         for J in range(1, n + 1):
             if f"gravity_torque(q{J})" in why_not:
                 continue
-            pi = np.concatenate(params[J:])
-            if np.linalg.norm(Y[J - 1] @ pi) <= RANK_TOL * np.linalg.norm(Y[J - 1]) * np.linalg.norm(pi):
+            carried = np.concatenate(params[J:])
+            if np.linalg.norm(Y[J - 1] @ carried) <= RANK_TOL * np.linalg.norm(Y[J - 1]) * np.linalg.norm(carried):
                 why_not[f"gravity_torque(q{J})"] = (f"the URDF's masses put no gravity torque on joint q{J} "
                                                     f"({robot.joints[J - 1].name}); drop the term")
             else:
