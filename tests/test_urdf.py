@@ -68,7 +68,7 @@ def write_robot(folder, urdf: str, base_link="world", tip_link="tool"):
     (folder / "arm.urdf").write_text(urdf)
     targets = "".join(f"  {k}: {list(v)}\n" for k, v in TARGETS.items())
     path = folder / "arm.yaml"
-    path.write_text(f"name: arm\nurdf: arm.urdf\nbase_link: {base_link}\ntip_link: {tip_link}\ntargets:\n{targets}")
+    path.write_text(f"name: arm\nangle_unit: rad\nurdf: arm.urdf\nbase_link: {base_link}\ntip_link: {tip_link}\ntargets:\n{targets}")
     return path
 
 

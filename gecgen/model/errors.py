@@ -14,7 +14,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
 from gecgen.model.validation import ModelError, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
@@ -181,9 +181,6 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
     names.update({w: sp.Symbol(w, real=True) for w in WRENCH})
     names.update({a: sp.Symbol(a, real=True) for a in aux})
     return names
-
-
-RESERVED = {"pi", "sqrt", "sin", "cos", "poly", "fourier", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
 
 
 def is_aux_name(name: str) -> bool:
