@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model.checks import check_terms_finite
 
 
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
@@ -50,6 +51,7 @@ def _identify_inputs(args):
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    check_terms_finite(model, robot, data)
     return robot, model, data, CompiledModel(robot, model)
 
 
@@ -111,6 +113,7 @@ def cmd_evaluate(args) -> dict:
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
+    check_terms_finite(calib.model, calib.robot, data)
     cm = CompiledModel(calib.robot, calib.model)
     y = calib.registration.to_world(data.xyz)
     return {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(y),
@@ -127,6 +130,7 @@ def cmd_compensate(args) -> dict:
 
     calib = calibration.load(args.calibration)
     cmds = read_commands(args.poses, calib.robot, calib.model.aux)
+    check_terms_finite(calib.model, calib.robot, cmds)
     cm = CompiledModel(calib.robot, calib.model)
     q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
     failed = np.nonzero((status == 1) | (status == 2))[0]
@@ -153,6 +157,8 @@ def cmd_redundancy(args) -> dict:
 
         data = read_measurements(args.data, load_robot(args.robot))
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
+    if data:
+        check_terms_finite(model, robot, data)
     result = redundancy(CompiledModel(robot, model), data).to_dict()
     return {"robot": robot.name, "data": args.data, **result}
 
@@ -166,6 +172,8 @@ def cmd_diagnose(args) -> dict:
     data = read_measurements(args.data, robot)
     val = read_measurements(args.val, robot) if args.val else None
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    for d in filter(None, (data, val)):
+        check_terms_finite(model, robot, d)
     with _progress(not args.json) as status:
         def progress(round_no, rms_mm):
             if status:
