@@ -13,6 +13,7 @@ from pathlib import Path
 
 from gecgen.files import check_output_dir, check_output_file
 from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model.checks import check_terms_finite
 
 
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
@@ -52,6 +53,7 @@ def _identify_inputs(args):
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    check_terms_finite(model, robot, data)
     return robot, model, data, CompiledModel(robot, model)
 
 
@@ -115,6 +117,7 @@ def cmd_evaluate(args) -> dict:
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
+    check_terms_finite(calib.model, calib.robot, data)
     cm = CompiledModel(calib.robot, calib.model)
     y = calib.registration.to_world(data.xyz)
     outside = _extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))
@@ -145,6 +148,7 @@ def cmd_compensate(args) -> dict:
         raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
     calib = calibration.load(args.calibration)  # refuses non-finite coefficients, naming the first
     cmds = read_commands(args.poses, calib.robot, calib.model.aux)
+    check_terms_finite(calib.model, calib.robot, cmds)
     cm = CompiledModel(calib.robot, calib.model)
     q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
     failed = np.nonzero(np.isin(status, FAILED))[0]
@@ -174,6 +178,8 @@ def cmd_redundancy(args) -> dict:
 
         data = read_measurements(args.data, load_robot(args.robot))
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
+    if data:
+        check_terms_finite(model, robot, data)
     result = redundancy(CompiledModel(robot, model), data).to_dict()
     return {"robot": robot.name, "data": args.data, **result}
 
@@ -187,6 +193,8 @@ def cmd_diagnose(args) -> dict:
     data = read_measurements(args.data, robot)
     val = read_measurements(args.val, robot) if args.val else None
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    for d in filter(None, (data, val)):
+        check_terms_finite(model, robot, d)
     with _progress(not args.json) as status:
         def progress(round_no, rms_mm):
             if status:

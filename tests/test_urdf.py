@@ -68,7 +68,7 @@ def write_robot(folder, urdf: str, base_link="world", tip_link="tool"):
     (folder / "arm.urdf").write_text(urdf)
     targets = "".join(f"  {k}: {list(v)}\n" for k, v in TARGETS.items())
     path = folder / "arm.yaml"
-    path.write_text(f"name: arm\nurdf: arm.urdf\nbase_link: {base_link}\ntip_link: {tip_link}\ntargets:\n{targets}")
+    path.write_text(f"name: arm\nangle_unit: rad\nurdf: arm.urdf\nbase_link: {base_link}\ntip_link: {tip_link}\ntargets:\n{targets}")
     return path
 
 
@@ -185,7 +185,7 @@ MALFORMED = {
     "tip on another branch": (urdf_text(), {"base_link": "link3", "tip_link": "side"}, "'side' is not below"),
     "cycle of links": (replaced("</robot>", '<joint name="loop" type="fixed"><parent link="tool"/>'
                                             '<child link="world"/></joint></robot>'),
-                       {"base_link": "side"}, "'tool' is not below base_link 'side'"),
+                       {"base_link": "side"}, "joint 'mount': link 'base' is its own ancestor"),
     "floating joint on the path": (retyped("j3", "floating"), {}, "joint 'j3': type 'floating' is not supported"),
     "planar joint on the path": (retyped("j2", "planar"), {}, "joint 'j2': type 'planar' is not supported"),
     "revolute without limits": (replaced('<limit lower="-1.5" upper="1.5" effort="10" velocity="1"/>', ""), {},

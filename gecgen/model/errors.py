@@ -8,20 +8,23 @@ evaluated.
 from __future__ import annotations
 
 import ast
-import re
 import hashlib
+import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
 
 from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
-from gecgen.model.validation import ModelError, read_yaml, require, require_keys
+from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
+from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
-FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sqrt": sp.sqrt, "sign": sp.sign, "abs": sp.Abs}
+#: constants in terms stay within 2**+-MAX_LOG2, inside double precision with room for products
+MAX_LOG2 = 1000
+FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sign": sp.sign, "abs": sp.Abs}  # and sqrt, a power
 ALLOWED = "use numbers, variables, + - * / **, sin, cos, sqrt, sign, abs, poly, fourier and the load signals"
 
 
@@ -92,25 +95,65 @@ class _TermParser:
         self.symbols, self.where, self.loads = symbols, where, loads
 
     def fail(self, text: str, why: str):
-        raise ModelError(f"{self.where}: term {text!r}: {why}")
+        raise ModelError(f"{self.where}: term {excerpt(text)}: {why}")
 
     def parse(self, text) -> list[tuple[sp.Expr, str]]:
         """(expression, label) per basis term: one for a plain term, several for poly and fourier."""
         if isinstance(text, (int, float)) and not isinstance(text, bool):
             text = repr(text)
         if not isinstance(text, str):
-            self.fail(str(text), "terms must be strings such as \"q1**2\"")
+            self.fail(text, "terms must be strings such as \"q1**2\"")
         if len(text) > MAX_TERM_LENGTH:
-            self.fail(text[:40] + "...", f"longer than {MAX_TERM_LENGTH} characters")
+            self.fail(text, f"longer than {MAX_TERM_LENGTH} characters")
         try:
             tree = ast.parse(text.strip(), mode="eval").body
-        except SyntaxError:
+        except (SyntaxError, ValueError):  # ValueError: a NUL character
             self.fail(text, f"not a valid expression; {ALLOWED}")
         if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in ("poly", "fourier"):
-            return self.shorthand(text, tree)
-        if self.loads.is_shorthand(tree):
-            return self.loads.expand(text, tree, self.fail)
-        return [(self.expr(text, tree), text.strip())]
+            out = self.shorthand(text, tree)
+        elif self.loads.is_shorthand(tree):
+            out = self.loads.expand(text, tree, self.fail)
+        else:
+            out = [(self.expr(text, tree), text.strip())]
+        for expr, _ in out:
+            self.check(text, expr)
+        return out
+
+    def check(self, text: str, expr: sp.Expr):
+        """Refuse what the generated code could not evaluate: infinities, complex numbers, numbers
+        beyond floating point, and powers that nesting or products raised above MAX_EXPONENT."""
+        if expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+            self.fail(text, "not finite (a division by zero?); rewrite the term")
+        if any(sub.is_number and sub.is_extended_real is False for sub in sp.preorder_traversal(expr)):
+            self.fail(text, "complex (a root of a negative number); rewrite the term")
+        if any(abs(_log2(n)) > MAX_LOG2 for n in expr.atoms(sp.Number) if n != 0):
+            self.fail(text, "holds a number beyond floating point; rewrite the term")
+        for x in sorted(expr.free_symbols, key=str):
+            if _degree(expr, x) > MAX_EXPONENT:
+                self.fail(text, f"{x} appears to the power {_degree(expr, x):g} (nested powers and products "
+                                f"multiply); at most {MAX_EXPONENT}")
+        for p in expr.atoms(sp.Pow):
+            if abs(p.exp) > MAX_EXPONENT:
+                self.fail(text, f"exponent {p.exp} is larger than {MAX_EXPONENT}")
+
+    def power(self, text: str, base: sp.Expr, k: float) -> sp.Expr:
+        """base**k, refused before sympy works it out: nested powers multiply ((((2*q1)**16)**16)**16
+        holds a number of millions of digits) and exact roots of high order take sympy minutes."""
+        if abs(k) > MAX_EXPONENT:
+            self.fail(text, f"exponent {k:g} is larger than {MAX_EXPONENT}")
+        exponent = sp.Integer(int(k)) if k == int(k) else sp.Rational(repr(k))
+        for e in [exponent] + [p.exp * exponent for p in base.atoms(sp.Pow)]:
+            if e.q > MAX_EXPONENT:
+                self.fail(text, f"a root of order above {MAX_EXPONENT} (nested roots multiply); "
+                                f"exponents are multiples of 1/2 .. 1/{MAX_EXPONENT}")
+        self.check(text, base)  # a complex or infinite base has no magnitude to bound below
+        worst = max((_degree(base, x) for x in base.free_symbols), default=0.0) * abs(k)
+        if worst > MAX_EXPONENT:
+            self.fail(text, f"a variable appears to the power {worst:g} (nested powers multiply); "
+                            f"at most {MAX_EXPONENT}")
+        if not base.free_symbols and base != 0 and abs(k) * abs(_log2(base)) > MAX_LOG2:
+            self.fail(text, "holds a number beyond floating point; rewrite the term")
+        return base ** exponent
 
     def shorthand(self, text: str, node: ast.Call) -> list[tuple[sp.Expr, str]]:
         if node.keywords:
@@ -124,7 +167,7 @@ class _TermParser:
             v, k = self.expr(text, args[0]), self.number(text, args[1])
             if k != int(k) or not 1 <= k <= MAX_EXPONENT:
                 self.fail(text, f"poly order must be an integer 1..{MAX_EXPONENT}")
-            return [(v ** j, var if j == 1 else f"{var}**{j}") for j in range(1, int(k) + 1)]
+            return [(self.power(text, v, j), var if j == 1 else f"{var}**{j}") for j in range(1, int(k) + 1)]
         if len(args) != 3:
             self.fail(text, "fourier takes (variable, period, harmonics), e.g. fourier(q1, 0.45, 2)")
         v, period, h = self.expr(text, args[0]), self.number(text, args[1]), self.number(text, args[2])
@@ -143,11 +186,14 @@ class _TermParser:
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
             return -self.number(text, node.operand)
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            if not math.isfinite(_magnitude(node.value)):
+                self.fail(text, "holds a number beyond floating point; rewrite the term")
             return float(node.value)
         self.fail(text, "expected a number here")
 
     def expr(self, text: str, node) -> sp.Expr:
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            self.number(text, node)
             return sp.Integer(node.value) if isinstance(node.value, int) else sp.Rational(repr(node.value))
         if isinstance(node, ast.Name):
             if node.id == "pi":
@@ -164,20 +210,47 @@ class _TermParser:
                    ast.Div: lambda a, b: a / b}
             if isinstance(node.op, ast.Pow):
                 k = self.number(text, node.right)
-                if abs(k) > MAX_EXPONENT:
-                    self.fail(text, f"exponent {k:g} is larger than {MAX_EXPONENT}")
-                return self.expr(text, node.left) ** (sp.Integer(int(k)) if k == int(k) else sp.Rational(repr(k)))
+                return self.power(text, self.expr(text, node.left), k)
             if type(node.op) in ops:
                 return ops[type(node.op)](self.expr(text, node.left), self.expr(text, node.right))
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS:
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in (*FUNCTIONS, "sqrt"):
             if len(node.args) != 1 or node.keywords:
                 self.fail(text, f"{node.func.id} takes one argument")
-            return FUNCTIONS[node.func.id](self.expr(text, node.args[0]))
+            arg = self.expr(text, node.args[0])
+            return self.power(text, arg, 0.5) if node.func.id == "sqrt" else FUNCTIONS[node.func.id](arg)
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in LOAD_FUNCTIONS:
             return self.loads.symbol(text, node, self.fail)
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("poly", "fourier"):
             self.fail(text, f"{node.func.id}(...) must stand alone as a whole term")
-        self.fail(text, f"'{ast.unparse(node)}' is not allowed; {ALLOWED}")
+        self.fail(text, f"{excerpt(ast.unparse(node))} is not allowed; {ALLOWED}")
+
+
+def _magnitude(number) -> float:
+    """|number| as a float: inf beyond floating point (float() of a huge integer raises instead)."""
+    try:
+        return abs(float(number))
+    except OverflowError:
+        return math.inf
+
+
+def _log2(number: sp.Expr) -> float:
+    """log2 |number| of a nonzero real constant; exact for rationals, whose float() can overflow or underflow."""
+    if number.is_Rational:
+        return abs(number.p).bit_length() - number.q.bit_length()
+    magnitude = _magnitude(number)
+    return math.log2(magnitude) if magnitude else -math.inf
+
+
+def _degree(expr: sp.Expr, x: sp.Symbol) -> float:
+    """The highest power of x in expr through nested powers and products; a function's argument counts
+    as it stands (sin(q1**20) varies as fast as q1**20)."""
+    if expr == x:
+        return 1.0
+    if expr.is_Pow and expr.exp.is_number:
+        return _degree(expr.base, x) * abs(float(expr.exp))
+    if expr.is_Mul:
+        return sum(_degree(a, x) for a in expr.args)
+    return max((_degree(a, x) for a in expr.args), default=0.0)
 
 
 def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
@@ -188,9 +261,6 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
     names.update({w: sp.Symbol(w, real=True) for w in WRENCH})
     names.update({a: sp.Symbol(a, real=True) for a in aux})
     return names
-
-
-RESERVED = {"pi", "sqrt", "sin", "cos", "poly", "fourier", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
 
 
 def is_aux_name(name: str) -> bool:
@@ -231,7 +301,7 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
             f"{where}: aux: expected a list of data column names")
     symbols = variables(robot, ())
     clash = [a for a in declared if a in symbols or not is_aux_name(a)]
-    require(not clash, f"{where}: aux: '{clash[0] if clash else ''}' is a joint, wrench or reserved name "
+    require(not clash, f"{where}: aux: {excerpt(clash[0]) if clash else ''} is a joint, wrench or reserved name "
                        f"(q, eps, w, aux, c, f, p, J, T, Jq, t<k>); rename the data column")
     aux_all = tuple(dict.fromkeys(list(declared) + [a for a in aux_columns if a not in symbols and is_aux_name(a)]))
     symbols = variables(robot, aux_all)
@@ -244,9 +314,9 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
         for item in items:
             for expr, label in parser.parse(item):
                 if expr.is_number:
-                    require(expr == 1, f"{w}: term {item!r} is a constant; write the constant term as \"1\"")
+                    require(expr == 1, f"{w}: term {excerpt(item)} is a constant; write the constant term as \"1\"")
                 text = _canonical(expr)
-                require(text not in out, f"{w}: term {item!r} repeats '{text}'; each term may appear once")
+                require(text not in out, f"{w}: term {excerpt(item)} repeats {excerpt(text)}; each term may appear once")
                 out[text] = Term(text, expr, "1" if expr == 1 else label)
         return tuple(out.values())
 
@@ -256,14 +326,14 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
     require(isinstance(frames, dict), f"{where}: frames: expected a mapping from frame number to terms")
     for key, block in frames.items():
         require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n,
-                f"{where}: frames: key {key!r} is not a frame number 0..{robot.n}")
+                f"{where}: frames: key {excerpt(key)} is not a frame number 0..{robot.n}")
         fw = f"{where}: frames.{key}"
         if isinstance(block, list):
             terms[6 * key:6 * key + 6] = [parse_list(block, fw)] * 6
             continue
         require(isinstance(block, dict), f"{fw}: expected a list of terms or a mapping from ex..ep to terms")
         for err, items in block.items():
-            require(err in ERROR_NAMES, f"{fw}: unknown error '{err}'; use one of {', '.join(ERROR_NAMES)}")
+            require(err in ERROR_NAMES, f"{fw}: unknown error {excerpt(str(err))}; use one of {', '.join(ERROR_NAMES)}")
             terms[6 * key + ERROR_NAMES.index(err)] = parse_list(items, f"{fw}.{err}")
     used = set()
     for ts in terms:

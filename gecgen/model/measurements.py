@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,12 +15,27 @@ import numpy as np
 
 from gecgen.files import write_atomically
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.model.validation import ModelError, require
+from gecgen.model.validation import ModelError, excerpt, read_text, require
 
 #: joint readings may exceed the limits by this much (m or rad) before a row is refused
 LIMIT_TOLERANCE = 1e-3
 #: measured positions farther than this from the robot's reach look like millimetres (m)
 MM_SUSPECT = 50.0
+#: magnitudes no real reading reaches (a wrench in N and N m, an auxiliary signal): beyond them a cell
+#: is an export or unit error, and terms that large would swamp every other column of the fit
+MAX_WRENCH = 1e7
+MAX_AUX = 1e12
+#: pose ids are read as floats, which tell neighbouring integers apart only below 2**53
+MAX_POSE_ID = 2 ** 53
+#: characters in one cell; numbers and names are far shorter
+MAX_CELL = 10_000
+#: separators some spreadsheets write instead of commas, as messages name them
+SEPARATORS = {";": "';'", "\t": "tabs", "|": "'|'"}
+
+
+def at(where: str, row: int, col: str) -> str:
+    """How messages name a cell: file, row (1-based, header = 1) and column."""
+    return f"{where}: row {row}, column {excerpt(col)}"
 
 
 def read_table(path: str | Path, what: str, expect: str) -> tuple[list[str], np.ndarray]:
@@ -28,14 +44,33 @@ def read_table(path: str | Path, what: str, expect: str) -> tuple[list[str], np.
     in messages ("measurement file") and `expect` says what the header should hold."""
     path = Path(path)
     where = str(path)
-    require(path.is_file(), f"{where}: no such {what}")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+    text = read_text(path, what)
+    # csv's own cap on a cell raises a bare error without the column; lift it for this read and
+    # refuse long cells below, by row and column
+    cap = csv.field_size_limit()
+    csv.field_size_limit(max(cap, len(text) + 1))
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
         header = next(reader, None)
-        require(header, f"{where}: the file is empty; expected a header row with {expect}")
-        header = [h.strip() for h in header]
         rows = list(reader)
-    require(len(set(header)) == len(header), f"{where}: row 1: duplicated column names in the header")
+    except csv.Error as exc:
+        raise ModelError(f"{where}: row {reader.line_num}: not readable as CSV ({excerpt(str(exc))}); fix the row") from None
+    finally:
+        csv.field_size_limit(cap)
+    require(header, f"{where}: the file is empty; expected a header row with {expect}")
+    header = [h.strip() for h in header]
+    for sep, name in SEPARATORS.items():
+        require(len(header) > 1 or sep not in header[0], f"{where}: row 1: the columns are separated by {name}; "
+                                                         f"gecgen reads comma-separated files: convert the file to commas")
+    for r, row in enumerate([header, *rows]):
+        if max(map(len, row), default=0) > MAX_CELL:
+            c = next(c for c, cell in enumerate(row) if len(cell) > MAX_CELL)
+            col = header[c] if r and c < len(header) else f"#{c + 1}"
+            raise ModelError(f"{at(where, r + 1, col)}: {len(row[c])} characters ({excerpt(row[c])}); a cell may have "
+                             f"at most {MAX_CELL}: fix the file")
+    twice = [h for h in dict.fromkeys(header) if header.count(h) > 1]
+    require(not twice, f"{where}: row 1: column {excerpt(twice[0]) if twice else ''} appears twice in the header; "
+                       f"rename or remove one")
     require(rows, f"{where}: no data rows after the header")
     lengths = np.fromiter((len(r) for r in rows), int, len(rows))
     bad = np.nonzero(lengths != len(header))[0]
@@ -44,8 +79,9 @@ def read_table(path: str | Path, what: str, expect: str) -> tuple[list[str], np.
     return header, np.array(rows, dtype=object)
 
 
-def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value") -> np.ndarray:
-    """One column of text cells (R,) as finite floats; the first bad cell is refused with its row."""
+def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value", limit: float = math.inf) -> np.ndarray:
+    """One column of text cells (R,) as finite floats of magnitude at most `limit`; the first bad
+    cell is refused with its row."""
     try:
         values = cells.astype(float)
     except ValueError:
@@ -53,11 +89,23 @@ def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value")
             try:
                 float(text)
             except ValueError:
-                raise ModelError(f"{where}: row {r + 2}, column '{col}': {text!r} is not a number; {fix}") from None
+                raise ModelError(f"{at(where, r + 2, col)}: {excerpt(text)} is not a number; {fix}") from None
     bad = np.nonzero(~np.isfinite(values))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{col}': "
-                          f"{cells[bad[0]] if len(bad) else ''!r} is not finite; fix or remove the row")
+    require(not len(bad), f"{at(where, bad[0] + 2 if len(bad) else 0, col)}: "
+                          f"{excerpt(cells[bad[0]]) if len(bad) else ''} is not finite; fix or remove the row")
+    big = np.nonzero(np.abs(values) > limit)[0]
+    require(not len(big), f"{at(where, big[0] + 2 if len(big) else 0, col)}: {excerpt(cells[big[0]]) if len(big) else ''} "
+                          f"is beyond +-{limit:g}, more than any real reading there; {fix}")
     return values
+
+
+def pose_id_column(cells: np.ndarray, col: str, where: str) -> np.ndarray:
+    """A column of integer pose ids (R,); beyond 2**53 distinct ids would merge silently."""
+    ids = numbers(cells, col, where)
+    bad = np.nonzero((ids != np.round(ids)) | (np.abs(ids) >= MAX_POSE_ID))[0]
+    require(not len(bad), f"{at(where, bad[0] + 2 if len(bad) else 0, col)}: not an integer pose id within +-2**53 "
+                          f"({excerpt(cells[bad[0]]) if len(bad) else ''}); number the poses 0, 1, 2, ...")
+    return ids.astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -104,7 +152,7 @@ class Measurements:
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
         missing = [a for a in names if a not in self.aux_names]
-        require(not missing, f"{self.source}: the error model uses auxiliary signal '{missing[0] if missing else ''}' "
+        require(not missing, f"{self.source}: the error model uses auxiliary signal {excerpt(missing[0]) if missing else ''} "
                              f"but the data has no such column; add it or remove the term")
         return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
 
@@ -117,27 +165,27 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
     extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
-    require(not extra_q, f"{where}: row 1: column '{extra_q[0] if extra_q else ''}' but robot {robot.name} has "
+    require(not extra_q, f"{where}: row 1: column {excerpt(extra_q[0]) if extra_q else ''} but robot {robot.name} has "
                          f"{robot.n} joints; remove it or use the right robot file")
     wcols = [c for c in WRENCH if c in header]
     aux_names = tuple(h for h in header if h not in required and h not in WRENCH)
     idx = {h: k for k, h in enumerate(header)}
 
     def column(col: str) -> np.ndarray:
-        contract = col in required or col in WRENCH
-        fix = "fix the value" if contract else "fix it or remove the column (auxiliary columns must be numeric)"
-        return numbers(table[:, idx[col]], col, where, fix)
+        if col in required:
+            return numbers(table[:, idx[col]], col, where)
+        if col in WRENCH:
+            return numbers(table[:, idx[col]], col, where, limit=MAX_WRENCH)
+        return numbers(table[:, idx[col]], col, where, "fix it or remove the column (auxiliary columns must be "
+                                                       "numeric)", MAX_AUX)
 
-    ids = column("pose")
-    bad = np.nonzero(ids != np.round(ids))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column 'pose': not an integer pose id")
-    ids = ids.astype(np.int64)
+    ids = pose_id_column(table[:, idx["pose"]], "pose", where)
     targets = list(robot.targets)
     tindex = {t: k for k, t in enumerate(targets)}
     names = [str(t).strip() for t in table[:, idx["target"]]]
     unknown = [r for r, t in enumerate(names) if t not in tindex]
-    require(not unknown, f"{where}: row {unknown[0] + 2 if unknown else 0}, column 'target': unknown target "
-                         f"'{names[unknown[0]] if unknown else ''}'; robot {robot.name} has {', '.join(targets)}")
+    require(not unknown, f"{at(where, unknown[0] + 2 if unknown else 0, 'target')}: unknown target "
+                         f"{excerpt(names[unknown[0]]) if unknown else ''}; robot {robot.name} has {', '.join(targets)}")
     target = np.array([tindex[t] for t in names])
     key = ids * len(targets) + target
     _, first = np.unique(key, return_index=True)
@@ -153,7 +201,7 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     out = np.argwhere((q < lo) | (q > hi))
     if len(out):
         r, j = out[0]
-        raise ModelError(f"{where}: row {r + 2}, column 'q{j + 1}': {q[r, j]:g} is outside the joint limits "
+        raise ModelError(f"{at(where, r + 2, f'q{j + 1}')}: {q[r, j]:g} is outside the joint limits "
                          f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
     require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
@@ -162,7 +210,7 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     differs = np.argwhere(state != state[first[pose]])
     if len(differs):
         r, k = differs[0]
-        raise ModelError(f"{where}: row {r + 2}, column '{state_cols[k]}': pose {ids[r]} disagrees with its row "
+        raise ModelError(f"{at(where, r + 2, state_cols[k])}: pose {ids[r]} disagrees with its row "
                          f"{first[pose[r]] + 2}; rows of one pose must share joints, wrench and aux")
     ps = state[first]
     w = np.zeros((len(pose_ids), 6))
@@ -196,7 +244,8 @@ def write_csv(path: str | Path, header: list[str], rows) -> Path:
 @dataclass(frozen=True)
 class Commands:
     """Joint commands to compensate: q (P, n), w (P, 6), aux (P, len(aux_names)), and the file's
-    header and rows kept verbatim so the output repeats every other column unchanged."""
+    header and rows kept verbatim so the output repeats every other column unchanged; row p is
+    line p + 2 of `source`."""
 
     q: np.ndarray
     w: np.ndarray
@@ -204,6 +253,7 @@ class Commands:
     aux_names: tuple[str, ...]
     header: list[str]
     rows: list[list[str]]
+    source: str = ""
 
 
 def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
@@ -214,18 +264,18 @@ def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = (
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
     for col in aux_names:
-        require(col in header, f"{where}: row 1: missing column '{col}', an auxiliary signal the error model uses; "
+        require(col in header, f"{where}: row 1: missing column {excerpt(col)}, an auxiliary signal the error model uses; "
                                f"add it" + (" (gecgen gravity writes tau_<joint> columns)" if col.startswith("tau_") else ""))
 
-    def column(col: str) -> np.ndarray:
-        return numbers(table[:, header.index(col)], col, where)
+    def column(col: str, limit: float = math.inf) -> np.ndarray:
+        return numbers(table[:, header.index(col)], col, where, limit=limit)
 
     w = np.zeros((len(table), 6))
     for j, c in enumerate(WRENCH):
         if c in header:
-            w[:, j] = column(c)
-    aux = np.column_stack([column(a) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
-    return Commands(np.column_stack([column(c) for c in qcols]), w, aux, aux_names, header, table.tolist())
+            w[:, j] = column(c, MAX_WRENCH)
+    aux = np.column_stack([column(a, MAX_AUX) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
+    return Commands(np.column_stack([column(c) for c in qcols]), w, aux, aux_names, header, table.tolist(), where)
 
 
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):

@@ -15,12 +15,14 @@ chain prunes exact zeros; `model.kinematics` evaluates them in floating point.
 from __future__ import annotations
 
 import hashlib
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import sympy as sp
 
-from gecgen.model.validation import read_yaml, require, require_keys
+from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
 
 #: An elementary transform: ("Tx"|"Ty"|"Tz"|"Rx"|"Ry"|"Rz", value) or ("H", 4x4 rows).
 Elementary = tuple
@@ -29,6 +31,10 @@ WRENCH = ("fx", "fy", "fz", "mx", "my", "mz")
 ERROR_NAMES = ("ex", "ey", "ez", "es", "er", "ep")
 #: standard gravity, m/s^2, in the robot file's world frame unless the file's `gravity` says otherwise
 GRAVITY = (0, 0, -9.80665)
+#: names of the term language (functions, pi) and of the generated code's variables: neither a joint
+#: nor an auxiliary signal may take them
+RESERVED = {"pi", "sqrt", "sin", "cos", "sign", "abs", "poly", "fourier", "wrench_torque", "gravity",
+            "gravity_torque", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
 
 
 @dataclass(frozen=True)
@@ -86,14 +92,22 @@ class Robot:
 def exact(value, where: str, unit_deg: bool = False) -> sp.Expr:
     """A YAML number as an exact sympy number; degrees become exact multiples of pi."""
     require(isinstance(value, (int, float)) and not isinstance(value, bool),
-            f"{where}: expected a number, got {value!r}")
+            f"{where}: expected a number, got {excerpt(value)}")
+    require(_finite(value), f"{where}: {excerpt(value)} is not a finite number; write the value")
     v = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
     return v * sp.pi / 180 if unit_deg else v
 
 
+def _finite(value) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer beyond any float
+        return False
+
+
 def _vector(value, where: str, length: int = 3) -> tuple:
     require(isinstance(value, list) and len(value) == length,
-            f"{where}: expected a list of {length} numbers, got {value!r}")
+            f"{where}: expected a list of {length} numbers, got {excerpt(value)}")
     return tuple(exact(v, f"{where}[{k}]") for k, v in enumerate(value))
 
 
@@ -130,7 +144,7 @@ def _transform(spec, where: str, deg: bool) -> tuple[Elementary, ...]:
 def _limits(value, where: str, kind: str, deg: bool) -> tuple[float, float]:
     require(isinstance(value, list) and len(value) == 2, f"{where}: expected [lower, upper]")
     lo, hi = (float(exact(v, f"{where}[{k}]", deg and kind == "R")) for k, v in enumerate(value))
-    require(lo < hi, f"{where}: lower limit {value[0]} must be below upper limit {value[1]}")
+    require(lo < hi, f"{where}: lower limit {excerpt(value[0])} must be below upper limit {excerpt(value[1])}")
     return lo, hi
 
 
@@ -140,9 +154,9 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
     require_keys(row, where, required={"type", "a", "alpha", "limits"},
                  optional={"name", "theta", "d"})
     kind = row["type"]
-    require(kind in ("R", "P"), f"{where}.type: unknown joint type {kind!r}; use R (revolute) or P (prismatic)")
+    require(kind in ("R", "P"), f"{where}.type: unknown joint type {excerpt(kind)}; use R (revolute) or P (prismatic)")
     name = row.get("name", f"q{k + 1}")
-    require(isinstance(name, str) and name.isidentifier(), f"{where}.name: {name!r} is not a valid identifier")
+    require(isinstance(name, str) and name.isidentifier(), f"{where}.name: {excerpt(name)} is not a valid identifier")
     theta = exact(row.get("theta", 0), f"{where}.theta", deg)
     post = (("Rz", theta), ("Tz", exact(row.get("d", 0), f"{where}.d")),
             ("Tx", exact(row["a"], f"{where}.a")), ("Rx", exact(row["alpha"], f"{where}.alpha", deg)))
@@ -155,9 +169,30 @@ def _targets(spec, where: str) -> dict[str, tuple[float, float, float]]:
     require(isinstance(spec, dict) and spec, f"{where}: targets must map names to [x, y, z] in the tool frame")
     out = {}
     for name, xyz in spec.items():
-        require(isinstance(name, str) and name.isidentifier(), f"{where}.{name}: target names must be identifiers")
+        require(isinstance(name, str) and name.isidentifier(),
+                f"{where}: {excerpt(name)}: target names must be identifiers")
         out[name] = tuple(float(v) for v in _vector(xyz, f"{where}.{name}"))
     return out
+
+
+def _check_joint_names(joints, place):
+    """Joint names are aliases of q1..qn in error terms, so a name that means something else there
+    would silently change what a term measures. `place(k)` says where joint k's name is written."""
+    seen: dict[str, int] = {}
+    for k, joint in enumerate(joints):
+        name = joint.name
+        if re.fullmatch(r"q\d+", name) and name != f"q{k + 1}":
+            why = f"is spelled like a joint variable but names joint {k + 1} (its own is q{k + 1})"
+        elif name in WRENCH:
+            why = "is a wrench component (fx fy fz mx my mz)"
+        elif name in RESERVED:
+            why = "is reserved by the error terms and the generated code"
+        elif name in seen:
+            why = f"is also the name of joint {seen[name] + 1} (q{seen[name] + 1})"
+        else:
+            seen[name] = k
+            continue
+        raise ModelError(f"{place(k)} {excerpt(name)} {why}; rename the joint")
 
 
 def file_hash(path: Path) -> str:
@@ -170,14 +205,18 @@ def load_robot(path: str | Path) -> Robot:
     where = str(path)
     spec = read_yaml(path, "robot")
     require(isinstance(spec, dict), f"{where}: expected a mapping at the top level")
-    require_keys(spec, where, required={"name", "targets"},
-                 optional={"description", "angle_unit", "base", "tool", "joints", "urdf", "base_link",
+    # no default: a file written in degrees and read as radians turns 90 deg into 90 rad
+    require("angle_unit" in spec, f"{where}: missing key 'angle_unit'; add 'angle_unit: deg' or 'angle_unit: rad' "
+                                  f"(the unit of every angle in the file)")
+    require_keys(spec, where, required={"name", "targets", "angle_unit"},
+                 optional={"description", "base", "tool", "joints", "urdf", "base_link",
                            "tip_link", "wrench_frame", "points", "gravity"})
-    unit = spec.get("angle_unit", "rad")
-    require(unit in ("deg", "rad"), f"{where}: angle_unit: {unit!r}; use deg or rad")
+    unit = spec["angle_unit"]
+    require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
     deg = unit == "deg"
     name = spec["name"]
-    require(isinstance(name, str) and name.isidentifier(), f"{where}: name: {name!r} must be an identifier (it names C functions)")
+    require(isinstance(name, str) and name.isidentifier(),
+            f"{where}: name: {excerpt(name)} must be an identifier (it names C functions)")
     hashes = {path.name: file_hash(path)}
     base = _transform(spec.get("base"), f"{where}: base", deg)
     urdf_path = None
@@ -187,8 +226,10 @@ def load_robot(path: str | Path) -> Robot:
         require("joints" not in spec, f"{where}: give either joints (DH) or urdf, not both")
         for key in ("base_link", "tip_link"):
             require(key in spec, f"{where}: missing key '{key}' (needed with urdf)")
-        urdf_path = path.parent / str(spec["urdf"])
-        require(urdf_path.is_file(), f"{where}: urdf: no such file {urdf_path}")
+            require(isinstance(spec[key], str), f"{where}: {key}: expected the name of a URDF link")
+        require(isinstance(spec["urdf"], str), f"{where}: urdf: expected the path of a URDF file")
+        urdf_path = path.parent / spec["urdf"]
+        require(urdf_path.is_file(), f"{where}: urdf: no such file {excerpt(str(urdf_path))}")
         hashes[urdf_path.name] = file_hash(urdf_path)
         lead, joints, trail = urdf_chain(urdf_path, spec["base_link"], spec["tip_link"])
         base = base + lead
@@ -199,13 +240,14 @@ def load_robot(path: str | Path) -> Robot:
         require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
         joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
         tool = _transform(spec.get("tool"), f"{where}: tool", deg)
-    names = [j.name for j in joints]
-    require(len(set(names)) == len(names), f"{where}: joint names must be unique, got {names}")
+    _check_joint_names(joints, (lambda k: f"{urdf_path}: joint") if urdf_path else
+                       (lambda k: f"{where}: joints[{k}].name:"))
     wrench_frame = spec.get("wrench_frame", "tool")
-    require(wrench_frame == "tool" or (isinstance(wrench_frame, int) and 0 <= wrench_frame <= len(joints)),
-            f"{where}: wrench_frame: {wrench_frame!r}; use 'tool' or a frame number 0..{len(joints)}")
-    points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{k}"))
-              for k, p in (spec.get("points") or {}).items()}
+    require(wrench_frame == "tool" or (type(wrench_frame) is int and 0 <= wrench_frame <= len(joints)),
+            f"{where}: wrench_frame: {excerpt(wrench_frame)}; use 'tool' or a frame number 0..{len(joints)}")
+    points = spec.get("points") or {}
+    require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
+    points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
     return Robot(name=name, joints=tuple(joints), base=base, tool=tool,
                  targets=_targets(spec["targets"], f"{where}: targets"), wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,

@@ -22,7 +22,7 @@ import sympy as sp
 
 from gecgen.model.kinematics import constant
 from gecgen.model.robot import Elementary, Joint
-from gecgen.model.validation import ModelError, require
+from gecgen.model.validation import ModelError, excerpt, read_text, require
 
 MOVING = {"revolute": "R", "continuous": "R", "prismatic": "P"}
 
@@ -42,15 +42,15 @@ def _number(text: str, where: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise ModelError(f"{where}: {text!r} is not a number; fix the URDF") from None
-    require(math.isfinite(value), f"{where}: {text!r} is not finite; fix the URDF")
+        raise ModelError(f"{where}: {excerpt(text)} is not a number; fix the URDF") from None
+    require(math.isfinite(value), f"{where}: {excerpt(text)} is not finite; fix the URDF")
     return value
 
 
 def _triple(text: str | None, default: str, where: str) -> list[float]:
     """Three numbers from an attribute such as xyz="0 0.1 0"; `default` when it is absent."""
     words = (text if text is not None else default).split()
-    require(len(words) == 3, f"{where}: expected three numbers, got {text!r}; fix the URDF")
+    require(len(words) == 3, f"{where}: expected three numbers, got {excerpt(text)}; fix the URDF")
     return [_number(w, where) for w in words]
 
 
@@ -87,7 +87,7 @@ def _limits(joint: ET.Element, jtype: str, where: str) -> tuple[float, float]:
 
 def _parse(path: str | Path) -> ET.Element:
     try:
-        return ET.parse(path).getroot()
+        return ET.fromstring(read_text(Path(path), "URDF file"))
     except ET.ParseError as exc:
         raise ModelError(f"{path}: not valid XML ({exc})") from None
 
@@ -98,19 +98,29 @@ def _tree(root: ET.Element, where: str) -> tuple[set[str], dict[str, UrdfJoint]]
     above: dict[str, UrdfJoint] = {}
     for el in root.findall("joint"):  # top-level only: <transmission> also holds <joint> elements
         name = el.get("name")
-        jwhere = f"{where}: joint '{name}'"
+        jwhere = f"{where}: joint {excerpt(name)}"
         require(name, f"{where}: a <joint> has no name; name every joint")
         ends = {}
         for end in ("parent", "child"):
             tag = el.find(end)
             ends[end] = None if tag is None else tag.get("link")
             require(ends[end], f"{jwhere}: missing <{end} link=...>")
-            require(ends[end] in links, f"{jwhere}: {end} link '{ends[end]}' is not a <link> of this URDF; "
+            require(ends[end] in links, f"{jwhere}: {end} link {excerpt(ends[end])} is not a <link> of this URDF; "
                                         f"declare it or fix the name")
         child = ends["child"]
-        require(child not in above, f"{jwhere}: link '{child}' is already the child of joint "
-                                    f"'{above[child].name if child in above else ''}'; a URDF is a tree")
+        require(child not in above, f"{jwhere}: link {excerpt(child)} is already the child of joint "
+                                    f"{excerpt(above[child].name) if child in above else ''}; a URDF is a tree")
         above[child] = UrdfJoint(name, el.get("type"), ends["parent"], child, el)
+    # a loop of joints (a link its own ancestor) would send every walk along the tree round forever
+    done: set[str] = set()
+    for start in above:
+        trail, link = set(), start
+        while link in above and link not in done:
+            require(link not in trail, f"{where}: joint {excerpt(above[link].name)}: link {excerpt(link)} is its own "
+                                       f"ancestor (the joints form a loop); a URDF is a tree, remove a joint of the loop")
+            trail.add(link)
+            link = above[link].parent
+        done.update(trail)
     return links, above
 
 
@@ -119,8 +129,8 @@ def _path(above: dict[str, UrdfJoint], base_link: str, tip_link: str, where: str
     path: list[UrdfJoint] = []
     link = tip_link
     while link != base_link:
-        require(link in above and len(path) < len(above),  # the length bound stops a cycle of links
-                f"{where}: tip_link '{tip_link}' is not below base_link '{base_link}'; choose links on one branch")
+        require(link in above, f"{where}: tip_link {excerpt(tip_link)} is not below base_link {excerpt(base_link)}; "
+                               f"choose links on one branch")
         path.append(above[link])
         link = above[link].parent
     return path[::-1]
@@ -135,18 +145,18 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
     root = _parse(path)
     links, above = _tree(root, where)
     for key, link in (("base_link", base_link), ("tip_link", tip_link)):
-        require(link in links, f"{where}: {key} '{link}' is not a link of this URDF")
+        require(link in links, f"{where}: {key} {excerpt(link)} is not a link of this URDF")
 
     pending: tuple[Elementary, ...] = ()  # fixed transforms not yet folded into a frame
     base: tuple[Elementary, ...] | None = None
     joints = []
     for uj in _path(above, base_link, tip_link, where):
-        jwhere = f"{where}: joint '{uj.name}'"
+        jwhere = f"{where}: joint {excerpt(uj.name)}"
         origin = _origin(uj.element, jwhere)
         if uj.type == "fixed":
             pending += origin
             continue
-        require(uj.type in MOVING, f"{jwhere}: type '{uj.type}' is not supported on the chain; "
+        require(uj.type in MOVING, f"{jwhere}: type {excerpt(uj.type)} is not supported on the chain; "
                                    f"use revolute, continuous, prismatic or fixed")
         require(uj.element.find("mimic") is None,
                 f"{jwhere}: mimic joints are not supported; give the chain without them")
@@ -158,7 +168,7 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
         pending = ()
         joints.append(Joint(name=uj.name, kind=MOVING[uj.type], axis=_axis(uj.element, jwhere), pre=pre, post=(),
                             lower=lo, upper=hi))
-    require(joints, f"{where}: no moving joint between '{base_link}' and '{tip_link}'")
+    require(joints, f"{where}: no moving joint between {excerpt(base_link)} and {excerpt(tip_link)}")
     return base, tuple(joints), pending
 
 
@@ -198,7 +208,7 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
     where = str(path)
     root = _parse(path)
     links, above = _tree(root, where)
-    require(base_link in links, f"{where}: base_link '{base_link}' is not a link of this URDF")
+    require(base_link in links, f"{where}: base_link {excerpt(base_link)} is not a link of this URDF")
     below: dict[str, list[str]] = {}
     for child, uj in above.items():
         below.setdefault(uj.parent, []).append(child)
@@ -210,7 +220,7 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
     joint = {}
     for link in order[1:]:
         uj = above[link]
-        jwhere = f"{where}: joint '{uj.name}'"
+        jwhere = f"{where}: joint {excerpt(uj.name)}"
         kind = MOVING.get(uj.type, "F")
         axis = np.array([float(a) for a in _axis(uj.element, jwhere)]) if kind != "F" else np.zeros(3)
         joint[link] = TreeJoint(uj.name, kind, constant(_origin(uj.element, jwhere)), axis)
@@ -219,7 +229,7 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
         name, inertial = el.get("name"), el.find("inertial")
         if (name not in joint and name != base_link) or inertial is None:
             continue
-        lwhere = f"{where}: link '{name}' inertial"
+        lwhere = f"{where}: link {excerpt(name)} inertial"
         m = inertial.find("mass")
         require(m is not None and m.get("value") is not None, f"{lwhere}: no <mass value=...>; give the link's mass")
         mass[name] = _number(m.get("value"), f"{lwhere} mass")

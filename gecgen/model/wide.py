@@ -22,12 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import math
+
 import numpy as np
 
 from gecgen.model.errors import is_aux_name
-from gecgen.model.measurements import Measurements, numbers, read_table
+from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Measurements, at, numbers, pose_id_column,
+                                        read_table)
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.model.validation import read_yaml, require, require_keys
+from gecgen.model.validation import excerpt, read_yaml, require, require_keys
 
 #: columns of the contract's measurement file, which an aux column must not shadow
 CONTRACT_COLUMNS = ("pose", "target", "x", "y", "z", *WRENCH)
@@ -53,12 +56,12 @@ class ColumnMap:
 
 def _names(value, where: str, what: str) -> list[str]:
     require(isinstance(value, list) and all(isinstance(v, str) and v for v in value),
-            f"{where}: expected a list of {what}, got {value!r}")
+            f"{where}: expected a list of {what}, got {excerpt(value)}")
     return value
 
 
 def _mapping(value, where: str, what: str) -> dict:
-    require(isinstance(value, dict) and value, f"{where}: expected a mapping {what}, got {value!r}")
+    require(isinstance(value, dict) and value, f"{where}: expected a mapping {what}, got {excerpt(value)}")
     return value
 
 
@@ -75,41 +78,41 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     joints: dict[str, str] = {}
     for key, col in _mapping(spec["joints"], f"{where}: joints", "from joint to column").items():
         q = qnames[robot.joint_names.index(key)] if key in robot.joint_names else key
-        require(q in qnames, f"{where}: joints: '{key}' is not a joint of {robot.name}; "
+        require(q in qnames, f"{where}: joints: {excerpt(key)} is not a joint of {robot.name}; "
                              f"use q1..q{robot.n} or {', '.join(robot.joint_names)}")
-        require(q not in joints, f"{where}: joints: '{key}' is mapped twice (as {q} and by name); keep one")
-        require(isinstance(col, str), f"{where}: joints.{key}: expected a column name, got {col!r}")
+        require(q not in joints, f"{where}: joints: {excerpt(key)} is mapped twice (as {q} and by name); keep one")
+        require(isinstance(col, str), f"{where}: joints.{key}: expected a column name, got {excerpt(col)}")
         joints[q] = col
     missing = [f"{q} ({name})" for q, name in zip(qnames, robot.joint_names) if q not in joints]
     require(not missing, f"{where}: joints: no column for {missing[0] if missing else ''}; map every joint")
 
     targets = {}
     for name, cols in _mapping(spec["targets"], f"{where}: targets", "from target to [x, y, z] columns").items():
-        require(name in robot.targets, f"{where}: targets: '{name}' is not a target of {robot.name} "
+        require(name in robot.targets, f"{where}: targets: {excerpt(name)} is not a target of {robot.name} "
                                        f"({', '.join(robot.targets)}); add it to the robot file or fix the name")
         require(len(_names(cols, f"{where}: targets.{name}", "three column names [x, y, z]")) == 3,
-                f"{where}: targets.{name}: expected three column names [x, y, z], got {cols!r}")
+                f"{where}: targets.{name}: expected three column names [x, y, z], got {excerpt(cols)}")
         targets[name] = tuple(cols)
 
     wrench = _mapping(spec["wrench"], f"{where}: wrench", "from fx..mz to column") if "wrench" in spec else {}
     for k, col in wrench.items():
-        require(k in WRENCH, f"{where}: wrench: '{k}' is not one of {', '.join(WRENCH)}")
-        require(isinstance(col, str), f"{where}: wrench.{k}: expected a column name, got {col!r}")
+        require(k in WRENCH, f"{where}: wrench: {excerpt(k)} is not one of {', '.join(WRENCH)}")
+        require(isinstance(col, str), f"{where}: wrench.{k}: expected a column name, got {excerpt(col)}")
 
     aux = _names(spec.get("aux") or [], f"{where}: aux", "column names")
     for a in aux:
         require(is_aux_name(a) and a not in CONTRACT_COLUMNS and a not in robot.joint_names,
-                f"{where}: aux: '{a}' cannot be an auxiliary signal (it is a contract, joint or reserved name, "
+                f"{where}: aux: {excerpt(a)} cannot be an auxiliary signal (it is a contract, joint or reserved name, "
                 f"or not an identifier); list it under ignore")
     ignore = _names(spec.get("ignore") or [], f"{where}: ignore", "column names")
 
     mapping = ColumnMap(pose=spec.get("pose", "row"), joints=tuple(joints[q] for q in qnames), targets=targets,
                         wrench=dict(wrench), aux=tuple(aux), ignore=tuple(ignore), source=where)
     require(isinstance(mapping.pose, str) and mapping.pose,
-            f"{where}: pose: expected 'row' or the name of the pose-id column, got {mapping.pose!r}")
+            f"{where}: pose: expected 'row' or the name of the pose-id column, got {excerpt(mapping.pose)}")
     used = mapping.columns()
     twice = [c for c in dict.fromkeys(used) if used.count(c) > 1] + [c for c in ignore if c in used]
-    require(not twice, f"{where}: column '{twice[0] if twice else ''}' is used twice (mapped, aux or ignored); "
+    require(not twice, f"{where}: column {excerpt(twice[0]) if twice else ''} is used twice (mapped, aux or ignored); "
                        f"give each column one role")
     return mapping
 
@@ -125,32 +128,28 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path)
     where = str(path)
     header, table = read_table(path, "file", "the column names of the mapping " + str(mapping.source))
     for col in mapping.columns():
-        require(col in header, f"{where}: row 1: no column '{col}' (named in {mapping.source}); "
+        require(col in header, f"{where}: row 1: no column {excerpt(col)} (named in {mapping.source}); "
                                f"fix the mapping or the table")
     unused = [h for h in header if h not in mapping.columns() and h not in mapping.ignore]
-    require(not unused, f"{where}: row 1: column '{unused[0] if unused else ''}' is neither mapped nor ignored in "
+    require(not unused, f"{where}: row 1: column {excerpt(unused[0]) if unused else ''} is neither mapped nor ignored in "
                         f"{mapping.source}; map it, keep it under aux or list it under ignore")
 
-    def column(col: str) -> np.ndarray:
-        return numbers(table[:, header.index(col)], col, where)
+    def column(col: str, limit: float = math.inf) -> np.ndarray:
+        return numbers(table[:, header.index(col)], col, where, limit=limit)
 
     P = len(table)
     q = np.column_stack([column(c) for c in mapping.joints])
     w = np.zeros((P, 6))
     for k, col in mapping.wrench.items():
-        w[:, WRENCH.index(k)] = column(col)
-    aux = np.column_stack([column(a) for a in mapping.aux]) if mapping.aux else np.zeros((P, 0))
+        w[:, WRENCH.index(k)] = column(col, MAX_WRENCH)
+    aux = np.column_stack([column(a, MAX_AUX) for a in mapping.aux]) if mapping.aux else np.zeros((P, 0))
     if mapping.pose == "row":
         ids = np.arange(P)
     else:
-        raw = column(mapping.pose)
-        bad = np.nonzero(raw != np.round(raw))[0]
-        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{mapping.pose}': "
-                              f"not an integer pose id")
-        ids = raw.astype(np.int64)
+        ids = pose_id_column(table[:, header.index(mapping.pose)], mapping.pose, where)
         _, first = np.unique(ids, return_index=True)
         again = np.setdiff1d(np.arange(P), first)
-        require(not len(again), f"{where}: row {again[0] + 2 if len(again) else 0}, column '{mapping.pose}': "
+        require(not len(again), f"{at(where, again[0] + 2 if len(again) else 0, mapping.pose)}: "
                                 f"pose id repeats an earlier row; one row per pose")
     names = list(robot.targets)
     xyz = np.stack([np.column_stack([column(c) for c in cols]) for cols in mapping.targets.values()], axis=1)

@@ -1,0 +1,184 @@
+"""Bad input gets one short line on stderr naming the file and the fix, at once: no traceback, no
+hang, nothing dropped or guessed. Every case is a shipped file (robots/pps.yaml, robots/tiago.yaml and
+its URDF, robots/tiago.import.yaml) or a small valid table with one defect, run through the command line."""
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from conftest import ROBOTS
+
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.measurements import read_measurements
+from gecgen.runtime import calibration
+from gecgen.runtime.registration import IDENTITY
+
+PPS = (ROBOTS / "pps.yaml").read_text()
+TIAGO = (ROBOTS / "tiago.yaml").read_text()
+URDF = (ROBOTS / "tiago" / "tiago_48_schunk.urdf").read_text()
+MAPPING = (ROBOTS / "tiago.import.yaml").read_text()
+HEADER = "pose,q1,q2,q3,q4,q5,q6,target,x,y,z"
+
+
+def edit(text: str, old: str, new: str) -> str:
+    assert old in text, old  # the shipped file still holds what the case breaks
+    return text.replace(old, new)
+
+
+def write(folder, name, content):
+    path = folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    (path.write_bytes if isinstance(content, bytes) else path.write_text)(content)
+    return path
+
+
+def table(q1=0.1, q2=0.05, header=HEADER, extra=""):
+    """Three poses of pps measuring t1..t3; pose 1 has the given q1 and q2; `extra` appends to every row."""
+    rows = [header]
+    for pose in range(3):
+        q = [q1 if pose == 1 else 0.1, q2 if pose == 1 else 0.05, 0.0, 0.2, 0.01, -0.01]
+        rows += [",".join([str(pose), *map(repr, q), t, "0.1", "0.6", "0.8"]) + extra for t in ("t1", "t2", "t3")]
+    return "\n".join(rows) + "\n"
+
+
+def bomb(key: str) -> str:
+    """YAML whose `key` holds ten nested levels of ten aliases each: 10**10 values when expanded."""
+    levels = ['&l0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    levels += [f"&l{k} [{', '.join([f'*l{k - 1}'] * 10)}]" for k in range(1, 10)]
+    return f"{key}: [{', '.join(levels)}]\n"
+
+
+def tiago(tmp, urdf=URDF):
+    write(tmp, "tiago/tiago_48_schunk.urdf", urdf)
+    return write(tmp, "tiago.yaml", TIAGO)
+
+
+def pps(tmp, text=PPS):
+    return write(tmp, "robot.yaml", text)
+
+
+def with_model(tmp, command: str, terms: str, data: str):
+    model = write(tmp, "model.errors.yaml", f"frames:\n  1: {terms}\n")
+    return [command, pps(tmp), write(tmp, "data.csv", data), "--errors", model]
+
+
+def calibrated(tmp, terms: str):
+    """A calibration of pps with the given frame-1 terms (zero coefficients), written as identify would."""
+    robot = load_robot(pps(tmp))
+    model = load_error_model(write(tmp, "model.errors.yaml", f"frames:\n  1: {terms}\n"), robot)
+    nc = len(model.coefficients)
+    calib = calibration.Calibration(robot, model, np.zeros(nc), np.zeros(nc), tuple(range(nc)), np.eye(nc), IDENTITY, {})
+    calibration.save(calib, tmp / "calib.json")
+    return tmp / "calib.json"
+
+
+LOOP = '<joint name="loop" type="fixed"><parent link="arm_7_link"/><child link="base_footprint"/></joint></robot>'
+SECOND_PARENT = '<joint name="extra" type="fixed"><parent link="base_footprint"/><child link="arm_3_link"/></joint></robot>'
+
+# case: (arguments given the test's folder, the file the message must name, a phrase it must hold)
+CASES = {
+    "angle_unit missing": (lambda t: ["redundancy", pps(t, edit(PPS, "angle_unit: deg\n", ""))],
+                           "robot.yaml", "add 'angle_unit: deg' or 'angle_unit: rad'"),
+    "joint named like another joint's variable": (
+        lambda t: ["redundancy", pps(t, edit(PPS, "name: vertical,", "name: q3,"))],
+        "robot.yaml", "joints[1].name: 'q3' is spelled like a joint variable"),
+    "joint named like a wrench component": (lambda t: ["redundancy", pps(t, edit(PPS, "name: roll,", "name: fx,"))],
+                                            "robot.yaml", "'fx' is a wrench component"),
+    "joint named like a term function": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pitch,", "name: sin,"))],
+                                         "robot.yaml", "'sin' is reserved"),
+    "two joints of one name": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pitch,", "name: roll,"))],
+                               "robot.yaml", "joints[5].name: 'roll' is also the name of joint 5"),
+    "URDF joint named like another joint's variable": (
+        lambda t: ["redundancy", tiago(t, edit(URDF, '"arm_1_joint"', '"q1"'))],
+        "tiago_48_schunk.urdf", "joint 'q1' is spelled like a joint variable but names joint 2"),
+    "robot name of 100,000 characters": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pps\n", f"name: {'x-' * 50_000}\n"))],
+                                         "robot.yaml", "name: 'x-x-x-"),
+    "term of 100,000 characters": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                              write(t, "m.errors.yaml", f"default: ['{'q1+' * 33_333}q1']\n")],
+                                   "m.errors.yaml", "longer than 200 characters"),
+    "NaN in a robot file": (lambda t: ["redundancy", pps(t, edit(PPS, "d: 0.45", "d: .nan"))],
+                            "robot.yaml", "joints[3].d: nan is not a finite number"),
+    "inf in a robot file": (lambda t: ["redundancy", pps(t, edit(PPS, "t1: [-0.20,", "t1: [-.inf,"))],
+                            "robot.yaml", "targets.t1[0]: -inf is not a finite number"),
+    "alias bomb in a robot file": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pps\n", bomb("name")))],
+                                   "robot.yaml", "YAML aliases (*name) stand for more than"),
+    "alias bomb in an error model": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                                write(t, "bomb.errors.yaml", bomb("default"))],
+                                     "bomb.errors.yaml", "YAML aliases (*name) stand for more than"),
+    "robot file of 1.1 MB": (lambda t: ["redundancy", pps(t, PPS + "#" + "x" * 1_100_000 + "\n")],
+                             "robot.yaml", "a robot file may have at most 1000000"),
+    "URDF with a loop (gravity)": (lambda t: ["gravity", tiago(t, edit(URDF, "</robot>", LOOP)),
+                                              write(t, "q.csv", "q1,q2,q3,q4,q5,q6,q7,q8\n" + "0.1," * 7 + "0.1\n"),
+                                              "-o", t / "out.csv"],
+                                   "tiago_48_schunk.urdf", "is its own ancestor (the joints form a loop)"),
+    "URDF link with two parents": (lambda t: ["redundancy", tiago(t, edit(URDF, "</robot>", SECOND_PARENT))],
+                                   "tiago_48_schunk.urdf", "link 'arm_3_link' is already the child of joint"),
+    "robot file not UTF-8": (lambda t: ["redundancy", pps(t, edit(PPS, "description: Patient",
+                                                                   "description: caf\xe9 Patient").encode("latin-1"))],
+                             "robot.yaml", "line 4: byte 0xe9 is not UTF-8; save the robot file as UTF-8"),
+    "error model not UTF-8": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                         write(t, "m.errors.yaml", b"# caf\xe9\ndefault: ['1']\n")],
+                              "m.errors.yaml", "byte 0xe9 is not UTF-8"),
+    "CSV not UTF-8": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().encode() + b"5\xff\n")],
+                      "data.csv", "line 11: byte 0xff is not UTF-8"),
+    "mapping not UTF-8": (lambda t: ["import", ROBOTS / "tiago.yaml", t / "wide.csv", "--mapping",
+                                     write(t, "map.yaml", MAPPING.encode() + b"# \xe9\n"), "-o", t / "out.csv"],
+                          "map.yaml", "is not UTF-8"),
+    "CSV separated by semicolons": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",", ";"))],
+                                    "data.csv", "row 1: the columns are separated by ';'; gecgen reads comma-separated"),
+    "CSV separated by tabs": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",", "\t"))],
+                              "data.csv", "separated by tabs"),
+    "CSV cell of 200,000 characters": (
+        lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",t2,", "," + "x" * 200_000 + ",", 1))],
+        "data.csv", "row 3, column 'target': 200000 characters"),
+    "wrench of 1e308": (lambda t: ["identify", ROBOTS / "pps.yaml",
+                                   write(t, "data.csv", table(header=HEADER + ",fx", extra=",1e308"))],
+                        "data.csv", "row 2, column 'fx': '1e308' is beyond +-1e+07"),
+    "aux signal of 1e308": (lambda t: ["identify", ROBOTS / "pps.yaml",
+                                       write(t, "data.csv", table(header=HEADER + ",temp_c", extra=",1e308"))],
+                            "data.csv", "row 2, column 'temp_c': '1e308' is beyond +-1e+12"),
+    "pose id 1e308": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace("\n2,", "\n1e308,"))],
+                      "data.csv", "column 'pose': not an integer pose id within +-2**53"),
+    "pose id 2**53 + 1": (lambda t: ["identify", ROBOTS / "pps.yaml",
+                                     write(t, "data.csv", table().replace("\n2,", "\n9007199254740993,"))],
+                          "data.csv", "column 'pose': not an integer pose id within +-2**53"),
+    "nested powers": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                 write(t, "m.errors.yaml", 'frames:\n  1: ["((q1**16)**16)**16"]\n')],
+                      "m.errors.yaml", "a variable appears to the power 256"),
+    "sqrt of a negative reading (identify)": (lambda t: with_model(t, "identify", '["1", "sqrt(q1)"]', table(q1=-0.5)),
+                                              "data.csv", "pose 1: the term 'sqrt(q1)' of model.errors.yaml is NaN"),
+    "1/q2 at q2 = 0 (redundancy)": (lambda t: with_model(t, "redundancy", '["1", "1/q2"]', table(q2=0.0)),
+                                    "data.csv", "pose 1: the term '1/q2' of model.errors.yaml is infinite at q2 = 0"),
+    "q1**-1 at q1 = 0 (diagnose)": (lambda t: with_model(t, "diagnose", '["1", "q1**-1"]', table(q1=0.0)),
+                                    "data.csv", "the term 'q1**-1' of model.errors.yaml is infinite"),
+    "sqrt of a negative command (compensate)": (
+        lambda t: ["compensate", calibrated(t, '["1", "sqrt(q1)"]'),
+                   write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6\n0.1,0,0,0,0,0\n-0.1,0,0,0,0,0\n"), "-o", t / "out.csv"],
+        "cmds.csv", "row 3: the term 'sqrt(q1)' of calib.json: error_model is NaN at q1 = -0.1"),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_is_refused_in_one_short_line(tmp_path, case):
+    make_args, filename, phrase = CASES[case]
+    args = [str(a) for a in make_args(tmp_path)]
+    start = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "gecgen.cli", *args, "--json"], capture_output=True, text=True,
+                         cwd=tmp_path, timeout=60)
+    seconds = time.perf_counter() - start
+    lines = run.stderr.splitlines()
+    assert run.returncode != 0 and run.stdout == "" and len(lines) == 1, run.stderr[-2000:]
+    assert filename in lines[0] and phrase in lines[0] and len(lines[0]) < 300, lines[0]
+    assert seconds < 10, f"{seconds:.1f} s"
+
+
+def test_a_byte_order_mark_and_modest_aliases_are_accepted(tmp_path):
+    """Spreadsheets write a BOM before the header; anchors that share a term list are ordinary YAML."""
+    robot = load_robot(ROBOTS / "pps.yaml")
+    plain = read_measurements(write(tmp_path, "plain.csv", table()), robot)
+    marked = read_measurements(write(tmp_path, "bom.csv", "\ufeff" + table()), robot)
+    for key in ("q", "pose_ids", "target", "xyz"):
+        assert getattr(marked, key).tolist() == getattr(plain, key).tolist(), key
+    model = load_error_model(write(tmp_path, "m.errors.yaml", "frames:\n  1: &terms ['1', q1]\n  2: *terms\n"), robot)
+    assert [t.text for t in model.terms[6 * 2]] == ["1", "q1"]

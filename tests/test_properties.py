@@ -1,0 +1,156 @@
+"""Property tests of the two parsers of user text: error terms and measurement CSVs. Whatever they
+are given, they either accept it as finite numbers and bounded powers or refuse it with a ModelError
+of one line; nothing else escapes."""
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+from conftest import ROBOTS
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from gecgen.model import ModelError, load_robot
+from gecgen.model.errors import MAX_EXPONENT, error_model_from_dict
+from gecgen.model.measurements import read_measurements
+
+SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+PPS = load_robot(ROBOTS / "pps.yaml")
+
+# -- terms ------------------------------------------------------------------------------------------
+NUMBERS = st.one_of(st.integers(-20, 20).map(str), st.floats(allow_nan=False, allow_infinity=False).map(repr),
+                    st.sampled_from(["0", "0.5", "1e308", "1e999", "1e-320", "9" * 60]))
+ATOMS = st.one_of(st.sampled_from(["q1", "q2", "q6", "fx", "mz", "temp_c", "pi", "lateral", "q7", "x", "__class__"]),
+                  NUMBERS)
+
+
+def compound(children):
+    return st.one_of(
+        st.tuples(children, st.sampled_from(["+", "-", "*", "/", "%", "**"]), children).map(lambda t: f"({t[0]}{t[1]}{t[2]})"),
+        st.tuples(children, NUMBERS).map(lambda t: f"({t[0]})**{t[1]}"),
+        st.tuples(children, st.sampled_from(["-0.5", "1/2", "-1", "16", "17"])).map(lambda t: f"({t[0]})**{t[1]}"),
+        st.tuples(st.sampled_from(["sin", "cos", "sqrt", "exp", "poly"]), children).map(lambda t: f"{t[0]}({t[1]})"),
+        children.map(lambda c: f"-{c}"),
+    )
+
+
+EXPRESSIONS = st.recursive(ATOMS, compound, max_leaves=10)
+TERMS = st.one_of(
+    EXPRESSIONS,
+    st.tuples(EXPRESSIONS, NUMBERS).map(lambda t: f"poly({t[0]}, {t[1]})"),
+    st.tuples(EXPRESSIONS, NUMBERS, NUMBERS).map(lambda t: f"fourier({t[0]}, {t[1]}, {t[2]})"),
+    st.text(max_size=40),
+    st.text(alphabet="q12 fx+-*/().e09,sincoqrtplyu", max_size=40),
+)
+YAML_VALUES = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=10)),
+                           lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=5), c, max_size=3),
+                           max_leaves=8)
+
+
+def accepted_or_refused(spec):
+    """The model error_model_from_dict makes of `spec`, or None when it refuses in one line."""
+    try:
+        return error_model_from_dict(spec, PPS, "<h>")
+    except ModelError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("<h>") and len(str(exc)) < 400, str(exc)
+        return None
+
+
+@SETTINGS
+@given(st.lists(TERMS, min_size=1, max_size=3))
+def test_terms_are_finite_with_bounded_powers_or_refused(texts):
+    model = accepted_or_refused({"aux": ["temp_c"], "frames": {1: texts}})
+    for term in model.terms[6] if model else ():
+        expr = term.expr
+        assert not expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan), term.text
+        assert all(math.isfinite(float(n)) for n in expr.atoms(sp.Number)), term.text
+        assert all(abs(p.exp) <= MAX_EXPONENT for p in expr.atoms(sp.Pow)), term.text
+        for x in expr.free_symbols:
+            if expr.is_polynomial(x):
+                assert sp.degree(expr, x) <= MAX_EXPONENT, term.text
+
+
+@SETTINGS
+@given(YAML_VALUES)
+def test_any_yaml_value_as_a_model_is_accepted_or_refused(value):
+    for spec in (value, {"default": value}, {"frames": {1: value}}, {"frames": value}, {"aux": value}):
+        accepted_or_refused(spec)
+
+
+def test_the_term_strategies_reach_both_outcomes():
+    """The properties above are not vacuous: the strategies produce accepted and refused terms."""
+    outcomes = set()
+
+    @settings(max_examples=100, deadline=None, database=None)
+    @given(TERMS)
+    def collect(text):
+        outcomes.add(accepted_or_refused({"aux": ["temp_c"], "frames": {1: [text]}}) is None)
+
+    collect()
+    assert outcomes == {True, False}
+
+
+# -- measurement CSVs -------------------------------------------------------------------------------
+HEADER = ["pose", "q1", "q2", "q3", "q4", "q5", "q6", "fx", "temp_c", "target", "x", "y", "z"]
+GOOD_CELLS = {"target": st.sampled_from(["t1", "t2", "t3", "ntp"]),
+              **{c: st.floats(-0.05, 0.05).map(repr) for c in HEADER if c not in ("pose", "target")}}
+ODD_CELLS = st.one_of(st.sampled_from(["", "nan", "-inf", "1e308", "9007199254740993", "1.5", "t9", " 0.1 ", '"0,1"',
+                                       "x" * 200, "\ufeff0"]), st.text(max_size=12))
+SEPARATORS = st.sampled_from([",", ",", ",", ";", "\t"])
+
+
+@st.composite
+def tables(draw) -> bytes:
+    header = draw(st.permutations(HEADER))
+    if draw(st.booleans()):
+        header = draw(st.lists(st.sampled_from(HEADER + ["q7", "mz", "pose"]), min_size=1, max_size=14))
+    # pose r on row r keeps most tables consistent; odd cells break them
+    rows = [[draw(ODD_CELLS) if draw(st.integers(0, 19)) == 0 else str(r) if c == "pose" else draw(GOOD_CELLS.get(c, ODD_CELLS))
+             for c in header] for r in range(draw(st.integers(0, 6)))]
+    sep = draw(SEPARATORS)
+    text = "\n".join(sep.join(row) for row in [header, *rows]) + "\n"
+    data = ("\ufeff" if draw(st.booleans()) else "").encode() + text.encode()
+    if draw(st.integers(0, 4)) == 0:  # a stray byte anywhere
+        at = draw(st.integers(0, len(data)))
+        data = data[:at] + draw(st.binary(min_size=1, max_size=3)) + data[at:]
+    return data
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    return tmp_path_factory.mktemp("csv")
+
+
+def read_or_refuse(path):
+    """read_measurements(path) with finite arrays, or None after a one-line refusal naming the file."""
+    try:
+        data = read_measurements(path, PPS)
+    except ModelError as exc:
+        message = str(exc)
+        assert "\n" not in message and message.startswith(str(path)) and len(message) < 400, message
+        return None
+    for array in (data.q, data.w, data.aux, data.xyz):
+        assert np.isfinite(array).all()
+    return data
+
+
+@SETTINGS
+@given(st.one_of(tables(), st.binary(max_size=300)))
+def test_csv_reads_as_finite_arrays_or_is_refused_in_one_line(folder, content):
+    path = folder / "data.csv"
+    path.write_bytes(content)
+    read_or_refuse(path)
+
+
+def test_the_csv_strategy_reaches_both_outcomes(folder):
+    outcomes = set()
+
+    @settings(max_examples=150, deadline=None, database=None)
+    @given(tables())
+    def collect(content):
+        path = folder / "reach.csv"
+        path.write_bytes(content)
+        outcomes.add(read_or_refuse(path) is None)
+
+    collect()
+    assert outcomes == {True, False}
