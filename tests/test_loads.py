@@ -338,7 +338,7 @@ def test_gravity_torque_needs_the_inertials_and_a_mass_below_the_joint(tmp_path)
 
     from test_gravity import arm_urdf
 
-    (tmp_path / "arm.yaml").write_text("name: arm\nurdf: arm.urdf\nbase_link: base\ntip_link: hand\n"
+    (tmp_path / "arm.yaml").write_text("name: arm\nangle_unit: rad\nurdf: arm.urdf\nbase_link: base\ntip_link: hand\n"
                                        "targets: {t: [0.1, 0, 0]}\n")
     arm_urdf(tmp_path / "arm.urdf", hand_mass="<mass/>")
     robot = load_robot(tmp_path / "arm.yaml")
