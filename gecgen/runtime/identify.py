@@ -372,8 +372,9 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                 break
         else:
             fit = replace(fit, failures=(*fit.failures, f"the {len(frames)} station frames did not settle in "
-                                         f"{STATION_ROUNDS} rounds (last move {1e3 * moved:.3g} mm): the stations "
-                                         f"share too few well-spread poses; measure more from each"))
+                                         f"{STATION_ROUNDS} rounds (last move {1e3 * moved:.3g} mm): on this data "
+                                         f"they are hard to tell from the robot's errors; measure more poses, "
+                                         f"spread wider, from each station"))
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=2)
     return fit
