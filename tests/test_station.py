@@ -151,6 +151,13 @@ def test_an_unknown_station_needs_register(setup, calibrations, capsys):
     two = files["two"]
     write_measurements(d / "half.csv", robot, two.subset(np.arange(30, 60)), wrench=False)
     assert run(capsys, "evaluate", calibrations[1], d / "half.csv")["after"]["rms_mm"] < 0.1
+    # a calibration written before stations knows one: station 0, its `registration`
+    old = json.loads(calibrations[1].read_text())
+    del old["registrations"]
+    (d / "old.json").write_text(json.dumps(old))
+    assert main(["evaluate", str(d / "old.json"), str(d / "half.csv")]) == 2
+    assert "station 1 has no known tracker frame" in capsys.readouterr().err
+    assert run(capsys, "evaluate", d / "old.json", d / "val.csv") == run(capsys, "evaluate", calibrations[1], d / "val.csv")
 
 
 def test_the_station_column_is_an_integer_id_not_a_signal(setup):
