@@ -105,7 +105,8 @@ def cmd_identify(args) -> dict:
     out = Path(args.output or f"{robot.name}.calib.json")
     calibration.save(calib, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
-              "n_points": len(data.xyz), **calib.report, "registration": fit.registration.to_dict()}
+              "n_points": len(data.xyz), **calib.report, "registration": fit.registration.to_dict(),
+              "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
     return result
 
 
@@ -113,16 +114,31 @@ def cmd_evaluate(args) -> dict:
     from gecgen.model.measurements import read_measurements
     from gecgen.runtime import calibration
     from gecgen.runtime.compiled import CompiledModel
-    from gecgen.runtime.identify import position_errors, summary
+    from gecgen.runtime.identify import fit_frames, position_errors, summary, to_world
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
     check_terms_finite(calib.model, calib.robot, data)
     cm = CompiledModel(calib.robot, calib.model)
-    y = calib.registration.to_world(data.xyz)
     outside = _extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))
-    return {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(y),
-            "before": summary(position_errors(cm, data, y, None)),
+    result = {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(data.xyz),
+              "registered": args.register}
+    if args.register:
+        # a new stationing: each side is scored in the frame that fits it best, so that before and
+        # after differ by the calibration alone
+        frames = fit_frames(cm, data, calib.c)
+        y_before, y = to_world(fit_frames(cm, data, None), data), to_world(frames, data)
+        known = calib.frames
+        moved = {k: {**r.to_dict(), **r.relative_to(known.get(k, calib.registration))} for k, r in frames.items()}
+        first = moved[min(moved)]
+        result.update(before_registration="the nominal model's, fitted on DATA", registration=first,
+                      registrations={str(k): v for k, v in moved.items()},
+                      tracker_frame=f"re-fitted on DATA with the calibration held: {first['angle_deg']:.3f} deg and "
+                                    f"{first['distance_mm']:.1f} mm from the calibration's")
+    else:
+        y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: use evaluate --register")
+        result.update(before_registration="the calibration's", tracker_frame="the calibration's")
+    return {**result, "before": summary(position_errors(cm, data, y_before, None)),
             "after": summary(position_errors(cm, data, y, calib.c)), "extrapolation": outside}
 
 
@@ -189,6 +205,9 @@ def cmd_diagnose(args) -> dict:
     from gecgen.loop.diagnose import diagnose, verdict, write_error_model
     from gecgen.model.measurements import read_measurements
 
+    register_val = args.register == "val"
+    if register_val and not args.val:
+        raise ModelError("diagnose --register re-fits the tracker frame of the validation file; give it with --val VAL")
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     val = read_measurements(args.val, robot) if args.val else None
@@ -200,8 +219,9 @@ def cmd_diagnose(args) -> dict:
             if status:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
-        diag = diagnose(robot, model, data, val, registration_mode=args.register, progress=progress,
-                        noise_mm=args.noise_mm, max_rounds=args.max_rounds)
+        diag = diagnose(robot, model, data, val, registration_mode="auto" if register_val else args.register,
+                        progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds,
+                        register_val=register_val)
     out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
@@ -210,7 +230,8 @@ def cmd_diagnose(args) -> dict:
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
               "verdict": verdict(diag.remaining),
-              "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses"}
+              "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses",
+              "val_registered": register_val}
     if args.report:
         from gecgen.loop.report import write_report
 
@@ -246,6 +267,9 @@ def _print_human(result: dict):
             print(f"{key}: {len(value)} (use --json for the list)")
         elif isinstance(value, dict):
             scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list))}
+            if not scalars:
+                print(f"{key}: {len(value)} (use --json for them)")
+                continue
             more = " (more with --json)" if len(scalars) < len(value) else ""
             print(f"{key}: " + ", ".join(f"{k} {_scalar(v)}" for k, v in scalars.items()) + more)
         else:
@@ -287,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("evaluate", cmd_evaluate, "position errors of new data before and after the calibration")
     p.add_argument("calibration")
     p.add_argument("data")
+    p.add_argument("--register", action="store_true",
+                   help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
+                        "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
 
     p = command("compensate", cmd_compensate, "corrected joint commands for nominal commands")
     p.add_argument("calibration")
@@ -317,7 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", help="folder for report.md and its plots")
-    p.add_argument("--register", choices=["auto", "always", "never"], default="auto")
+    p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
+                   help="registration of DATA onto the nominal model: auto (when far apart), always or never; "
+                        "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
+                        "the --val file, measured from another stationing, before scoring it")
     p.add_argument("--max-rounds", type=int, default=50,
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
     p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "

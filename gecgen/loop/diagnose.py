@@ -38,7 +38,7 @@ from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, identify, position_errors, rows_H_and_residual, summary
+from gecgen.runtime.identify import Fit, fit_frames, identify, position_errors, rows_H_and_residual, summary, to_world
 
 #: rounds at most: a safety net, not the stopping rule (that is the statistics)
 MAX_ROUNDS = 50
@@ -137,11 +137,12 @@ def _choose(found: list[Hit], cands, J, H, r, rows_pose, fold, n_tests: int, bas
 
 def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
              registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None,
-             max_rounds: int = MAX_ROUNDS) -> Diagnosis:
+             max_rounds: int = MAX_ROUNDS, register_val: bool = False) -> Diagnosis:
     """Run the loop; without `val`, a seeded fifth of the poses is held out for the report.
     `noise_mm`: the measurement noise per coordinate (mm), when known; otherwise it is estimated
     from repeated poses of `data`, if any. It decides whether what remains is only noise. The loop
-    stops when nothing passes the statistics, or after `max_rounds`."""
+    stops when nothing passes the statistics, or after `max_rounds`. `register_val`: `val` was
+    measured from another tracker stationing; each scored model fits its frame on it first."""
     rng = np.random.default_rng(seed)
     noise = noise_floor(data, noise_mm)
     if val is None:
@@ -157,7 +158,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     for round_no in range(1, max_rounds + 1):
         if progress:
             progress(round_no, rnd.fit.train["rms_mm"])
-        y = rnd.fit.registration.to_world(data.xyz)
+        y = rnd.fit.to_world(data)
         H, r = _linear_system(rnd, data, y)
         rows_pose, order = _rows_pose(data)
         Q = np.linalg.qr(H / np.linalg.norm(H, axis=0))[0]
@@ -222,8 +223,8 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         coefs = _effect_coefficients(robot, rnd, e, len(c.terms))
         effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), c.family,
                               1e3 * (base_cv - cv), p, coefs, alternatives[:5]))
-    before = _scores(first, data, val)
-    after = _scores(rnd, data, val)
+    before = _scores(first, val, register_val)
+    after = _scores(rnd, val, register_val)
     # the last round's CV is the final model's unless that round added an effect (the round cap)
     final_cv = history[-1]["cv_rms_mm"] if history[-1]["accepted"] is None else None
     remaining = {**what_remains(rnd, data, final_cv, noise), "correlates": correlates,
@@ -266,7 +267,7 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
     then nobody can say that the model covers the data, only that nothing in the dictionary
     explains what remains."""
     fit = rnd.fit
-    e = position_errors(rnd.cm, data, fit.registration.to_world(data.xyz), fit.c)
+    e = position_errors(rnd.cm, data, fit.to_world(data), fit.c)
     inliers = np.nonzero(e <= fit.outlier_limit_m)[0]  # outliers are counted, not ranked with the rest
     top = inliers[np.argsort(-e[inliers])[:LARGEST]]
     out = {"train_rms_mm": fit.train_inliers["rms_mm"], "cv_rms_mm": cv_rms_mm, "sigma_mm": 1e3 * fit.sigma_m,
@@ -310,8 +311,10 @@ def _effect_coefficients(robot: Robot, rnd: Round, error: int, n_new: int) -> li
             for j, c in enumerate(rnd.model.coefficients) if c.error == error and c.term.text in new]
 
 
-def _scores(rnd: Round, data: Measurements, val: Measurements) -> dict:
-    yv = rnd.fit.registration.to_world(val.xyz)
+def _scores(rnd: Round, val: Measurements, register: bool) -> dict:
+    """Training RMS and validation RMS and max (mm); `register`: in val's own fitted frame."""
+    frames = fit_frames(rnd.cm, val, rnd.fit.c) if register else rnd.fit.registrations
+    yv = to_world(frames, val, "use diagnose --register")
     ev = position_errors(rnd.cm, val, yv, rnd.fit.c)
     s = summary(ev)
     return {"train_rms_mm": rnd.fit.train["rms_mm"], "val_rms_mm": s["rms_mm"], "val_max_mm": s["max_mm"]}

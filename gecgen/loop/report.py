@@ -29,7 +29,7 @@ def _variable(data: Measurements, name: str) -> np.ndarray:
 
 def _errors_by_pose(rnd: Round, data: Measurements) -> np.ndarray:
     """RMS point error (mm) per pose."""
-    e = position_errors(rnd.cm, data, rnd.fit.registration.to_world(data.xyz), rnd.fit.c)
+    e = position_errors(rnd.cm, data, rnd.fit.to_world(data), rnd.fit.c)
     sq = np.bincount(data.pose, e ** 2, minlength=data.n_poses) / np.maximum(np.bincount(data.pose, minlength=data.n_poses), 1)
     return 1e3 * np.sqrt(sq)
 

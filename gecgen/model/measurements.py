@@ -19,6 +19,8 @@ from gecgen.model.validation import ModelError, excerpt, read_text, require
 
 #: joint readings may exceed the limits by this much (m or rad) before a row is refused
 LIMIT_TOLERANCE = 1e-3
+#: the optional column naming the tracker stationing of each row (an integer id)
+STATION = "station"
 #: measured positions farther than this from the robot's reach look like millimetres (m)
 MM_SUSPECT = 50.0
 #: magnitudes no real reading reaches (a wrench in N and N m, an auxiliary signal): beyond them a cell
@@ -116,7 +118,8 @@ class Measurements:
     pose_ids (P,) the file's pose ids; pose (R,) index into the poses; target (R,) index into
     robot.targets; xyz (R, 3) measured world positions in m; row (R,) the line of each point in
     its file (header = 1), None when the points were never read from a file (then they are
-    numbered as `write_measurements` would write them).
+    numbered as `write_measurements` would write them); station (R,) the integer id of the tracker
+    stationing each point was measured from (zeros when the file has no `station` column).
     """
 
     q: np.ndarray
@@ -129,6 +132,11 @@ class Measurements:
     xyz: np.ndarray
     source: str = ""
     row: np.ndarray | None = None
+    station: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.station is None:  # one stationing: every point in the same tracker frame
+            object.__setattr__(self, "station", np.zeros(len(self.xyz), np.int64))
 
     @property
     def n_poses(self) -> int:
@@ -147,7 +155,7 @@ class Measurements:
         remap[poses] = np.arange(len(poses))
         return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
                             remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
-                            self.file_rows[keep])
+                            self.file_rows[keep], self.station[keep])
 
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
@@ -168,7 +176,8 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     require(not extra_q, f"{where}: row 1: column {excerpt(extra_q[0]) if extra_q else ''} but robot {robot.name} has "
                          f"{robot.n} joints; remove it or use the right robot file")
     wcols = [c for c in WRENCH if c in header]
-    aux_names = tuple(h for h in header if h not in required and h not in WRENCH)
+    # station names the tracker frame of a row, not a signal the robot's errors may depend on
+    aux_names = tuple(h for h in header if h not in required and h not in WRENCH and h != STATION)
     idx = {h: k for k, h in enumerate(header)}
 
     def column(col: str) -> np.ndarray:
@@ -212,22 +221,34 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
         r, k = differs[0]
         raise ModelError(f"{at(where, r + 2, state_cols[k])}: pose {ids[r]} disagrees with its row "
                          f"{first[pose[r]] + 2}; rows of one pose must share joints, wrench and aux")
+    station = np.zeros(len(xyz), np.int64)
+    if STATION in header:
+        station = numbers(table[:, idx[STATION]], STATION, where, "give the integer id of the tracker stationing")
+        bad = np.nonzero(station != np.round(station))[0]
+        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{STATION}': "
+                              f"{table[bad[0], idx[STATION]] if len(bad) else ''!r} is not an integer station id; "
+                              f"give every row of one tracker stationing the same integer")
+        station = station.astype(np.int64)
     ps = state[first]
     w = np.zeros((len(pose_ids), 6))
     for k, c in enumerate(wcols):
         w[:, WRENCH.index(c)] = ps[:, robot.n + k]
     return Measurements(q=ps[:, :robot.n], w=w, aux=ps[:, robot.n + len(wcols):], aux_names=aux_names,
                         pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where,
-                        row=np.arange(len(xyz)) + 2)
+                        row=np.arange(len(xyz)) + 2, station=station)
 
 
 def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrench: bool = True):
-    """Write in the contract's layout; floats with full precision (repr)."""
+    """Write in the contract's layout; floats with full precision (repr); the station column only
+    when some point is not from station 0 (a file without it is station 0)."""
     qcols = [f"q{i + 1}" for i in range(robot.n)]
-    header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, "target", "x", "y", "z"]
+    stations = bool(np.any(data.station != 0))
+    header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, *([STATION] if stations else ()),
+              "target", "x", "y", "z"]
     targets = list(robot.targets)
     write_csv(path, header, ([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
                               *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
+                              *([int(data.station[r])] if stations else ()),
                               targets[data.target[r]], *map(repr, data.xyz[r].tolist())]
                              for r, k in enumerate(data.pose)))
 

@@ -41,8 +41,14 @@ class Calibration:
     std: np.ndarray  # (nc,), NaN where eliminated
     kept: tuple[int, ...]
     cov: np.ndarray  # (k, k) over kept
-    registration: Registration
+    registration: Registration  # the first (or only) station's
     report: dict  # metrics, statistics and redundancy as written
+    registrations: dict[int, Registration] | None = None  # per station id; None: one, station 0
+
+    @property
+    def frames(self) -> dict[int, Registration]:
+        """The tracker frame of every station the calibration was fitted with (station id -> frame)."""
+        return self.registrations or {0: self.registration}
 
     def to_dict(self) -> dict:
         names = self.model.coefficient_names(self.robot)
@@ -59,6 +65,7 @@ class Calibration:
             "kept": list(self.kept),
             "covariance": self.cov.tolist(),
             "registration": self.registration.to_dict(),
+            "registrations": {str(k): r.to_dict() for k, r in self.frames.items()},
             **self.report,
         }
 
@@ -72,13 +79,14 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
               "loss": fit.loss, "outlier_limit_mm": 1e3 * fit.outlier_limit_m if np.isfinite(fit.outlier_limit_m) else None,
               "outliers": [o.to_dict() for o in fit.outliers], "train_inliers": fit.train_inliers,
               "training_ranges": fit.ranges}
-    return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report)
+    return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report,
+                       fit.registrations)
 
 
 #: keys every calibration file holds; the rest, but for these three, is its report
 REQUIRED = ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
             "covariance", "registration")
-NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", *REQUIRED}
+NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", *REQUIRED}
 #: R^T R may differ from the identity by this much (JSON keeps R to full precision)
 ROTATION_TOL = 1e-6
 
@@ -201,4 +209,14 @@ def load(path: str | Path) -> Calibration:
     c = np.array([x["value"] for x in entries], dtype=float)
     std = np.array([np.nan if x["std"] is None else x["std"] for x in entries], dtype=float)
     report = {k: v for k, v in d.items() if k not in NOT_REPORT}
-    return Calibration(robot, model, c, std, tuple(kept), cov, _registration(d["registration"], where), report)
+    return Calibration(robot, model, c, std, tuple(kept), cov, _registration(d["registration"], where), report,
+                       _registrations(d.get("registrations"), where))
+
+
+def _registrations(d, where: str) -> dict[int, Registration] | None:
+    """The per-station frames ({"id": registration}); None in a file written before stations."""
+    if d is None:
+        return None
+    require(isinstance(d, dict) and d and all(isinstance(k, str) and k.lstrip("-").isdigit() for k in d),
+            f"{where}: registrations: expected an object of station ids (integers) to registrations; identify again")
+    return {int(k): _registration(v, f"{where}: registrations.{k}") for k, v in d.items()}

@@ -14,7 +14,7 @@ import hashlib
 import itertools
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -90,10 +90,15 @@ class Fit:
     outliers: tuple[Outlier, ...] = ()
     train_inliers: dict | None = None
     ranges: dict | None = None
+    registrations: dict[int, Registration] | None = None  # per station id; `registration` is the first's
 
     @property
     def trustworthy(self) -> bool:
         return not self.failures
+
+    def to_world(self, data: Measurements) -> np.ndarray:
+        """Measured points of `data` (R, 3) in the robot world, each through its station's frame."""
+        return to_world(self.registrations, data)
 
 
 def _poses_inputs(cm: CompiledModel, data: Measurements):
@@ -169,7 +174,7 @@ def cross_validated_rms(cm: CompiledModel, data: Measurements, folds: int = 5, s
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fit = identify(cm, train, **options)
-        e = position_errors(cm, test, fit.registration.to_world(test.xyz), fit.c)
+        e = position_errors(cm, test, fit.to_world(test), fit.c)
         sq, n = sq + float(e @ e), n + len(e)
     return 1e3 * np.sqrt(sq / n)
 
@@ -253,12 +258,40 @@ def redundancy(cm: CompiledModel, data: Measurements | None = None, registration
     """Structural analysis for the targets the data measures (all robot targets without data)."""
     if data is None:
         return _structural(cm, np.arange(cm.dims.nt))
-    return _data_analysis(cm, data, _registered(cm, data, registration_mode).to_world(data.xyz))[0]
+    return _data_analysis(cm, data, to_world(fit_frames(cm, data, None, mode=registration_mode), data))[0]
 
 
-def _registered(cm: CompiledModel, data: Measurements, mode: str, loss: str = "cauchy") -> Registration:
-    p_nom = cm.nominal_targets(data.q)[data.pose, data.target]
-    return register(p_nom, data.xyz, mode, loss)
+def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss: str = "cauchy",
+               mode: str = "always") -> dict[int, Registration]:
+    """The tracker frame of each station of `data` ({station id: Registration}) with the model held
+    at coefficients c (nc,), None for the nominal model: the robust rigid transform taking the
+    modelled points onto the station's measured ones (`registration.register`: mode and loss)."""
+    if c is None:
+        p = cm.nominal_targets(data.q)[data.pose, data.target]
+    else:
+        p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), c)[data.pose, data.target]
+    frames = {}
+    for s in np.unique(data.station):
+        rows = data.station == s
+        try:
+            frames[int(s)] = register(p[rows], data.xyz[rows], mode, loss)
+        except ModelError as exc:
+            raise ModelError(f"{data.source}: station {s}: {exc}") from None
+    return frames
+
+
+def to_world(frames: dict[int, Registration], data: Measurements, fix: str = "use --register") -> np.ndarray:
+    """Measured points of `data` (R, 3) in the robot world (m), each through the frame of its
+    station; a station `frames` lacks is refused (`fix` says what to do)."""
+    unknown = sorted(set(np.unique(data.station).tolist()) - set(frames))
+    if unknown:
+        raise ModelError(f"{data.source}: station {unknown[0]} has no known tracker frame (known: stations "
+                         f"{', '.join(map(str, sorted(frames)))}); {fix} to fit its frame on this data")
+    y = data.xyz.copy()
+    for s, frame in frames.items():
+        rows = data.station == s
+        y[rows] = frame.to_world(data.xyz[rows])
+    return y
 
 
 def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.ndarray, kept: np.ndarray,
@@ -291,6 +324,12 @@ def _ranges(cm: CompiledModel, data: Measurements) -> dict[str, list[float]]:
     return {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
 
 
+#: alternations of station frames and coefficients at most (see `identify`)
+STATION_ROUNDS = 50
+#: the station frames have settled when no measured point moves more than this between rounds (m)
+STATION_TOL_M = 1e-6  # a micrometre: a fiftieth of a good tracker's noise
+
+
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
              step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
              loss: str = "cauchy") -> Fit:
@@ -307,11 +346,45 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     the exact RANK_TOL holds the weakly excited coefficients at zero instead (see
     `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
     `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
+
+    Stations (`data.station`): each is registered onto the nominal model on its own. With more
+    than one, what the nominal model leaves of each frame differs between stations, and frame 0's
+    errors can absorb only one of them; so the frames and the coefficients are then fitted in turn
+    (each other station's frame onto the calibrated model's points, `fit_frames`, then the
+    coefficients anew) until no measured point moves by more than STATION_TOL_M between two
+    rounds' frames. The first (lowest id) station keeps its nominal registration: it anchors frame
+    0's errors as with one station. `Fit.before` stays that of the nominal registrations.
     """
     robust.check_loss(loss)
+    frames = fit_frames(cm, data, None, loss, registration_mode)
+    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss)
+    if len(frames) > 1 and registration_mode != "never":
+        first = min(frames)
+        for _ in range(STATION_ROUNDS):
+            # the first station keeps its frame: frame 0's errors stay relative to it as with one
+            # station, rather than trading places with all the frames at once
+            new = {**fit_frames(cm, data, fit.c, loss), first: frames[first]}
+            moved = np.linalg.norm(to_world(new, data) - to_world(frames, data), axis=1).max()
+            frames = new
+            fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss),
+                          before=fit.before)
+            if moved <= STATION_TOL_M:
+                break
+        else:
+            fit = replace(fit, failures=(*fit.failures, f"the {len(frames)} station frames did not settle in "
+                                         f"{STATION_ROUNDS} rounds (last move {1e3 * moved:.3g} mm): on this data "
+                                         f"they are hard to tell from the robot's errors; measure more poses, "
+                                         f"spread wider, from each station"))
+    for note in [*fit.failures, *fit.warnings]:
+        warnings.warn(note, stacklevel=2)
+    return fit
+
+
+def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
+         progress, ridge: float, rank_tol: float, loss: str) -> Fit:
+    """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted."""
     notes = []
-    registration = _registered(cm, data, registration_mode, loss)
-    y = registration.to_world(data.xyz)
+    y = to_world(frames, data)
     nc = cm.dims.nc
     c = np.zeros(nc)
     red, A0, m = _data_analysis(cm, data, y, rank_tol)
@@ -396,10 +469,9 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     if len(flagged) > OUTLIER_SHARE * len(e):
         notes.append(f"{len(flagged)} of {len(e)} points are outliers: more than glitches usually make; the model "
                      f"may lack an effect (run diagnose) or the data mixes set-ups")
-    for note in [*failures, *notes]:
-        warnings.warn(note, stacklevel=2)
     inliers = e <= limit
-    return Fit(c=c, std=std, cov=cov, redundancy=red, registration=registration, sigma_m=sigma,
+    return Fit(c=c, std=std, cov=cov, redundancy=red, registration=frames[min(frames)], registrations=frames,
+               sigma_m=sigma,
                condition_number=cond, observability_index=obs, iterations=it, converged=converged,
                before=before, train=summary(e), warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=outliers,
@@ -416,4 +488,5 @@ def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarr
     return np.sqrt(var.reshape(len(Hk), cm.dims.nt, 3).sum(-1))
 
 
-__all__ = ["Fit", "IDENTITY", "Outlier", "identify", "position_errors", "prediction_std", "redundancy", "summary"]
+__all__ = ["Fit", "IDENTITY", "Outlier", "fit_frames", "identify", "position_errors", "prediction_std", "redundancy",
+           "summary", "to_world"]

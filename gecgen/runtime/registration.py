@@ -35,7 +35,18 @@ class Registration:
 
     @property
     def angle_rad(self) -> float:
-        return float(np.arccos(np.clip((np.trace(self.R) - 1) / 2, -1, 1)))
+        return _angle(self.R)
+
+    def relative_to(self, other: "Registration") -> dict:
+        """How far this tracker frame is from `other`: {angle_deg, distance_mm}, the rotation
+        between them and the distance between the tracker origins in the world. A registration
+        not applied stands for the world frame itself, since that is what the data was taken in."""
+        (R1, t1), (R0, t0) = (r._frame() for r in (self, other))
+        return {"angle_deg": float(np.degrees(_angle(R1 @ R0.T))),
+                "distance_mm": float(1e3 * np.linalg.norm(R1.T @ t1 - R0.T @ t0))}
+
+    def _frame(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self.R, self.t) if self.applied else (np.eye(3), np.zeros(3))
 
     def to_dict(self) -> dict:
         return {"rotation": self.R.tolist(), "translation": self.t.tolist(), "applied": self.applied,
@@ -47,6 +58,11 @@ class Registration:
 
 
 IDENTITY = Registration(np.eye(3), np.zeros(3), False)
+
+
+def _angle(R: np.ndarray) -> float:
+    """Rotation angle (rad) of a rotation matrix (3, 3)."""
+    return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
 
 
 def kabsch(p: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -91,8 +107,9 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
         raise ValueError(f"registration mode {mode!r}: use auto, always or never")
     if len(y) < 3 or np.linalg.matrix_rank(y - y.mean(0), tol=1e-6) < 2:
         if mode == "always":
-            raise ModelError("registration needs at least three non-collinear measured points; use --register never")
+            raise ModelError("registration needs at least three non-collinear measured points per tracker stationing; "
+                             "measure more, or do not register (identify --register never)")
         return IDENTITY
     R, t = robust_kabsch(p_nominal, y, loss)
-    far = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
+    far = _angle(R) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
     return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)))
