@@ -45,9 +45,12 @@ from gecgen.simulate.truth import sensor_wrench
 
 #: poses whose H_e is evaluated at once (the PPS default model: 12 x 330 doubles per pose, 63 MB)
 BLOCK = 2000
-#: candidates whose scaled H_e the search holds in memory at once, and the bytes that may take
-MAX_POOL = 20_000
+#: candidates whose whitened H_e the search holds in memory at once, and the bytes that may take
+MAX_POOL = 10_000
 POOL_BYTES = 256 * 2 ** 20
+#: candidates (a random sample of more) whose H_e decides what is excited and the whitening: the
+#: mean information of 20,000 i.i.d. poses is within a few per cent of that of any more
+BASIS_SAMPLE = 20_000
 #: ridge on the whitened information (the mean candidate adds the identity): keeps M invertible
 #: while the greedy start spans the coefficients (a new direction then gains log(1/RIDGE) = 7, far
 #: above what strengthening a spanned one gains), and negligible once N poses inform every one
@@ -58,9 +61,9 @@ SWAP_TOL = 1e-6
 #: the confidence ellipsoid's axes by 1/k % on average) or after MAX_PASSES
 PASS_TOL = 1e-2
 MAX_PASSES = 10
-MAX_ROUNDS = 2
+MAX_ROUNDS = 1
 #: multiply-adds an exchange trial may spend on the candidates (T r^2 (k + r) for T candidates)
-EXCHANGE_BUDGET = 5e7
+EXCHANGE_BUDGET = 2e7
 N_VALIDATION = 500
 NOISE_M = 5e-5
 GRAVITY = (0.0, 0.0, -9.81)
@@ -180,7 +183,10 @@ class _Search:
     REFACTOR = 32
 
     def __init__(self, H: np.ndarray, M0: np.ndarray, rng: np.random.Generator):
-        self.H, self.rng = H, rng
+        # single precision: the passes over the pool are memory-bound, and a gain's relative
+        # rounding (1e-6) is far below the differences that decide; M accumulates the rounded
+        # blocks in double, so every checked swap is exact for the problem held
+        self.H, self.rng = H.astype(np.float32), rng
         self.P, self.r, self.k = H.shape
         self.M = M0.copy()
         self.chosen: list[int] = []
@@ -189,8 +195,16 @@ class _Search:
     def start(self, chosen):
         """Begin from the given pool indices (a design carried over from another pool)."""
         self.chosen = list(chosen)
-        self.M = self.M + np.einsum("pik,pil->kl", self.H[self.chosen], self.H[self.chosen])
+        Hc = self.H[self.chosen].astype(float)
+        self.M = self.M + np.einsum("pik,pil->kl", Hc, Hc)
         self._refactor()
+
+    def row(self, i: int) -> np.ndarray:
+        return self.H[i].astype(float)
+
+    def _cross(self, flat: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """H_t W for the stacked pool rows flat (T r, k), (T, r, r) in double."""
+        return (flat @ W.astype(flat.dtype)).astype(float).reshape(-1, self.r, self.r)
 
     def _refactor(self):
         self.Minv = inverse(self.M)
@@ -224,8 +238,8 @@ class _Search:
             g = _logdet_blocks(D)
             g[self.chosen] = -np.inf
             i = int(np.argmax(g))
-            Hi = self.H[i]
-            C = (flat @ (self.Minv @ Hi.T)).reshape(self.P, self.r, self.r)
+            Hi = self.row(i)
+            C = self._cross(flat, self.Minv @ Hi.T)
             D -= _sandwich(C, np.linalg.inv(np.eye(self.r) + D[i]))
             self.chosen.append(i)
             self._update(Hi, 1.0)
@@ -245,7 +259,7 @@ class _Search:
 
     def _swap_gain(self, i: int, j: int) -> float:
         """log det(M - H_j^T H_j + H_i^T H_i) - log det M from the current inverse alone."""
-        Hi, Hj = self.H[i], self.H[j]
+        Hi, Hj = self.row(i), self.row(j)
         W = self.Minv @ Hj.T
         S = np.eye(self.r) - Hj @ W
         C = Hi @ W
@@ -271,14 +285,14 @@ class _Search:
             made = 0
             for slot in range(len(self.chosen)):
                 j = self.chosen[slot]
-                Hj = self.H[j]
+                Hj = self.row(j)
                 W = self.Minv @ Hj.T  # (k, r)
                 S = I - Hj @ W  # positive definite while M - H_j^T H_j is
                 loss = _logdet_blocks(-(I - S)[None])[0]
                 if not np.isfinite(loss):
                     continue  # the other poses leave a direction only j spans: j stays
                 Sinv = np.linalg.inv(S)
-                C = (flat @ W).reshape(len(trial), self.r, self.r)
+                C = self._cross(flat, W)
                 D_minus = D + _sandwich(C, Sinv)
                 net = _logdet_blocks(D_minus) + loss
                 b = int(np.argmax(net))
@@ -286,12 +300,13 @@ class _Search:
                     continue
                 i = int(trial[b])
                 # D against M_-j + H_i^T H_i: Woodbury again, with W2 = M_-j^-1 H_i^T
-                W2 = self.Minv @ self.H[i].T + W @ Sinv @ C[b].T
-                C2 = (flat @ W2).reshape(len(trial), self.r, self.r)
+                Hi = self.row(i)
+                W2 = self.Minv @ Hi.T + W @ Sinv @ C[b].T
+                C2 = self._cross(flat, W2)
                 D = D_minus - _sandwich(C2, np.linalg.inv(I + D_minus[b]))
                 self.chosen[slot] = i
                 self._update(Hj, -1.0)
-                self._update(self.H[i], 1.0)
+                self._update(Hi, 1.0)
                 trial[b], Ht[b] = j, Hj  # j becomes a trial candidate in i's place
                 D[b] = Hj @ self.Minv @ Hj.T
                 made += 1
@@ -303,9 +318,10 @@ class _Search:
 
 
 def _quadratic(H: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """H_i A H_i^T for a stack H (T, r, k), (T, r, r)."""
-    HA = (H.reshape(-1, H.shape[-1]) @ A).reshape(H.shape)
-    return np.einsum("tik,tjk->tij", HA, H, optimize=True)  # optimize: BLAS, 10x numpy's loop
+    """H_i A H_i^T for a stack H (T, r, k), (T, r, r) in double (computed in H's precision)."""
+    HA = (H.reshape(-1, H.shape[-1]) @ A.astype(H.dtype)).reshape(H.shape)
+    # optimize: BLAS, 10x numpy's own loop
+    return np.einsum("tik,tjk->tij", HA, H, optimize=True).astype(float)
 
 
 def _sandwich(C: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -353,6 +369,14 @@ class PoseDesign:
                 "identifiable": [names[j] for j in self.columns], "unexcitable": unexcitable,
                 "swaps": self.swaps, "passes": self.passes, "rounds": self.rounds,
                 "history": [finite(v) for v in self.history]}
+
+
+def pose_rank(robot: Robot, targets: np.ndarray) -> int:
+    """Most coefficients one pose can inform: the targets sit on the tool, so every error moves
+    them as one rigid body (3 for one point, 5 for two, 6 for three not in a line)."""
+    points = np.array(list(robot.targets.values()))[targets]
+    rigid = [np.hstack([np.eye(3), -np.cross(np.eye(3), p)]) for p in points]  # d p = d x + d theta x p
+    return int(np.linalg.matrix_rank(np.vstack(rigid), tol=1e-9))
 
 
 def _measured_rows(targets: np.ndarray) -> np.ndarray:
@@ -408,10 +432,10 @@ def _whitened(cm, cands, idx, basis: _Basis) -> np.ndarray:
 def _basis(cm: CompiledModel, cands: Candidates, rows: np.ndarray, struct: Redundancy, n_struct_targets: int,
            rng: np.random.Generator) -> tuple[_Basis, Redundancy]:
     """The coefficients the candidates excite (the structurally kept ones less those the rank test
-    on the candidates' H_e finds dependent) and the whitening; over at most MAX_POOL candidates
+    on the candidates' H_e finds dependent) and the whitening; over at most BASIS_SAMPLE candidates
     (a seeded random sample of more), whose R factor is streamed through a QR."""
     K = len(cands)
-    sample = np.sort(rng.choice(K, MAX_POOL, replace=False)) if K > MAX_POOL else np.arange(K)
+    sample = np.sort(rng.choice(K, BASIS_SAMPLE, replace=False)) if K > BASIS_SAMPLE else np.arange(K)
     kept = np.array(struct.kept, int)
     R = qr_accumulate((H.reshape(-1, len(kept)), np.zeros(H.shape[0] * H.shape[1]))
                       for _, H in scaled_blocks(cm, cands, sample, rows, kept))[0][:-1, :-1]
@@ -465,12 +489,15 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
     k = len(basis.columns)
     M0, m0 = given_information(cm, given, basis) if given is not None else (np.zeros((k, k)), 0)
     m = m0 + r * n_poses
-    require(m >= k, f"--poses {n_poses}: {n_poses} poses measure {r * n_poses} coordinates"
-                    f"{f' (and the given data {m0})' if m0 else ''} for {k} identifiable coefficients; "
-                    f"give at least {int(np.ceil((k - m0) / r))} poses")
+    per_pose = pose_rank(cm.robot, targets)
+    known = np.linalg.matrix_rank(M0) if given is not None else 0
+    require(known + per_pose * n_poses >= k,
+            f"--poses {n_poses}: {n_poses} poses inform at most {per_pose * n_poses} of the {k} identifiable "
+            f"coefficients{f' the given data leaves' if known else ''} ({per_pose} each: the targets move with the "
+            f"tool as one rigid body); give at least {int(np.ceil((k - known) / per_pose))} poses")
     M_start = M0 + RIDGE * np.eye(k)
 
-    pool_cap = int(min(MAX_POOL, max(n_poses + 1, POOL_BYTES // (8 * r * k))))
+    pool_cap = int(min(MAX_POOL, max(n_poses + 1, POOL_BYTES // (4 * r * k))))
     rounds = 0
     if K <= pool_cap:
         pool = np.arange(K)
