@@ -7,24 +7,25 @@ pose p, nt targets, over the identifiable coefficients). The design maximises lo
 candidate poses:
 
 * columns: the coefficients the structural analysis keeps for the measured targets, less those
-  no candidate excites (a wrench term when every candidate carries the same load); each column
-  is scaled by its RMS over the candidates, so metres and radians, newtons and squared joint
-  angles weigh alike (D-optimal choices do not depend on the scaling; the reported values do);
+  no candidate excites (a wrench term when every candidate carries the same load); the reported
+  values scale each column by its RMS over the candidates, so metres and radians, newtons and
+  squared joint angles weigh alike. The search itself runs in whitened coordinates (the mean
+  candidate informs every direction alike): D-optimal choices do not depend on a linear change of
+  the coefficients, only log det's constant does;
 * greedy start: the pose with the largest gain log det(I + H_i M^-1 H_i^T) (the matrix
-  determinant lemma for a block of 3 nt rows), lazily re-evaluated: log det is submodular, so
-  a gain computed against a smaller M bounds the current one from above, and only the candidates
-  whose bound reaches the top are evaluated again. A small ridge makes M invertible before the
-  chosen poses span every coefficient;
+  determinant lemma for a block of 3 nt rows), every candidate's H_i M^-1 H_i^T updated by
+  Woodbury after each pick. A small ridge makes M invertible before the chosen poses span every
+  coefficient;
 * exchanges (Fedorov, one chosen pose at a time): remove pose j (M_-j), find the candidate i with
-  the largest gain against M_-j, swap when that raises log det M by more than SWAP_TOL; passes
-  over the chosen poses until a pass makes no swap or MAX_PASSES. Every swap is checked on the
-  refactored M, so the criterion never falls;
-* scale: candidates' H_e is computed in blocks of BLOCK poses; at most MAX_POOL candidates
-  (and POOL_BYTES of H_e) are held at once. With more, the pool is the candidates with the
-  largest gain against the information N average candidates would give, and after the exchange
-  the whole set is screened again against the design (up to MAX_ROUNDS times): a candidate
-  outside the pool enters when its gain ranks it there. An exchange pass evaluates at most
-  EXCHANGE_BUDGET multiply-adds per chosen pose: on a larger pool it looks at the candidates of
+  the largest gain against M_-j, swap when that raises log det M by more than SWAP_TOL, each swap
+  checked again from the inverse, so the criterion never falls; passes over the chosen poses
+  until one gains less than PASS_TOL, or MAX_PASSES;
+* scale: candidates' H_e is computed in blocks of BLOCK poses; at most MAX_POOL candidates (and
+  POOL_BYTES of their H_e, in single precision) are held at once. With more, the pool is the
+  candidates of largest gain against the information N average candidates would give, and after
+  the exchange the whole set is screened again against the design (MAX_ROUNDS times): a candidate
+  outside the pool enters when its gain ranks it there. An exchange pass spends at most
+  EXCHANGE_BUDGET multiply-adds per chosen pose: on a larger pool it tries the candidates of
   largest gain and a fresh random sample of the rest each pass.
 """
 from __future__ import annotations
@@ -412,7 +413,7 @@ class _Basis:
         return logdet(M_w) + 2.0 * float(np.sum(np.log(np.abs(np.diag(self.T))) - np.log(self.scale)))
 
 
-def scaled_blocks(cm: CompiledModel, cands: Candidates, idx: np.ndarray, rows: np.ndarray, columns: np.ndarray):
+def measured_blocks(cm: CompiledModel, cands: Candidates, idx: np.ndarray, rows: np.ndarray, columns: np.ndarray):
     """Yield (start, H (b, r, k)): the H_e rows of the measured targets over the chosen columns
     (at the nominal model) for the candidates idx, in blocks of BLOCK poses."""
     c = np.zeros(cm.dims.nc)
@@ -424,7 +425,7 @@ def scaled_blocks(cm: CompiledModel, cands: Candidates, idx: np.ndarray, rows: n
 
 def _whitened(cm, cands, idx, basis: _Basis) -> np.ndarray:
     out = np.empty((len(idx), len(basis.rows), len(basis.columns)))
-    for s, H in scaled_blocks(cm, cands, idx, basis.rows, basis.columns):
+    for s, H in measured_blocks(cm, cands, idx, basis.rows, basis.columns):
         out[s:s + len(H)] = basis.whiten(H)
     return out
 
@@ -438,7 +439,7 @@ def _basis(cm: CompiledModel, cands: Candidates, rows: np.ndarray, struct: Redun
     sample = np.sort(rng.choice(K, BASIS_SAMPLE, replace=False)) if K > BASIS_SAMPLE else np.arange(K)
     kept = np.array(struct.kept, int)
     R = qr_accumulate((H.reshape(-1, len(kept)), np.zeros(H.shape[0] * H.shape[1]))
-                      for _, H in scaled_blocks(cm, cands, sample, rows, kept))[0][:-1, :-1]
+                      for _, H in measured_blocks(cm, cands, sample, rows, kept))[0][:-1, :-1]
     red = unexcited(struct, R, cm.robot, cm.model, n_struct_targets)
     local = np.searchsorted(kept, red.kept)
     T = np.linalg.qr(R[:, local], mode="r") / np.sqrt(len(sample))
@@ -549,7 +550,7 @@ def _top_gains(cm, cands, basis: _Basis, M: np.ndarray, n: int, exclude) -> np.n
     streamed over all candidates."""
     A = basis.T_inv @ inverse(M) @ basis.T_inv.T  # M^-1 in the raw columns: no whitening pass
     gains = np.empty(len(cands))
-    for s, H in scaled_blocks(cm, cands, np.arange(len(cands)), basis.rows, basis.columns):
+    for s, H in measured_blocks(cm, cands, np.arange(len(cands)), basis.rows, basis.columns):
         gains[s:s + len(H)] = _logdet_blocks(_quadratic(H, A))
     gains[np.asarray(exclude, int)] = -np.inf
     return np.sort(np.argsort(-gains)[:n])
