@@ -64,7 +64,7 @@ def main():
         std = r["predicted_std"]
         lines.append(f"| {label} | {poses} | {candidates:,} | {load:.1f} | {r['seconds']:.1f} | {target} | "
                      f"{r['peak_mb']:.0f} | {r['n_identifiable']} | {r['value']:.1f} / {r['random_value']:.1f} | "
-                     f"{std['design']['rms_mm']:.4f} / {std['random']['rms_mm']:.4f} | "
+                     f"{std['rms_mm']:.4f} / {std['random_rms_mm']:.4f} | "
                      f"{r['swaps']}, {r['passes']}, {r['rounds']} |")
     lines += ["", "Targets: 50 of 10,000 for industrial6r with the constant model under 10 s; 200 of 100,000 for "
                   "the PPS default model under 2 minutes. Candidates beyond 10,000 are screened (the pool of largest "

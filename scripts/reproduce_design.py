@@ -90,9 +90,9 @@ def run_case(case: dict, seeds: int, sizes) -> dict:
         v = random_design(robot, N_VALIDATION, rng, case["payloads"] or (0.0,), targets=case["targets"])
         val = simulate(robot, exact, v, rng)
         for n in sizes:
-            t0 = time.perf_counter()
+            started = time.perf_counter()
             d = design_poses(cm, cands, n, targets, seed=seed)
-            rows["seconds"][n].append(time.perf_counter() - t0)
+            rows["seconds"][n].append(time.perf_counter() - started)
             rows["design"][n].append(fitted_rms(cm, robot, truth, cands.q[d.chosen], payload[d.chosen],
                                                 case["targets"], val, rng))
             for key, idx in (("design", d.chosen), ("random", d.random)):

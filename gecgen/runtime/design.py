@@ -362,10 +362,13 @@ class PoseDesign:
         finite = (lambda v: float(v) if np.isfinite(v) else None)
         names = self.redundancy.names
         unexcitable = [e.param for e in self.redundancy.eliminated if e.reason == "unexcited"]
+        # flat, "random_" before the comparison's figures, as value and random_value
+        obs = {**self.observability["design"], **{f"random_{k}": v for k, v in self.observability["random"].items()}}
+        std = {**self.predicted_std_mm["design"],
+               **{f"random_{k}": v for k, v in self.predicted_std_mm["random"].items()}}
         return {"n_poses": len(self.chosen), "criterion": "D", "value": finite(self.value),
-                "random_value": finite(self.random_value), "observability": self.observability,
-                "predicted_std": {"noise_mm": self.noise_mm, "n_validation_poses": self.n_validation,
-                                  **self.predicted_std_mm},
+                "random_value": finite(self.random_value), "observability": obs,
+                "predicted_std": {"noise_mm": self.noise_mm, "n_validation_poses": self.n_validation, **std},
                 "n_candidates": self.n_candidates, "n_identifiable": len(self.columns),
                 "identifiable": [names[j] for j in self.columns], "unexcitable": unexcitable,
                 "swaps": self.swaps, "passes": self.passes, "rounds": self.rounds,
