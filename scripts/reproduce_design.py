@@ -268,11 +268,10 @@ def write_doc(curves: list, fig: dict | None, seconds: float, quick: bool):
               "poses spread like the validation poses and average it; the predicted std (noise only) is far "
               "below the measured error on these two robots, so the unmodelled effects set the floor. Where the "
               "model is complete (the TIAGo arm with a geometric truth, the UR10 below) the measured error is "
-              "of the order of the predicted std ("
-              + "; ".join(", ".join(f"N={n}: {c['design'][n]:.3f} measured, {c['pred_design'][n]:.3f} predicted from "
-                                    "the tracker noise alone" for n in c["design"]) for c in curves
-                          if c["robot"] == "tiago")
-              + " mm; the truth adds 0.03 mm repeatability per pose), and the design lowers the predicted std "
+              "of the order of the predicted std (measured / predicted from the tracker noise alone, mm: "
+              + "; ".join(", ".join(f"N={n} {c['design'][n]:.3f} / {c['pred_design'][n]:.3f}" for n in c["design"])
+                          for c in curves if c["robot"] == "tiago")
+              + "; the truth adds 0.03 mm repeatability per pose), and the design lowers the predicted std "
               "against random poses of the same number by these ratios ("
               + "; ".join(f"{c['robot']} " + ", ".join(f"N={n}: {c['pred_design'][n] / c['pred_random'][n]:.2f}"
                                                        for n in c["pred_design"]) for c in curves
