@@ -337,8 +337,9 @@ class PoseDesign:
     random comparison. Values are log det of the scaled information (given poses included, no
     ridge); `history` the criterion (with the ridge) after the greedy start and each exchange pass.
     `columns` the coefficient indices of the criterion, `scale` (k,) their RMS over the
-    candidates (the column scaling of the reported values); `predicted_std_mm` {design, random} -> {rms_mm, max_mm} of the predicted target
-    position std over the validation poses at noise_mm per coordinate."""
+    candidates (the column scaling of the reported values); `observability` and
+    `predicted_std_mm` map "design" and "random" to {O1, O2, O3} and to {rms_mm, max_mm} of the
+    predicted target position std over the validation poses at noise_mm per coordinate."""
 
     chosen: np.ndarray
     random: np.ndarray
@@ -359,20 +360,19 @@ class PoseDesign:
     history: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        finite = (lambda v: float(v) if np.isfinite(v) else None)
         names = self.redundancy.names
         unexcitable = [e.param for e in self.redundancy.eliminated if e.reason == "unexcited"]
         # flat, "random_" before the comparison's figures, as value and random_value
         obs = {**self.observability["design"], **{f"random_{k}": v for k, v in self.observability["random"].items()}}
         std = {**self.predicted_std_mm["design"],
                **{f"random_{k}": v for k, v in self.predicted_std_mm["random"].items()}}
-        return {"n_poses": len(self.chosen), "criterion": "D", "value": finite(self.value),
-                "random_value": finite(self.random_value), "observability": obs,
+        return {"n_poses": len(self.chosen), "criterion": "D", "value": _finite(self.value),
+                "random_value": _finite(self.random_value), "observability": obs,
                 "predicted_std": {"noise_mm": self.noise_mm, "n_validation_poses": self.n_validation, **std},
                 "n_candidates": self.n_candidates, "n_identifiable": len(self.columns),
                 "identifiable": [names[j] for j in self.columns], "unexcitable": unexcitable,
                 "swaps": self.swaps, "passes": self.passes, "rounds": self.rounds,
-                "history": [finite(v) for v in self.history]}
+                "history": [_finite(v) for v in self.history]}
 
 
 def pose_rank(robot: Robot, targets: np.ndarray) -> int:
@@ -495,10 +495,12 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
     m = m0 + r * n_poses
     per_pose = pose_rank(cm.robot, targets)
     known = np.linalg.matrix_rank(M0) if given is not None else 0
+    wanted = f"{k - known} directions of the {k} identifiable coefficients the given data leaves open" if known \
+        else f"{k} identifiable coefficients"
     require(known + per_pose * n_poses >= k,
-            f"--poses {n_poses}: {n_poses} poses inform at most {per_pose * n_poses} of the {k} identifiable "
-            f"coefficients{f' the given data leaves' if known else ''} ({per_pose} each: the targets move with the "
-            f"tool as one rigid body); give at least {int(np.ceil((k - known) / per_pose))} poses")
+            f"--poses {n_poses}: {n_poses} poses inform at most {per_pose * n_poses} of the {wanted} ({per_pose} "
+            f"each: the targets move with the tool as one rigid body); give at least "
+            f"{int(np.ceil((k - known) / per_pose))} poses")
     M_start = M0 + RIDGE * np.eye(k)
 
     pool_cap = int(min(MAX_POOL, max(n_poses + 1, POOL_BYTES // (4 * r * k))))
