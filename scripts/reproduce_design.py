@@ -304,7 +304,7 @@ def write_doc(curves: list, fig: dict | None, seconds: float, quick: bool):
         for n in FIGAROH_SIZES:
             lines.append(f"| {n} | {_fmt(fig['gecgen'][str(n)])} | {_fmt(fig['figaroh'][str(n)])} | "
                          f"{_fmt(fig['random'][str(n)])} |")
-        lines += ["", f"Time to choose (median): gecgen {fig["seconds"]["gecgen"]:.2f} s per N; figaroh "
+        lines += ["", f"Time to choose (median): gecgen {fig['seconds']['gecgen']:.2f} s per N; figaroh "
                       f"{fig['seconds']['figaroh']:.1f} s for the regressor and the SOCP over {FIGAROH_CANDIDATES} "
                       "candidates (its weights serve every N).", ""]
     DOC.write_text("\n".join(lines))
