@@ -335,6 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gecgen.model.gravity_cli import add_parser as add_gravity
 
     add_gravity(command)
+    from gecgen.runtime.design_cli import add_parser as add_design
+
+    add_design(command)
 
     p = command("diagnose", cmd_diagnose, "trace the residual to missing effects, add them, refit, report")
     p.add_argument("robot")
@@ -365,6 +368,7 @@ OUTPUTS = {
                  "truth_out": ("truth file", False)},
     "import": {"output": ("measurements", False)},
     "gravity": {"output": ("table", False)},
+    "design": {"output": ("poses", False)},
 }
 
 

@@ -1,0 +1,561 @@
+"""Optimal experiment design: which poses to measure so that the calibration learns the most.
+
+The measured target errors are linear in the coefficients through H_e, so the information a set
+of poses carries about them is M = sum_p H_p^T H_p (H_p: the 3 nt rows of the measured targets at
+pose p, nt targets, over the identifiable coefficients). The design maximises log det M
+(D-optimality: the smallest joint confidence region of the coefficients) over a finite set of
+candidate poses:
+
+* columns: the coefficients the structural analysis keeps for the measured targets, less those
+  no candidate excites (a wrench term when every candidate carries the same load); the reported
+  values scale each column by its RMS over the candidates, so metres and radians, newtons and
+  squared joint angles weigh alike. The search itself runs in whitened coordinates (the mean
+  candidate informs every direction alike): D-optimal choices do not depend on a linear change of
+  the coefficients, only log det's constant does;
+* greedy start: the pose with the largest gain log det(I + H_i M^-1 H_i^T) (the matrix
+  determinant lemma for a block of 3 nt rows), every candidate's H_i M^-1 H_i^T updated by
+  Woodbury after each pick. A small ridge makes M invertible before the chosen poses span every
+  coefficient;
+* exchanges (Fedorov, one chosen pose at a time): remove pose j (M_-j), find the candidate i with
+  the largest gain against M_-j, swap when that raises log det M by more than SWAP_TOL, each swap
+  checked again from the inverse, so the criterion never falls; passes over the chosen poses
+  until one gains less than PASS_TOL, or MAX_PASSES;
+* scale: candidates' H_e is computed in blocks of BLOCK poses; at most MAX_POOL candidates (and
+  POOL_BYTES of their H_e, in single precision) are held at once. With more, the pool is the
+  candidates of largest gain against the information N average candidates would give, and after
+  the exchange the whole set is screened again against the design (MAX_ROUNDS times): a candidate
+  outside the pool enters when its gain ranks it there. An exchange pass spends at most
+  EXCHANGE_BUDGET multiply-adds per chosen pose: on a larger pool it tries the candidates of
+  largest gain and a fresh random sample of the rest each pass.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gecgen.model.kinematics import tool_pose
+from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_commands
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.validation import ModelError, require
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import _structural, qr_accumulate, rows_H_and_residual
+from gecgen.runtime.redundancy import Redundancy, unexcited
+from gecgen.simulate.designs import random_design, with_payloads
+from gecgen.simulate.truth import sensor_wrench
+
+#: poses whose H_e is evaluated at once (the PPS default model: 12 x 330 doubles per pose, 63 MB)
+BLOCK = 2000
+#: candidates whose whitened H_e the search holds in memory at once, and the bytes that may take
+MAX_POOL = 10_000
+POOL_BYTES = 256 * 2 ** 20
+#: candidates (a random sample of more) whose H_e decides what is excited and the whitening: the
+#: mean information of 20,000 i.i.d. poses is within a few per cent of that of any more
+BASIS_SAMPLE = 20_000
+#: ridge on the whitened information (the mean candidate adds the identity): keeps M invertible
+#: while the greedy start spans the coefficients (a new direction then gains log(1/RIDGE) = 7, far
+#: above what strengthening a spanned one gains), and negligible once N poses inform every one
+RIDGE = 1e-3
+#: a swap must raise log det M by more than this; smaller gains are rounding and could cycle
+SWAP_TOL = 1e-6
+#: exchange passes stop when one raises log det M by less than this (det by 1%; for k coefficients
+#: the confidence ellipsoid's axes by 1/k % on average) or after MAX_PASSES
+PASS_TOL = 1e-2
+MAX_PASSES = 10
+MAX_ROUNDS = 1
+#: multiply-adds an exchange trial may spend on the candidates (T r^2 (k + r) for T candidates)
+EXCHANGE_BUDGET = 2e7
+N_VALIDATION = 500
+NOISE_M = 5e-5
+GRAVITY = (0.0, 0.0, -9.81)
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Poses a design may choose from. q (K, n) m or rad; w (K, 6) the wrench at the sensor, N and
+    N m in the sensor frame; aux (K, naux) the model's auxiliary signals; payload_kg (K,) the
+    payload behind the wrench, or None when the wrench came from a file."""
+
+    q: np.ndarray
+    w: np.ndarray
+    aux: np.ndarray
+    payload_kg: np.ndarray | None = None
+    has_wrench: bool = False  # the wrench is part of the pose (payloads, or wrench columns in the file)
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    def subset(self, idx) -> "Candidates":
+        return Candidates(self.q[idx], self.w[idx], self.aux[idx],
+                          None if self.payload_kg is None else self.payload_kg[idx], self.has_wrench)
+
+
+def uniform_candidates(robot: Robot, n: int, rng: np.random.Generator, payloads_kg=None,
+                       gravity=GRAVITY) -> Candidates:
+    """n poses uniform within the joint limits (continuous joints within +-pi), as `gecgen simulate
+    --design random` draws them: with payloads (kg), each pose carries one drawn at random, at the
+    tool origin, and the wrench is what the sensor reads of its weight (gravity (3,), m/s^2, world)."""
+    design = random_design(robot, n, rng, payloads_kg if payloads_kg is not None else (0.0,))
+    if payloads_kg is None:
+        return Candidates(design.q, np.zeros((n, 6)), np.zeros((n, 0)))
+    return Candidates(design.q, sensor_wrench(robot, design.q, design.payload_kg, design.payload_at,
+                                              np.asarray(gravity, float)), np.zeros((n, 0)), design.payload_kg, True)
+
+
+def file_candidates(path, robot: Robot, aux_names: tuple[str, ...], payloads_kg=None, gravity=GRAVITY) -> Candidates:
+    """The allowed configurations of a CSV: q1..qn, optional wrench fx..mz and the model's aux
+    columns. With payloads (kg) and no wrench columns, every row is offered with every payload
+    (the wrench as in `uniform_candidates`). A joint outside its limits is refused with its row."""
+    c = read_commands(path, robot, aux_names)
+    lo = np.array([j.lower for j in robot.joints]) - LIMIT_TOLERANCE
+    hi = np.array([j.upper for j in robot.joints]) + LIMIT_TOLERANCE
+    out = np.argwhere((c.q < lo) | (c.q > hi))
+    if len(out):
+        r, j = out[0]
+        raise ModelError(f"{path}: row {r + 2}, column 'q{j + 1}': {c.q[r, j]:g} is outside the joint limits "
+                         f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}]; fix the row or the robot file")
+    has_wrench = any(col in c.header for col in WRENCH)
+    if payloads_kg is None:
+        return Candidates(c.q, c.w, c.aux, None, has_wrench)
+    require(not has_wrench, f"--payload-kg: {path} has wrench columns already; drop them or the option")
+    q, payload, _ = with_payloads(c.q, payloads_kg, "from")
+    w = sensor_wrench(robot, q, payload, np.zeros(3), np.asarray(gravity, float))
+    return Candidates(q, w, np.vstack([c.aux] * len(payloads_kg)), payload, True)
+
+
+def constraint_mask(robot: Robot, cands: Candidates, targets: np.ndarray, min_z: float | None = None,
+                    tracker=None, max_incidence_deg: float | None = None) -> np.ndarray:
+    """(K,) True where a candidate satisfies the constraints on the nominal model: every measured
+    target (indices into robot.targets) at world z >= min_z (m); and, with a tracker position (3,)
+    in the world (m), the line of sight from each measured target to the tracker within
+    max_incidence_deg of the tool z axis (a reflector facing along tool z)."""
+    T = tool_pose(robot, cands.q)
+    local = np.array(list(robot.targets.values()))[targets]  # (nt, 3) tool frame
+    p = np.einsum("kij,tj->kti", T[:, :3, :3], local) + T[:, None, :3, 3]
+    ok = np.ones(len(cands), bool)
+    if min_z is not None:
+        ok &= (p[..., 2] >= min_z).all(axis=1)
+    if tracker is not None:
+        sight = np.asarray(tracker, float) - p
+        cos = np.einsum("kti,ki->kt", sight, T[:, :3, 2]) / np.maximum(np.linalg.norm(sight, axis=2), 1e-12)
+        ok &= (cos >= np.cos(np.radians(max_incidence_deg))).all(axis=1)
+    return ok
+
+
+def _logdet_blocks(D: np.ndarray) -> np.ndarray:
+    """log det(I + D_i) for a stack D (T, r, r) of symmetric blocks; -inf where I + D_i is not
+    positive definite (a removal that would leave M singular)."""
+    sign, value = np.linalg.slogdet(D + np.eye(D.shape[-1]))
+    return np.where(sign > 0, value, -np.inf)
+
+
+def logdet(M: np.ndarray) -> float:
+    """log det of a symmetric matrix; -inf when it is not positive definite."""
+    try:
+        return 2.0 * float(np.log(np.diag(np.linalg.cholesky(M))).sum())
+    except np.linalg.LinAlgError:
+        return -np.inf
+
+
+def inverse(M: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive definite matrix, symmetric to the last bit."""
+    L_inv = np.linalg.inv(np.linalg.cholesky(M))
+    return L_inv.T @ L_inv
+
+
+def observability(M: np.ndarray, m: int) -> dict:
+    """Observability indices of a design whose scaled information is M = A^T A, A with m rows (Sun and
+    Hollerbach 2008, singular values s of A): O1 = (prod s)^(1/k) / sqrt(m), O2 = s_max / s_min (the
+    condition number; their O2 is its inverse), O3 = s_min. None when A is rank deficient."""
+    s = np.sqrt(np.clip(np.linalg.eigvalsh(M), 0.0, None))
+    if s[0] <= 1e-12 * s[-1]:
+        return {"O1": None, "O2": None, "O3": 0.0}
+    return {"O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(m)), "O2": float(s[-1] / s[0]), "O3": float(s[0])}
+
+
+class _Search:
+    """Greedy and exchange on a pool of candidates whose whitened blocks H (P, r, k) are in memory.
+    M (k, k) = M0 (given poses and the ridge) + sum over the chosen of H_i^T H_i. Its inverse is
+    updated by Woodbury (rank 3 nt) after each change and refactored every REFACTOR updates and
+    at every pass: a k x k factorisation per change would cost more than the passes over the pool.
+    (numpy's linear algebra only: scipy brings a second BLAS whose threads contend with numpy's
+    on a shared machine, 60 ms per 156 x 156 Cholesky factorisation measured.)"""
+
+    REFACTOR = 32
+
+    def __init__(self, H: np.ndarray, M0: np.ndarray, rng: np.random.Generator):
+        # single precision: the passes over the pool are memory-bound, and a gain's relative
+        # rounding (1e-6) is far below the differences that decide; M accumulates the rounded
+        # blocks in double, so every checked swap is exact for the problem held
+        self.H, self.rng = H.astype(np.float32), rng
+        self.P, self.r, self.k = H.shape
+        self.M = M0.copy()
+        self.chosen: list[int] = []
+        self._refactor()
+
+    def start(self, chosen):
+        """Begin from the given pool indices (a design carried over from another pool)."""
+        self.chosen = list(chosen)
+        Hc = self.H[self.chosen].astype(float)
+        self.M = self.M + np.einsum("pik,pil->kl", Hc, Hc)
+        self._refactor()
+
+    def row(self, i: int) -> np.ndarray:
+        return self.H[i].astype(float)
+
+    def _cross(self, flat: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """H_t W for the stacked pool rows flat (T r, k), (T, r, r) in double."""
+        return (flat @ W.astype(flat.dtype)).astype(float).reshape(-1, self.r, self.r)
+
+    def _refactor(self):
+        self.Minv = inverse(self.M)
+        self.updates = 0
+
+    def _update(self, Hi: np.ndarray, sign: float):
+        """M += sign H_i^T H_i, and its inverse."""
+        self.M += sign * (Hi.T @ Hi)
+        self.updates += 1
+        if self.updates >= self.REFACTOR:
+            self._refactor()
+            return
+        W = self.Minv @ Hi.T
+        self.Minv -= sign * W @ np.linalg.solve(np.eye(self.r) + sign * (Hi @ W), W.T)
+
+    def _all_D(self) -> np.ndarray:
+        """H_i M^-1 H_i^T for the whole pool, (P, r, r), in chunks that bound the temporaries."""
+        D = np.empty((self.P, self.r, self.r))
+        step = max(1, int(5e6 // (self.r * self.k)))
+        for s in range(0, self.P, step):
+            D[s:s + step] = _quadratic(self.H[s:s + step], self.Minv)
+        return D
+
+    def greedy(self, n: int):
+        """Add n poses one by one, each of largest gain. Every candidate's H_i M^-1 H_i^T is
+        updated after each addition by Woodbury (r^2 k per candidate, not r k^2 afresh), and
+        recomputed whenever the inverse is refactored."""
+        flat = self.H.reshape(-1, self.k)
+        D = self._all_D()
+        for _ in range(n):
+            g = _logdet_blocks(D)
+            g[self.chosen] = -np.inf
+            i = int(np.argmax(g))
+            Hi = self.row(i)
+            C = self._cross(flat, self.Minv @ Hi.T)
+            D -= _sandwich(C, np.linalg.inv(np.eye(self.r) + D[i]))
+            self.chosen.append(i)
+            self._update(Hi, 1.0)
+            if self.updates == 0:  # just refactored: D afresh too, so rounding never accumulates
+                D = self._all_D()
+
+    def _trial_set(self, size: int) -> np.ndarray:
+        """Candidates an exchange pass evaluates: every unchosen one when they fit the budget, else
+        the half of largest gain and a random sample of the rest."""
+        free = np.setdiff1d(np.arange(self.P), self.chosen)
+        if len(free) <= size:
+            return free
+        g = _logdet_blocks(self._all_D()[free])  # the gain of adding each
+        top = free[np.argsort(-g)[:size // 2]]
+        rest = np.setdiff1d(free, top)
+        return np.concatenate([top, self.rng.choice(rest, size - len(top), replace=False)])
+
+    def _swap_gain(self, i: int, j: int) -> float:
+        """log det(M - H_j^T H_j + H_i^T H_i) - log det M from the current inverse alone."""
+        Hi, Hj = self.row(i), self.row(j)
+        W = self.Minv @ Hj.T
+        S = np.eye(self.r) - Hj @ W
+        C = Hi @ W
+        D = Hi @ self.Minv @ Hi.T + C @ np.linalg.solve(S, C.T)
+        return _logdet_blocks(-(np.eye(self.r) - S)[None])[0] + _logdet_blocks(D[None])[0]
+
+    def exchange(self, max_passes: int = MAX_PASSES) -> tuple[int, int, list[float]]:
+        """Fedorov exchanges; returns (swaps, passes, log det M after the greedy start and each pass).
+
+        For chosen pose j, with W = M^-1 H_j^T and S = I - H_j W, every trial candidate's
+        H_i M_-j^-1 H_i^T is D_i + C_i S^-1 C_i^T (C_i = H_i W, Woodbury), so the log det after
+        swapping j for i is log det M + log det S + log det(I + that): one pass over the trial set
+        per chosen pose. The best swap is checked once more from the inverse before it is made."""
+        size = max(1, int(EXCHANGE_BUDGET // (self.r ** 2 * (self.k + self.r))))
+        I = np.eye(self.r)
+        history, swaps, passes = [logdet(self.M)], 0, 0
+        for passes in range(1, max_passes + 1):
+            self._refactor()
+            trial = self._trial_set(size)
+            Ht = self.H[trial]  # contiguous: one read per chosen pose
+            flat = Ht.reshape(-1, self.k)
+            D = _quadratic(Ht, self.Minv)
+            made = 0
+            for slot in range(len(self.chosen)):
+                j = self.chosen[slot]
+                Hj = self.row(j)
+                W = self.Minv @ Hj.T  # (k, r)
+                S = I - Hj @ W  # positive definite while M - H_j^T H_j is
+                loss = _logdet_blocks(-(I - S)[None])[0]
+                if not np.isfinite(loss):
+                    continue  # the other poses leave a direction only j spans: j stays
+                Sinv = np.linalg.inv(S)
+                C = self._cross(flat, W)
+                D_minus = D + _sandwich(C, Sinv)
+                net = _logdet_blocks(D_minus) + loss
+                b = int(np.argmax(net))
+                if net[b] <= SWAP_TOL or self._swap_gain(int(trial[b]), j) <= SWAP_TOL:
+                    continue
+                i = int(trial[b])
+                # D against M_-j + H_i^T H_i: Woodbury again, with W2 = M_-j^-1 H_i^T
+                Hi = self.row(i)
+                W2 = self.Minv @ Hi.T + W @ Sinv @ C[b].T
+                C2 = self._cross(flat, W2)
+                D = D_minus - _sandwich(C2, np.linalg.inv(I + D_minus[b]))
+                self.chosen[slot] = i
+                self._update(Hj, -1.0)
+                self._update(Hi, 1.0)
+                trial[b], Ht[b] = j, Hj  # j becomes a trial candidate in i's place
+                D[b] = Hj @ self.Minv @ Hj.T
+                made += 1
+            swaps += made
+            history.append(logdet(self.M))
+            if history[-1] - history[-2] < PASS_TOL:
+                break
+        return swaps, passes, history
+
+
+def _quadratic(H: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """H_i A H_i^T for a stack H (T, r, k), (T, r, r) in double (computed in H's precision)."""
+    HA = (H.reshape(-1, H.shape[-1]) @ A.astype(H.dtype)).reshape(H.shape)
+    # optimize: BLAS, 10x numpy's own loop
+    return np.einsum("tik,tjk->tij", HA, H, optimize=True).astype(float)
+
+
+def _sandwich(C: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """C_i A C_i^T for a stack C (T, r, r)."""
+    # batched matmul, not one flat product: BLAS's overhead on an inner dimension of r is 20x
+    return np.matmul(np.matmul(C, A), C.transpose(0, 2, 1))
+
+
+@dataclass(frozen=True)
+class PoseDesign:
+    """A design: `chosen` (N,) candidate indices in the order chosen; `random` (N,) the seeded
+    random comparison. Values are log det of the scaled information (given poses included, no
+    ridge); `history` the criterion (with the ridge) after the greedy start and each exchange pass.
+    `columns` the coefficient indices of the criterion, `scale` (k,) their RMS over the
+    candidates (the column scaling of the reported values); `observability` and
+    `predicted_std_mm` map "design" and "random" to {O1, O2, O3} and to {rms_mm, max_mm} of the
+    predicted target position std over the validation poses at noise_mm per coordinate."""
+
+    chosen: np.ndarray
+    random: np.ndarray
+    value: float
+    random_value: float
+    observability: dict
+    predicted_std_mm: dict
+    noise_mm: float
+    n_validation: int
+    columns: np.ndarray
+    scale: np.ndarray
+    redundancy: Redundancy
+    targets: np.ndarray
+    n_candidates: int
+    swaps: int
+    passes: int
+    rounds: int
+    history: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        names = self.redundancy.names
+        unexcitable = [e.param for e in self.redundancy.eliminated if e.reason == "unexcited"]
+        # flat, "random_" before the comparison's figures, as value and random_value
+        obs = {**self.observability["design"], **{f"random_{k}": v for k, v in self.observability["random"].items()}}
+        std = {**self.predicted_std_mm["design"],
+               **{f"random_{k}": v for k, v in self.predicted_std_mm["random"].items()}}
+        return {"n_poses": len(self.chosen), "criterion": "D", "value": _finite(self.value),
+                "random_value": _finite(self.random_value), "observability": obs,
+                "predicted_std": {"noise_mm": self.noise_mm, "n_validation_poses": self.n_validation, **std},
+                "n_candidates": self.n_candidates, "n_identifiable": len(self.columns),
+                "identifiable": [names[j] for j in self.columns], "unexcitable": unexcitable,
+                "swaps": self.swaps, "passes": self.passes, "rounds": self.rounds,
+                "history": [_finite(v) for v in self.history]}
+
+
+def pose_rank(robot: Robot, targets: np.ndarray) -> int:
+    """Most coefficients one pose can inform: the targets sit on the tool, so every error moves
+    them as one rigid body (3 for one point, 5 for two, 6 for three not in a line)."""
+    points = np.array(list(robot.targets.values()))[targets]
+    rigid = [np.hstack([np.eye(3), -np.cross(np.eye(3), p)]) for p in points]  # d p = d x + d theta x p
+    return int(np.linalg.matrix_rank(np.vstack(rigid), tol=1e-9))
+
+
+def _measured_rows(targets: np.ndarray) -> np.ndarray:
+    return (3 * np.asarray(targets)[:, None] + np.arange(3)).ravel()
+
+
+@dataclass(frozen=True)
+class _Basis:
+    """The criterion's coordinates: H_e rows `rows` (measured targets), coefficient `columns`, and
+    T (k, k) upper triangular with T^T T the candidates' mean information per pose over those
+    columns. Blocks are whitened, H T^-1: the mean candidate then informs every direction alike, so
+    the ridge and the rounding mean the same in every direction however unequal the columns' units
+    and however nearly dependent they are (the D-optimal choice is unchanged: log det shifts by a
+    constant). `scale` (k,) the columns' RMS over the candidates, for the reported values."""
+
+    rows: np.ndarray
+    columns: np.ndarray
+    T: np.ndarray
+    scale: np.ndarray
+    T_inv: np.ndarray
+
+    def whiten(self, A: np.ndarray) -> np.ndarray:
+        """A (..., k) over the columns -> A T^-1."""
+        return (A.reshape(-1, A.shape[-1]) @ self.T_inv).reshape(A.shape)
+
+    def scaled_information(self, M_w: np.ndarray) -> np.ndarray:
+        """The column-scaled information S^-1 T^T M_w T S^-1 of a whitened M_w."""
+        A = self.T / self.scale
+        return A.T @ M_w @ A
+
+    def scaled_logdet(self, M_w: np.ndarray) -> float:
+        """log det of the column-scaled information from that of the whitened one (exact, no refactor)."""
+        return logdet(M_w) + 2.0 * float(np.sum(np.log(np.abs(np.diag(self.T))) - np.log(self.scale)))
+
+
+def measured_blocks(cm: CompiledModel, cands: Candidates, idx: np.ndarray, rows: np.ndarray, columns: np.ndarray):
+    """Yield (start, H (b, r, k)): the H_e rows of the measured targets over the chosen columns
+    (at the nominal model) for the candidates idx, in blocks of BLOCK poses."""
+    c = np.zeros(cm.dims.nc)
+    for s in range(0, len(idx), BLOCK):
+        sel = idx[s:s + BLOCK]
+        _, H = cm.model_targets(cands.q[sel], cands.w[sel], cands.aux[sel], c, with_H=True)
+        yield s, H[:, rows][:, :, columns]
+
+
+def _whitened(cm, cands, idx, basis: _Basis) -> np.ndarray:
+    out = np.empty((len(idx), len(basis.rows), len(basis.columns)))
+    for s, H in measured_blocks(cm, cands, idx, basis.rows, basis.columns):
+        out[s:s + len(H)] = basis.whiten(H)
+    return out
+
+
+def _basis(cm: CompiledModel, cands: Candidates, rows: np.ndarray, struct: Redundancy, n_struct_targets: int,
+           rng: np.random.Generator) -> tuple[_Basis, Redundancy]:
+    """The coefficients the candidates excite (the structurally kept ones less those the rank test
+    on the candidates' H_e finds dependent) and the whitening; over at most BASIS_SAMPLE candidates
+    (a seeded random sample of more), whose R factor is streamed through a QR."""
+    K = len(cands)
+    sample = np.sort(rng.choice(K, BASIS_SAMPLE, replace=False)) if K > BASIS_SAMPLE else np.arange(K)
+    kept = np.array(struct.kept, int)
+    R = qr_accumulate((H.reshape(-1, len(kept)), np.zeros(H.shape[0] * H.shape[1]))
+                      for _, H in measured_blocks(cm, cands, sample, rows, kept))[0][:-1, :-1]
+    red = unexcited(struct, R, cm.robot, cm.model, n_struct_targets)
+    local = np.searchsorted(kept, red.kept)
+    T = np.linalg.qr(R[:, local], mode="r") / np.sqrt(len(sample))
+    T *= np.sign(np.diag(T))[:, None]  # a positive diagonal: T is then the Cholesky factor
+    return _Basis(rows, kept[local], T, np.linalg.norm(T, axis=0), np.linalg.inv(T)), red
+
+
+def given_information(cm: CompiledModel, given: Measurements, basis: _Basis) -> tuple[np.ndarray, int]:
+    """Whitened information (k, k) of the measured points of `given`, and their number of rows."""
+    k = len(basis.columns)
+    M, m = np.zeros((k, k)), 0
+    for H, r in rows_H_and_residual(cm, given, given.xyz, np.zeros(cm.dims.nc)):
+        A = basis.whiten(H[:, basis.columns])
+        M += A.T @ A
+        m += len(r)
+    return M, m
+
+
+def predicted_std(M: np.ndarray, H: np.ndarray, noise_m: float, nt: int) -> np.ndarray:
+    """Std (m) of each measured target's predicted position, (V, nt), at validation blocks H (V, r, k)
+    for coefficients estimated with covariance noise^2 M^-1 (M in H's coordinates): the square root
+    of the trace of that covariance propagated to the target's 3 coordinates."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        return np.full((len(H), nt), np.inf)
+    Z = np.linalg.solve(L, H.reshape(-1, H.shape[-1]).T)  # (k, V r)
+    var = (Z ** 2).sum(axis=0).reshape(len(H), nt, 3).sum(axis=2)
+    return noise_m * np.sqrt(var)
+
+
+def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np.ndarray,
+                 given: Measurements | None = None, seed: int = 0, noise_m: float = NOISE_M,
+                 n_validation: int = N_VALIDATION, max_passes: int = MAX_PASSES) -> PoseDesign:
+    """Choose n_poses of the candidates measuring `targets` (indices into robot.targets) that
+    maximise log det of the scaled information, added to that of `given` measurements if any.
+    The random comparison and the validation poses are drawn (seeded) from the same candidates."""
+    K = len(cands)
+    require(n_poses >= 1, f"--poses {n_poses}: give at least 1 pose to design")
+    require(n_poses <= K, f"--poses {n_poses}: only {K} candidates to choose from; raise --candidates, "
+                          f"relax the constraints or lower --poses")
+    # three streams, so the comparison and the validation poses do not depend on the search's draws
+    rng, rng_random, rng_val = (np.random.default_rng([seed, s]) for s in range(3))
+    rows = _measured_rows(targets)
+    r = len(rows)
+    struct_targets = np.unique(np.concatenate([targets, given.target])) if given is not None else np.asarray(targets)
+    basis, red = _basis(cm, cands, rows, _structural(cm, struct_targets), len(struct_targets), rng)
+    k = len(basis.columns)
+    M0, m0 = given_information(cm, given, basis) if given is not None else (np.zeros((k, k)), 0)
+    m = m0 + r * n_poses
+    per_pose = pose_rank(cm.robot, targets)
+    known = np.linalg.matrix_rank(M0) if given is not None else 0
+    wanted = f"{k - known} directions of the {k} identifiable coefficients the given data leaves open" if known \
+        else f"{k} identifiable coefficients"
+    require(known + per_pose * n_poses >= k,
+            f"--poses {n_poses}: {n_poses} poses inform at most {per_pose * n_poses} of the {wanted} ({per_pose} "
+            f"each: the targets move with the tool as one rigid body); give at least "
+            f"{int(np.ceil((k - known) / per_pose))} poses")
+    M_start = M0 + RIDGE * np.eye(k)
+
+    pool_cap = int(min(MAX_POOL, max(n_poses + 1, POOL_BYTES // (4 * r * k))))
+    rounds = 0
+    if K <= pool_cap:
+        pool = np.arange(K)
+    else:  # rank by the gain against what N average candidates would give (I each, whitened)
+        pool = _top_gains(cm, cands, basis, M_start + n_poses * np.eye(k), pool_cap, [])
+    search = _Search(_whitened(cm, cands, pool, basis), M_start, rng)
+    search.greedy(n_poses)
+    swaps, passes, history = search.exchange(max_passes)
+    chosen = pool[search.chosen]
+    while K > pool_cap and rounds < MAX_ROUNDS:
+        rounds += 1
+        new_pool = _top_gains(cm, cands, basis, search.M, pool_cap - n_poses, chosen)
+        if np.isin(new_pool, pool).all():
+            break  # no candidate outside the pool ranks among the best: nothing new to try
+        pool = np.concatenate([chosen, new_pool])
+        search = _Search(_whitened(cm, cands, pool, basis), M_start, rng)
+        search.start(range(n_poses))
+        more, p, h = search.exchange(max_passes)
+        swaps, passes, history = swaps + more, passes + p, history + h[1:]
+        chosen = pool[search.chosen]
+        if not more:
+            break
+
+    random_pick = rng_random.choice(K, n_poses, replace=False)
+    val = rng_val.choice(K, min(n_validation, K), replace=False)
+    H_val = _whitened(cm, cands, val, basis)
+    out = {}
+    for name, idx in (("design", chosen), ("random", random_pick)):
+        Hc = _whitened(cm, cands, idx, basis)
+        M = M0 + np.einsum("pik,pil->kl", Hc, Hc)
+        std = predicted_std(M, H_val, noise_m, len(targets))
+        out[name] = (basis.scaled_logdet(M), observability(basis.scaled_information(M), m),
+                     {"rms_mm": _finite(1e3 * np.sqrt(np.mean(std ** 2))), "max_mm": _finite(1e3 * std.max())})
+    shift = basis.scaled_logdet(np.eye(k))  # whitened -> column-scaled log det
+    return PoseDesign(chosen=chosen, random=random_pick, value=out["design"][0], random_value=out["random"][0],
+                      observability={n: o[1] for n, o in out.items()},
+                      predicted_std_mm={n: o[2] for n, o in out.items()}, noise_mm=1e3 * noise_m,
+                      n_validation=len(val), columns=basis.columns, scale=basis.scale, redundancy=red,
+                      targets=np.asarray(targets), n_candidates=K, swaps=swaps, passes=passes, rounds=rounds,
+                      history=[v + shift for v in history])
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def _top_gains(cm, cands, basis: _Basis, M: np.ndarray, n: int, exclude) -> np.ndarray:
+    """The n candidates (not in `exclude`) of largest gain log det(I + H_i M^-1 H_i^T), whitened M,
+    streamed over all candidates."""
+    A = basis.T_inv @ inverse(M) @ basis.T_inv.T  # M^-1 in the raw columns: no whitening pass
+    gains = np.empty(len(cands))
+    for s, H in measured_blocks(cm, cands, np.arange(len(cands)), basis.rows, basis.columns):
+        gains[s:s + len(H)] = _logdet_blocks(_quadratic(H, A))
+    gains[np.asarray(exclude, int)] = -np.inf
+    return np.sort(np.argsort(-gains)[:n])

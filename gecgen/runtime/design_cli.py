@@ -1,0 +1,131 @@
+"""`gecgen design ROBOT [--errors FILE] --poses N -o POSES.csv [--json]`: choose the poses to measure.
+
+Candidates are uniform samples within the joint limits (`--candidates K`, `--seed`) or the rows
+of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/runtime/design.py`
+chooses N of the rest (D-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
+of the pose, `fx..mz` and `payload_kg`: the commands to send, and the measurement file's joint
+columns once `target x y z` are filled in.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gecgen.model import load_robot
+from gecgen.model.measurements import read_measurements, read_table, write_csv
+from gecgen.model.robot import WRENCH
+from gecgen.model.validation import ModelError, require
+from gecgen.runtime import design as D
+
+DEFAULT_CANDIDATES = 5000
+
+
+def add_parser(command):
+    """Register `design` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("design", run, "choose the poses to measure (D-optimal experiment design)")
+    p.add_argument("robot")
+    p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+    p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
+    p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
+    p.add_argument("--candidates", type=int, help=f"uniform samples within the joint limits to choose from "
+                                                  f"(default {DEFAULT_CANDIDATES})")
+    p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
+                                                    "aux columns) instead of uniform samples")
+    p.add_argument("--seed", type=int, default=0, help="seed of the samples, the random comparison and the "
+                                                       "validation poses")
+    p.add_argument("--targets", help="comma-separated targets measured at every pose (default: those of --given, "
+                                     "else every target of the robot)")
+    p.add_argument("--payload-kg", help="comma-separated payloads (kg) at the tool origin, as gecgen simulate: the "
+                                        "wrench the sensor reads of their weight is part of each pose")
+    p.add_argument("--gravity", default="0,0,-9.81", help="gravity in the world frame for the payload wrench, m/s^2 "
+                                                          "(default: %(default)s)")
+    p.add_argument("--min-z", type=float, help="every measured target at world z >= this (m)")
+    p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
+    p.add_argument("--max-incidence-deg", type=float, help="largest angle between the line of sight to the tracker "
+                                                           "and the tool z axis (the reflector's acceptance, deg)")
+    p.add_argument("--given", help="measurement CSV already measured: the design adds poses to its information")
+    p.add_argument("--noise-mm", type=float, default=1e3 * D.NOISE_M,
+                   help="measurement noise per coordinate (mm) for the predicted uncertainty (default %(default)s)")
+
+
+def _numbers(text: str, option: str, count: int | None, unit: str) -> list[float]:
+    """Comma-separated finite numbers of an option (count of them when given)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    ok = values and all(np.isfinite(values)) and (count is None or len(values) == count)
+    require(ok, f"--{option} {text}: expected {count or 'one or more'} comma-separated numbers ({unit})")
+    return values
+
+
+def _candidates(args, robot, model):
+    gravity = _numbers(args.gravity, "gravity", 3, "m/s^2")
+    payloads = _numbers(args.payload_kg, "payload-kg", None, "kg") if args.payload_kg else None
+    require(payloads is None or min(payloads) >= 0, f"--payload-kg {args.payload_kg}: payloads are masses, >= 0 kg")
+    if args.from_csv:
+        require(args.candidates is None, "--candidates: the candidates are the rows of --from; drop one of the two")
+        return D.file_candidates(args.from_csv, robot, model.aux, payloads, gravity)
+    require(not model.aux, f"the error model uses auxiliary signals ({', '.join(model.aux)}) that uniform samples "
+                           f"lack: give the candidates with --from CSV holding those columns")
+    n = DEFAULT_CANDIDATES if args.candidates is None else args.candidates
+    require(n >= 1, f"--candidates {n}: give at least 1 candidate pose")
+    return D.uniform_candidates(robot, n, np.random.default_rng(args.seed), payloads, gravity)
+
+
+def _targets(args, robot, given) -> np.ndarray:
+    names = list(robot.targets)
+    if not args.targets:
+        return np.unique(given.target) if given is not None else np.arange(len(names))
+    chosen = [t.strip() for t in args.targets.split(",")]
+    for t in chosen:
+        require(t in names, f"--targets: '{t}' is not a target of {robot.name} ({', '.join(names)})")
+    return np.array(sorted({names.index(t) for t in chosen}))
+
+
+def run(args) -> dict:
+    from gecgen.cli import robot_and_model
+    from gecgen.runtime.compiled import CompiledModel
+
+    require(args.poses >= 1, f"--poses {args.poses}: give at least 1 pose to design")
+    require(args.noise_mm > 0, f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
+    require((args.tracker is None) == (args.max_incidence_deg is None),
+            "--tracker and --max-incidence-deg go together: give the tracker position x,y,z (m) and the "
+            "reflector's largest incidence angle (deg)")
+    robot = load_robot(args.robot)
+    given = read_measurements(args.given, robot) if args.given else None
+    columns = given.aux_names if given is not None else ()
+    if args.from_csv:
+        header, _ = read_table(args.from_csv, "file of candidate poses", "q1..qn")
+        columns = tuple(h for h in header if h not in WRENCH and not (h[:1] == "q" and h[1:].isdigit()))
+    robot, model = robot_and_model(args.robot, args.errors, columns)
+    cands = _candidates(args, robot, model)
+    targets = _targets(args, robot, given)
+    tracker = _numbers(args.tracker, "tracker", 3, "m") if args.tracker else None
+    ok = D.constraint_mask(robot, cands, targets, args.min_z, tracker, args.max_incidence_deg)
+    constraints = {k: v for k, v in (("min_z", args.min_z), ("tracker", tracker),
+                                     ("max_incidence_deg", args.max_incidence_deg)) if v is not None}
+    if not ok.any():
+        given_as = " ".join(f"--{k.replace('_', '-')} {args.tracker if k == 'tracker' else v}"
+                            for k, v in constraints.items())
+        raise ModelError(f"no candidate pose passes the constraints ({given_as}): relax them, or give other "
+                         f"candidates (--candidates, --from)")
+    allowed = np.nonzero(ok)[0]
+    cands = cands.subset(allowed)
+    result = D.design_poses(CompiledModel(robot, model), cands, args.poses, targets, given, args.seed,
+                            args.noise_mm / 1e3)
+    first = int(given.pose_ids.max()) + 1 if given is not None else 0  # appends to the given file's ids
+    chosen = cands.subset(result.chosen)
+    header = ["pose", *(f"q{i + 1}" for i in range(robot.n))]
+    header += list(WRENCH) if chosen.has_wrench else []
+    header += ["payload_kg"] if chosen.payload_kg is not None else []
+    header += list(model.aux)
+    rows = []
+    for p in range(len(chosen)):
+        row = [first + p, *map(repr, chosen.q[p].tolist())]
+        row += list(map(repr, chosen.w[p].tolist())) if chosen.has_wrench else []
+        row += [repr(float(chosen.payload_kg[p]))] if chosen.payload_kg is not None else []
+        rows.append(row + list(map(repr, chosen.aux[p].tolist())))
+    write_csv(args.output, header, rows)
+    return {"robot": robot.name, "output": str(args.output), **result.to_dict(),
+            "targets": [robot.target_names[t] for t in targets], "constraints": constraints,
+            "n_sampled": len(ok), "seed": args.seed, "given": args.given}
