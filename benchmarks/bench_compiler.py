@@ -20,7 +20,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_runtime import write_section  # noqa: E402
+from bench_runtime import cpu_model, write_section  # noqa: E402
 
 from gecgen.emit import render  # noqa: E402
 from gecgen.model import load_error_model, load_robot  # noqa: E402
@@ -156,7 +156,7 @@ def main():
               f"CasADi {1e6 * ca_je:6.2f} us, numpy FD {1e6 * fd:8.1f} us | H_e C {1e6 * c_h:6.2f} us | "
               f"{n_loads} loads C loop {1e6 * c_loads:6.3f} us ({c_loads / c_loop:.2f} x J_e)")
     load_average = os.getloadavg()[0]  # other processes on the machine inflate the times
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
+    cpu = cpu_model()
     lines = ["## Compiler: generate, and J_e / H_e per pose", "",
              f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores, load average {load_average:.1f} at the end. "
              "Regenerate: `python benchmarks/bench_compiler.py`. "

@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_runtime import write_section  # noqa: E402
+from bench_runtime import cpu_model, write_section  # noqa: E402
 
 CASES = [
     # (label, robot, errors, poses, candidates, extra options, target seconds)
@@ -49,7 +49,7 @@ def main():
         print(f"{label:40s} {poses:4d} of {candidates:7d}: {r['seconds']:7.1f} s  peak {r['peak_mb']:6.0f} MB  "
               f"load {load:.1f}  value {r['value']:.2f} (random {r['random_value']:.2f})  swaps {r['swaps']} "
               f"passes {r['passes']} rounds {r['rounds']}", flush=True)
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
+    cpu = cpu_model()
     lines = ["## Design: choosing the poses to measure", "",
              f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores, shared with other jobs (load average when each "
              "case started in the table). Regenerate: `python benchmarks/bench_design.py`. Each case is a fresh "

@@ -91,6 +91,11 @@ def run_case(kind: str, errors: str, data: Path, loss: str, robot: str = "pps") 
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def cpu_model() -> str:
+    """The machine's CPU, as /proc/cpuinfo names it, for the benchmark tables."""
+    return next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
+
+
 def write_section(name: str, text: str):
     """Replace this script's section of docs/benchmarks.md, keeping every other section."""
     begin, end = f"<!-- bench:{name} -->", f"<!-- /bench:{name} -->"
@@ -131,7 +136,7 @@ def main():
         rows.append((kind, label, n, loss, r))
         print(f"{kind:9s} {label:36s} {loss:6s} {n:7d} poses  load {r['load_s']:6.2f} s  run {r['run_s']:7.2f} s  "
               f"total {r['total_s']:7.2f} s  peak {r['peak_mb']:7.0f} MB  {json.dumps({k: v for k, v in r.items() if k not in ('load_s', 'run_s', 'total_s', 'peak_mb')})}")
-    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
+    cpu = cpu_model()
     lines = ["## Runtime: identify and diagnose (simulated PPS and Panda, 3 targets per pose)", "",
              f"Machine: {cpu}, {len(os.sched_getaffinity(0))} cores, load average "
              f"{load_average:.1f} when the benchmark started. "
