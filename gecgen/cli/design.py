@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gecgen.cli.common import robot_and_model
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, read_table, write_csv
 from gecgen.model.robot import WRENCH
@@ -83,7 +84,6 @@ def _targets(args, robot, given) -> np.ndarray:
 
 
 def run(args) -> dict:
-    from gecgen.cli import robot_and_model
     from gecgen.runtime.compiled import CompiledModel
 
     require(args.poses >= 1, f"--poses {args.poses}: give at least 1 pose to design")

@@ -1,0 +1,80 @@
+"""What several commands share: the robot and its error model, fit options, progress, extrapolation."""
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model.checks import check_terms_finite
+
+
+def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
+    """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
+    robot = load_robot(robot_path)
+    if errors is None:
+        default = Path(robot_path).with_name(f"{robot.name}.errors.yaml")
+        errors = str(default) if default.is_file() else None
+    return robot, load_error_model(errors, robot, aux_columns)
+
+
+def progress_status(enabled: bool):
+    """A rich status line for long steps on a terminal; silent under --json or when piped."""
+    from contextlib import nullcontext
+
+    if not enabled or not sys.stderr.isatty():
+        return nullcontext(None)
+    from rich.console import Console
+
+    return Console(stderr=True).status("working")
+
+
+def identify_inputs(args):
+    from gecgen.model.measurements import read_measurements
+    from gecgen.runtime.compiled import CompiledModel
+
+    robot = load_robot(args.robot)
+    data = read_measurements(args.data, robot)
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    check_terms_finite(model, robot, data)
+    return robot, model, data, CompiledModel(robot, model)
+
+
+def fit_options(args, cm, data) -> tuple[dict, list]:
+    """--ridge and --rank-tol: each a number, or auto; the auto ones are chosen together by 5-fold
+    cross-validation on the training data. Returns the options for identify and the CV table."""
+    import numpy as np
+
+    from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose
+
+    fixed, grids = {"loss": args.loss}, {}
+    # rank_tol is a share of a normalised column: at 1 or above nothing would be kept
+    for name, option, grid, upper in (("ridge", args.ridge, RIDGE_GRID, np.inf),
+                                      ("rank_tol", args.rank_tol, RANK_TOL_GRID, 1.0)):
+        if option is None:
+            continue  # identify's default
+        if option == "auto":
+            grids[name] = grid
+            continue
+        try:
+            fixed[name] = float(option)
+        except ValueError:
+            fixed[name] = np.nan
+        if not 0 <= fixed[name] < upper:
+            bound = "a non-negative number" if upper == np.inf else f"a number from 0 to below {upper:g}"
+            raise ModelError(f"--{name.replace('_', '-')} {option!r}: give {bound}, or auto")
+    if not grids:
+        return fixed, []
+    chosen, table = choose(cm, data, grids, **fixed)
+    return {**fixed, **chosen}, table
+
+
+def extrapolation(calib, q, w, aux) -> dict:
+    """Poses outside the training ranges per input; a warning line says so when there are any."""
+    from gecgen.runtime import calibration
+
+    counts = calibration.extrapolation(calib, q, w, aux)
+    note = calibration.extrapolation_note(counts, len(q), calib.robot)
+    if note:
+        warnings.warn(note)
+    return counts

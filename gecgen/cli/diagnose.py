@@ -1,0 +1,67 @@
+"""`gecgen diagnose ROBOT DATA [--val VAL]`: trace the residual to missing effects, add them, refit, report."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from gecgen.cli.common import progress_status, robot_and_model
+from gecgen.model import ModelError, load_robot
+from gecgen.model.checks import check_terms_finite
+
+
+def add_parser(command):
+    """Register `diagnose` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("diagnose", run, "trace the residual to missing effects, add them, refit, report")
+    p.add_argument("robot")
+    p.add_argument("data")
+    p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
+    p.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
+    p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
+    p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
+    p.add_argument("--report", help="folder for report.md and its plots")
+    p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
+                   help="registration of DATA onto the nominal model: auto (when far apart), always or never; "
+                        "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
+                        "the --val file, measured from another stationing, before scoring it")
+    p.add_argument("--max-rounds", type=int, default=50,
+                   help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
+    p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "
+                                                   "remains is only noise (default: from repeated poses, if any)")
+
+
+def run(args) -> dict:
+    from gecgen.emit import generate
+    from gecgen.loop.diagnose import diagnose, verdict, write_error_model
+    from gecgen.model.measurements import read_measurements
+
+    register_val = args.register == "val"
+    if register_val and not args.val:
+        raise ModelError("diagnose --register re-fits the tracker frame of the validation file; give it with --val VAL")
+    robot = load_robot(args.robot)
+    data = read_measurements(args.data, robot)
+    val = read_measurements(args.val, robot) if args.val else None
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    for d in filter(None, (data, val)):
+        check_terms_finite(model, robot, d)
+    with progress_status(not args.json) as status:
+        def progress(round_no, rms_mm):
+            if status:
+                status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
+
+        diag = diagnose(robot, model, data, val, registration_mode="auto" if register_val else args.register,
+                        progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds,
+                        register_val=register_val)
+    out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
+    write_error_model(robot, diag.final.model, diag.effects, out)
+    generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
+    generate(robot, diag.final.model, generated)
+    result = {"robot": robot.name, "before": diag.before, "after": diag.after,
+              "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
+              "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
+              "verdict": verdict(diag.remaining),
+              "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses",
+              "val_registered": register_val}
+    if args.report:
+        from gecgen.loop.report import write_report
+
+        result["report"] = str(write_report(diag, data, args.report, str(out)))
+    return result

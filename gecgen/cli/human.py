@@ -1,0 +1,39 @@
+"""The short summary a person reads; --json prints the full record."""
+from __future__ import annotations
+
+
+def scalar(value) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+#: list entries a person sees one per line before the rest is left to --json
+MAX_LISTED = 20
+
+
+def print_human(result: dict):
+    """A short summary for a person; the full record (every list entry) is what --json prints."""
+    for key, value in result.items():
+        if key in ("identifiable", "training_ranges"):
+            continue
+        if key == "outliers":
+            print(f"outliers: {len(value)}" + (" (file row, pose, target, residual)" if value else ""))
+            for o in value[:MAX_LISTED]:
+                print(f"  row {o['row']}: pose {o['pose']} {o['target']} {o['residual_mm']:.3f} mm")
+            if len(value) > MAX_LISTED:
+                print(f"  ... {len(value) - MAX_LISTED} more (use --json for the list)")
+        elif key == "effects":
+            print(f"effects: {len(value)}")
+            for e in value:
+                print(f"  {e['error']}: {', '.join(e['terms'])} ({e['family']}; cross-validated gain "
+                      f"{e['gain_mm']:.4f} mm)")
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            print(f"{key}: {len(value)} (use --json for the list)")
+        elif isinstance(value, dict):
+            scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list))}
+            if not scalars:
+                print(f"{key}: {len(value)} (use --json for them)")
+                continue
+            more = " (more with --json)" if len(scalars) < len(value) else ""
+            print(f"{key}: " + ", ".join(f"{k} {scalar(v)}" for k, v in scalars.items()) + more)
+        else:
+            print(f"{key}: {scalar(value)}")

@@ -1,0 +1,50 @@
+"""`gecgen identify ROBOT DATA [-o CALIB.json]`: fit the error model to measured data, write a calibration."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from gecgen.cli.common import fit_options, identify_inputs, progress_status
+
+
+def add_parser(command):
+    """Register `identify` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("identify", run, "fit the error model to measured data and write a calibration")
+    p.add_argument("robot")
+    p.add_argument("data", help="measurement CSV (CONTRACTS.md section 3)")
+    p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+    p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
+    p.add_argument("--register", choices=["auto", "always", "never"], default="auto",
+                   help="register the measurement frame onto the robot world first (auto: when far apart)")
+    p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
+                                               "(5-fold cross-validation on DATA); default 0, plain least squares")
+    p.add_argument("--loss", choices=["cauchy", "huber", "l2"], default="cauchy",
+                   help="robust loss on each point's residual (default cauchy): points beyond the outlier limit are "
+                        "down-weighted and listed; l2 is plain least squares")
+    p.add_argument("--rank-tol",
+                   help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
+                        "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
+                        "on DATA); default: exact dependencies only (1e-7)")
+
+
+def run(args) -> dict:
+    from gecgen.runtime import calibration
+    from gecgen.runtime.identify import identify
+
+    robot, model, data, cm = identify_inputs(args)
+    with progress_status(not args.json) as status:
+        def progress(it, rms_mm):
+            if status:
+                status.update(f"Gauss-Newton iteration {it}: linearised residual {rms_mm:.4f} mm rms")
+
+        options, cv_table = fit_options(args, cm, data)
+        fit = identify(cm, data, registration_mode=args.register, progress=progress, **options)
+    if fit.failures:
+        raise RuntimeError(f"the fit is not trustworthy, no calibration written: {fit.failures[0]}")
+    calib = calibration.from_fit(robot, model, fit)
+    calib.report.update({**options, "cv": cv_table})
+    out = Path(args.output or f"{robot.name}.calib.json")
+    calibration.save(calib, out)
+    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
+              "n_points": len(data.xyz), **calib.report, "registration": fit.registration.to_dict(),
+              "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
+    return result

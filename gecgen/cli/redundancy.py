@@ -1,0 +1,30 @@
+"""`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
+from __future__ import annotations
+
+from gecgen.cli.common import robot_and_model
+from gecgen.model import load_robot
+from gecgen.model.checks import check_terms_finite
+
+
+def add_parser(command):
+    """Register `redundancy` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("redundancy", run, "which coefficients are eliminated and what they merge into")
+    p.add_argument("robot")
+    p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
+    p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+
+
+def run(args) -> dict:
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.identify import redundancy
+
+    data = None
+    if args.data:
+        from gecgen.model.measurements import read_measurements
+
+        data = read_measurements(args.data, load_robot(args.robot))
+    robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
+    if data:
+        check_terms_finite(model, robot, data)
+    result = redundancy(CompiledModel(robot, model), data).to_dict()
+    return {"robot": robot.name, "data": args.data, **result}
