@@ -123,7 +123,7 @@ def main():
                          for o in files[(day, "outside")])
              + " (inside the reader's 1 mm / 1 mrad tolerance; reported, not clipped). "
              "The motion-capture-to-base transform is registered (closed form on the nominal model, then frame 0's "
-             "errors); the marker points start from `scripts/tiago_marker_guess.py` (training file, nominal model) "
+             "errors); the marker points start from gecgen's placement estimate on the training file (`gecgen/runtime/placement.py`, nominal model) "
              "and frame 8's errors refine them. `gecgen gravity` then appends the static gravity torque on arm_2..arm_7 "
              "(`tau_<joint>`, N m: the URDF's link masses at the measured joints, nominal kinematics), the load "
              "signal of the elastic model and of diagnose; over the training postures: "

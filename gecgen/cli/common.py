@@ -30,14 +30,30 @@ def progress_status(enabled: bool):
 
 
 def identify_inputs(args):
+    """(robot with its targets placed, error model, data, compiled model, placement or None)."""
     from gecgen.model.measurements import read_measurements
     from gecgen.runtime.compiled import CompiledModel
 
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    robot, placement = placed(robot, data)
     check_terms_finite(model, robot, data)
-    return robot, model, data, CompiledModel(robot, model)
+    return robot, model, data, CompiledModel(robot, model), placement
+
+
+def placed(robot, data):
+    """The robot with the targets the data must place placed (runtime.placement), and the placement
+    or None; a warning says which targets moved and how far."""
+    from gecgen.runtime.placement import FAR_M, place_targets
+
+    robot, placement = place_targets(robot, data)
+    if placement:
+        moves = ", ".join(f"{n} estimated" if d is None else f"{n} {d:.0f} mm from the robot file's"
+                          for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M)
+        warnings.warn(f"targets placed from the data before the fit: {moves} (nominal model residual "
+                      f"{placement.rms_mm:.2f} mm rms with them)")
+    return robot, placement
 
 
 def fit_options(args, cm, data) -> tuple[dict, list]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import progress_status, robot_and_model
+from gecgen.cli.common import placed, progress_status, robot_and_model
 from gecgen.model import ModelError, load_robot
 from gecgen.model.checks import check_terms_finite
 
@@ -40,6 +40,7 @@ def run(args) -> dict:
     data = read_measurements(args.data, robot)
     val = read_measurements(args.val, robot) if args.val else None
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
+    robot, placement = placed(robot, data)
     for d in filter(None, (data, val)):
         check_terms_finite(model, robot, d)
     with progress_status(not args.json) as status:
@@ -59,7 +60,7 @@ def run(args) -> dict:
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
               "verdict": verdict(diag.remaining),
               "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses",
-              "val_registered": register_val}
+              "val_registered": register_val, "placement": placement.to_dict() if placement else None}
     if args.report:
         from gecgen.loop.report import write_report
 

@@ -30,7 +30,7 @@ def run(args) -> dict:
     from gecgen.runtime import calibration
     from gecgen.runtime.identify import identify
 
-    robot, model, data, cm = identify_inputs(args)
+    robot, model, data, cm, placement = identify_inputs(args)
     with progress_status(not args.json) as status:
         def progress(it, rms_mm):
             if status:
@@ -41,7 +41,7 @@ def run(args) -> dict:
     if fit.failures:
         raise RuntimeError(f"the fit is not trustworthy, no calibration written: {fit.failures[0]}")
     calib = calibration.from_fit(robot, model, fit)
-    calib.report.update({**options, "cv": cv_table})
+    calib.report.update({**options, "cv": cv_table, "placement": placement.to_dict() if placement else None})
     out = Path(args.output or f"{robot.name}.calib.json")
     calibration.save(calib, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,

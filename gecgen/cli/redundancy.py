@@ -1,7 +1,7 @@
 """`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
 from __future__ import annotations
 
-from gecgen.cli.common import robot_and_model
+from gecgen.cli.common import placed, robot_and_model
 from gecgen.model import load_robot
 from gecgen.model.checks import check_terms_finite
 
@@ -25,6 +25,7 @@ def run(args) -> dict:
         data = read_measurements(args.data, load_robot(args.robot))
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
     if data:
+        robot = placed(robot, data)[0]
         check_terms_finite(model, robot, data)
     result = redundancy(CompiledModel(robot, model), data).to_dict()
     return {"robot": robot.name, "data": args.data, **result}

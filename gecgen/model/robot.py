@@ -60,6 +60,9 @@ class Robot:
     tool: tuple[Elementary, ...]
     targets: dict[str, tuple[float, float, float]]
     wrench_frame: str = "tool"
+    #: targets whose placement the robot file leaves to the data (`estimate`); they sit at the tool
+    #: origin until `runtime.placement` places them, and nothing is fitted or compensated before
+    estimated: tuple[str, ...] = ()
     points: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     source: str = ""
     source_hashes: dict[str, str] = field(default_factory=dict)
@@ -165,14 +168,20 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
                  tuple(op for op in post if op[1] != 0), lo, hi)
 
 
-def _targets(spec, where: str) -> dict[str, tuple[float, float, float]]:
-    require(isinstance(spec, dict) and spec, f"{where}: targets must map names to [x, y, z] in the tool frame")
+#: the value of a target whose position on the tool the data is to give
+ESTIMATE = "estimate"
+
+
+def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], tuple[str, ...]]:
+    """Targets (name -> tool-frame xyz, m) and the names of those left to estimate (at the origin)."""
+    require(isinstance(spec, dict) and spec, f"{where}: targets must map names to [x, y, z] in the tool frame, "
+                                             f"or to '{ESTIMATE}'")
     out = {}
     for name, xyz in spec.items():
         require(isinstance(name, str) and name.isidentifier(),
                 f"{where}: {excerpt(name)}: target names must be identifiers")
-        out[name] = tuple(float(v) for v in _vector(xyz, f"{where}.{name}"))
-    return out
+        out[name] = (0.0, 0.0, 0.0) if xyz == ESTIMATE else tuple(float(v) for v in _vector(xyz, f"{where}.{name}"))
+    return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
 
 
 def _check_joint_names(joints, place):
@@ -248,8 +257,9 @@ def load_robot(path: str | Path) -> Robot:
     points = spec.get("points") or {}
     require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
     points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
-    return Robot(name=name, joints=tuple(joints), base=base, tool=tool,
-                 targets=_targets(spec["targets"], f"{where}: targets"), wrench_frame=wrench_frame,
+    targets, estimated = _targets(spec["targets"], f"{where}: targets")
+    return Robot(name=name, joints=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
+                 wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,
                  urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))

@@ -24,6 +24,7 @@ from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot, load_robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.identify import Fit
+from gecgen.runtime.placement import with_targets
 from gecgen.runtime.registration import Registration
 
 
@@ -59,6 +60,7 @@ class Calibration:
             "robot_hashes": self.robot.source_hashes,
             "error_model": self.model.to_yaml_dict(self.robot),
             "error_model_hash": model_hash(self.robot, self.model),
+            "targets": {n: list(xyz) for n, xyz in self.robot.targets.items()},
             "coefficients": [{"name": n, "value": float(v), "std": None if np.isnan(s) else float(s),
                               "identified": k in set(self.kept)}
                              for k, (n, v, s) in enumerate(zip(names, self.c, self.std))],
@@ -86,7 +88,7 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
 #: keys every calibration file holds; the rest, but for these three, is its report
 REQUIRED = ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
             "covariance", "registration")
-NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", *REQUIRED}
+NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", "targets", *REQUIRED}
 #: R^T R may differ from the identity by this much (JSON keeps R to full precision)
 ROTATION_TOL = 1e-6
 
@@ -160,6 +162,22 @@ def _robot(d: dict, path: Path) -> Robot:
     raise ModelError(f"{where}: the robot file {found[0]} changed since this calibration was made; identify again")
 
 
+def _targets(robot: Robot, d, where: str) -> Robot:
+    """The robot with the targets the calibration was fitted with: those the robot file leaves to
+    estimate, or that the data placed elsewhere (runtime.placement). A file written before targets
+    were recorded holds the robot file's."""
+    if d is None:
+        require(not robot.estimated, f"{where}: targets: missing, and the robot file leaves "
+                                     f"'{robot.estimated[0] if robot.estimated else ''}' to estimate; identify again")
+        return robot
+    ok = isinstance(d, dict) and set(d) == set(robot.targets)
+    xyz = {n: _finite_array(v, (3,)) for n, v in d.items()} if ok else {}
+    require(ok and all(v is not None for v in xyz.values()),
+            f"{where}: targets: expected the robot's targets ({', '.join(robot.targets)}) each as three finite "
+            f"numbers (m); identify again")
+    return with_targets(robot, {n: tuple(v.tolist()) for n, v in xyz.items()})
+
+
 def _registration(d, where: str) -> Registration:
     fix = "identify again (or restore the file)"
     require(isinstance(d, dict) and "applied" in d, f"{where}: registration: expected rotation, translation and "
@@ -185,7 +203,7 @@ def load(path: str | Path) -> Calibration:
     require(isinstance(d, dict), f"{where}: not a calibration file (a JSON object is expected)")
     for key in REQUIRED:
         require(key in d, f"{where}: missing key '{key}'; not a gecgen calibration file")
-    robot = _robot(d, path)
+    robot = _targets(_robot(d, path), d.get("targets"), where)
     spec = dict(d["error_model"])
     spec["frames"] = {int(k): v for k, v in spec.get("frames", {}).items()}  # JSON keys are strings
     model = error_model_from_dict(spec, robot, f"{where}: error_model")

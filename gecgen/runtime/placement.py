@@ -1,0 +1,158 @@
+"""Tool placement: where the measured points sit on the tool, estimated from the data.
+
+A camera mount or a marker body is rarely where a drawing says, and a robot file may leave its
+targets to the data (`targets: {m1: estimate}`). With the nominal kinematics, the tool pose
+(R_i, p_i) of pose i and the unknown tracker frame (R, t) of each stationing, a target at m_k in
+the tool frame is measured at
+
+    y_ik = R (R_i m_k + p_i) + t.
+
+The product R m_k makes this bilinear, but lifting W_k = R m_k^T (the 27 numbers R_ab m_kc) makes
+it linear: row a of y_ik is  sum_bc W_k[a,b,c] (R_i)_bc + sum_b R_ab (p_i)_b + t_a,  the same
+design for a = x, y, z. One least-squares solve gives W_k, R and t; R is projected onto the
+rotations (SVD) and m_k = sum_ab R_ab W_k[a,b,c] / 3. That closed form starts a robust nonlinear
+refinement over every stationing's frame and every target at once. The data determines the
+placement only when the tool turns about at least two independent axes; otherwise the estimate
+is refused, never guessed.
+
+Identification then fits the generalized errors around the estimated targets: the placement is a
+starting point (frame n's errors still absorb what the nominal kinematics got wrong), recorded in
+the calibration so that evaluate and compensate use the same targets.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from gecgen.model.kinematics import tool_pose
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import Robot
+from gecgen.model.validation import ModelError
+from gecgen.runtime import robust
+
+#: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
+FAR_M = 0.02
+#: singular values of the refinement's column-scaled Jacobian below this share of the largest leave a
+#: direction of the placement undetermined
+RANK_TOL = 1e-7
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Targets (name -> tool-frame xyz, m) as the data places them, with the nominal kinematics.
+
+    rms_mm: residual of the nominal model with these targets and the fitted tracker frames (what
+    the generalized errors are left to explain); moved_mm: distance of each target from the robot
+    file's (None for one the file leaves to estimate).
+    """
+
+    targets: dict[str, tuple[float, float, float]]
+    rms_mm: float
+    moved_mm: dict[str, float | None]
+
+    def to_dict(self) -> dict:
+        return {"targets_m": {k: list(v) for k, v in self.targets.items()}, "rms_mm": self.rms_mm,
+                "moved_mm": self.moved_mm}
+
+
+def _closed_form(T: np.ndarray, data: Measurements, rows: np.ndarray, k_targets: int):
+    """The lifted linear solve on the given rows (one stationing): (R, t, m (k_targets, 3))."""
+    pose, target = data.pose[rows], data.target[rows]
+    Ri, pi = T[pose, :3, :3].reshape(-1, 9), T[pose, :3, 3]
+    A = np.zeros((len(rows), 9 * k_targets + 4))
+    for k in range(k_targets):
+        on = target == k
+        A[on, 9 * k:9 * k + 9] = Ri[on]
+    A[:, -4:-1], A[:, -1] = pi, 1.0
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    X = np.linalg.lstsq(A / scale, data.xyz[rows], rcond=None)[0] / scale[:, None]  # (9K + 4, 3): column a
+    U, _, Vt = np.linalg.svd(X[-4:-1].T)
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    W = X[:-4].reshape(k_targets, 3, 3, 3)  # [k, b, c, a]
+    m = np.einsum("ab,kbca->kc", R, W) / 3
+    return R, X[-1], m
+
+
+def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -> Placement:
+    """The targets the data measures, placed on the tool (see the module docstring); every
+    stationing of the data gets its own tracker frame. Raises ModelError when the poses do not
+    turn the tool enough to place them."""
+    robust.check_loss(loss)
+    T = tool_pose(robot, data.q)
+    measured = np.unique(data.target)
+    index = np.searchsorted(measured, data.target)  # targets renumbered 0..K-1 over those measured
+    stations = np.unique(data.station)
+    sidx = np.searchsorted(stations, data.station)
+    k = len(measured)
+    local = dataclasses.replace(data, target=index)
+    largest = np.argmax(np.bincount(sidx))
+    R0, t0, m0 = _closed_form(T, local, np.nonzero(sidx == largest)[0], k)
+    # the other stationings start from a Kabsch fit of their points to the first estimate
+    from gecgen.runtime.registration import kabsch
+
+    p0 = np.einsum("nij,nj->ni", T[data.pose, :3, :3], m0[index]) + T[data.pose, :3, 3]
+    frames = [(R0, t0) if s == largest else kabsch(p0[sidx == s], data.xyz[sidx == s]) for s in range(len(stations))]
+    x0 = np.concatenate([np.concatenate([Rotation.from_matrix(R).as_rotvec(), t]) for R, t in frames] + [m0.ravel()])
+    Rp, pp = T[data.pose, :3, :3], T[data.pose, :3, 3]
+
+    def residual(x):
+        m = x[6 * len(stations):].reshape(k, 3)
+        p = np.einsum("nij,nj->ni", Rp, m[index]) + pp
+        out = np.empty_like(data.xyz)
+        for s in range(len(stations)):
+            on = sidx == s
+            R = Rotation.from_rotvec(x[6 * s:6 * s + 3]).as_matrix()
+            out[on] = p[on] @ R.T + x[6 * s + 3:6 * s + 6] - data.xyz[on]
+        return out.ravel()
+
+    e0 = np.linalg.norm(residual(x0).reshape(-1, 3), axis=1)
+    kind = {"l2": "linear", "huber": "huber", "cauchy": "cauchy"}[loss]
+    f_scale = max(robust.scale(e0), robust.SCALE_FLOOR_M)
+    sol = least_squares(residual, x0, loss=kind, f_scale=f_scale, x_scale="jac", max_nfev=200)
+    J = sol.jac * np.maximum(np.linalg.norm(sol.jac, axis=0), 1e-300) ** -1
+    s = np.linalg.svd(J, compute_uv=False)
+    names = [robot.target_names[t] for t in measured]
+    if not (np.isfinite(sol.x).all() and s[-1] > RANK_TOL * s[0]):
+        raise ModelError(f"the data does not place target(s) {', '.join(names)} on the tool: the poses turn the "
+                         f"tool about fewer than two independent axes; give the targets' positions in the robot "
+                         f"file, or measure poses that turn the tool more")
+    m = sol.x[6 * len(stations):].reshape(k, 3)
+    e = np.linalg.norm(residual(sol.x).reshape(-1, 3), axis=1)
+    placed = {n: tuple(float(v) for v in xyz) for n, xyz in zip(names, m)}
+    moved = {n: None if n in robot.estimated else float(1e3 * np.linalg.norm(np.subtract(placed[n], robot.targets[n])))
+             for n in names}
+    return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved)
+
+
+def with_targets(robot: Robot, targets: dict[str, tuple[float, float, float]]) -> Robot:
+    """The robot with the given targets placed (the rest as they were), none left to estimate."""
+    placed = {n: tuple(float(v) for v in targets.get(n, xyz)) for n, xyz in robot.targets.items()}
+    left = tuple(n for n in robot.estimated if n not in targets)
+    return dataclasses.replace(robot, targets=placed, estimated=left)
+
+
+def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tuple[Robot, Placement | None]:
+    """The robot to fit `data` with: the targets the robot file leaves to the data are estimated,
+    and given ones that the data puts more than FAR_M away start from where the data puts them.
+    (robot, None) when the given targets stand; a target left to estimate that `data` does not
+    measure is refused."""
+    measured = {robot.target_names[t] for t in np.unique(data.target)}
+    missing = [n for n in robot.estimated if n not in measured]
+    if missing:
+        raise ModelError(f"{data.source}: target '{missing[0]}' is left to estimate (robot file) but the data never "
+                         f"measures it; give its position in the robot file or remove it")
+    try:
+        placement = estimate_placement(robot, data, loss)
+    except ModelError:
+        if robot.estimated:
+            raise
+        return robot, None  # the data cannot place the targets, and the robot file does
+    far = {n: d for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M}
+    if not far:
+        return robot, None
+    return with_targets(robot, {n: placement.targets[n] for n in far}), placement
