@@ -17,7 +17,7 @@ from gecgen.model import ModelError
 
 #: the command modules, in the order `gecgen --help` lists them
 COMMANDS = ("generate", "identify", "evaluate", "compensate", "redundancy", "simulate", "import_", "gravity", "design",
-            "diagnose")
+            "diagnose", "calibrate")
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
 OUTPUTS = {
@@ -30,6 +30,7 @@ OUTPUTS = {
     "import": {"output": ("measurements", False)},
     "gravity": {"output": ("table", False)},
     "design": {"output": ("poses", False)},
+    "calibrate": {"output": ("calibration folder", True)},
 }
 
 

@@ -32,14 +32,23 @@ def progress_status(enabled: bool):
 def identify_inputs(args):
     """(robot with its targets placed, error model, data, compiled model, placement or None)."""
     from gecgen.model.measurements import read_measurements
-    from gecgen.runtime.compiled import CompiledModel
 
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
     robot, placement = placed(robot, data)
-    check_terms_finite(model, robot, data)
-    return robot, model, data, CompiledModel(robot, model), placement
+    return robot, model, data, checked(model, robot, data), placement
+
+
+def checked(model, robot, *datas):
+    """The compiled model, after refusing (one line) a term that is not finite on any of `datas`
+    (measurements or commands; None entries skipped)."""
+    from gecgen.runtime.compiled import CompiledModel
+
+    cm = CompiledModel(robot, model)
+    for data in filter(None, datas):
+        check_terms_finite(model, robot, data, cm.load_signals)
+    return cm
 
 
 def placed(robot, data):

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import sys
 
-from gecgen.cli.common import extrapolation
+from gecgen.cli.common import checked, extrapolation
 from gecgen.model import ModelError
-from gecgen.model.checks import check_terms_finite
 
 
 def add_parser(command):
@@ -22,14 +21,13 @@ def run(args) -> dict:
 
     from gecgen.model.measurements import read_commands, write_commands
     from gecgen.runtime import calibration
-    from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
+    from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS
 
     if args.max_iter < 0:
         raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
     calib = calibration.load(args.calibration)  # refuses non-finite coefficients, naming the first
     cmds = read_commands(args.poses, calib.robot, calib.model.aux)
-    check_terms_finite(calib.model, calib.robot, cmds)
-    cm = CompiledModel(calib.robot, calib.model)
+    cm = checked(calib.model, calib.robot, cmds)
     q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
     failed = np.nonzero(np.isin(status, FAILED))[0]
     if len(failed):

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import placed, progress_status, robot_and_model
+from gecgen.cli.common import checked, placed, progress_status, robot_and_model
 from gecgen.model import ModelError, load_robot
-from gecgen.model.checks import check_terms_finite
 
 
 def add_parser(command):
@@ -14,7 +13,12 @@ def add_parser(command):
     p.add_argument("robot")
     p.add_argument("data")
     p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
-    p.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
+    held = p.add_mutually_exclusive_group()
+    held.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
+    held.add_argument("--holdout", type=float, help="share of DATA's poses to hold out for the report instead, split "
+                                                    "by pose (seeded by --seed); default without --val: 0.2")
+    p.add_argument("--seed", type=int, default=0, help="seed of the hold-out split and of the cross-validation folds "
+                                                       "(default %(default)s)")
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", help="folder for report.md and its plots")
@@ -31,7 +35,7 @@ def add_parser(command):
 def run(args) -> dict:
     from gecgen.emit import generate
     from gecgen.loop.diagnose import diagnose, verdict, write_error_model
-    from gecgen.model.measurements import read_measurements
+    from gecgen.model.measurements import hold_out, read_measurements
 
     register_val = args.register == "val"
     if register_val and not args.val:
@@ -39,17 +43,18 @@ def run(args) -> dict:
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     val = read_measurements(args.val, robot) if args.val else None
+    if args.holdout is not None:
+        data, val = hold_out(data, args.holdout, args.seed)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
     robot, placement = placed(robot, data)
-    for d in filter(None, (data, val)):
-        check_terms_finite(model, robot, d)
+    checked(model, robot, data, val)
     with progress_status(not args.json) as status:
         def progress(round_no, rms_mm):
             if status:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
         diag = diagnose(robot, model, data, val, registration_mode="auto" if register_val else args.register,
-                        progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds,
+                        progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds, seed=args.seed,
                         register_val=register_val)
     out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
     write_error_model(robot, diag.final.model, diag.effects, out)
@@ -59,7 +64,8 @@ def run(args) -> dict:
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
               "verdict": verdict(diag.remaining),
-              "validation": str(args.val) if args.val else "internal hold-out of 1/5 of the poses",
+              "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
+              if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
     if args.report:
         from gecgen.loop.report import write_report

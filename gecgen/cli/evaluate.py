@@ -1,8 +1,7 @@
 """`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import extrapolation
-from gecgen.model.checks import check_terms_finite
+from gecgen.cli.common import checked, extrapolation
 
 
 def add_parser(command):
@@ -18,13 +17,11 @@ def add_parser(command):
 def run(args) -> dict:
     from gecgen.model.measurements import read_measurements
     from gecgen.runtime import calibration
-    from gecgen.runtime.compiled import CompiledModel
     from gecgen.runtime.identify import fit_frames, position_errors, summary, to_world
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
-    check_terms_finite(calib.model, calib.robot, data)
-    cm = CompiledModel(calib.robot, calib.model)
+    cm = checked(calib.model, calib.robot, data)
     outside = extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))
     result = {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(data.xyz),
               "registered": args.register}

@@ -21,6 +21,11 @@ def print_human(result: dict):
                 print(f"  row {o['row']}: pose {o['pose']} {o['target']} {o['residual_mm']:.3f} mm")
             if len(value) > MAX_LISTED:
                 print(f"  ... {len(value) - MAX_LISTED} more (use --json for the list)")
+        elif key == "candidates":
+            print(f"candidates: {len(value)} (cross-validated on the training poses)")
+            for c in value:
+                score = f"{c['cv_rms_mm']:.4f} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
+                print(f"  {c['model']}: {score}")
         elif key == "effects":
             print(f"effects: {len(value)}")
             for e in value:

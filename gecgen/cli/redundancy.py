@@ -1,9 +1,8 @@
 """`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
 from __future__ import annotations
 
-from gecgen.cli.common import placed, robot_and_model
+from gecgen.cli.common import checked, placed, robot_and_model
 from gecgen.model import load_robot
-from gecgen.model.checks import check_terms_finite
 
 
 def add_parser(command):
@@ -15,7 +14,6 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    from gecgen.runtime.compiled import CompiledModel
     from gecgen.runtime.identify import redundancy
 
     data = None
@@ -26,6 +24,5 @@ def run(args) -> dict:
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
     if data:
         robot = placed(robot, data)[0]
-        check_terms_finite(model, robot, data)
-    result = redundancy(CompiledModel(robot, model), data).to_dict()
+    result = redundancy(checked(model, robot, data), data).to_dict()
     return {"robot": robot.name, "data": args.data, **result}

@@ -70,6 +70,7 @@ def _printed(fn: Function, printer, element, signature: bool) -> dict:
 
 def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = None) -> dict[str, str]:
     """File name -> text of every generated file, manifest included; deterministic."""
+    robot.require_placed()
     functions = functions or all_functions(robot, model)
     ctx = context(robot, model)
     c_env, ca_env = _env("c"), _env("casadi")

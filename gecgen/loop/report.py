@@ -90,3 +90,41 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
     lines += [f"| {h['round']} | {h['train_rms_mm']:.4f} | {h['cv_rms_mm']:.4f} | {h['candidates']} | {h['accepted'] or '-'} |"
               for h in diag.history]
     return write_atomically(outdir / "report.md", "\n".join(lines) + "\n")
+
+
+def write_calibrate_report(result: dict, outdir: str | Path) -> Path:
+    """report.md of `gecgen calibrate` from its result (the command's JSON); returns the path."""
+    outdir = Path(outdir)
+    rows = ["| model | coefficients | training CV RMS (mm) |", "|---|---|---|"]
+    for c in result["candidates"]:
+        cv = f"{c['cv_rms_mm']:.4f}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
+        size = f"{c['n_params']} + what diagnose adds" if c["diagnose"] else c["n_params"]
+        rows.append(f"| {c['model']}{' **(chosen)**' if c['model'] == result['model'] else ''} | {size} | {cv} |")
+    lines = [f"# gecgen calibrate: {result['robot']}", "",
+             f"Training data: {result['train_data']}. The model is chosen on it alone: each candidate is fitted "
+             "whole (diagnose's choices included) on four fifths of the training poses and scored on the fifth left "
+             "out, in turn; the lowest cross-validated RMS wins, a tie within 1% going to the smaller model.", "",
+             *rows, "",
+             f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} "
+             f"coefficients.", "",
+             "| | uncalibrated RMS / max (mm) | calibrated RMS / max (mm) |", "|---|---|---|",
+             f"| training | {result['before']['rms_mm']:.4f} / {result['before']['max_mm']:.4f} | "
+             f"{result['train']['rms_mm']:.4f} / {result['train']['max_mm']:.4f} |"]
+    if "val" in result:
+        lines.append(f"| validation ({result['validation']}) | {result['val_before']['rms_mm']:.4f} / "
+                     f"{result['val_before']['max_mm']:.4f} | {result['val']['rms_mm']:.4f} / {result['val']['max_mm']:.4f} |")
+    lines.append("")
+    if result["effects"]:
+        lines += ["Effects diagnose added to the geometric model:", ""]
+        lines += [f"- {e['error']}: {', '.join(e['terms'])} ({e['family']}, cross-validated gain {e['gain_mm']:.4f} mm)"
+                  for e in result["effects"]]
+        lines.append("")
+    if result["outliers"]:
+        lines += [f"{len(result['outliers'])} training points were outliers of the robust fit (down-weighted; "
+                  "`calibration.json` lists them).", ""]
+    if result["placement"]:
+        lines += ["Targets placed from the training data before the fit: " + ", ".join(
+            f"{n} {list(map(lambda v: round(v, 4), xyz))} m" for n, xyz in result["placement"]["targets_m"].items()), ""]
+    lines += ["Files: `calibration.json` (for `gecgen evaluate` and `gecgen compensate`), `errors.yaml` (the chosen "
+              "error model), `generated/` (its C and CasADi code).", ""]
+    return write_atomically(outdir / "report.md", "\n".join(lines) + "\n")

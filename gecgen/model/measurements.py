@@ -309,3 +309,13 @@ def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.nda
             row[idx[f"q{j + 1}"]] = repr(float(qi[j]))
         rows.append(row)
     write_csv(path, commands.header, rows)
+
+
+def hold_out(data: Measurements, fraction: float, seed: int = 0) -> tuple[Measurements, Measurements]:
+    """(training, held-out) parts of `data`, split by pose at random (seeded): round(fraction x
+    poses) poses held out, at least one on each side."""
+    require(0 < fraction < 1, f"--holdout {fraction:g}: give the share of poses to hold out, between 0 and 1 (e.g. 0.2)")
+    require(data.n_poses >= 2, f"{data.source}: {data.n_poses} pose: nothing to hold out; measure more poses")
+    n = min(max(1, round(fraction * data.n_poses)), data.n_poses - 1)
+    held = np.random.default_rng(seed).permutation(data.n_poses)
+    return data.subset(np.sort(held[n:])), data.subset(np.sort(held[:n]))

@@ -87,6 +87,12 @@ class Robot:
         """Number of generalized errors, 6(n+1)."""
         return 6 * (self.n + 1)
 
+    def require_placed(self):
+        """Refuse (one line) to build anything on targets that still wait for measured data."""
+        require(not self.estimated, f"{self.source}: target '{self.estimated[0] if self.estimated else ''}' is left "
+                                    f"to estimate: place it from measured data first (identify, diagnose and calibrate "
+                                    f"do; runtime.placement.place_targets)")
+
     def error_names(self) -> list[str]:
         """Names like '3.ey' in the order of the generalized error vector eps."""
         return [f"{i}.{e}" for i in range(self.n + 1) for e in ERROR_NAMES]

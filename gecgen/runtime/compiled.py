@@ -30,7 +30,6 @@ from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot
-from gecgen.model.validation import require
 
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
 
@@ -135,9 +134,7 @@ class CompiledModel:
     """
 
     def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
-        require(not robot.estimated, f"{robot.source}: target '{robot.estimated[0] if robot.estimated else ''}' is "
-                                     f"left to estimate: place it from measured data first (identify, diagnose and "
-                                     f"calibrate do; runtime.placement.place_targets)")
+        robot.require_placed()
         self.robot, self.model = robot, model
         self.key = model_key(robot, model)
         self.dims = Dims(robot.n, len(robot.targets), robot.n_errors, len(model.coefficients), len(model.aux))

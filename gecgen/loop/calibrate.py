@@ -1,0 +1,164 @@
+"""calibrate: the whole pipeline, with the model chosen on the training data alone.
+
+The candidates are ways of fitting a model, not just models:
+
+* geometric: six constant generalized errors per frame (classical calibration, any robot);
+* default: the robot's own error model (robots/NAME.errors.yaml), when it has one;
+* elastic: geometric plus joint compliance, each joint's own angle error (the generalized error
+  that turns or slides about its axis, `loop.dictionary.own_errors`) times the loads it carries:
+  the gravity torque from the URDF's masses when the robot has them, the torque of the measured
+  wrench when the data has one;
+* diagnosed: diagnose run from the geometric model (its terms chosen on the data).
+
+The rule (docs/real-data-tiago.md used it first): every candidate is run whole inside each of 5
+folds of the training poses (the poses split at random, seeded), so that diagnose's choices are
+made again on each fold's other poses alone, and is scored on all measured points of the
+held-out poses. The lowest cross-validated RMS is the choice; ties within 1% go to the candidate
+with fewer coefficients. The chosen candidate is then fitted on all the training poses.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from gecgen.loop.diagnose import Diagnosis, diagnose
+from gecgen.loop.dictionary import SIGNAL, own_errors
+from gecgen.model.errors import ErrorModel, error_model_from_dict
+from gecgen.model.loads import catalog
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import ERROR_NAMES, Robot
+from gecgen.model.validation import ModelError
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import Fit, identify, position_errors
+
+FOLDS = 5
+#: cross-validated RMS this close (relative) counts as a tie, won by the smaller model
+TIE = 0.01
+
+
+@dataclass(frozen=True)
+class Pipeline:
+    """One way of fitting: a start model, and whether diagnose extends it on the data."""
+
+    name: str
+    model: ErrorModel
+    diagnose: bool = False
+
+
+@dataclass
+class Choice:
+    """What calibrate chose and why: every pipeline's cross-validated RMS (mm, `None` when it
+    could not be fitted in some fold, with the reason), the chosen one fitted on all the data."""
+
+    table: list[dict]
+    chosen: Pipeline
+    model: ErrorModel
+    cm: CompiledModel
+    fit: Fit
+    diagnosis: Diagnosis | None
+
+
+def elastic_spec(robot: Robot, data: Measurements, seed: int = 0) -> dict | None:
+    """Error-model spec of geometric + joint compliance under the loads the robot and the data
+    give (gravity torque from known masses, wrench torque), for every joint whose own error exists
+    and whose load varies over the data; None when no joint has one."""
+    names = catalog(robot).names
+    wanted = [k for k, n in enumerate(names) if SIGNAL.match(n) and SIGNAL.match(n).group(1) in
+              ("gravity_torque", "wrench_torque")]
+    if not wanted:
+        return None
+    geometric = error_model_from_dict({"default": ["1"]}, robot, "<geometric>")
+    values = CompiledModel(robot, geometric).load_signals(data.q, data.w)[1][:, wanted]
+    varies = np.ptp(values, axis=0) > 1e-9 * np.maximum(1.0, np.abs(values).max(axis=0))
+    frames: dict[int, dict[str, list[str]]] = {}
+    for joint, error in own_errors(robot, np.random.default_rng(seed)).items():
+        terms = [names[k] for k, v in zip(wanted, varies) if v and SIGNAL.match(names[k]).group(2) == f"q{joint + 1}"]
+        if terms:
+            frame, e = divmod(error, 6)
+            frames.setdefault(frame, {})[ERROR_NAMES[e]] = ["1", *terms]
+    return {"default": ["1"], "frames": frames} if frames else None
+
+
+#: the candidates' names, in the order they are tried
+NAMES = ("geometric", "default", "elastic", "diagnosed")
+
+
+def pipelines(robot: Robot, data: Measurements, default: ErrorModel | None,
+              names: tuple[str, ...] = NAMES) -> list[Pipeline]:
+    """The candidates of the module docstring that apply to this robot and data, of those named."""
+    geometric = error_model_from_dict({"default": ["1"]}, robot, "<geometric>")
+    out = [Pipeline("geometric", geometric)]
+    if default is not None and default.to_yaml_dict(robot) != geometric.to_yaml_dict(robot):
+        out.append(Pipeline("default", default))
+    spec = elastic_spec(robot, data)
+    if spec:
+        out.append(Pipeline("elastic", error_model_from_dict(spec, robot, "<elastic>")))
+    out.append(Pipeline("diagnosed", geometric, diagnose=True))
+    return [p for p in out if p.name in names]
+
+
+def run_pipeline(robot: Robot, pipeline: Pipeline, data: Measurements,
+                 registration_mode: str = "auto") -> tuple[ErrorModel, CompiledModel, Fit, Diagnosis | None]:
+    """Fit one pipeline on `data`: (final model, its compiled code, the fit, diagnose's record)."""
+    if pipeline.diagnose:
+        # the second `data` is only reported on: diagnose then chooses on every pose it is given
+        diag = diagnose(robot, pipeline.model, data, data, registration_mode=registration_mode)
+        return diag.final.model, diag.final.cm, diag.final.fit, diag
+    cm = CompiledModel(robot, pipeline.model)
+    return pipeline.model, cm, identify(cm, data, registration_mode=registration_mode), None
+
+
+def pipeline_cv(robot: Robot, pipeline: Pipeline, data: Measurements, seed: int = 0,
+                registration_mode: str = "auto") -> float:
+    """Cross-validated RMS (mm) over all measured points of the held-out poses, the pipeline run
+    whole on the other folds. Raises RuntimeError when a fold's fit cannot be trusted."""
+    fold = np.random.default_rng(seed).permutation(data.n_poses) % FOLDS
+    sq, n = 0.0, 0
+    for f in range(FOLDS):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # conditioning warnings of the fold fits; the score says it all
+            _, cm, fit, _ = run_pipeline(robot, pipeline, data.subset(np.nonzero(fold != f)[0]), registration_mode)
+        if fit.failures:
+            raise RuntimeError(f"fold {f + 1}: {fit.failures[0]}")
+        test = data.subset(np.nonzero(fold == f)[0])
+        e = position_errors(cm, test, fit.to_world(test), fit.c)
+        sq, n = sq + float(e @ e), n + len(e)
+    return 1e3 * float(np.sqrt(sq / n))
+
+
+def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
+           registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES) -> Choice:
+    """Score the named pipelines that apply (see the module docstring) on the training data, fit
+    the choice on all of it. Raises RuntimeError when none applies or can be fitted, or when the
+    chosen fit cannot be trusted."""
+    require_poses = 2 * FOLDS
+    if data.n_poses < require_poses:
+        raise RuntimeError(f"{data.n_poses} poses: the model is chosen by {FOLDS}-fold cross-validation over poses, "
+                           f"which needs at least {require_poses}; measure more poses")
+    table, scored = [], []
+    candidates = pipelines(robot, data, default, names)
+    if not candidates:
+        raise RuntimeError(f"none of the models {', '.join(names)} applies to this robot and data (default: the robot "
+                           f"has no error-model file; elastic: neither URDF masses nor a wrench that varies)")
+    for p in candidates:
+        if progress:
+            progress(p.name)
+        try:
+            cv = pipeline_cv(robot, p, data, seed, registration_mode)
+            scored.append((cv, len(p.model.coefficients), p))
+            table.append({"model": p.name, "cv_rms_mm": cv, "n_params": len(p.model.coefficients),
+                          "diagnose": p.diagnose})
+        except (RuntimeError, ModelError) as exc:  # too few poses for it, or an untrustworthy fold fit
+            table.append({"model": p.name, "cv_rms_mm": None, "n_params": len(p.model.coefficients),
+                          "diagnose": p.diagnose, "refused": str(exc).splitlines()[0]})
+    if not scored:
+        raise RuntimeError(f"no candidate model could be fitted in every fold ({table[0]['refused']})")
+    best = min(cv for cv, _, _ in scored)
+    # diagnose only ever adds to its start model: in a tie it counts as the larger one
+    chosen = min((s for s in scored if s[0] <= best * (1 + TIE)), key=lambda s: (s[1] + s[2].diagnose / 2, s[0]))[2]
+    model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
+    if fit.failures:
+        raise RuntimeError(f"the chosen model ({chosen.name}) cannot be trusted on all the data: {fit.failures[0]}")
+    return Choice(table, chosen, model, cm, fit, diag)

@@ -1,0 +1,83 @@
+"""gecgen calibrate: the model chosen on the training data alone, then fitted, written and scored.
+
+Simulated industrial6r (robots/industrial6r.truth.yaml: gravity bending, gear eccentricity,
+compliance) with a payload measured by the wrench sensor: 0 or 150 kg on alternate poses."""
+import json
+
+import numpy as np
+import pytest
+from conftest import ROBOTS
+
+from gecgen.cli import main
+from gecgen.model import load_robot
+from gecgen.model.measurements import hold_out, read_measurements
+
+ROBOT = ROBOTS / "industrial6r.yaml"
+
+
+def run(capsys, *args) -> dict:
+    assert main([*map(str, args), "--json"]) == 0, capsys.readouterr().err
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture(scope="module")
+def payload_data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("calibrate")
+    assert main(["simulate", str(ROBOT), "--poses", "60", "--seed", "2", "--payload-kg", "0,150",
+                 "-o", str(d / "train.csv"), "--json"]) == 0
+    assert main(["simulate", str(ROBOT), "--poses", "40", "--seed", "3", "--payload-kg", "0,150",
+                 "-o", str(d / "val.csv"), "--json"]) == 0
+    return d
+
+
+def test_the_elastic_model_is_chosen_when_a_payload_bends_the_arm(payload_data, capsys):
+    d = payload_data
+    out = run(capsys, "calibrate", ROBOT, d / "train.csv", "--val", d / "val.csv", "--models", "geometric,elastic",
+              "-o", d / "elastic")
+    cv = {c["model"]: c["cv_rms_mm"] for c in out["candidates"]}
+    assert set(cv) == {"geometric", "elastic"}
+    # the wrench torque on each joint's own error is what the truth's compliance is made of
+    assert out["model"] == "elastic" and cv["elastic"] < 0.7 * cv["geometric"]
+    errors = (d / "elastic" / "errors.yaml").read_text()
+    assert "wrench_torque(q2)" in errors and "wrench_torque(q3)" in errors
+    # the validation figure is what evaluate says of the written calibration on the same file
+    ev = run(capsys, "evaluate", d / "elastic" / "calibration.json", d / "val.csv")
+    assert ev["after"]["rms_mm"] == pytest.approx(out["val"]["rms_mm"], rel=1e-9)
+    assert out["val"]["rms_mm"] < 0.25 * out["val_before"]["rms_mm"]
+    for f in ("calibration.json", "errors.yaml", "report.md", "generated/industrial6r.c"):
+        assert (d / "elastic" / f).is_file(), f
+    assert "elastic **(chosen)**" in (d / "elastic" / "report.md").read_text()
+
+
+def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):
+    """All four candidates on 30 poses, validation by --holdout: the chosen one has the lowest
+    cross-validated RMS (or ties it within 1% with fewer coefficients)."""
+    d = payload_data
+    out = run(capsys, "calibrate", ROBOT, d / "val.csv", "--holdout", "0.25", "--seed", "1", "-o", d / "all")
+    cv = {c["model"]: c["cv_rms_mm"] for c in out["candidates"]}
+    assert set(cv) == {"geometric", "default", "elastic", "diagnosed"}
+    best = min(v for v in cv.values() if v is not None)
+    assert cv[out["model"]] <= 1.01 * best
+    assert out["validation"] == "--holdout 0.25 of TRAIN (seed 1)"
+    assert {"rms_mm", "max_mm"} <= set(out["train"]) and {"rms_mm", "max_mm"} <= set(out["val"])
+
+
+def test_hold_out_splits_by_pose_and_is_seeded(payload_data):
+    data = read_measurements(payload_data / "train.csv", load_robot(ROBOT))
+    train, val = hold_out(data, 0.25, seed=5)
+    assert (train.n_poses, val.n_poses) == (45, 15)
+    assert not set(train.pose_ids) & set(val.pose_ids)
+    again = hold_out(data, 0.25, seed=5)[1]
+    np.testing.assert_array_equal(again.pose_ids, val.pose_ids)
+    assert not np.array_equal(hold_out(data, 0.25, seed=6)[1].pose_ids, val.pose_ids)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--models", "geometric,bogus"], "--models: 'bogus' is not a candidate"),
+    (["--holdout", "1.5"], "--holdout 1.5: give the share of poses to hold out"),
+])
+def test_bad_options_are_refused_in_one_line(payload_data, capsys, args, message):
+    d = payload_data
+    assert main(["calibrate", str(ROBOT), str(d / "train.csv"), *args, "-o", str(d / "bad"), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
