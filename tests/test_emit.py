@@ -112,3 +112,24 @@ def test_without_a_c_compiler_the_casadi_form_is_used_and_said(monkeypatch, rng)
     q, eps = random_q(robot, rng, 4), rng.normal(0, 0.01, (4, robot.n_errors))
     for a, b in zip(fallback.J_e(q, eps), c_model.J_e(q, eps)):
         np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_urdf_names_cannot_end_the_header_comments(tmp_path):
+    """URDF joint names are free text: `*/` in one would close the header's comment and turn the
+    rest of the name into code; a line break in one would leave the comment's layout."""
+    (tmp_path / "arm.urdf").write_text("""<robot name="arm">
+  <link name="base"/><link name="l1"/><link name="l2"/>
+  <joint name="shoulder */ int oops; /*" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="elbow&#10;#error line" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.4 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>""")
+    (tmp_path / "arm.yaml").write_text("name: arm\nurdf: arm.urdf\nbase_link: base\ntip_link: l2\nangle_unit: rad\n"
+                                       "targets: {t: [0.1, 0, 0]}\n")
+    assert main(["generate", str(tmp_path / "arm.yaml"), "--errors", str(ROBOTS / "constant.errors.yaml"),
+                 "-o", str(tmp_path / "out")]) == 0
+    header = (tmp_path / "out" / "arm.h").read_text()
+    assert "shoulder *\\/ int oops; /\\*" in header and "elbow #error line" in header
+    build = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-c", "arm.c", "-o", "arm.o"],
+                           cwd=tmp_path / "out", capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr

@@ -29,8 +29,17 @@ HERE = Path(__file__).parent
 
 
 def _env(lang: str) -> jinja2.Environment:
-    return jinja2.Environment(loader=jinja2.FileSystemLoader(HERE / lang / "templates"), trim_blocks=True,
-                              lstrip_blocks=True, keep_trailing_newline=True, undefined=jinja2.StrictUndefined)
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(HERE / lang / "templates"), trim_blocks=True,
+                             lstrip_blocks=True, keep_trailing_newline=True, undefined=jinja2.StrictUndefined)
+    env.filters["comment"] = comment_text
+    return env
+
+
+def comment_text(text: str) -> str:
+    """A name as it may stand inside a C comment: a URDF joint named `a*/b` would end the comment
+    and leave the rest as code, `/*` in it is an error under -Wall -Werror, and a line break would
+    leave the comment's layout."""
+    return " ".join(str(text).replace("*/", "*\\/").replace("/*", "/\\*").split())
 
 
 def _c_literal(x: float) -> str:

@@ -39,7 +39,7 @@ from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_comman
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import _structural, qr_accumulate, rows_H_and_residual
+from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structural_analysis
 from gecgen.runtime.redundancy import Redundancy, unexcited
 from gecgen.simulate.designs import random_design, with_payloads
 from gecgen.simulate.truth import sensor_wrench
@@ -489,7 +489,7 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
     rows = _measured_rows(targets)
     r = len(rows)
     struct_targets = np.unique(np.concatenate([targets, given.target])) if given is not None else np.asarray(targets)
-    basis, red = _basis(cm, cands, rows, _structural(cm, struct_targets), len(struct_targets), rng)
+    basis, red = _basis(cm, cands, rows, structural_analysis(cm, struct_targets), len(struct_targets), rng)
     k = len(basis.columns)
     M0, m0 = given_information(cm, given, basis) if given is not None else (np.zeros((k, k)), 0)
     m = m0 + r * n_poses

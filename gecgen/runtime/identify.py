@@ -220,7 +220,7 @@ def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> 
     return np.linalg.qr(A, mode="r"), lever
 
 
-def _structural(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
+def structural_analysis(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
     """Structural analysis for the measured targets. It uses no data, so like the compiled code it
     is cached by content (the model's key, the analysis code, numpy's version, the targets): a
     warm run skips an H_e evaluation at generic poses, its QR, the rank test and the merges."""
@@ -248,7 +248,7 @@ def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray,
     A0 (s+1, k+1), [H | r] at c = 0 over the identifiable columns up to an orthogonal factor (s the
     structurally kept count); the number of measured coordinates."""
     targets = np.unique(data.target)
-    struct = _structural(cm, targets)
+    struct = structural_analysis(cm, targets)
     R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)), np.array(struct.kept, int))
     red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
     return red, R0[:, [*np.searchsorted(struct.kept, red.kept), -1]], m
@@ -257,7 +257,7 @@ def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray,
 def redundancy(cm: CompiledModel, data: Measurements | None = None, registration_mode: str = "auto") -> Redundancy:
     """Structural analysis for the targets the data measures (all robot targets without data)."""
     if data is None:
-        return _structural(cm, np.arange(cm.dims.nt))
+        return structural_analysis(cm, np.arange(cm.dims.nt))
     return _data_analysis(cm, data, to_world(fit_frames(cm, data, None, mode=registration_mode), data))[0]
 
 
