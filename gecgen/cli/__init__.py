@@ -16,14 +16,15 @@ from gecgen.files import check_output_dir, check_output_file
 from gecgen.model import ModelError
 
 #: the command modules, in the order `gecgen --help` lists them
-COMMANDS = ("generate", "identify", "evaluate", "compensate", "redundancy", "simulate", "import_", "gravity", "design",
-            "diagnose", "calibrate")
+COMMANDS = ("generate", "identify", "evaluate", "compensate", "export", "redundancy", "simulate", "import_", "gravity",
+            "design", "diagnose", "calibrate")
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
 OUTPUTS = {
     "generate": {"output": ("generated code", True)},
     "identify": {"output": ("calibration", False)},
     "compensate": {"output": ("corrected commands", False)},
+    "export": {"c": ("generated code", True), "urdf": ("URDF", False)},
     "diagnose": {"output": ("error model", False), "generated": ("generated code", True), "report": ("report", True)},
     "simulate": {"output": ("measurements", False), "val_out": ("validation measurements", False),
                  "truth_out": ("truth file", False)},

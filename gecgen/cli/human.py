@@ -26,6 +26,8 @@ def print_human(result: dict):
             for c in value:
                 score = f"{c['cv_rms_mm']:.4f} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
                 print(f"  {c['model']}: {score}")
+        elif key == "table":
+            print_error_table(value)
         elif key == "effects":
             print(f"effects: {len(value)}")
             for e in value:
@@ -42,3 +44,27 @@ def print_human(result: dict):
             print(f"{key}: " + ", ".join(f"{k} {scalar(v)}" for k, v in scalars.items()) + more)
         else:
             print(f"{key}: {scalar(value)}")
+
+
+def _cell(value, std) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.4g}" + (f" +-{std:.2g}" if std is not None else "")
+
+
+def print_error_table(table: dict):
+    """`gecgen export --table`: joint zero offsets, then the constant errors of every frame."""
+    print("joint zero offsets (value +-std; coefficient):")
+    width = max(len(z["joint"]) for z in table["zero_offsets"])
+    for z in table["zero_offsets"]:
+        if z["value"] is None:
+            print(f"  {z['joint']:<{width}}  -  ({z['why']})")
+            continue
+        swap = f", exchanged for {z['exchanged_for']}" if z["exchanged_for"] else ""
+        print(f"  {z['joint']:<{width}}  {_cell(z['value'], z['std'])} {z['unit']}  ({z['coefficient']}{swap})")
+    keys = [k for k in table["frames"][0] if k not in ("frame", "std")]
+    print("constant errors per frame (value +-std; 0 without std: eliminated; -: a zero offset or not in the model):")
+    print("  frame" + "".join(f" {k:>19}" for k in keys))
+    for f in table["frames"]:
+        print(f"  {f['frame']:<5}" + "".join(f" {_cell(f[k], f['std'][k]):>19}" for k in keys))
+    print(f"re-expressed with the zero offsets kept: the targets move by {table['reexpressed_change_mm']:.2g} mm at most")

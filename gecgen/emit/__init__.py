@@ -52,6 +52,19 @@ def _rows(values: list, per_row: int = 16) -> list[list]:
     return [values[k:k + per_row] for k in range(0, len(values), per_row)]
 
 
+def robot_model_hash(robot: Robot, model: ErrorModel) -> str:
+    """sha256 (hex) of what the generated code computes: the robot files' contents and the error
+    model's terms, not file names or the gecgen version. Coefficients fitted with one hash belong to
+    code with that hash only; `NAME_MODEL_HASH` in NAME.h is its first 15 hex digits (60 bits, so
+    the preprocessor can compare it)."""
+    text = json.dumps([sorted(robot.source_hashes.values()), model.to_yaml_dict(robot)], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+#: hex digits of the model hash in the C macros: an integer the preprocessor compares (intmax_t)
+C_HASH_DIGITS = 15
+
+
 def context(robot: Robot, model: ErrorModel) -> dict:
     """Everything the templates need besides the printed functions."""
     terms = [t.text for t in model.unique_terms()]
@@ -60,7 +73,7 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     coef_term = [terms.index(c.term.text) for c in coefs]
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
-    return dict(nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
+    return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS], nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
                 nq=robot.n, nt=len(robot.targets), ne=robot.n_errors, nc=len(coefs), nf=len(terms),
@@ -97,7 +110,7 @@ def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = N
         errors=robot.error_names(), terms=ctx["terms"], coefficients=model.coefficient_names(robot),
         load_signals=[name for name, _ in ctx["loads"]],
         coef_error=ctx["coef_error_flat"], coef_term=ctx["coef_term_flat"],
-        limits=[[j.lower, j.upper] for j in robot.joints],
+        limits=[[j.lower, j.upper] for j in robot.joints], model_hash=robot_model_hash(robot, model),
         files={k: hashlib.sha256(v.encode()).hexdigest() for k, v in sorted(files.items())},
     )
     files["manifest.json"] = json.dumps(manifest, indent=1, sort_keys=True, allow_nan=True) + "\n"
@@ -110,3 +123,31 @@ def generate(robot: Robot, model: ErrorModel, outdir: str | Path) -> dict[str, s
     for name, text in files.items():
         write_atomically(Path(outdir) / name, text)
     return files
+
+
+def _g17(x: float) -> str:
+    """A C double literal that reads back as x exactly."""
+    return "%.17g" % x
+
+
+def render_calibration(robot: Robot, model: ErrorModel, c, std, command: dict, max_iter: int, tol: float,
+                       origin: str) -> dict[str, str]:
+    """NAME_calibration.h and NAME_example.c for coefficients c (nc,) with their std (nc,), NaN where
+    eliminated. The header holds c as const data in NAME.h's coefficient order, each value with its
+    name, and stops the build when NAME.h has another model hash; the example compensates one
+    nominal command, `command` = {"q": (nq,), "w": (6,), "aux": (naux,)} (m, rad, N, N m), with
+    NAME_compensate's max_iter and tol (m), and prints the corrected joints. `origin` names the
+    calibration in the comments."""
+    ctx = context(robot, model)
+    notes = ["eliminated" if math.isnan(s) else f"std {s:.2g}" for s in std]
+    # a name never closes the comment it stands in (terms may hold '*' and '/')
+    coefficients = [(_g17(v), f"{n} ({note})".replace("*/", "* /"))
+                    for v, n, note in zip(c, model.coefficient_names(robot), notes)]
+    env = _env("c")
+    values = {k: [_g17(v) for v in command[k]] for k in ("q", "w", "aux")}
+    return {
+        f"{robot.name}_calibration.h": env.get_template("calibration.h.j2").render(
+            coefficients=coefficients, origin=origin.replace("*/", "* /"), **ctx),
+        f"{robot.name}_example.c": env.get_template("example.c.j2").render(command=values, max_iter=max_iter,
+                                                                           tol=repr(float(tol)), **ctx),
+    }

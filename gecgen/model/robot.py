@@ -68,6 +68,7 @@ class Robot:
     source_hashes: dict[str, str] = field(default_factory=dict)
     urdf: str = ""  # the URDF file a robot file names (its masses give gravity torques), else ""
     base_link: str = ""
+    tip_link: str = ""  # with urdf: the link the tool hangs from
     gravity: tuple = tuple(sp.Rational(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
 
     @property
@@ -268,4 +269,5 @@ def load_robot(path: str | Path) -> Robot:
                  wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,
                  urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
+                 tip_link=str(spec["tip_link"]) if urdf_path else "",
                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))

@@ -12,7 +12,9 @@ of every link below a base link, on the path or not, for gravity torques (`model
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
+from xml.parsers import expat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -238,3 +240,111 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
         com[name] = np.array(_triple(None if origin is None else origin.get("xyz"), "0 0 0", f"{lwhere} origin xyz"))
     return MassTree(links=tuple(order), parent={k: above[k].parent for k in order[1:]}, joint=joint, mass=mass,
                     com=com, source=where)
+
+
+def rpy(R: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) with R = Rz(yaw) Ry(pitch) Rx(roll), the URDF convention. Roll is taken
+    from what is left after yaw and pitch, so near pitch +-90 degrees (where yaw and roll are
+    nearly one angle, and many URDFs sit) the three still compose R to rounding."""
+    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    rest = constant((("Ry", -pitch), ("Rz", -yaw)))[:3, :3] @ R
+    return math.atan2(rest[2, 1], rest[1, 1]), pitch, yaw
+
+
+#: the rest of a start tag after its name: attributes, then > or />
+_TAG_REST = re.compile(r"""(?:\s+[^\s=/>]+\s*=\s*(?:"[^"]*"|'[^']*'))*\s*/?>""")
+
+
+def _start_tags(text: str) -> tuple[dict[tuple[str, str], tuple[int, int]], tuple[int, int]]:
+    """Character spans of start tags in a URDF's text: ("joint", name) for every top-level joint and
+    ("origin", name) for its first <origin>; and the span of the root's start tag."""
+    data = text.encode()
+    parser = expat.ParserCreate()
+    path: list[str] = []  # the open elements
+    joint = ""  # the top-level joint being read
+    found: dict[tuple[str, str], int] = {}
+
+    def start(tag, attrs):
+        nonlocal joint
+        path.append(tag)
+        if len(path) == 1:
+            found[("root", "")] = parser.CurrentByteIndex
+        elif len(path) == 2 and tag == "joint":
+            joint = attrs.get("name", "")
+            found[("joint", joint)] = parser.CurrentByteIndex
+        elif len(path) == 3 and tag == "origin" and path[1] == "joint":
+            found.setdefault(("origin", joint), parser.CurrentByteIndex)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda tag: path.pop()
+    parser.Parse(data, True)
+
+    def span(at: int) -> tuple[int, int]:
+        i = len(data[:at].decode())  # byte index -> character index
+        name = re.match(r"<[^\s/>]+", text[i:])
+        return i, _TAG_REST.match(text, i + name.end()).end()
+
+    spans = {k: span(v) for k, v in found.items()}
+    return spans, spans.pop(("root", ""))
+
+
+def _origin_tag(T: np.ndarray, close: str = "/>") -> str:
+    xyz = " ".join(repr(float(v)) for v in T[:3, 3])
+    return f'<origin xyz="{xyz}" rpy="{" ".join(repr(v) for v in rpy(T[:3, :3]))}"{close}'
+
+
+def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np.ndarray],
+                note: str) -> tuple[str, str, list[str]]:
+    """The URDF's text with constant error transforms folded into joint origins.
+
+    errors[i] (4x4, one per frame 0..n of the chain base_link -> tip_link) sits right after frame
+    i's nominal transform: E_0 goes into the first moving joint's origin (after it: frame 0 is that
+    joint's frame at zero), E_i (i >= 1) before the origin of every joint below the i-th moving
+    joint's child link, on the chain or off it, so everything that link carries moves with it. When
+    that link is the tip (E_n has nowhere on the chain to go) a fixed joint and a new link
+    `<tip>_calibrated` below it carry E_n, and the new link is the calibrated chain's tip. Only
+    those origins change, byte for byte; `note` becomes a comment after the root's start tag.
+    Returns (text, the tip link of the calibrated chain, the names of the joints added or changed)."""
+    where = str(path)
+    text = read_text(Path(path), "URDF file")
+    links, above = _tree(_parse(path), where)
+    chain = [uj for uj in _path(above, base_link, tip_link, where) if uj.type != "fixed"]
+    require(len(chain) + 1 == len(errors), f"{where}: {len(chain)} moving joints from {base_link} to {tip_link}, "
+                                           f"but {len(errors) - 1} frames of errors; the URDF changed")
+    below: dict[str, list[UrdfJoint]] = {}
+    for uj in above.values():
+        below.setdefault(uj.parent, []).append(uj)
+
+    def origin(uj: UrdfJoint) -> np.ndarray:
+        return constant(_origin(uj.element, f"{where}: joint {excerpt(uj.name)}"))
+
+    identity = [np.array_equal(E, np.eye(4)) for E in errors]
+    changed = {} if identity[0] else {chain[0].name: origin(chain[0]) @ errors[0]}
+    for uj, E, unit in zip(chain, errors[1:], identity[1:]):
+        for child in [] if unit else below.get(uj.child, []):
+            changed[child.name] = E @ origin(child)
+    tags, (_, root_end) = _start_tags(text)
+    edits = [(root_end, root_end, f"\n  <!-- {note.replace('--', '- -')} -->")]
+    for name, T in changed.items():
+        if ("origin", name) in tags:
+            a, b = tags[("origin", name)]
+            edits.append((a, b, _origin_tag(T, "/>" if text[b - 2:b] == "/>" else ">")))
+        else:  # the URDF's default origin, the identity, was left out
+            a, b = tags[("joint", name)]
+            indent = text[text.rfind("\n", 0, a) + 1:a]
+            edits.append((b, b, f"\n{indent}  {_origin_tag(T)}"))
+    names = sorted(changed)
+    tip = tip_link
+    if chain[-1].child == tip_link and not identity[-1]:
+        tip = f"{tip_link}_calibrated"
+        while tip in links or f"{tip}_joint" in {uj.name for uj in above.values()}:
+            tip += "_"
+        names.append(f"{tip}_joint")
+        end = text.rindex("</")  # the root's end tag
+        edits.append((end, end, f'  <joint name="{tip}_joint" type="fixed">\n    <parent link="{tip_link}"/>\n'
+                                f'    <child link="{tip}"/>\n    {_origin_tag(errors[-1])}\n  </joint>\n'
+                                f'  <link name="{tip}"/>\n'))
+    for a, b, new in sorted(edits, reverse=True):
+        text = text[:a] + new + text[b:]
+    return text, tip, names

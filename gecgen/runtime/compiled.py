@@ -238,6 +238,19 @@ class CompiledModel:
             f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(c), _ptr(out[i]))
         return out
 
+    def basis(self, q, w, aux):
+        """The distinct basis terms f (N, nf) of the error model at each pose (`model.unique_terms()`
+        order; coefficient k scales term `terms.index(coefficients[k].term.text)` of its error)."""
+        q, w, aux, N = self._poses(q, w, aux)
+        nf = len(self.model.unique_terms())
+        if self.backend == "casadi":
+            return self._casadi("basis", N, q, w, aux)[0].reshape(N, nf)
+        out = np.empty((N, nf))
+        f = self._fn("basis")
+        for i in range(N):
+            f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(out[i]))
+        return out
+
     def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11):
         """Corrected joint commands (N, nq) and status codes (N,) for nominal commands q_cmd (N, nq)
         (m or rad), residual tolerance tol (m; 1 rad counts as 1 m). The codes, per row:

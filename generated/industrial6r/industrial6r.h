@@ -61,6 +61,9 @@ extern "C" {
 #define INDUSTRIAL6R_NF 19
 #define INDUSTRIAL6R_NAUX 0
 #define INDUSTRIAL6R_NL 36
+/* The robot and error model this code computes: the first 60 bits of manifest.json's model_hash. A
+ * coefficient header from `gecgen export` compares it with its own and stops the build on a mismatch. */
+#define INDUSTRIAL6R_MODEL_HASH 0x31021de457306ba
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES

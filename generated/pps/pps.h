@@ -38,6 +38,9 @@ extern "C" {
 #define PPS_NF 19
 #define PPS_NAUX 0
 #define PPS_NL 13
+/* The robot and error model this code computes: the first 60 bits of manifest.json's model_hash. A
+ * coefficient header from `gecgen export` compares it with its own and stops the build on a mismatch. */
+#define PPS_MODEL_HASH 0xa14fbd46f6855cb
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES

@@ -61,6 +61,9 @@ extern "C" {
 #define PUMA560_NF 1
 #define PUMA560_NAUX 0
 #define PUMA560_NL 36
+/* The robot and error model this code computes: the first 60 bits of manifest.json's model_hash. A
+ * coefficient header from `gecgen export` compares it with its own and stops the build on a mismatch. */
+#define PUMA560_MODEL_HASH 0x1cedde7e0d063a3
 
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES

@@ -1,0 +1,283 @@
+"""Export a calibration into a controller: generated C with the coefficients as const data, a
+URDF whose joint origins carry the constant errors, and a table of joint zero offsets and link
+errors. Units: m and rad inside; the table and the effects reported in mm, mrad and mdeg.
+
+Joint zero offsets. Joint i's zero offset is the generalized error adjacent to its motion that
+turns about (revolute) or moves along (prismatic) its axis: for a URDF joint (no constant transform
+after the motion) that of frame i, right after the motion; for a DH joint (none before it) that of
+frame i-1, right before it: `er` of frame i-1 for a revolute joint i (`ez` for a prismatic one), or
+with a URDF axis along -x, -y or -z the matching error with its sign turned. Alone, that error
+equals the joint reading off by its value: M_i(q) Rot(u, d) = M_i(q + d) and Rz(d) Rz(q) = Rz(q + d).
+Identification usually eliminates it (it acts like the joint and the next frame), and the next
+frames' errors carry it; the table re-expresses the calibration with every zero offset kept,
+each exchanged for the kept constant coefficient it merges into most (a rotation for a revolute
+joint, a translation for a prismatic one, else the other kind), through the merge factors of the
+redundancy analysis. Those are linear, so the re-expressed errors reproduce the calibration to
+first order in the errors; `reexpressed_change_mm` measures the rest.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import shlex
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from gecgen.model.kinematics import error_transform
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.validation import require
+from gecgen.runtime.calibration import Calibration, model_hash
+from gecgen.runtime.compiled import OK, CompiledModel
+from gecgen.runtime.redundancy import generic_design
+
+#: the example program's compensation settings: `gecgen compensate`'s (Newton steps, residual m),
+#: and how many random commands it tries when the middle of the training ranges is singular
+EXAMPLE_MAX_ITER, EXAMPLE_TOL, EXAMPLE_TRIES = 50, 1e-11, 20
+#: random poses in the training ranges over which the effect of a term the URDF cannot carry is
+#: taken (with the corners of the ranges, when there are at most CORNERS_MAX)
+EFFECT_SAMPLES, CORNERS_MAX = 2000, 4096
+#: a merge factor below this is no link between a zero offset and a coefficient
+FACTOR_TOL = 1e-9
+MDEG_PER_RAD = 180e3 / math.pi
+
+
+def _ranges(calib: Calibration, where: str) -> tuple[list[str], np.ndarray]:
+    """Input names (q1..qn, fx..mz, aux) and their training spans (k, 2)."""
+    ranges = calib.report.get("training_ranges")
+    names = [f"q{i + 1}" for i in range(calib.robot.n)] + list(WRENCH) + list(calib.model.aux)
+    require(isinstance(ranges, dict) and all(n in ranges for n in names),
+            f"{where}: training_ranges: the calibration does not record the span of every input (it was "
+            f"written by an older gecgen); identify again")
+    return names, np.array([ranges[n] for n in names], dtype=float)
+
+
+def example_command(calib: Calibration, cm: CompiledModel, where: str) -> dict[str, list[float]]:
+    """The example program's nominal command: the middle of each input's training span, or where
+    compensation does not converge there (the middle of symmetric ranges can stretch an arm or line
+    up two wrist axes: a singular pose), the first of EXAMPLE_TRIES uniform poses in the spans (seed
+    0) where it does."""
+    _, span = _ranges(calib, where)
+    rng = np.random.default_rng(0)
+    X = np.vstack([span.mean(axis=1), rng.uniform(span[:, 0], span[:, 1], (EXAMPLE_TRIES, len(span)))])
+    n = calib.robot.n
+    _, status = cm.compensate(X[:, :n], X[:, n:n + 6], X[:, n + 6:], calib.c, EXAMPLE_MAX_ITER, EXAMPLE_TOL)
+    ok = np.nonzero(status == OK)[0]
+    if not len(ok):
+        raise RuntimeError(f"{where}: compensation converges inside the joint limits at none of {len(X)} commands in "
+                           f"the training ranges; the calibration cannot be used to compensate")
+    return {"q": X[ok[0], :n].tolist(), "w": X[ok[0], n:n + 6].tolist(), "aux": X[ok[0], n + 6:].tolist()}
+
+
+def c_files(calib: Calibration, cm: CompiledModel, where: str) -> tuple[dict[str, str], dict[str, list[float]]]:
+    """File name -> text: what `gecgen generate` writes for the calibration's robot and error model,
+    NAME_calibration.h and NAME_example.c; and the example's command."""
+    from gecgen.emit import render, render_calibration
+
+    # the generated comments and manifest then name the calibration as the error model's source
+    model = dataclasses.replace(calib.model, source=Path(where).name,
+                                source_hash=model_hash(calib.robot, calib.model))
+    files = render(calib.robot, model)
+    command = example_command(calib, cm, where)
+    files.update(render_calibration(calib.robot, model, calib.c, calib.std, command, EXAMPLE_MAX_ITER, EXAMPLE_TOL,
+                                    Path(where).name))
+    return files, command
+
+
+def compile_command(folder: str | Path, name: str) -> tuple[list[str], list[str]]:
+    """(compile, run) argument lists for the example program in folder, from the current folder."""
+    folder = Path(folder)
+    exe = folder / f"{name}_example"
+    run = str(exe) if exe.is_absolute() or str(folder) != "." else f"./{exe}"
+    return (["cc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(folder / f"{name}_example.c"),
+             str(folder / f"{name}.c"), "-lm"], [run])
+
+
+def shell(args: list[str]) -> str:
+    return shlex.join(args)
+
+
+def constant_coefficients(calib: Calibration) -> np.ndarray:
+    """(nc,) bool: the coefficients of the term "1"."""
+    return np.array([c.term.text == "1" for c in calib.model.coefficients])
+
+
+def constant_errors(calib: Calibration, c: np.ndarray | None = None) -> np.ndarray:
+    """The constant part of the generalized errors (ne,): the "1" coefficients of c (default the
+    calibration's)."""
+    c = calib.c if c is None else c
+    eps = np.zeros(calib.robot.n_errors)
+    for k, coef in enumerate(calib.model.coefficients):
+        if coef.term.text == "1":
+            eps[coef.error] += c[k]
+    return eps
+
+
+def _unit(error: int) -> str:
+    return "mm" if error % 6 < 3 else "mrad"
+
+
+def not_carried(calib: Calibration, cm: CompiledModel, where: str) -> list[dict]:
+    """The coefficients of terms other than "1" that are not zero, each with the largest value its
+    term times it reaches over the training ranges (mm or mrad, the unit of its error), largest
+    first: the corners of the ranges and EFFECT_SAMPLES uniform poses in them."""
+    coefs = calib.model.coefficients
+    ks = [k for k, coef in enumerate(coefs) if coef.term.text != "1" and calib.c[k] != 0]
+    if not ks:
+        return []
+    _, span = _ranges(calib, where)
+    rng = np.random.default_rng(0)
+    X = rng.uniform(span[:, 0], span[:, 1], (EFFECT_SAMPLES, len(span)))
+    moving = np.nonzero(span[:, 1] > span[:, 0])[0]
+    if 2 ** len(moving) <= CORNERS_MAX:
+        corners = np.tile(span[:, 0], (2 ** len(moving), 1))
+        for row, pick in zip(corners, itertools.product((0, 1), repeat=len(moving))):
+            row[moving] = span[moving, pick]
+        X = np.vstack([X, corners])
+    n = calib.robot.n
+    f = cm.basis(X[:, :n], X[:, n:n + 6], X[:, n + 6:])
+    terms = [t.text for t in calib.model.unique_terms()]
+    names = calib.model.coefficient_names(calib.robot)
+    out = [{"coefficient": names[k], "max_effect": float(1e3 * np.abs(calib.c[k] * f[:, terms.index(coefs[k].term.text)]).max()),
+            "unit": _unit(coefs[k].error)} for k in ks]
+    return sorted(out, key=lambda e: -e["max_effect"])
+
+
+def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, dict]:
+    """The robot's URDF with the calibration's constant errors folded into its joint origins
+    (`model.urdf.folded_copy`), and what the command reports about it. The tracker registration
+    is the measurement frame, not the robot: it is not applied."""
+    from gecgen.model.urdf import folded_copy
+
+    robot = calib.robot
+    require(robot.urdf, f"{where}: robot '{robot.name}' ({robot.source}) is a DH robot file with no URDF to copy, "
+                        f"and six errors per frame do not fit DH's four parameters; use --c for the controller "
+                        f"or --table for the errors per frame")
+    eps = constant_errors(calib)
+    E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n + 1)]
+    note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
+            f"into the joint origins; the tracker registration is not applied")
+    text, tip, changed = folded_copy(robot.urdf, robot.base_link, robot.tip_link, E, note)
+    left = not_carried(calib, cm, where)
+    if left:
+        top = left[0]
+        warnings.warn(f"the URDF carries the constant errors only: {len(left)} coefficients of other terms are left "
+                      f"out (largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the "
+                      f"training ranges); see not_carried")
+    reg = calib.registration
+    return text, {"tip_link": tip, "changed_joints": changed, "not_carried": left, "registration_applied": False,
+                  "registration": {"angle_deg": reg.to_dict().get("angle_deg"),
+                                   "distance_mm": reg.to_dict().get("distance_mm")}}
+
+
+# -- the table ---------------------------------------------------------------------------------------
+def zero_offset_error(robot: Robot, i: int) -> tuple[int, float] | None:
+    """(eps index, sign) of joint i's zero offset (i from 1; see the module's docstring), or None
+    when its axis is not along an axis of the adjacent frame or constant transforms sit on both
+    sides of its motion."""
+    joint = robot.joints[i - 1]
+    u = np.array([float(a) for a in joint.axis])
+    frame = i if not joint.post else i - 1 if not joint.pre else None
+    k = int(np.argmax(np.abs(u)))
+    if frame is None or abs(abs(u[k]) - 1) > 1e-12:
+        return None
+    name = ("ex", "ey", "ez")[k] if joint.kind == "P" else ("ep", "es", "er")[k]
+    return 6 * frame + ERROR_NAMES.index(name), float(np.sign(u[k]))
+
+
+def table(calib: Calibration, cm: CompiledModel) -> dict:
+    """Joint zero offsets (mdeg, mm for a prismatic joint) and the other constant errors per frame
+    (mm, mrad), with standard deviations, in the calibration re-expressed with every zero offset
+    kept (see the module's docstring)."""
+    robot, model = calib.robot, calib.model
+    names = model.coefficient_names(robot)
+    coefs = model.coefficients
+    constant = constant_coefficients(calib)
+    index = {(c.error, c.term.text): k for k, c in enumerate(coefs)}
+    kept = list(calib.kept)
+    pos = {k: a for a, k in enumerate(kept)}
+    eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
+
+    zero, why = {}, {}
+    for i in range(1, robot.n + 1):
+        found = zero_offset_error(robot, i)
+        k = index.get((found[0], "1")) if found else None
+        if k is None:
+            why[i] = ("its axis is not along an axis of the frame next to its motion" if not found
+                      else f"the error model has no constant term for {robot.error_names()[found[0]]}")
+        else:
+            zero[i] = (k, found[1])
+    reserved = {k for k, _ in zero.values()}
+    swap, rows, pivots, reduced = [], [], [], []
+    for i, (k, _) in zero.items():
+        if k in pos:
+            continue
+        e = eliminated.get(names[k], {})
+        if e.get("reason") != "structural":
+            why[i] = f"{names[k]} is held at zero ({e.get('reason', 'eliminated')}: {e.get('detail', '')})"
+            continue
+        row = np.zeros(len(kept))
+        for m in e["merged_into"]:
+            row[pos[names.index(m["param"])]] = m["factor"]
+        r = row.copy()
+        for p, rr in zip(pivots, reduced):
+            r -= r[p] / rr[p] * rr
+        free = [a for a in range(len(kept)) if constant[kept[a]] and kept[a] not in reserved and a not in pivots
+                and abs(r[a]) > FACTOR_TOL]
+        rotation = [a for a in free if (coefs[kept[a]].error % 6 >= 3) == (robot.joints[i - 1].kind == "R")]
+        if not free:
+            why[i] = (f"{names[k]} is eliminated ({e['detail']}) and merges into no other constant coefficient: "
+                      f"the measured points cannot tell it")
+            continue
+        p = max(rotation or free, key=lambda a: abs(r[a]))
+        swap.append((i, k))
+        rows.append(row)
+        pivots.append(p)
+        reduced.append(r)
+
+    def reexpress(cK: np.ndarray) -> np.ndarray:
+        c = np.zeros(len(coefs))
+        c[kept] = cK
+        if swap:
+            F = np.array(rows)
+            z = np.linalg.solve(F[:, pivots].T, cK[pivots])
+            c[kept] = cK - F.T @ z
+            c[[kept[p] for p in pivots]] = 0.0
+            c[[k for _, k in swap]] = z
+        return c
+
+    A = np.column_stack([reexpress(e) for e in np.eye(len(kept))]) if kept else np.zeros((len(coefs), 0))
+    c2 = A @ calib.c[kept]
+    std2 = np.sqrt(np.maximum(np.diag(A @ calib.cov @ A.T), 0.0))
+    free = set(kept) - {kept[p] for p in pivots} | {k for _, k in swap}
+    q, w, aux = generic_design(robot, cm.dims.naux, 100, np.random.default_rng(0))
+    change = np.linalg.norm(cm.model_targets(q, w, aux, c2) - cm.model_targets(q, w, aux, calib.c), axis=-1).max()
+
+    exchanged = dict(zip([i for i, _ in swap], [names[kept[p]] for p in pivots]))
+    offsets = []
+    for i, joint in enumerate(robot.joints, start=1):
+        scale = MDEG_PER_RAD if joint.kind == "R" else 1e3
+        entry = {"joint": joint.name, "unit": "mdeg" if joint.kind == "R" else "mm"}
+        if i in zero:
+            k, sign = zero[i]
+            entry |= {"coefficient": names[k], "value": float(sign * scale * c2[k]),
+                      "std": float(scale * std2[k]) if k in free else None, "exchanged_for": exchanged.get(i)}
+        else:
+            entry |= {"coefficient": None, "value": None, "std": None, "why": why[i]}
+        offsets.append(entry)
+    frames = []
+    for f in range(robot.n + 1):
+        values, stds = {}, {}
+        for e, err in enumerate(ERROR_NAMES):
+            key = f"{err}_{_unit(e)}"
+            k = index.get((6 * f + e, "1"))
+            if k is None or k in reserved:
+                values[key] = stds[key] = None  # not in the model, or a zero offset listed above
+            else:
+                values[key] = float(1e3 * c2[k])
+                stds[key] = float(1e3 * std2[k]) if k in free else None
+        frames.append({"frame": f, **values, "std": stds})
+    return {"zero_offsets": offsets, "frames": frames, "reexpressed_change_mm": float(1e3 * change)}
+
