@@ -57,8 +57,9 @@ def calibrate(folder, robot, truth: str, errors=CONSTANT, poses=40):
 def ur10_calib(tmp_path_factory):
     """A constant-error calibration of a UR10 with geometric errors and joint offsets."""
     folder = tmp_path_factory.mktemp("ur10")
-    return calibrate(folder, ur10_file(folder), "seed: 3\nconstant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}\n"
-                                                "joint_offsets: {std: 3.0e-4}\nnoise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    truth = ("seed: 3\nconstant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}\njoint_offsets: {std: 3.0e-4}\n"
+             "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    return calibrate(folder, ur10_file(folder), truth)
 
 
 @pytest.fixture(scope="session")
@@ -190,7 +191,8 @@ def test_non_constant_terms_are_listed_with_their_largest_effect(ur10_calib, tmp
 
 
 def test_dh_robot_urdf_refused_in_one_line(offsets_calib, tmp_path, capsys):
-    assert main(["export", str(offsets_calib("industrial6r")), "--urdf", str(tmp_path / "x.urdf"), "--c", str(tmp_path / "c")]) == 2
+    calib = offsets_calib("industrial6r")
+    assert main(["export", str(calib), "--urdf", str(tmp_path / "x.urdf"), "--c", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "DH robot file" in err[0] and "--c" in err[0]
     assert not (tmp_path / "x.urdf").exists() and not (tmp_path / "c").exists()

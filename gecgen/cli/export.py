@@ -1,6 +1,7 @@
 """`gecgen export CALIB [--c DIR] [--urdf OUT.urdf] [--table]`: a calibration into a controller."""
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 from gecgen.model import ModelError
@@ -39,7 +40,7 @@ def run(args) -> dict:
             write_atomically(Path(args.c) / name, text)
         compile_args, run_args = export.compile_command(args.c, calib.robot.name)
         out["c"] = {"output": args.c, "files": sorted(files),
-                    "compile": export.shell(compile_args), "run": export.shell(run_args),
+                    "compile": shlex.join(compile_args), "run": shlex.join(run_args),
                     "example_command": command}
     if urdf is not None:
         write_atomically(args.urdf, urdf[0])

@@ -73,7 +73,8 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     coef_term = [terms.index(c.term.text) for c in coefs]
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
-    return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS], nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
+    return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
+                nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
                 nq=robot.n, nt=len(robot.targets), ne=robot.n_errors, nc=len(coefs), nf=len(terms),

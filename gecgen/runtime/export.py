@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import shlex
 import warnings
 from pathlib import Path
 
@@ -44,14 +43,14 @@ FACTOR_TOL = 1e-9
 MDEG_PER_RAD = 180e3 / math.pi
 
 
-def _ranges(calib: Calibration, where: str) -> tuple[list[str], np.ndarray]:
-    """Input names (q1..qn, fx..mz, aux) and their training spans (k, 2)."""
+def _spans(calib: Calibration, where: str) -> np.ndarray:
+    """The training span of every input (k, 2): q1..qn, fx..mz, the aux signals."""
     ranges = calib.report.get("training_ranges")
     names = [f"q{i + 1}" for i in range(calib.robot.n)] + list(WRENCH) + list(calib.model.aux)
     require(isinstance(ranges, dict) and all(n in ranges for n in names),
             f"{where}: training_ranges: the calibration does not record the span of every input (it was "
             f"written by an older gecgen); identify again")
-    return names, np.array([ranges[n] for n in names], dtype=float)
+    return np.array([ranges[n] for n in names], dtype=float)
 
 
 def example_command(calib: Calibration, cm: CompiledModel, where: str) -> dict[str, list[float]]:
@@ -59,7 +58,7 @@ def example_command(calib: Calibration, cm: CompiledModel, where: str) -> dict[s
     compensation does not converge there (the middle of symmetric ranges can stretch an arm or line
     up two wrist axes: a singular pose), the first of EXAMPLE_TRIES uniform poses in the spans (seed
     0) where it does."""
-    _, span = _ranges(calib, where)
+    span = _spans(calib, where)
     rng = np.random.default_rng(0)
     X = np.vstack([span.mean(axis=1), rng.uniform(span[:, 0], span[:, 1], (EXAMPLE_TRIES, len(span)))])
     n = calib.robot.n
@@ -90,18 +89,9 @@ def compile_command(folder: str | Path, name: str) -> tuple[list[str], list[str]
     """(compile, run) argument lists for the example program in folder, from the current folder."""
     folder = Path(folder)
     exe = folder / f"{name}_example"
-    run = str(exe) if exe.is_absolute() or str(folder) != "." else f"./{exe}"
+    run = f"./{exe}" if exe.parent == Path(".") else str(exe)
     return (["cc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(folder / f"{name}_example.c"),
              str(folder / f"{name}.c"), "-lm"], [run])
-
-
-def shell(args: list[str]) -> str:
-    return shlex.join(args)
-
-
-def constant_coefficients(calib: Calibration) -> np.ndarray:
-    """(nc,) bool: the coefficients of the term "1"."""
-    return np.array([c.term.text == "1" for c in calib.model.coefficients])
 
 
 def constant_errors(calib: Calibration, c: np.ndarray | None = None) -> np.ndarray:
@@ -127,7 +117,7 @@ def not_carried(calib: Calibration, cm: CompiledModel, where: str) -> list[dict]
     ks = [k for k, coef in enumerate(coefs) if coef.term.text != "1" and calib.c[k] != 0]
     if not ks:
         return []
-    _, span = _ranges(calib, where)
+    span = _spans(calib, where)
     rng = np.random.default_rng(0)
     X = rng.uniform(span[:, 0], span[:, 1], (EFFECT_SAMPLES, len(span)))
     moving = np.nonzero(span[:, 1] > span[:, 0])[0]
@@ -140,8 +130,9 @@ def not_carried(calib: Calibration, cm: CompiledModel, where: str) -> list[dict]
     f = cm.basis(X[:, :n], X[:, n:n + 6], X[:, n + 6:])
     terms = [t.text for t in calib.model.unique_terms()]
     names = calib.model.coefficient_names(calib.robot)
-    out = [{"coefficient": names[k], "max_effect": float(1e3 * np.abs(calib.c[k] * f[:, terms.index(coefs[k].term.text)]).max()),
-            "unit": _unit(coefs[k].error)} for k in ks]
+    effect = [np.abs(calib.c[k] * f[:, terms.index(coefs[k].term.text)]).max() for k in ks]
+    out = [{"coefficient": names[k], "max_effect": float(1e3 * e), "unit": _unit(coefs[k].error)}
+           for k, e in zip(ks, effect)]
     return sorted(out, key=lambda e: -e["max_effect"])
 
 
@@ -166,10 +157,9 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
         warnings.warn(f"the URDF carries the constant errors only: {len(left)} coefficients of other terms are left "
                       f"out (largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the "
                       f"training ranges); see not_carried")
-    reg = calib.registration
+    reg = calib.registration.to_dict()
     return text, {"tip_link": tip, "changed_joints": changed, "not_carried": left, "registration_applied": False,
-                  "registration": {"angle_deg": reg.to_dict().get("angle_deg"),
-                                   "distance_mm": reg.to_dict().get("distance_mm")}}
+                  "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
 
 
 # -- the table ---------------------------------------------------------------------------------------
@@ -194,7 +184,6 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
     robot, model = calib.robot, calib.model
     names = model.coefficient_names(robot)
     coefs = model.coefficients
-    constant = constant_coefficients(calib)
     index = {(c.error, c.term.text): k for k, c in enumerate(coefs)}
     kept = list(calib.kept)
     pos = {k: a for a, k in enumerate(kept)}
@@ -209,33 +198,39 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
                       else f"the error model has no constant term for {robot.error_names()[found[0]]}")
         else:
             zero[i] = (k, found[1])
+    # exchange each eliminated zero offset for a kept constant coefficient (Gaussian elimination on
+    # the merge factors, pivots chosen as described in the module's docstring)
     reserved = {k for k, _ in zero.values()}
     swap, rows, pivots, reduced = [], [], [], []
-    for i, (k, _) in zero.items():
+    for i, (k, _) in list(zero.items()):
         if k in pos:
             continue
         e = eliminated.get(names[k], {})
-        if e.get("reason") != "structural":
-            why[i] = f"{names[k]} is held at zero ({e.get('reason', 'eliminated')}: {e.get('detail', '')})"
+        partners = [names.index(m["param"]) for m in e.get("merged_into", [])]
+        if e.get("reason") != "structural" or not all(j in pos for j in partners):
+            del zero[i]
+            why[i] = (f"{names[k]} is held at zero ({e.get('reason', 'eliminated')}: {e.get('detail', '')}), and the "
+                      f"data leaves what it merges into undetermined")
             continue
         row = np.zeros(len(kept))
-        for m in e["merged_into"]:
-            row[pos[names.index(m["param"])]] = m["factor"]
+        row[[pos[j] for j in partners]] = [m["factor"] for m in e["merged_into"]]
         r = row.copy()
         for p, rr in zip(pivots, reduced):
             r -= r[p] / rr[p] * rr
-        free = [a for a in range(len(kept)) if constant[kept[a]] and kept[a] not in reserved and a not in pivots
-                and abs(r[a]) > FACTOR_TOL]
-        rotation = [a for a in free if (coefs[kept[a]].error % 6 >= 3) == (robot.joints[i - 1].kind == "R")]
-        if not free:
+        candidates = [a for a in range(len(kept)) if coefs[kept[a]].term.text == "1" and kept[a] not in reserved
+                      and a not in pivots and abs(r[a]) > FACTOR_TOL]
+        same_kind = [a for a in candidates if (coefs[kept[a]].error % 6 >= 3) == (robot.joints[i - 1].kind == "R")]
+        if not candidates:
+            del zero[i]
             why[i] = (f"{names[k]} is eliminated ({e['detail']}) and merges into no other constant coefficient: "
                       f"the measured points cannot tell it")
             continue
-        p = max(rotation or free, key=lambda a: abs(r[a]))
+        p = max(same_kind or candidates, key=lambda a: abs(r[a]))
         swap.append((i, k))
         rows.append(row)
         pivots.append(p)
         reduced.append(r)
+    reserved = {k for k, _ in zero.values()}
 
     def reexpress(cK: np.ndarray) -> np.ndarray:
         c = np.zeros(len(coefs))
@@ -251,7 +246,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
     A = np.column_stack([reexpress(e) for e in np.eye(len(kept))]) if kept else np.zeros((len(coefs), 0))
     c2 = A @ calib.c[kept]
     std2 = np.sqrt(np.maximum(np.diag(A @ calib.cov @ A.T), 0.0))
-    free = set(kept) - {kept[p] for p in pivots} | {k for _, k in swap}
+    determined = set(kept) - {kept[p] for p in pivots} | {k for _, k in swap}  # those with a std
     q, w, aux = generic_design(robot, cm.dims.naux, 100, np.random.default_rng(0))
     change = np.linalg.norm(cm.model_targets(q, w, aux, c2) - cm.model_targets(q, w, aux, calib.c), axis=-1).max()
 
@@ -263,7 +258,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
         if i in zero:
             k, sign = zero[i]
             entry |= {"coefficient": names[k], "value": float(sign * scale * c2[k]),
-                      "std": float(scale * std2[k]) if k in free else None, "exchanged_for": exchanged.get(i)}
+                      "std": float(scale * std2[k]), "exchanged_for": exchanged.get(i)}
         else:
             entry |= {"coefficient": None, "value": None, "std": None, "why": why[i]}
         offsets.append(entry)
@@ -277,7 +272,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
                 values[key] = stds[key] = None  # not in the model, or a zero offset listed above
             else:
                 values[key] = float(1e3 * c2[k])
-                stds[key] = float(1e3 * std2[k]) if k in free else None
+                stds[key] = float(1e3 * std2[k]) if k in determined else None
         frames.append({"frame": f, **values, "std": stds})
     return {"zero_offsets": offsets, "frames": frames, "reexpressed_change_mm": float(1e3 * change)}
 
