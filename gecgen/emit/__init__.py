@@ -141,14 +141,19 @@ def render_calibration(robot: Robot, model: ErrorModel, c, std, command: dict, m
     calibration in the comments."""
     ctx = context(robot, model)
     notes = ["eliminated" if math.isnan(s) else f"std {s:.2g}" for s in std]
-    # a name never closes the comment it stands in (terms may hold '*' and '/')
-    coefficients = [(_g17(v), f"{n} ({note})".replace("*/", "* /"))
-                    for v, n, note in zip(c, model.coefficient_names(robot), notes)]
+    coefficients = [(_g17(v), f"{n} ({note})") for v, n, note in zip(c, model.coefficient_names(robot), notes)]
     env = _env("c")
     values = {k: [_g17(v) for v in command[k]] for k in ("q", "w", "aux")}
     return {
         f"{robot.name}_calibration.h": env.get_template("calibration.h.j2").render(
-            coefficients=coefficients, origin=origin.replace("*/", "* /"), **ctx),
-        f"{robot.name}_example.c": env.get_template("example.c.j2").render(command=values, max_iter=max_iter,
-                                                                           tol=repr(float(tol)), **ctx),
+            coefficients=coefficients, origin=origin, **ctx),
+        f"{robot.name}_example.c": env.get_template("example.c.j2").render(
+            command=values, max_iter=max_iter, tol=repr(float(tol)), joint_strings=map(_c_string, robot.joint_names),
+            **ctx),
     }
+
+
+def _c_string(text: str) -> str:
+    """A C string literal of text: its UTF-8 bytes, all but letters, digits and `_-. ` as octal escapes."""
+    keep = set(b"abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-. ")
+    return '"' + "".join(chr(b) if b in keep else f"\\{b:03o}" for b in text.encode()) + '"'

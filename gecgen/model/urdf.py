@@ -15,6 +15,7 @@ import math
 import re
 import xml.etree.ElementTree as ET
 from xml.parsers import expat
+from xml.sax.saxutils import quoteattr
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -280,12 +281,16 @@ def _start_tags(text: str) -> tuple[dict[tuple[str, str], tuple[int, int]], tupl
     parser.EndElementHandler = lambda tag: path.pop()
     parser.Parse(data, True)
 
-    def span(at: int) -> tuple[int, int]:
-        i = len(data[:at].decode())  # byte index -> character index
-        name = re.match(r"<[^\s/>]+", text[i:])
+    char, done, count = {}, 0, 0  # byte index -> character index, decoding each stretch once
+    for at in sorted(set(found.values())):
+        count += len(data[done:at].decode())  # a tag starts with "<": a character boundary
+        char[at], done = count, at
+
+    def span(i: int) -> tuple[int, int]:
+        name = re.match(r"<[^\s/>]+", text[i:i + 1000])
         return i, _TAG_REST.match(text, i + name.end()).end()
 
-    spans = {k: span(v) for k, v in found.items()}
+    spans = {k: span(char[v]) for k, v in found.items()}
     return spans, spans.pop(("root", ""))
 
 
@@ -324,7 +329,7 @@ def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np
     for uj, E, unit in zip(chain, errors[1:], identity[1:]):
         for child in [] if unit else below.get(uj.child, []):
             changed[child.name] = E @ origin(child)
-    tags, (_, root_end) = _start_tags(text)
+    tags, (root_start, root_end) = _start_tags(text)
     edits = [(root_end, root_end, f"\n  <!-- {note.replace('--', '- -')} -->")]
     for name, T in changed.items():
         if ("origin", name) in tags:
@@ -341,10 +346,10 @@ def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np
         while tip in links or f"{tip}_joint" in {uj.name for uj in above.values()}:
             tip += "_"
         names.append(f"{tip}_joint")
-        end = text.rindex("</")  # the root's end tag
-        edits.append((end, end, f'  <joint name="{tip}_joint" type="fixed">\n    <parent link="{tip_link}"/>\n'
-                                f'    <child link="{tip}"/>\n    {_origin_tag(errors[-1])}\n  </joint>\n'
-                                f'  <link name="{tip}"/>\n'))
+        end = text.rindex("</" + text[root_start + 1:root_end].split()[0].rstrip("/>"))  # the root's end tag
+        edits.append((end, end, f'  <joint name={quoteattr(tip + "_joint")} type="fixed">\n'
+                                f'    <parent link={quoteattr(tip_link)}/>\n    <child link={quoteattr(tip)}/>\n'
+                                f'    {_origin_tag(errors[-1])}\n  </joint>\n  <link name={quoteattr(tip)}/>\n'))
     for a, b, new in sorted(edits, reverse=True):
         text = text[:a] + new + text[b:]
     return text, tip, names
