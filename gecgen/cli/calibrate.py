@@ -29,8 +29,9 @@ def add_parser(command):
                         "to the robot and data are skipped)")
     p.add_argument("--seed", type=int, default=0, help="seed of the cross-validation folds and of --holdout "
                                                        "(default %(default)s)")
-    p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, generated/ "
-                                                         "and report.md")
+    p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md and "
+                                                         "generated/ (the C and CasADi code, NAME_calibration.h with the "
+                                                         "coefficients, NAME_example.c)")
 
 
 def _default_model(args, robot, aux):
@@ -41,12 +42,12 @@ def _default_model(args, robot, aux):
 
 
 def run(args) -> dict:
-    from gecgen.emit import generate
+    from gecgen.files import write_atomically
     from gecgen.loop.calibrate import choose
     from gecgen.loop.diagnose import write_error_model
     from gecgen.loop.report import write_calibrate_report
     from gecgen.model.measurements import hold_out, read_measurements
-    from gecgen.runtime import calibration
+    from gecgen.runtime import calibration, export
     from gecgen.runtime.identify import position_errors, summary, to_world
 
     names = tuple(n.strip() for n in args.models.split(","))
@@ -74,7 +75,10 @@ def run(args) -> dict:
     calibration.save(calib, out / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []
     write_error_model(robot, choice.model, effects, out / "errors.yaml")
-    generate(robot, choice.model, out / "generated")
+    # the code, the coefficient header and an example program: what `gecgen export --c` writes
+    code, _ = export.c_files(calib, choice.cm, str(out / "calibration.json"))
+    for name, text in code.items():
+        write_atomically(out / "generated" / name, text)
     result = {"robot": robot.name, "train_data": str(args.train), "output": str(out), "model": choice.chosen.name,
               "candidates": choice.table, "n_params": len(choice.model.coefficients),
               "n_identifiable": choice.fit.redundancy.n_identifiable, "before": choice.fit.before,
@@ -86,7 +90,8 @@ def run(args) -> dict:
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
         result["val_before"] = summary(position_errors(choice.cm, val, y, None))
         result["val"] = summary(position_errors(choice.cm, val, y, choice.fit.c))
-    files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated"}
+    files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
+             "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
     files["report"] = write_calibrate_report(result, out)
     result["files"] = {k: str(v) for k, v in files.items()}
     return result

@@ -126,5 +126,6 @@ def write_calibrate_report(result: dict, outdir: str | Path) -> Path:
         lines += ["Targets placed from the training data before the fit: " + ", ".join(
             f"{n} {list(map(lambda v: round(v, 4), xyz))} m" for n, xyz in result["placement"]["targets_m"].items()), ""]
     lines += ["Files: `calibration.json` (for `gecgen evaluate` and `gecgen compensate`), `errors.yaml` (the chosen "
-              "error model), `generated/` (its C and CasADi code).", ""]
+              "error model), `generated/` (its C and CasADi code, `NAME_calibration.h` with the coefficients in the code's "
+              "order, `NAME_example.c`: `gecgen export` says how to build it).", ""]
     return write_atomically(outdir / "report.md", "\n".join(lines) + "\n")
