@@ -14,6 +14,7 @@ import yaml
 from conftest import ROBOTS, ROOT, random_q
 from test_symbolic import fd_jacobian
 
+from gecgen.emit import frame_names
 from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.errors import error_model_from_dict
 from gecgen.model.gravity import robot_gravity_torques
@@ -93,6 +94,9 @@ def test_frames_and_joint_variables_are_counted_apart(telescope):
     # a mimic joint's limits narrow the joint it follows: lift2 <= 0.9 m, tilt = 0.2 - stick >= -0.1 rad
     assert [(j.lower, j.upper) for j in r.joints] == [(-3, 3), (0, 0.9), (-1.2, 1.2), (-2, pytest.approx(0.3))]
     assert (r.chain[6].lower, r.chain[6].upper) == (-np.inf, np.inf)  # continuous wrist: no limit
+    # the generated header and manifest list the frames, a mimic joint with its value
+    assert frame_names(r) == ["slew", "lift", "lift2 = 1.0*q2 + 0.0", "boom", "stick", "tilt = -1.0*q4 + 0.2",
+                              "wrist = 2.0*q2 - 0.1"]
 
 
 # -- kinematics -----------------------------------------------------------------------------------
@@ -264,6 +268,8 @@ REFUSED = {
     "mimic of a fixed joint": (replaced('<mimic joint="stick"', '<mimic joint="flange"'),
                                "joint 'tilt' mimics joint 'flange', a fixed joint; a mimic joint follows a revolute, "
                                "continuous or prismatic joint: fix its <mimic>"),
+    "two joints of one name": (replaced('<joint name="finger_b"', '<joint name="finger_a"'),
+                               "joint 'finger_a': a second joint of this name; joint names must be unique"),
     "limits that leave nothing": (replaced('lower="-0.1" upper="2.2"', 'lower="2.4" upper="3"'),
                                   "joint 'tilt': its limits [2.4, 3] allow joint 'stick' only [-2.8, -2.2], outside "
                                   "that joint's limits [-2, 0.5]"),
@@ -326,3 +332,16 @@ def test_compensate_corrects_the_independent_joint_a_mimic_group_follows(telesco
     q, status = cm.compensate(q_cmd, np.zeros((4, 6)), None, c)
     assert np.all(status == 0)
     np.testing.assert_allclose(q - q_cmd, np.tile([0, -d, 0, 0], (4, 1)), atol=1e-10)
+
+
+def test_tiago_mimic_joints_are_off_its_chain():
+    """TIAGo's gripper finger mimics the gripper joint, both beyond arm_7_link: the chain, and so the
+    generated code, are those of a robot without mimic joints."""
+    from gecgen.model.urdf import load_mass_tree
+
+    tiago = load_robot(ROBOTS / "tiago.yaml")
+    assert tiago.n == tiago.n_frames == 8 and not any(j.mimic for j in tiago.chain)
+    tree = load_mass_tree(tiago.urdf, tiago.base_link)
+    mimics = {j.name: j.mimic.root for j in tree.joint.values() if j.mimic}
+    assert mimics == {"gripper_right_finger_joint": "gripper_finger_joint"}
+    assert not set(mimics.values()) & set(tiago.joint_names)

@@ -21,7 +21,7 @@ from gecgen.emit.printing import straight_line
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
-from gecgen.model.robot import Robot
+from gecgen.model.robot import Mimic, Robot
 from gecgen.symbolic.functions import all_functions
 from gecgen.symbolic.program import Function
 
@@ -63,10 +63,11 @@ def context(robot: Robot, model: ErrorModel) -> dict:
 
 
 def frame_names(robot: Robot) -> list[str]:
-    """Each moving frame's joint, a mimic joint with the value it takes ("jaw2 = -1.0*q3 + 0.01")."""
-    return [j.name if j.mimic is None else
-            f"{j.name} = {float(j.mimic.multiplier)!r}*q{j.mimic.joint + 1} + {float(j.mimic.offset)!r}"
-            for j in robot.chain]
+    """Each moving frame's joint, a mimic joint with the value it takes ("jaw2 = -1.0*q3 - 0.01")."""
+    def value(m: Mimic) -> str:
+        o = float(m.offset)
+        return f"{float(m.multiplier)!r}*q{m.joint + 1} {'-' if o < 0 else '+'} {abs(o)!r}"
+    return [j.name if j.mimic is None else f"{j.name} = {value(j.mimic)}" for j in robot.chain]
 
 
 def _printed(fn: Function, printer, element, signature: bool) -> dict:

@@ -100,7 +100,8 @@ def _mimic(uj: UrdfJoint, where: str) -> tuple[str, float, float] | None:
     if el is None:
         return None
     jwhere = f"{where}: joint {excerpt(uj.name)} mimic"
-    require(uj.type in MOVING, f"{jwhere}: a {uj.type} joint does not move and cannot mimic; remove its <mimic>")
+    require(uj.type in MOVING, f"{jwhere}: a {uj.type} joint cannot mimic (only revolute, continuous and prismatic "
+                               f"joints move here); remove its <mimic>")
     require(el.get("joint"), f"{jwhere}: <mimic> names no joint; give joint=\"...\", the joint it follows")
     multiplier = _number(el.get("multiplier", "1"), f"{jwhere} multiplier")
     require(multiplier != 0, f"{jwhere}: multiplier 0 holds the joint at its offset; make it a fixed joint "
