@@ -201,8 +201,8 @@ MALFORMED = {
     "xyz not finite": (replaced('xyz="0.1 0.0 0.2"', 'xyz="0.1 nan 0.2"'), {},
                        "joint 'j4' origin xyz: 'nan' is not finite"),
     "zero axis": (replaced('<axis xyz="0 -1 0"/>', '<axis xyz="0 0 0"/>'), {}, "joint 'j3': axis must not be zero"),
-    "mimic joint": (replaced('<child link="link4"/>', '<child link="link4"/><mimic joint="j1"/>'), {},
-                    "joint 'j4': mimic joints are not supported"),
+    "mimic of a floating joint": (replaced('<child link="link4"/>', '<child link="link4"/><mimic joint="side_joint"/>'),
+                                  {}, "joint 'j4' mimics joint 'side_joint', a floating joint; a mimic joint follows"),
     "not XML": (urdf_text().replace("</robot>", ""), {}, "not valid XML"),
 }
 

@@ -37,7 +37,11 @@ def _gravity(text: str) -> tuple[float, float, float]:
 def run(args) -> dict:
     robot = load_robot(args.robot)
     joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
+    mimics = {m.name: m.mimic.name for m in robot.chain if m.mimic}
     for j in joints:
+        followed = mimics.get(j)
+        require(j not in mimics, f"--joints: '{j}' mimics '{followed}', whose tau_{followed} includes its load times "
+                                 f"the multiplier; name '{followed}'")
         require(j in robot.joint_names, f"--joints: '{j}' is not a joint of {robot.name} ({', '.join(robot.joint_names)})")
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     where = str(args.table)

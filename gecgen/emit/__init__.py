@@ -21,7 +21,7 @@ from gecgen.emit.printing import straight_line
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
-from gecgen.model.robot import Robot
+from gecgen.model.robot import Mimic, Robot
 from gecgen.symbolic.functions import all_functions
 from gecgen.symbolic.program import Function
 
@@ -74,6 +74,7 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
     return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
+                mimics=any(j.mimic for j in robot.chain), frame_names=frame_names(robot),
                 nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
@@ -82,6 +83,14 @@ def context(robot: Robot, model: ErrorModel) -> dict:
                 aux_names=list(model.aux), q_min=[_c_literal(j.lower) for j in robot.joints],
                 q_max=[_c_literal(j.upper) for j in robot.joints], coef_error=_rows(coef_error),
                 coef_term=_rows(coef_term), coef_error_flat=coef_error, coef_term_flat=coef_term, terms=terms)
+
+
+def frame_names(robot: Robot) -> list[str]:
+    """Each moving frame's joint, a mimic joint with the value it takes ("jaw2 = -1.0*q3 - 0.01")."""
+    def value(m: Mimic) -> str:
+        o = float(m.offset)
+        return f"{float(m.multiplier)!r}*q{m.joint + 1} {'-' if o < 0 else '+'} {abs(o)!r}"
+    return [j.name if j.mimic is None else f"{j.name} = {value(j.mimic)}" for j in robot.chain]
 
 
 def _printed(fn: Function, printer, element, signature: bool) -> dict:
@@ -112,6 +121,7 @@ def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = N
         load_signals=[name for name, _ in ctx["loads"]],
         coef_error=ctx["coef_error_flat"], coef_term=ctx["coef_term_flat"],
         limits=[[j.lower, j.upper] for j in robot.joints], model_hash=robot_model_hash(robot, model),
+        **({"frames": ctx["frame_names"]} if ctx["mimics"] else {}),
         files={k: hashlib.sha256(v.encode()).hexdigest() for k, v in sorted(files.items())},
     )
     files["manifest.json"] = json.dumps(manifest, indent=1, sort_keys=True, allow_nan=True) + "\n"

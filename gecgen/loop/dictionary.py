@@ -42,7 +42,7 @@ def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[
     hi = np.array([min(j.upper, np.pi) for j in robot.joints])
     q = rng.uniform(lo, hi, (16, robot.n))
     W = frames(robot, q)
-    axes = [W[i][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
+    axes = [W[robot.frame_of(i) - 1][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
             for i, j in enumerate(robot.joints)]
     groups, run = [], [0]
     for i in range(1, robot.n):
@@ -152,9 +152,10 @@ def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
     F = frames(robot, rng.uniform(lo, hi, (8, robot.n)))
     out = {}
     for i, joint in enumerate(robot.joints):
-        J = F[i] @ constant(joint.pre)
+        frame = robot.frame_of(i)
+        J = F[frame - 1] @ constant(joint.pre)
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
-        for f in (i + 1, i):
+        for f in (frame, frame - 1):
             W = F[f]
             # column k of a frame is the axis of translation e{x,y,z}[k] and of rotation (ep, es, er)[k]
             for k in range(3):

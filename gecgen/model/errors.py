@@ -77,7 +77,7 @@ class ErrorModel:
         """A dict that `load_error_model` reads back into this model, terms spelled as written:
         `default: ["1"]` and, under `frames`, only the errors whose terms differ from it."""
         frames: dict[int, dict[str, list[str]]] = {}
-        for i in range(robot.n + 1):
+        for i in range(robot.n_frames + 1):
             for k, e in enumerate(ERROR_NAMES):
                 labels = [t.label for t in self.terms[6 * i + k]]
                 if labels != ["1"]:
@@ -198,6 +198,11 @@ class _TermParser:
         if isinstance(node, ast.Name):
             if node.id == "pi":
                 return sp.pi
+            mimic = next((j.mimic for j in self.loads.robot.chain if j.name == node.id and j.mimic), None)
+            if mimic is not None and node.id not in self.symbols:
+                k = mimic.joint + 1
+                self.fail(text, f"'{node.id}' is a mimic joint, with no variable of its own; write its value "
+                                f"{float(mimic.multiplier)!r}*q{k} + {float(mimic.offset)!r} in q{k}")
             if node.id not in self.symbols:
                 self.fail(text, f"unknown variable '{node.id}'; known: {', '.join(self.symbols)} "
                                 f"(declare a data column under 'aux:')")
@@ -325,8 +330,8 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
     frames = spec.get("frames") or {}
     require(isinstance(frames, dict), f"{where}: frames: expected a mapping from frame number to terms")
     for key, block in frames.items():
-        require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n,
-                f"{where}: frames: key {excerpt(key)} is not a frame number 0..{robot.n}")
+        require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n_frames,
+                f"{where}: frames: key {excerpt(key)} is not a frame number 0..{robot.n_frames}")
         fw = f"{where}: frames.{key}"
         if isinstance(block, list):
             terms[6 * key:6 * key + 6] = [parse_list(block, fw)] * 6

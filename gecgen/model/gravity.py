@@ -32,12 +32,18 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
                     gravity=UPRIGHT) -> np.ndarray:
     """Torque (N m) or force (N) of gravity about/along each of `joints`, (P, len(joints)).
 
-    q: joint name -> readings (P,) for the joints that move (others are held at zero); gravity:
-    the acceleration (m/s^2) in the base link's frame."""
+    q: joint name -> readings (P,) for the joints that move (others are held at zero, their mimic
+    joints at the offset); gravity: the acceleration (m/s^2) in the base link's frame. A joint's
+    mimic joints move with it, so their loads act on it through the multiplier (virtual work:
+    tau_J = sum over the joints k it moves of dq_k/dq_J tau_k)."""
     by_joint = {j.name: link for link, j in tree.joint.items() if j.kind != "F"}
     for name in joints:
-        require(name in by_joint, f"{tree.source}: '{name}' is not a moving joint below the base link; "
-                                  f"name one of {', '.join(by_joint)}")
+        link = by_joint.get(name)
+        mimic = tree.joint[link].mimic if link else None
+        require(mimic is None, f"{tree.source}: joint '{name}' mimics joint '{mimic.root if mimic else ''}', whose "
+                               f"torque includes its load (times the multiplier); name '{mimic.root if mimic else ''}'")
+        require(link, f"{tree.source}: '{name}' is not a moving joint below the base link; "
+                      f"name one of {', '.join(n for n, k in by_joint.items() if tree.joint[k].mimic is None)}")
     P = len(next(iter(q.values())))
     g = np.asarray(gravity, float)
     world = {tree.links[0]: np.broadcast_to(np.eye(4), (P, 4, 4))}
@@ -45,8 +51,7 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
     for link in tree.links[1:]:
         j = tree.joint[link]
         placed[link] = world[tree.parent[link]] @ j.origin
-        motion = np.eye(4) if j.kind == "F" else joint_motion(j.axis, j.kind, np.asarray(q.get(j.name, np.zeros(P)), float))
-        world[link] = placed[link] @ motion
+        world[link] = placed[link] if j.kind == "F" else placed[link] @ joint_motion(j.axis, j.kind, j.value(q, P))
     # mass and first moment of mass (sum m * c, world) of every subtree, leaves first
     M = {link: tree.mass.get(link, 0.0) for link in tree.links}
     S = {link: M[link] * (world[link][:, :3, :3] @ tree.com.get(link, np.zeros(3)) + world[link][:, :3, 3])
@@ -54,24 +59,30 @@ def gravity_torques(tree: MassTree, q: dict[str, np.ndarray], joints: list[str],
     for link in reversed(tree.links[1:]):
         M[tree.parent[link]] += M[link]
         S[tree.parent[link]] = S[tree.parent[link]] + S[link]
-    out = np.zeros((P, len(joints)))
-    for k, name in enumerate(joints):
-        link = by_joint[name]
-        require(M[link] > 0, f"{tree.source}: no link below joint '{name}' has a mass; give the links' "
-                             f"<inertial> masses or leave the joint out")
+
+    def own(link: str) -> np.ndarray:
+        """The load about/along the joint above `link` of everything below it."""
         axis = placed[link][:, :3, :3] @ tree.joint[link].axis
         if tree.joint[link].kind == "P":
-            out[:, k] = M[link] * axis @ g
-        else:  # sum over the subtree of (c - p) x m g = (S - M p) x g
-            arm = S[link] - M[link] * placed[link][:, :3, 3]
-            out[:, k] = np.einsum("pi,pi->p", axis, np.cross(arm, g))
+            return M[link] * axis @ g
+        arm = S[link] - M[link] * placed[link][:, :3, 3]  # sum over the subtree of (c - p) x m g = (S - M p) x g
+        return np.einsum("pi,pi->p", axis, np.cross(arm, g))
+
+    out = np.zeros((P, len(joints)))
+    for k, name in enumerate(joints):
+        moved = [(by_joint[name], 1.0)] + [(link, j.mimic.multiplier) for link, j in tree.joint.items()
+                                           if j.mimic is not None and j.mimic.root == name]
+        require(any(M[link] > 0 for link, _ in moved), f"{tree.source}: no link below joint '{name}' has a mass; "
+                                                       f"give the links' <inertial> masses or leave the joint out")
+        for link, multiplier in moved:
+            out[:, k] += own(link) if multiplier == 1.0 else multiplier * own(link)
     return out
 
 
 def base_link_gravity(robot: Robot, tree: MassTree) -> np.ndarray:
     """The robot file's `gravity` (world, m/s^2) in the URDF base link's frame, (3,): the world is the
     base link's frame turned by the file's `base`. Joint 1's child link sits at the chain's frame 1."""
-    link1 = next(link for link, j in tree.joint.items() if j.name == robot.joints[0].name)
+    link1 = next(link for link, j in tree.joint.items() if j.name == robot.chain[0].name)
     world = frames(robot, np.zeros((1, robot.n)))[1][0] @ np.linalg.inv(tree.rest_poses()[link1])
     return world[:3, :3].T @ np.array([float(v) for v in robot.gravity])
 

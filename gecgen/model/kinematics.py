@@ -1,8 +1,9 @@
 """The exact nonlinear chain with generalized errors, in plain numpy (batched over poses).
 
 This is the independent reference for the generated code (finite differences of these
-functions check `J_e`) and the truth model of the simulator. Shapes: q (N, n), eps (N, 6(n+1))
-or (6(n+1),); transforms (N, 4, 4); lengths in m, angles in rad.
+functions check `J_e`) and the truth model of the simulator. Shapes: q (N, n) the joint
+variables, eps (N, 6(m+1)) or (6(m+1),) over the m moving frames; transforms (N, 4, 4); lengths
+in m, angles in rad.
 """
 from __future__ import annotations
 
@@ -61,15 +62,23 @@ def joint_motion(axis, kind: str, q: np.ndarray) -> np.ndarray:
     return M
 
 
+def joint_values(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """The value of every frame's joint (N, m) at joint variables q (N, n): a mimic joint's is
+    multiplier * q_J + offset."""
+    return np.column_stack([q[:, k] if joint.mimic is None else float(m) * q[:, k] + float(o)
+                            for joint, (k, m, o) in zip(robot.chain, robot.drives())])
+
+
 def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
-    """World transforms W_0..W_n (after each frame's errors) and the tool, each (N, 4, 4)."""
+    """World transforms W_0..W_m (after each frame's errors) and the tool, each (N, 4, 4)."""
     q = np.atleast_2d(np.asarray(q, float))
     N = q.shape[0]
     eps = np.zeros((N, robot.n_errors)) if eps is None else np.broadcast_to(eps, (N, robot.n_errors))
     W = constant(robot.base) @ error_transform(eps[:, 0:6])
     out = [W]
-    for i, joint in enumerate(robot.joints):
-        A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, q[:, i]) @ constant(joint.post)
+    v = joint_values(robot, q)
+    for i, joint in enumerate(robot.chain):
+        A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ constant(joint.post)
         W = W @ A @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)])
         out.append(W)
     out.append(W @ constant(robot.tool))

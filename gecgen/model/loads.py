@@ -30,6 +30,12 @@ joint carries is rigid with one frame i >= J (fixed URDF links, the tool, branch
 with their joints held at zero), so its mass and first moment are a combination of frame i's four
 columns: these 4 (n - J + 1) candidates span joint J's row of the full regressor restricted to the
 masses and first moments, and the rank test keeps the first independent ones in that order.
+
+A joint with mimic joints moves several frames: by virtual work its load is the sum over the
+frames k it moves of dq_k/dq_J times frame k's load (`joint_columns`, `frame_wrench_torque`), so
+each of its gravity columns is that sum for one carried frame, from its first moved frame on.
+A link off the chain that a mimic joint moves with a chain joint is rigid with no frame: its mass
+is refused for gravity_torque (`gecgen gravity` walks the URDF tree and carries it).
 """
 from __future__ import annotations
 
@@ -43,7 +49,7 @@ import sympy as sp
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.robot import Robot
 from gecgen.model.urdf import load_mass_tree
-from gecgen.model.validation import ModelError
+from gecgen.model.validation import ModelError, excerpt
 
 LOAD_FUNCTIONS = ("wrench_torque", "gravity", "gravity_torque")
 #: a candidate column is independent when its part outside the earlier ones exceeds this fraction of
@@ -81,6 +87,32 @@ def regressor_columns(let, kind: str, a, o, carried, g) -> list:
         cols.append(let(dot([p[k] - o[k] for k in range(3)], u)))
         cols += [let(dot([R[k][j] for k in range(3)], u)) for j in range(3)]
     return cols
+
+
+def joint_columns(let, robot: Robot, J: int, axes, origins, carried, g, numeric: bool = False) -> list:
+    """Candidate gravity-regressor columns of joint variable J (1-based): per carried frame from the
+    first frame J moves to the last, the sum over the frames k it moves of multiplier times frame
+    k's `regressor_columns` (zero for frames before k). axes, origins: world axis and a point on it
+    of every frame's joint (1..m); carried: (R, p) of frames 0..m; let, g as for regressor_columns,
+    `numeric` with numpy arrays (the multipliers then as floats)."""
+    moved = [(k, float(m) if numeric else m) for k, m in robot.driven(J - 1)]
+    first = moved[0][0]
+    total: list = []
+    for k, mult in moved:
+        cols = [0] * (4 * (k - first)) + regressor_columns(let, robot.chain[k - 1].kind, axes[k - 1], origins[k - 1],
+                                                           carried[k:], g)
+        cols = cols if mult == 1 else [let(mult * c) for c in cols]
+        total = [let(a + c) for a, c in zip(total, cols)] if total else cols
+    return total
+
+
+def frame_wrench_torque(let, kind: str, a, o, sensor_p, force, moment):
+    """The measured wrench's load on one frame's joint (axis a, point o, world): a . f along a
+    prismatic joint, a . (m + (p_s - o) x f) about a revolute one (N or N m)."""
+    if kind == "P":
+        return dot(a, force)
+    lever = tuple(let(sensor_p[k] - o[k]) for k in range(3))
+    return dot(a, [moment[k] + c for k, c in enumerate(cross3(lever, force))])
 
 
 @dataclass(frozen=True)
@@ -127,7 +159,7 @@ class LoadCatalog:
         if s.kind == "gravity_torque":
             return f"static gravity {'force' if joint.kind == 'P' else 'torque'} on {where} from the URDF masses " \
                    f"(-dV/dq), {unit}"
-        frame, k = s.joint + s.column // 4, s.column % 4
+        frame, k = robot.driven(s.joint - 1)[0][0] + s.column // 4, s.column % 4
         load = "a unit mass at the origin of" if k == 0 else f"a unit first moment along the {'xyz'[k - 1]} axis of"
         return f"gravity on {where} of {load} frame {frame}, {unit} per {'kg' if k == 0 else 'kg m'}"
 
@@ -137,7 +169,7 @@ _CATALOGS: dict[tuple, LoadCatalog] = {}
 
 def catalog(robot: Robot) -> LoadCatalog:
     """The robot's load signals; computed once per robot content (kinematics, gravity, files)."""
-    key = (robot.joints, robot.base, robot.tool, robot.gravity, robot.wrench_frame, robot.urdf,
+    key = (robot.chain, robot.base, robot.tool, robot.gravity, robot.wrench_frame, robot.urdf,
            robot.base_link, tuple(sorted(robot.source_hashes.items())))
     if key not in _CATALOGS:
         _CATALOGS[key] = _build_catalog(robot)
@@ -152,18 +184,17 @@ def generic_poses(robot: Robot) -> np.ndarray:
 
 
 def _numeric_columns(robot: Robot, q: np.ndarray) -> list[np.ndarray]:
-    """Per joint, its candidate columns at poses q: (P, 4 (n - J + 1))."""
-    W = frames(robot, q)[:robot.n + 1]
+    """Per joint variable J, its candidate columns at poses q: (P, 4 (m - k + 1)), k its first frame."""
+    W = frames(robot, q)[:robot.n_frames + 1]
     g = np.array([float(v) for v in robot.gravity])
     poses = [(tuple(tuple(T[:, r, c] for c in range(3)) for r in range(3)), tuple(T[:, r, 3] for r in range(3)))
              for T in W]
-    out = []
-    for J, joint in enumerate(robot.joints, start=1):
-        F = W[J - 1] @ constant(joint.pre)
-        a = F[:, :3, :3] @ np.array([float(v) for v in joint.axis])
-        cols = regressor_columns(lambda x: x, joint.kind, a.T, F[:, :3, 3].T, poses[J:], g)
-        out.append(np.column_stack([np.broadcast_to(c, len(q)) for c in cols]))
-    return out
+    F = [W[k] @ constant(joint.pre) for k, joint in enumerate(robot.chain)]
+    axes = [(Fk[:, :3, :3] @ np.array([float(v) for v in joint.axis])).T for Fk, joint in zip(F, robot.chain)]
+    origins = [Fk[:, :3, 3].T for Fk in F]
+    return [np.column_stack([np.broadcast_to(c, len(q)) for c in joint_columns(lambda x: x, robot, J, axes, origins,
+                                                                                 poses, g, numeric=True)])
+            for J in range(1, robot.n + 1)]
 
 
 def _independent(Y: np.ndarray, g: float) -> list[int]:
@@ -184,20 +215,29 @@ def _independent(Y: np.ndarray, g: float) -> list[int]:
 
 
 def frame_params(robot: Robot) -> tuple[tuple[float, ...], ...]:
-    """Per frame 0..n, (m, m cx, m cy, m cz) of every URDF link rigid with it (kg, kg m, frame i's
-    coordinates); off-chain joints held at zero. Links above joint 1 count for no joint: frame 0 is 0."""
+    """Per frame 0..m, (m, m cx, m cy, m cz) of every URDF link rigid with it (kg, kg m, frame i's
+    coordinates); off-chain joints held at zero (their mimic joints at the offset). Links above joint
+    1 count for no joint: frame 0 is 0. A massive link that an off-chain mimic joint moves with a
+    chain joint is refused (ModelError): it is rigid with no frame."""
     tree = load_mass_tree(robot.urdf, robot.base_link)
     rest = tree.rest_poses()
-    frame_of_joint = {j.name: i for i, j in enumerate(robot.joints, start=1)}
-    anchor, link_of_frame = {tree.links[0]: 0}, {}
+    frame_of_joint = {j.name: i for i, j in enumerate(robot.chain, start=1)}
+    anchor, link_of_frame, swung = {tree.links[0]: 0}, {}, {tree.links[0]: None}
     for link in tree.links[1:]:
-        i = frame_of_joint.get(tree.joint[link].name)
+        j = tree.joint[link]
+        i = frame_of_joint.get(j.name)
         if i is not None:
             link_of_frame[i] = link
         anchor[link] = anchor[tree.parent[link]] if i is None else i
-    params = np.zeros((robot.n + 1, 4))
+        moves = i is None and j.mimic is not None and j.mimic.root in robot.joint_names
+        swung[link] = (j.name, j.mimic.root) if moves else None if i is not None else swung[tree.parent[link]]
+    params = np.zeros((robot.n_frames + 1, 4))
     for link, m in tree.mass.items():
         i = anchor[link]
+        if i and m and swung[link]:
+            raise ModelError(f"{tree.source}: link {excerpt(link)} hangs from joint {excerpt(swung[link][0])}, which "
+                             f"mimics chain joint {excerpt(swung[link][1])} off the chain, so it moves against every "
+                             f"frame and gravity_torque cannot carry its mass; use `gecgen gravity`'s tau columns")
         if i:
             T = np.linalg.solve(rest[link_of_frame[i]], rest[link])
             params[i] += m * np.r_[1.0, T[:3, :3] @ tree.com[link] + T[:3, 3]]
@@ -206,12 +246,16 @@ def frame_params(robot: Robot) -> tuple[tuple[float, ...], ...]:
 
 def _build_catalog(robot: Robot) -> LoadCatalog:
     n = robot.n
-    sensor = n if robot.wrench_frame == "tool" else robot.wrench_frame
-    signals = [Signal(f"wrench_torque(q{J})", "wrench_torque", J) for J in range(1, sensor + 1)]
+    sensor = robot.n_frames if robot.wrench_frame == "tool" else robot.wrench_frame
+    first = [robot.driven(k)[0][0] for k in range(n)]  # the first frame each joint variable moves
+    carrying = [J for J in range(1, n + 1) if first[J - 1] <= sensor]
+    signals = [Signal(f"wrench_torque(q{J})", "wrench_torque", J) for J in carrying]
+    use = (f"wrench_torque(q1) .. wrench_torque(q{len(carrying)})" if carrying == list(range(1, len(carrying) + 1))
+           else ", ".join(f"wrench_torque(q{J})" for J in carrying))
     why_not = {}
-    for J in range(sensor + 1, n + 1):
+    for J in sorted(set(range(1, n + 1)) - set(carrying)):
         why_not[f"wrench_torque(q{J})"] = (f"the wrench is measured in frame {sensor}, which joint q{J} does not move"
-                                           + (f"; use wrench_torque(q1) .. wrench_torque(q{sensor})" if sensor else ""))
+                                           + (f"; use {use}" if carrying else ""))
     Y = _numeric_columns(robot, generic_poses(robot))
     for J, joint in enumerate(robot.joints, start=1):
         keep = _independent(Y[J - 1], float(sp.sqrt(sum(v * v for v in robot.gravity))))
@@ -236,7 +280,7 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
         for J in range(1, n + 1):
             if f"gravity_torque(q{J})" in why_not:
                 continue
-            carried = np.concatenate(params[J:])
+            carried = np.concatenate(params[first[J - 1]:])
             if np.linalg.norm(Y[J - 1] @ carried) <= RANK_TOL * np.linalg.norm(Y[J - 1]) * np.linalg.norm(carried):
                 why_not[f"gravity_torque(q{J})"] = (f"the URDF's masses put no gravity torque on joint q{J} "
                                                     f"({robot.joints[J - 1].name}); drop the term")

@@ -1,11 +1,17 @@
 """Robot files: kinematics, targets and wrench frame of one robot (CONTRACTS.md section 1).
 
-A robot is a serial chain of frames 0..n. Frame 0 is the base; frame i sits after link i:
+A robot is a serial chain of frames 0..m. Frame 0 is the base; frame i sits after link i:
 
-    W_0 = base * E_0,      W_i = W_{i-1} * pre_i * M_i(q_i) * post_i * E_i,      tool = W_n * T_tool
+    W_0 = base * E_0,      W_i = W_{i-1} * pre_i * M_i(v_i) * post_i * E_i,      tool = W_m * T_tool
 
 `M_i` is the joint motion (rotation about, or translation along, the unit `axis`), `pre_i` and
-`post_i` are constant transforms and `E_i` the six generalized errors of frame i. A DH row
+`post_i` are constant transforms and `E_i` the six generalized errors of frame i. The joint
+variables q1..qn are the chain's independent joints in chain order; the value v_i of frame i's
+joint is its own variable, or for a joint that mimics another (URDF `<mimic>`) the multiplier
+times the followed joint's variable plus the offset. Frames and variables are counted apart:
+`Robot.chain` holds the m moving joints (the frames 1..m of the error model), `Robot.joints` the
+n independent ones (the columns q1..qn of every file and of the generated code); without mimic
+joints they are the same. A DH row
 `Rz(theta+q) Tz(d+q) Tx(a) Rx(alpha)` becomes `pre = I`, `axis = z`,
 `post = Rz(theta) Tz(d) Tx(a) Rx(alpha)`; a URDF joint becomes `pre = origin`, `post = I`.
 
@@ -38,8 +44,20 @@ RESERVED = {"pi", "sqrt", "sin", "cos", "sign", "abs", "poly", "fourier", "wrenc
 
 
 @dataclass(frozen=True)
+class Mimic:
+    """A joint that follows an independent one: its value is multiplier * q[joint] + offset, in its
+    own unit (m or rad) per the followed joint's unit, as the URDF's `<mimic>` says."""
+
+    joint: int  # the followed joint variable, 0-based (q<joint+1>)
+    name: str  # the followed joint's name
+    multiplier: sp.Expr  # exact number, nonzero
+    offset: sp.Expr  # exact number, m or rad
+
+
+@dataclass(frozen=True)
 class Joint:
-    """One moving joint and the link after it; lengths in m, angles in rad."""
+    """One moving joint and the link after it; lengths in m, angles in rad. An independent joint's
+    limits include what its mimic joints' limits allow (see `urdf.urdf_chain`)."""
 
     name: str
     kind: str  # "R" revolute or "P" prismatic
@@ -48,6 +66,7 @@ class Joint:
     post: tuple[Elementary, ...]
     lower: float  # joint limits, m or rad
     upper: float
+    mimic: Mimic | None = None
 
 
 @dataclass(frozen=True)
@@ -55,7 +74,7 @@ class Robot:
     """Nominal kinematics of one robot plus its measurement targets (tool-frame xyz, m)."""
 
     name: str
-    joints: tuple[Joint, ...]
+    chain: tuple[Joint, ...]  # the moving joints, frames 1..m in order (mimic joints included)
     base: tuple[Elementary, ...]
     tool: tuple[Elementary, ...]
     targets: dict[str, tuple[float, float, float]]
@@ -72,12 +91,44 @@ class Robot:
     gravity: tuple = tuple(sp.Rational(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
 
     @property
+    def joints(self) -> tuple[Joint, ...]:
+        """The independent joints: joint variable k is q<k+1>."""
+        return tuple(j for j in self.chain if j.mimic is None)
+
+    @property
     def n(self) -> int:
+        """Number of joint variables q1..qn."""
         return len(self.joints)
+
+    @property
+    def n_frames(self) -> int:
+        """Number of moving frames m (the last frame's number); n plus the mimic joints."""
+        return len(self.chain)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
+
+    def drives(self) -> list[tuple[int, sp.Expr, sp.Expr]]:
+        """Per frame 1..m: (variable k 0-based, multiplier, offset); its joint's value is
+        multiplier * q[k] + offset (1 and 0 for an independent joint)."""
+        out, k = [], 0
+        for j in self.chain:
+            if j.mimic is None:
+                out.append((k, sp.Integer(1), sp.Integer(0)))
+                k += 1
+            else:
+                out.append((j.mimic.joint, j.mimic.multiplier, j.mimic.offset))
+        return out
+
+    def driven(self, k: int) -> list[tuple[int, sp.Expr]]:
+        """The frames (1-based, ascending) whose joint variable k (0-based) moves, with multipliers:
+        its own frame and those of its mimic joints."""
+        return [(i, m) for i, (v, m, _) in enumerate(self.drives(), start=1) if v == k]
+
+    def frame_of(self, k: int) -> int:
+        """The frame (1-based) of independent joint k (0-based)."""
+        return [i for i, j in enumerate(self.chain, start=1) if j.mimic is None][k]
 
     @property
     def target_names(self) -> tuple[str, ...]:
@@ -85,8 +136,8 @@ class Robot:
 
     @property
     def n_errors(self) -> int:
-        """Number of generalized errors, 6(n+1)."""
-        return 6 * (self.n + 1)
+        """Number of generalized errors, 6(m+1)."""
+        return 6 * (self.n_frames + 1)
 
     def require_placed(self):
         """Refuse (one line) to build anything on targets that still wait for measured data."""
@@ -96,7 +147,7 @@ class Robot:
 
     def error_names(self) -> list[str]:
         """Names like '3.ey' in the order of the generalized error vector eps."""
-        return [f"{i}.{e}" for i in range(self.n + 1) for e in ERROR_NAMES]
+        return [f"{i}.{e}" for i in range(self.n_frames + 1) for e in ERROR_NAMES]
 
 
 def exact(value, where: str, unit_deg: bool = False) -> sp.Expr:
@@ -256,7 +307,7 @@ def load_robot(path: str | Path) -> Robot:
         require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
         joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
         tool = _transform(spec.get("tool"), f"{where}: tool", deg)
-    _check_joint_names(joints, (lambda k: f"{urdf_path}: joint") if urdf_path else
+    _check_joint_names([j for j in joints if j.mimic is None], (lambda k: f"{urdf_path}: joint") if urdf_path else
                        (lambda k: f"{where}: joints[{k}].name:"))
     wrench_frame = spec.get("wrench_frame", "tool")
     require(wrench_frame == "tool" or (type(wrench_frame) is int and 0 <= wrench_frame <= len(joints)),
@@ -265,7 +316,7 @@ def load_robot(path: str | Path) -> Robot:
     require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
     points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
     targets, estimated = _targets(spec["targets"], f"{where}: targets")
-    return Robot(name=name, joints=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
+    return Robot(name=name, chain=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
                  wrench_frame=wrench_frame,
                  points=points, source=str(path), source_hashes=hashes,
                  urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",

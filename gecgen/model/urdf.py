@@ -14,17 +14,17 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass, replace
 from xml.parsers import expat
 from xml.sax.saxutils import quoteattr
-from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import sympy as sp
 
-from gecgen.model.kinematics import constant
-from gecgen.model.robot import Elementary, Joint
+from gecgen.model.kinematics import constant, joint_motion
+from gecgen.model.robot import Elementary, Joint, Mimic
 from gecgen.model.validation import ModelError, excerpt, read_text, require
 
 MOVING = {"revolute": "R", "continuous": "R", "prismatic": "P"}
@@ -39,6 +39,15 @@ class UrdfJoint:
     parent: str
     child: str
     element: ET.Element
+
+
+class Follow(NamedTuple):
+    """A joint's value as multiplier * q_root + offset, `<mimic>` elements followed to the joint that
+    mimics nothing (root; the joint itself, 1 and 0, when it mimics nothing)."""
+
+    root: str
+    multiplier: float
+    offset: float
 
 
 def _number(text: str, where: str) -> float:
@@ -88,6 +97,44 @@ def _limits(joint: ET.Element, jtype: str, where: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _mimic(uj: UrdfJoint, where: str) -> tuple[str, float, float] | None:
+    """(followed joint's name, multiplier, offset) of a joint's `<mimic>` element, or None."""
+    el = uj.element.find("mimic")
+    if el is None:
+        return None
+    jwhere = f"{where}: joint {excerpt(uj.name)} mimic"
+    require(uj.type in MOVING, f"{jwhere}: a {uj.type} joint cannot mimic (only revolute, continuous and prismatic "
+                               f"joints move here); remove its <mimic>")
+    require(el.get("joint"), f"{jwhere}: <mimic> names no joint; give joint=\"...\", the joint it follows")
+    multiplier = _number(el.get("multiplier", "1"), f"{jwhere} multiplier")
+    require(multiplier != 0, f"{jwhere}: multiplier 0 holds the joint at its offset; make it a fixed joint "
+                             f"with the offset in its origin")
+    return el.get("joint"), multiplier, _number(el.get("offset", "0"), f"{jwhere} offset")
+
+
+def follow(joints: dict[str, UrdfJoint], name: str, where: str) -> Follow:
+    """Where joint `name`'s value comes from (joints: every joint of the URDF by name). A mimic of a
+    mimic composes: m1 * (m2 * q + o2) + o1."""
+    multiplier, offset, uj, seen = 1.0, 0.0, joints[name], [name]
+    while (mimic := _mimic(uj, where)) is not None:
+        target, m, o = mimic
+        require(target in joints, f"{where}: joint {excerpt(uj.name)} mimics joint {excerpt(target)}, which this URDF "
+                                  f"does not have; name an existing joint in its <mimic>")
+        require(target not in seen, f"{where}: joint {excerpt(name)}: the mimic joints {' -> '.join(seen + [target])} "
+                                    f"form a loop; let one of them mimic nothing")
+        multiplier, offset = multiplier * m, multiplier * o + offset
+        seen.append(target)
+        uj = joints[target]
+    require(uj.type in MOVING, f"{where}: joint {excerpt(name)} mimics joint {excerpt(uj.name)}, a {uj.type} joint; "
+                               f"a mimic joint follows a revolute, continuous or prismatic joint: fix its <mimic>")
+    return Follow(uj.name, multiplier, offset)
+
+
+def _exact(value: float) -> sp.Expr:
+    """A URDF number as sympy: integers stay exact so `1 * q + 0` prunes to q."""
+    return sp.Integer(int(value)) if value == int(value) and abs(value) < 2 ** 53 else sp.Float(value, 17)
+
+
 def _parse(path: str | Path) -> ET.Element:
     try:
         return ET.fromstring(read_text(Path(path), "URDF file"))
@@ -99,6 +146,7 @@ def _tree(root: ET.Element, where: str) -> tuple[set[str], dict[str, UrdfJoint]]
     """Link names and, for each child link, the joint above it (a URDF is a tree of links)."""
     links = {el.get("name") for el in root.findall("link")}
     above: dict[str, UrdfJoint] = {}
+    names: set[str] = set()
     for el in root.findall("joint"):  # top-level only: <transmission> also holds <joint> elements
         name = el.get("name")
         jwhere = f"{where}: joint {excerpt(name)}"
@@ -111,6 +159,8 @@ def _tree(root: ET.Element, where: str) -> tuple[set[str], dict[str, UrdfJoint]]
             require(ends[end] in links, f"{jwhere}: {end} link {excerpt(ends[end])} is not a <link> of this URDF; "
                                         f"declare it or fix the name")
         child = ends["child"]
+        require(name not in names, f"{jwhere}: a second joint of this name; joint names must be unique")
+        names.add(name)
         require(child not in above, f"{jwhere}: link {excerpt(child)} is already the child of joint "
                                     f"{excerpt(above[child].name) if child in above else ''}; a URDF is a tree")
         above[child] = UrdfJoint(name, el.get("type"), ends["parent"], child, el)
@@ -142,17 +192,19 @@ def _path(above: dict[str, UrdfJoint], base_link: str, tip_link: str, where: str
 def urdf_chain(path: Path, base_link: str, tip_link: str):
     """(base ops, joints, tool ops) of the path base_link -> tip_link in a URDF file.
 
-    Lengths in m, angles in rad; joints are `Joint(pre=origin, post=())` with their URDF names.
+    Lengths in m, angles in rad; joints are `Joint(pre=origin, post=())` with their URDF names, a
+    mimic joint's `mimic` naming the independent joint it follows.
     """
     where = str(path)
     root = _parse(path)
     links, above = _tree(root, where)
     for key, link in (("base_link", base_link), ("tip_link", tip_link)):
         require(link in links, f"{where}: {key} {excerpt(link)} is not a link of this URDF")
+    by_name = {uj.name: uj for uj in above.values()}
 
     pending: tuple[Elementary, ...] = ()  # fixed transforms not yet folded into a frame
     base: tuple[Elementary, ...] | None = None
-    joints = []
+    joints, follows = [], []
     for uj in _path(above, base_link, tip_link, where):
         jwhere = f"{where}: joint {excerpt(uj.name)}"
         origin = _origin(uj.element, jwhere)
@@ -161,8 +213,6 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
             continue
         require(uj.type in MOVING, f"{jwhere}: type {excerpt(uj.type)} is not supported on the chain; "
                                    f"use revolute, continuous, prismatic or fixed")
-        require(uj.element.find("mimic") is None,
-                f"{jwhere}: mimic joints are not supported; give the chain without them")
         lo, hi = _limits(uj.element, uj.type, jwhere)
         if base is None:
             base, pre = pending + origin, ()
@@ -171,18 +221,56 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
         pending = ()
         joints.append(Joint(name=uj.name, kind=MOVING[uj.type], axis=_axis(uj.element, jwhere), pre=pre, post=(),
                             lower=lo, upper=hi))
+        follows.append(follow(by_name, uj.name, where))
     require(joints, f"{where}: no moving joint between {excerpt(base_link)} and {excerpt(tip_link)}")
-    return base, tuple(joints), pending
+    return base, _with_mimics(joints, follows, base_link, tip_link, where), pending
+
+
+def _with_mimics(joints: list[Joint], follows: list[Follow], base_link: str, tip_link: str,
+                 where: str) -> tuple[Joint, ...]:
+    """The chain's joints with each mimic joint's `mimic` set and its limits mapped onto the joint
+    it follows, which keeps the values both sets of limits allow."""
+    variable = {j.name: k for k, j in enumerate(j for j, f in zip(joints, follows) if f.root == j.name)}
+    limits = {j.name: (j.lower, j.upper) for j in joints if j.name in variable}
+    mimics = {}
+    for joint, f in zip(joints, follows):
+        if f.root == joint.name:
+            continue
+        require(f.root in variable, f"{where}: joint {excerpt(joint.name)} on the chain mimics joint "
+                                    f"{excerpt(f.root)}, which is not on the chain from {excerpt(base_link)} to "
+                                    f"{excerpt(tip_link)}; choose links whose chain holds {excerpt(f.root)}, or make "
+                                    f"{excerpt(joint.name)} fixed")
+        mimics[joint.name] = Mimic(variable[f.root], f.root, _exact(f.multiplier), _exact(f.offset))
+        if math.isfinite(joint.lower):
+            ends = sorted(((joint.lower - f.offset) / f.multiplier, (joint.upper - f.offset) / f.multiplier))
+            lo, hi = max(limits[f.root][0], ends[0]), min(limits[f.root][1], ends[1])
+            require(lo < hi, f"{where}: joint {excerpt(joint.name)}: its limits [{joint.lower:g}, {joint.upper:g}] "
+                             f"allow joint {excerpt(f.root)} only [{ends[0]:g}, {ends[1]:g}], outside that joint's "
+                             f"limits [{limits[f.root][0]:g}, {limits[f.root][1]:g}]; fix the limits in the URDF")
+            limits[f.root] = (lo, hi)
+    out = []
+    for j in joints:
+        lo, hi = limits.get(j.name, (j.lower, j.upper))
+        out.append(replace(j, mimic=mimics.get(j.name), lower=lo, upper=hi))
+    return tuple(out)
 
 
 class TreeJoint(NamedTuple):
     """The joint above a link of a MassTree: kind "R", "P" or "F" (fixed, or any joint held still),
-    origin 4x4 (m), unit axis (3,) in the frame after the origin."""
+    origin 4x4 (m), unit axis (3,) in the frame after the origin; for a mimic joint, the joint that
+    moves it (`follow`)."""
 
     name: str
     kind: str
     origin: np.ndarray
     axis: np.ndarray
+    mimic: Follow | None = None
+
+    def value(self, q: dict[str, np.ndarray], P: int) -> np.ndarray:
+        """Its joint value (P,) when the joints `q` names take those values and all others are zero."""
+        if self.mimic is None:
+            return np.asarray(q.get(self.name, np.zeros(P)), float)
+        return self.mimic.multiplier * np.asarray(q.get(self.mimic.root, np.zeros(P)), float) + self.mimic.offset
 
 
 @dataclass(frozen=True)
@@ -198,10 +286,14 @@ class MassTree:
     source: str
 
     def rest_poses(self) -> dict[str, np.ndarray]:
-        """Every link's pose (4x4, m) in the base link's frame with all joints at zero."""
+        """Every link's pose (4x4, m) in the base link's frame with all independent joints at zero
+        (a mimic joint then sits at its offset)."""
         pose = {self.links[0]: np.eye(4)}
         for link in self.links[1:]:
-            pose[link] = pose[self.parent[link]] @ self.joint[link].origin
+            j = self.joint[link]
+            pose[link] = pose[self.parent[link]] @ j.origin
+            if j.mimic is not None and j.mimic.offset != 0:
+                pose[link] = pose[link] @ joint_motion(j.axis, j.kind, np.array(j.mimic.offset))
         return pose
 
 
@@ -212,6 +304,7 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
     root = _parse(path)
     links, above = _tree(root, where)
     require(base_link in links, f"{where}: base_link {excerpt(base_link)} is not a link of this URDF")
+    by_name = {uj.name: uj for uj in above.values()}
     below: dict[str, list[str]] = {}
     for child, uj in above.items():
         below.setdefault(uj.parent, []).append(child)
@@ -226,7 +319,9 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
         jwhere = f"{where}: joint {excerpt(uj.name)}"
         kind = MOVING.get(uj.type, "F")
         axis = np.array([float(a) for a in _axis(uj.element, jwhere)]) if kind != "F" else np.zeros(3)
-        joint[link] = TreeJoint(uj.name, kind, constant(_origin(uj.element, jwhere)), axis)
+        f = follow(by_name, uj.name, where) if kind != "F" else None
+        joint[link] = TreeJoint(uj.name, kind, constant(_origin(uj.element, jwhere)), axis,
+                                f if f is not None and f.root != uj.name else None)
     mass, com = {}, {}
     for el in root.findall("link"):
         name, inertial = el.get("name"), el.find("inertial")

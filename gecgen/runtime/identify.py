@@ -307,7 +307,7 @@ def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.
                    f"determine it: check the redundancy analysis, measure poses that move it or drop its term")
         return out
     eps = np.abs(cm.eps(data.q, data.w, data.aux_columns(cm.model.aux), c)).max(axis=0)
-    limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n + 1)
+    limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n_frames + 1)
     if np.any(eps > limit):
         e = int(np.argmax(eps / limit))
         unit = "m" if e % 6 < 3 else "rad"

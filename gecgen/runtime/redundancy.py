@@ -95,7 +95,7 @@ class Redundancy:
 def rule_candidates(robot: Robot, n_targets_measured: int) -> dict[int, str]:
     """Generalized errors (eps index) the analytic rules eliminate, with the rule in words."""
     out: dict[int, str] = {}
-    for i, joint in enumerate(robot.joints, start=1):
+    for i, joint in enumerate(robot.chain, start=1):
         axis = constant(joint.pre)[:3, :3] @ np.array([float(a) for a in joint.axis])  # in frame i-1
         k = int(np.argmax(np.abs(axis)))
         if abs(abs(axis[k]) - 1) > 1e-9:
@@ -111,8 +111,9 @@ def rule_candidates(robot: Robot, n_targets_measured: int) -> dict[int, str]:
             out[6 * (i - 1) + ERROR_NAMES.index(e)] = why
     if n_targets_measured == 1:
         for e in ("es", "er", "ep"):
-            out.setdefault(6 * robot.n + ERROR_NAMES.index(e),
-                           f"one measured point: rotations of the last frame ({robot.n}) act like its translations")
+            last = robot.n_frames
+            out.setdefault(6 * last + ERROR_NAMES.index(e),
+                           f"one measured point: rotations of the last frame ({last}) act like its translations")
     return out
 
 

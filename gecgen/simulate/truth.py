@@ -78,7 +78,7 @@ def _error_index(robot: Robot, text, where: str) -> tuple[int, float]:
     sign = -1.0 if text.startswith("-") else 1.0
     name = text.lstrip("+-")
     names = robot.error_names()
-    require(name in names, f"{where}: unknown generalized error '{name}'; use FRAME.ERROR such as 1.ey (frames 0..{robot.n})")
+    require(name in names, f"{where}: unknown generalized error '{name}'; use FRAME.ERROR such as 1.ey (frames 0..{robot.n_frames})")
     return names.index(name), sign
 
 
@@ -98,7 +98,7 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     c = spec.get("constant") or {}
     require_keys(c, f"{where}: constant", optional={"translation_std", "rotation_std", "values"})
     if "translation_std" in c or "rotation_std" in c:
-        std = np.tile([c.get("translation_std", 0.0)] * 3 + [c.get("rotation_std", 0.0)] * 3, robot.n + 1)
+        std = np.tile([c.get("translation_std", 0.0)] * 3 + [c.get("rotation_std", 0.0)] * 3, robot.n_frames + 1)
         const += rng.normal(0.0, 1.0, ne) * std
     for name, value in (c.get("values") or {}).items():
         k, sign = _error_index(robot, name, f"{where}: constant.values")
@@ -172,8 +172,8 @@ def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_a
 
 def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray,
                     payload_at: np.ndarray) -> np.ndarray:
-    """Static torque about every revolute joint axis (N, n), N m, from the link masses beyond it and
-    the payload, on the nominal chain."""
+    """Static torque on every revolute joint variable (N, n), N m, from the link masses beyond it and
+    the payload, on the nominal chain: about its axis, plus its mimic joints' times their multipliers."""
     F = frames(robot, q)
     N = len(q)
     points = []  # (mass (N,), world position (N, 3), first frame it rides on)
@@ -186,16 +186,17 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
         W = F[m["frame"]]
         points.append((np.full(N, float(m["mass"])), W[:, :3, :3] @ at + W[:, :3, 3], m["frame"]))
     tool = F[-1]
-    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n + 1))
-    for i, joint in enumerate(robot.joints):
-        if joint.kind != "R":
+    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n_frames + 1))
+    for i, (joint, (k, mult, _)) in enumerate(zip(robot.chain, robot.drives())):
+        if robot.joints[k].kind != "R":
             continue
         J = F[i] @ constant(joint.pre)  # the frame the joint axis is expressed in
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
         for mass, pos, frame in points:
-            if frame >= i + 1:
-                moment = np.cross(pos - J[:, :3, 3], mass[:, None] * truth.gravity)
-                tau[:, i] += np.einsum("ni,ni->n", moment, axis)
+            if frame >= i + 1:  # a prismatic mimic joint's force along its axis, times m/rad
+                load = mass[:, None] * truth.gravity
+                moment = np.cross(pos - J[:, :3, 3], load) if joint.kind == "R" else load
+                tau[:, k] += float(mult) * np.einsum("ni,ni->n", moment, axis)
     return tau
 
 

@@ -9,7 +9,9 @@ world pose of frame j before its error and o_j the origin after the error transl
 
 (the rotation axes of Trans * RotY * RotZ * RotX in the world). This is the exact derivative at
 any error values, so identification can iterate. One forward pass gives every column; the
-`Builder` shares all intermediates.
+`Builder` shares all intermediates. A mimic joint's frame is a frame like any other (its value
+m q_J + o only enters its motion), so J_e needs nothing more; in the joint Jacobian its column
+adds to joint J's times m (the chain rule).
 """
 from __future__ import annotations
 
@@ -114,17 +116,24 @@ class Chain:
     tool: Pose
 
 
+def joint_values(b: Builder, robot: Robot, q) -> list:
+    """Every frame's joint value: its variable, or multiplier * q_J + offset for a mimic joint."""
+    return [q[k] if joint.mimic is None else b.let(m * q[k] + o)
+            for joint, (k, m, o) in zip(robot.chain, robot.drives())]
+
+
 def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
-    """Forward pass; `eps` is a flat sequence of 6(n+1) symbols, or None for the nominal chain."""
+    """Forward pass; `eps` is a flat sequence of 6(m+1) symbols, or None for the nominal chain."""
     W = constant_pose(robot.base)
     pre, post, er_axis, joint_frames = [], [], [], []
-    for j in range(robot.n + 1):
+    v = joint_values(b, robot, q)
+    for j in range(robot.n_frames + 1):
         if j > 0:
-            joint = robot.joints[j - 1]
+            joint = robot.chain[j - 1]
             F = compose(b, W, constant_pose(joint.pre)) if joint.pre else W
             joint_frames.append(F)
-            W = compose(b, compose(b, F, motion(b, joint.axis, joint.kind, q[j - 1])), constant_pose(joint.post)) \
-                if joint.post else compose(b, F, motion(b, joint.axis, joint.kind, q[j - 1]))
+            W = compose(b, compose(b, F, motion(b, joint.axis, joint.kind, v[j - 1])), constant_pose(joint.post)) \
+                if joint.post else compose(b, F, motion(b, joint.axis, joint.kind, v[j - 1]))
         pre.append(W)
         if eps is not None:
             E, z_er = error_pose(b, tuple(eps[6 * j:6 * j + 6]))
@@ -136,7 +145,7 @@ def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
 
 
 def error_symbols(robot: Robot) -> tuple[sp.Symbol, ...]:
-    return tuple(sp.Symbol(f"eps_{i}_{e}", real=True) for i in range(robot.n + 1) for e in ERROR_NAMES)
+    return tuple(sp.Symbol(f"eps_{i}_{e}", real=True) for i in range(robot.n_frames + 1) for e in ERROR_NAMES)
 
 
 def _targets(b: Builder, robot: Robot, chain: Chain) -> list[tuple]:
@@ -158,13 +167,13 @@ def targets_function(robot: Robot) -> Function:
 
 
 def jacobian_function(robot: Robot) -> Function:
-    """J_e: d(target positions)/d(eps), (3 n_targets) x 6(n+1) row-major, at any eps."""
+    """J_e: d(target positions)/d(eps), (3 n_targets) x 6(m+1) row-major, at any eps."""
     b, q, eps = Builder(), joint_symbols(robot), error_symbols(robot)
     chain = build_chain(b, robot, q, eps)
     P = _targets(b, robot, chain)
     ne = robot.n_errors
     J = [[0] * ne for _ in range(3 * len(P))]
-    for j in range(robot.n + 1):
+    for j in range(robot.n_frames + 1):
         Wp, Wq = chain.pre[j], chain.post[j]
         axes = (Wp.col(1), chain.er_axis[j], Wq.col(0))
         for k, Pk in enumerate(P):
@@ -188,14 +197,14 @@ def tool_jacobian_function(robot: Robot) -> Function:
     chain = build_chain(b, robot, q, eps)
     T = chain.tool
     Jq = [[0] * robot.n for _ in range(6)]
-    for i, (joint, F) in enumerate(zip(robot.joints, chain.joint_frames)):
+    for joint, F, (i, mult, _) in zip(robot.chain, chain.joint_frames, robot.drives()):
         a = apply(b, F, joint.axis, point=False)
         if joint.kind == "P":
             v, w = a, (0, 0, 0)
         else:
             v, w = cross(b, a, tuple(b.let(T.p[m] - F.p[m]) for m in range(3))), a
-        for r in range(3):
-            Jq[r][i], Jq[3 + r][i] = v[r], w[r]
+        for r, x in enumerate((*v, *w)):
+            Jq[r][i] = x if joint.mimic is None and Jq[r][i] == 0 else b.let(Jq[r][i] + mult * x)
     out = [e for i in range(3) for e in (*T.R[i], T.p[i])] + [0, 0, 0, 1]
     return b.function("tool_jacobian", "Tool pose T (4x4 row-major) with errors eps and its geometric "
                       "Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},

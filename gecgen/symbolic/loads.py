@@ -6,15 +6,16 @@ signal is then a few dot and cross products:
     wrench_torque(J) = a_J . (m + (p_s - o_J) x f)   (revolute)   a_J . f   (prismatic)
 
 with f, m the wrench rotated from the sensor frame into the world and p_s the sensor frame's
-origin; gravity(J, r) is a kept column of `model.loads.regressor_columns`, and gravity_torque(J)
+origin; gravity(J, r) is a kept column of `model.loads.joint_columns`, and gravity_torque(J)
 the sum of all of joint J's columns times the masses and first moments of the frames it carries.
+A joint with mimic joints sums over the frames it moves, each times its multiplier.
 """
 from __future__ import annotations
 
 import sympy as sp
 
 from gecgen.model.errors import joint_symbols
-from gecgen.model.loads import catalog, cross3, dot, load_symbol, regressor_columns
+from gecgen.model.loads import catalog, frame_wrench_torque, joint_columns, load_symbol
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.symbolic.chain import apply, build_chain
 from gecgen.symbolic.program import Builder, Function
@@ -27,33 +28,31 @@ def load_values(b: Builder, robot: Robot, q, w, names) -> dict[sp.Symbol, sp.Exp
         return {}
     cat = catalog(robot)
     chain = build_chain(b, robot, q, None)
-    axes = [apply(b, F, joint.axis, point=False) for joint, F in zip(robot.joints, chain.joint_frames)]
+    axes = [apply(b, F, joint.axis, point=False) for joint, F in zip(robot.chain, chain.joint_frames)]
+    origins = [F.p for F in chain.joint_frames]
     carried = [(P.R, P.p) for P in chain.post]
     columns: dict[int, list] = {}
 
-    def joint_columns(J: int) -> list:
+    def columns_of(J: int) -> list:
         if J not in columns:
-            columns[J] = regressor_columns(b.let, robot.joints[J - 1].kind, axes[J - 1],
-                                           chain.joint_frames[J - 1].p, carried[J:], robot.gravity)
+            columns[J] = joint_columns(b.let, robot, J, axes, origins, carried, robot.gravity)
         return columns[J]
 
+    last = robot.n_frames if robot.wrench_frame == "tool" else robot.wrench_frame
     sensor = chain.tool if robot.wrench_frame == "tool" else chain.post[robot.wrench_frame]
     force, moment = apply(b, sensor, w[:3], point=False), apply(b, sensor, w[3:], point=False)
     out = {}
     for name in names:
         s = cat.by_name(name)
-        a, o = axes[s.joint - 1], chain.joint_frames[s.joint - 1].p
-        if s.kind == "wrench_torque":
-            if robot.joints[s.joint - 1].kind == "P":
-                value = dot(a, force)
-            else:
-                lever = tuple(b.let(sensor.p[k] - o[k]) for k in range(3))
-                value = dot(a, [moment[k] + c for k, c in enumerate(cross3(lever, force))])
+        moved = robot.driven(s.joint - 1)
+        if s.kind == "wrench_torque":  # frames after the sensor's do not move it
+            value = sum(mult * frame_wrench_torque(b.let, robot.chain[k - 1].kind, axes[k - 1], origins[k - 1],
+                                                   sensor.p, force, moment) for k, mult in moved if k <= last)
         elif s.kind == "gravity":
-            value = joint_columns(s.joint)[s.column]
+            value = columns_of(s.joint)[s.column]
         else:
-            params = [v for row in cat.params[s.joint:] for v in row]
-            value = sum(p * c for p, c in zip(params, joint_columns(s.joint)) if p)
+            params = [v for row in cat.params[moved[0][0]:] for v in row]
+            value = sum(p * c for p, c in zip(params, columns_of(s.joint)) if p)
         out[load_symbol(name)] = b.let(value)
     return out
 
