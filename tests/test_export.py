@@ -224,3 +224,24 @@ def test_table_recovers_simulated_joint_offsets(offsets_calib, name):
     assert max(links) < 1e-4  # mm, mrad: nothing else was simulated
     assert table["reexpressed_change_mm"] < 1e-4
     assert all(z["std"] is not None and z["std"] < 1e-6 for z in table["zero_offsets"])  # noise-free
+
+
+def test_export_of_a_robot_with_mimic_joints(tmp_path, rng):
+    """Frames and joint variables differ on a robot with mimic joints (7 frames, 4 variables): the
+    URDF copy folds every frame's errors, and reloaded (its mimic joints intact) it puts the
+    targets where the calibrated model does; the table lists the four independent joints."""
+    robot_file = ROBOTS.parent / "tests" / "data" / "mimic" / "telescope.yaml"
+    calib_file = calibrate(tmp_path, robot_file, "seed: 2\nconstant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}\n"
+                                                 "noise: {repeatability: 0, tracker: 0}\n")
+    out = gecgen_json("export", calib_file, "--urdf", tmp_path / "cal.urdf", "--table")
+    calib = calibration.load(calib_file)
+    robot = calib.robot
+    assert [o["joint"] for o in out["table"]["zero_offsets"]] == list(robot.joint_names)
+    text = robot_file.read_text().replace("urdf: telescope.urdf", f"urdf: {tmp_path / 'cal.urdf'}")
+    text = text.replace(f"tip_link: {robot.tip_link}", f"tip_link: {out['urdf']['tip_link']}")
+    (tmp_path / "cal.yaml").write_text(text)
+    exported = load_robot(tmp_path / "cal.yaml")
+    assert exported.n == robot.n == 4 and robot.n_frames == 7
+    q = random_q(robot, rng, 20)
+    np.testing.assert_allclose(target_positions(exported, q), target_positions(robot, q, constant_errors(calib)),
+                               atol=1e-9)

@@ -147,7 +147,7 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
                         f"and six errors per frame do not fit DH's four parameters; use --c for the controller "
                         f"or --table for the errors per frame")
     eps = constant_errors(calib)
-    E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n + 1)]
+    E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
             f"into the joint origins; the tracker registration is not applied")
     text, tip, changed = folded_copy(robot.urdf, robot.base_link, robot.tip_link, E, note)
@@ -164,10 +164,10 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
 
 # -- the table ---------------------------------------------------------------------------------------
 def zero_offset_error(robot: Robot, i: int) -> tuple[int, float] | None:
-    """(eps index, sign) of joint i's zero offset (i from 1; see the module's docstring), or None
-    when its axis is not along an axis of the adjacent frame or constant transforms sit on both
-    sides of its motion."""
-    joint = robot.joints[i - 1]
+    """(eps index, sign) of the zero offset of the joint of frame i (i from 1; see the module's
+    docstring), or None when its axis is not along an axis of the adjacent frame or constant
+    transforms sit on both sides of its motion."""
+    joint = robot.chain[i - 1]
     u = np.array([float(a) for a in joint.axis])
     frame = i if not joint.post else i - 1 if not joint.pre else None
     k = int(np.argmax(np.abs(u)))
@@ -189,8 +189,8 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
     pos = {k: a for a, k in enumerate(kept)}
     eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
 
-    zero, why = {}, {}
-    for i in range(1, robot.n + 1):
+    zero, why = {}, {}  # by frame: the independent joints' frames (a mimic joint's offset is its frame's error)
+    for i in map(robot.frame_of, range(robot.n)):
         found = zero_offset_error(robot, i)
         k = index.get((found[0], "1")) if found else None
         if k is None:
@@ -219,7 +219,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
             r -= r[p] / rr[p] * rr
         candidates = [a for a in range(len(kept)) if coefs[kept[a]].term.text == "1" and kept[a] not in reserved
                       and a not in pivots and abs(r[a]) > FACTOR_TOL]
-        same_kind = [a for a in candidates if (coefs[kept[a]].error % 6 >= 3) == (robot.joints[i - 1].kind == "R")]
+        same_kind = [a for a in candidates if (coefs[kept[a]].error % 6 >= 3) == (robot.chain[i - 1].kind == "R")]
         if not candidates:
             del zero[i]
             why[i] = (f"{names[k]} is eliminated ({e['detail']}) and merges into no other constant coefficient: "
@@ -252,7 +252,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
 
     exchanged = dict(zip([i for i, _ in swap], [names[kept[p]] for p in pivots]))
     offsets = []
-    for i, joint in enumerate(robot.joints, start=1):
+    for i, joint in ((robot.frame_of(k), joint) for k, joint in enumerate(robot.joints)):
         scale = MDEG_PER_RAD if joint.kind == "R" else 1e3
         entry = {"joint": joint.name, "unit": "mdeg" if joint.kind == "R" else "mm"}
         if i in zero:
@@ -263,7 +263,7 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
             entry |= {"coefficient": None, "value": None, "std": None, "why": why[i]}
         offsets.append(entry)
     frames = []
-    for f in range(robot.n + 1):
+    for f in range(robot.n_frames + 1):
         values, stds = {}, {}
         for e, err in enumerate(ERROR_NAMES):
             key = f"{err}_{_unit(e)}"
