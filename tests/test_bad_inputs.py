@@ -126,9 +126,12 @@ CASES = {
                                      write(t, "map.yaml", MAPPING.encode() + b"# \xe9\n"), "-o", t / "out.csv"],
                           "map.yaml", "is not UTF-8"),
     "CSV separated by semicolons": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",", ";"))],
-                                    "data.csv", "row 1: the columns are separated by ';'; gecgen reads comma-separated"),
+                                    "data.csv", "row 1: the columns are separated by ';'; gecgen reads comma-separated "
+                                                "files: convert the file to commas (a wide export converts with "
+                                                "gecgen import --sep ';' --decimal ',')"),
     "CSV separated by tabs": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",", "\t"))],
-                              "data.csv", "separated by tabs"),
+                              "data.csv", "separated by tabs; gecgen reads comma-separated files: convert the file to "
+                                          "commas (a wide export converts with gecgen import --sep tab)"),
     "CSV cell of 200,000 characters": (
         lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",t2,", "," + "x" * 200_000 + ",", 1))],
         "data.csv", "row 3, column 'target': 200000 characters"),
@@ -182,3 +185,14 @@ def test_a_byte_order_mark_and_modest_aliases_are_accepted(tmp_path):
         assert getattr(marked, key).tolist() == getattr(plain, key).tolist(), key
     model = load_error_model(write(tmp_path, "m.errors.yaml", "frames:\n  1: &terms ['1', q1]\n  2: *terms\n"), robot)
     assert [t.text for t in model.terms[6 * 2]] == ["1", "q1"]
+
+
+def test_quoted_cells_and_windows_line_ends_read_as_the_plain_file(tmp_path):
+    """The csv module reads what the fast reader declines (quotes); CRLF the fast reader takes."""
+    robot = load_robot(ROBOTS / "pps.yaml")
+    plain = read_measurements(write(tmp_path, "plain.csv", table()), robot)
+    quoted = table().replace(",t1,", ',"t1",').replace(",0.6,", ',"0.6",')
+    for name, text in (("quoted.csv", quoted), ("crlf.csv", table().replace("\n", "\r\n"))):
+        data = read_measurements(write(tmp_path, name, text.encode()), robot)
+        for key in ("q", "pose_ids", "target", "xyz"):
+            assert getattr(data, key).tolist() == getattr(plain, key).tolist(), (name, key)

@@ -2,6 +2,7 @@
 import csv
 import json
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -176,3 +177,66 @@ def test_shipped_mapping_reads_a_valid_table_and_the_command_fails_in_one_line(t
     captured = capsys.readouterr()
     assert code == 2 and captured.out == "" and len(captured.err.strip().splitlines()) == 1
     assert "temp_c" in captured.err and not (tmp_path / "out.csv").exists()
+
+
+# -- exports with other separators and decimal commas ----------------------------------------------
+def delimited(table: dict[str, list], sep: str, decimal: str = ",") -> str:
+    """The table as a spreadsheet may write it: `sep` between columns, `decimal` the decimal mark
+    (a European one by default)."""
+    return "".join(sep.join(row) + "\n" for row in [list(table), *zip(*table.values())]).replace(".", decimal)
+
+
+def with_point(table: dict[str, list]) -> str:
+    """A decimal-comma export whose first x1 cell has a decimal point instead."""
+    return delimited(table, ";").replace(table["x1"][0].replace(".", ","), "0.5", 1)
+
+
+@pytest.mark.parametrize("sep, option", [(";", ";"), ("\t", "tab"), ("|", "|")])
+def test_an_export_with_decimal_commas_imports_as_the_plain_table(tiago, tmp_path, capsys, sep, option):
+    table = wide_table(tiago, rows=5)
+    table["x2"][1], table["y3"][2], table["z4"][0] = "-1.5e-05", "-0.25", "2"  # exponent, sign, integer
+    plain = import_wide(write_table(tmp_path / "plain.csv", table), tiago, MAPPING)
+    path = tmp_path / "export.csv"
+    path.write_text(delimited(table, sep))
+    data = import_wide(path, tiago, MAPPING, sep=sep, decimal=",")
+    with mock.patch("gecgen.model.table._plain_columns", return_value=None):  # the csv module's reading
+        careful = import_wide(path, tiago, MAPPING, sep=sep, decimal=",")
+    for key in ("q", "w", "aux", "pose_ids", "pose", "target", "xyz"):
+        assert getattr(data, key).tolist() == getattr(plain, key).tolist() == getattr(careful, key).tolist(), key
+    # the command writes the contract's file (commas, decimal points), the same as from the plain table
+    for name, source, options in (("a.csv", tmp_path / "plain.csv", []), ("b.csv", path, ["--sep", option, "--decimal", ","])):
+        assert main(["import", str(ROBOTS / "tiago.yaml"), str(source), "--mapping", str(MAPPING), *options,
+                     "-o", str(tmp_path / name), "--json"]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "b.csv").read_bytes() == (tmp_path / "a.csv").read_bytes()
+    assert read_measurements(tmp_path / "b.csv", tiago).xyz.tolist() == plain.xyz.tolist()
+
+
+EXPORTS = {
+    # name: (file text from the wide table, import options, expected message part)
+    "point beside decimal commas": (with_point, ["--sep", ";", "--decimal", ","],
+                                    "row 2, column 'x1': '0.5' is not a number with the decimal mark ','; fix the value"),
+    "semicolons without --sep": (lambda t: delimited(t, ";"), [],
+                                 "row 1: the columns are separated by ';'; gecgen reads comma-separated files: convert "
+                                 "the file to commas (a wide export converts with gecgen import --sep ';' --decimal ',')"),
+    "commas with --sep ';'": (lambda t: delimited(t, ",", "."), ["--sep", ";"],
+                              "row 1: the columns are separated by ',', not ';'; give the file's separator (--sep ',')"),
+    "tabs with --sep ';'": (lambda t: delimited(t, "\t"), ["--sep", ";", "--decimal", ","],
+                            "the columns are separated by tabs, not ';'; give the file's separator (--sep tab)"),
+    "decimal comma and comma separator": (lambda t: delimited(t, ";"), ["--decimal", ","],
+                                          "--sep ',' --decimal ',': a comma cannot both separate the columns"),
+    "unknown separator": (lambda t: delimited(t, ";"), ["--sep", ":"], "--sep ':': give ',', ';', tab or '|'"),
+}
+
+
+@pytest.mark.parametrize("case", EXPORTS)
+def test_exports_read_with_the_wrong_options_are_refused_in_one_line(tiago, tmp_path, capsys, case):
+    make, options, expect = EXPORTS[case]
+    path = tmp_path / "export.csv"
+    path.write_text(make(wide_table(tiago)))
+    code = main(["import", str(ROBOTS / "tiago.yaml"), str(path), "--mapping", str(MAPPING), *options,
+                 "-o", str(tmp_path / "out.csv"), "--json"])
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert code == 2 and captured.out == "" and len(lines) == 1 and expect in lines[0], captured.err
+    assert not (tmp_path / "out.csv").exists()

@@ -2,6 +2,7 @@
 are given, they either accept it as finite numbers and bounded powers or refuse it with a ModelError
 of one line; nothing else escapes."""
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -157,3 +158,41 @@ def test_the_csv_strategy_reaches_both_outcomes(folder):
 
     collect()
     assert outcomes == {True, False}
+
+
+# -- the fast reader against the csv module --------------------------------------------------------
+# cells and lines that pandas and the csv module might read differently, and a plain file otherwise
+EDGE_CELLS = st.sampled_from(["True", "FALSE", "-0", "1_0", "+.5", "5.", " 1e-3 ", "\t2", "inf", "1e999", "0x1",
+                              "\uff11", "\x0b1", "", "nan", "1e-400", "0.1000000000000000055511151231257827"])
+
+
+@st.composite
+def near_plain_tables(draw) -> bytes:
+    header = draw(st.permutations(HEADER))
+    rows = [[draw(EDGE_CELLS) if draw(st.integers(0, 59)) == 0 else str(r) if c == "pose"
+             else draw(GOOD_CELLS.get(c, ODD_CELLS)) for c in header] for r in range(draw(st.integers(1, 6)))]
+    lines = [",".join(row) for row in [header, *rows]]
+    if draw(st.integers(0, 3)) == 0:  # a line one field longer or shorter, or a blank line
+        k = draw(st.integers(0, len(lines) - 1))
+        lines[k] = draw(st.sampled_from([lines[k] + ",", lines[k] + ",1", lines[k].rpartition(",")[0], ""]))
+    end = draw(st.sampled_from(["\n", "\r\n"]))
+    return (end.join(lines) + draw(st.sampled_from([end, "", end + end]))).encode()
+
+
+def outcome(path):
+    """What read_measurements makes of a file: its arrays bit for bit, or its message."""
+    try:
+        data = read_measurements(path, PPS)
+    except ModelError as exc:
+        return str(exc)
+    return [getattr(data, key).tobytes() for key in ("q", "w", "aux", "pose_ids", "pose", "target", "xyz", "station")]
+
+
+@SETTINGS
+@given(st.one_of(near_plain_tables(), tables()))
+def test_the_fast_reader_reads_and_refuses_as_the_csv_module(folder, content):
+    path = folder / "same.csv"
+    path.write_bytes(content)
+    with mock.patch("gecgen.model.table._plain_columns", return_value=None):  # the csv module reads every file
+        careful = outcome(path)
+    assert outcome(path) == careful

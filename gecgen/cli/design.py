@@ -12,8 +12,9 @@ import numpy as np
 
 from gecgen.cli.common import robot_and_model
 from gecgen.model import load_robot
-from gecgen.model.measurements import read_measurements, read_table, write_csv
+from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
+from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime import design as D
 
@@ -95,7 +96,7 @@ def run(args) -> dict:
     given = read_measurements(args.given, robot) if args.given else None
     columns = given.aux_names if given is not None else ()
     if args.from_csv:
-        header, _ = read_table(args.from_csv, "file of candidate poses", "q1..qn")
+        header = read_table(args.from_csv, "file of candidate poses", "q1..qn").header
         columns = tuple(h for h in header if h not in WRENCH and not (h[:1] == "q" and h[1:].isdigit()))
     robot, model = robot_and_model(args.robot, args.errors, columns)
     cands = _candidates(args, robot, model)

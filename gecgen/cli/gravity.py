@@ -10,7 +10,8 @@ import numpy as np
 
 from gecgen.model import load_robot
 from gecgen.model.gravity import robot_gravity_torques
-from gecgen.model.measurements import numbers, read_table, write_csv
+from gecgen.model.measurements import write_csv
+from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
 
 
@@ -45,17 +46,19 @@ def run(args) -> dict:
         require(j in robot.joint_names, f"--joints: '{j}' is not a joint of {robot.name} ({', '.join(robot.joint_names)})")
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     where = str(args.table)
-    header, table = read_table(args.table, "table", ", ".join(qcols))
+    # every other cell is copied as the file has it: the csv module reads them all
+    table = read_table(args.table, "table", ", ".join(qcols), verbatim=True)
+    header = table.header
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
     new = [f"tau_{j}" for j in joints]
     clash = [c for c in new if c in header]
     require(not clash, f"{where}: row 1: column '{clash[0] if clash else ''}' is already there; "
                        f"drop it or write from the table without it")
-    q = np.column_stack([numbers(table[:, header.index(c)], c, where) for c in qcols])
+    q = np.column_stack([table.numbers(c) for c in qcols])
     tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity) if args.gravity else None)
     write_csv(args.output, header + new,
-              (row + [repr(v) for v in t] for row, t in zip(table.tolist(), tau.tolist())))
+              (row + [repr(v) for v in t] for row, t in zip(table.rows(), tau.tolist())))
     units = {c: "N" if robot.joints[robot.joint_names.index(j)].kind == "P" else "N m" for c, j in zip(new, joints)}
     return {"robot": robot.name, "output": str(args.output), "rows": len(table), "columns": new,
             "min": {c: float(v) for c, v in zip(new, tau.min(0))}, "max": {c: float(v) for c, v in zip(new, tau.max(0))},

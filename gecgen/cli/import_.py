@@ -1,8 +1,10 @@
-"""`gecgen import ROBOT WIDE.csv --mapping MAP.yaml -o OUT.csv [--targets m1,m2] [--json]`.
+"""`gecgen import ROBOT WIDE.csv --mapping MAP.yaml -o OUT.csv [--targets m1,m2] [--sep ';'] [--decimal ','] [--json]`.
 
 Converts a wide table (several points per row, see gecgen/model/wide.py) into the contract's
-measurement CSV. Joint readings outside the robot's limits are reported (JSON `outside_limits`
-and a warning on stderr), never clipped: the values are written as read.
+measurement CSV (comma-separated, decimal points). `--sep` and `--decimal` read exports that
+separate columns by ';', tabs or '|' and write 1,234 for 1.234, as European spreadsheets and tracker
+software do. Joint readings outside the robot's limits are reported (JSON `outside_limits` and a
+warning on stderr), never clipped: the values are written as read.
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import numpy as np
 from gecgen.model import load_robot
 from gecgen.model.measurements import Measurements, write_measurements
 from gecgen.model.robot import Robot
+from gecgen.model.table import SEPARATORS
 from gecgen.model.validation import require
 from gecgen.model.wide import import_wide, load_mapping
 
@@ -26,6 +29,9 @@ def add_parser(command):
     p.add_argument("--mapping", required=True, help="column mapping YAML (see gecgen/model/wide.py)")
     p.add_argument("--targets", help="comma-separated targets to keep (default: every mapped target)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write (CONTRACTS.md section 3)")
+    p.add_argument("--sep", default=",", help="the table's column separator: ',' (default), ';', tab or '|'")
+    p.add_argument("--decimal", default=".", choices=[".", ","],
+                   help="the decimal mark of the table's numbers: '.' (default) or ',' (1,234 is 1.234)")
 
 
 def keep_targets(robot: Robot, data: Measurements, option: str) -> Measurements:
@@ -51,10 +57,20 @@ def outside_limits(robot: Robot, data: Measurements) -> list[dict]:
     return out
 
 
+def separator(option: str, decimal: str) -> str:
+    """The character `--sep` names ("tab" or a tab for a tab)."""
+    seps = {sep: sep for sep in SEPARATORS} | {"tab": "\t"}
+    require(option in seps, f"--sep {option!r}: give ',', ';', tab or '|'")
+    require(seps[option] != decimal, f"--sep {option!r} --decimal {decimal!r}: a comma cannot both separate the "
+                                     f"columns and mark the decimals; give the table's separator (--sep ';')")
+    return seps[option]
+
+
 def run(args) -> dict:
+    sep = separator(args.sep, args.decimal)
     robot = load_robot(args.robot)
     mapping = load_mapping(args.mapping, robot)
-    data = import_wide(args.table, robot, mapping)
+    data = import_wide(args.table, robot, mapping, sep, args.decimal)
     if args.targets:
         data = keep_targets(robot, data, args.targets)
     write_measurements(args.output, robot, data, wrench=bool(mapping.wrench))

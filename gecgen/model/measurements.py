@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,7 +14,8 @@ import numpy as np
 
 from gecgen.files import write_atomically
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.model.validation import ModelError, excerpt, read_text, require
+from gecgen.model.table import Table, at, read_table
+from gecgen.model.validation import ModelError, excerpt, require
 
 #: joint readings may exceed the limits by this much (m or rad) before a row is refused
 LIMIT_TOLERANCE = 1e-3
@@ -29,84 +29,14 @@ MAX_WRENCH = 1e7
 MAX_AUX = 1e12
 #: pose ids are read as floats, which tell neighbouring integers apart only below 2**53
 MAX_POSE_ID = 2 ** 53
-#: characters in one cell; numbers and names are far shorter
-MAX_CELL = 10_000
-#: separators some spreadsheets write instead of commas, as messages name them
-SEPARATORS = {";": "';'", "\t": "tabs", "|": "'|'"}
 
 
-def at(where: str, row: int, col: str) -> str:
-    """How messages name a cell: file, row (1-based, header = 1) and column."""
-    return f"{where}: row {row}, column {excerpt(col)}"
-
-
-def read_table(path: str | Path, what: str, expect: str) -> tuple[list[str], np.ndarray]:
-    """Header and cells (rows, columns; text) of a CSV. Refuses a missing or empty file, repeated
-    header names and rows whose field count differs from the header's; `what` names the file kind
-    in messages ("measurement file") and `expect` says what the header should hold."""
-    path = Path(path)
-    where = str(path)
-    text = read_text(path, what)
-    # csv's own cap on a cell raises a bare error without the column; lift it for this read and
-    # refuse long cells below, by row and column
-    cap = csv.field_size_limit()
-    csv.field_size_limit(max(cap, len(text) + 1))
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        header = next(reader, None)
-        rows = list(reader)
-    except csv.Error as exc:
-        raise ModelError(f"{where}: row {reader.line_num}: not readable as CSV ({excerpt(str(exc))}); fix the row") from None
-    finally:
-        csv.field_size_limit(cap)
-    require(header, f"{where}: the file is empty; expected a header row with {expect}")
-    header = [h.strip() for h in header]
-    for sep, name in SEPARATORS.items():
-        require(len(header) > 1 or sep not in header[0], f"{where}: row 1: the columns are separated by {name}; "
-                                                         f"gecgen reads comma-separated files: convert the file to commas")
-    for r, row in enumerate([header, *rows]):
-        if max(map(len, row), default=0) > MAX_CELL:
-            c = next(c for c, cell in enumerate(row) if len(cell) > MAX_CELL)
-            col = header[c] if r and c < len(header) else f"#{c + 1}"
-            raise ModelError(f"{at(where, r + 1, col)}: {len(row[c])} characters ({excerpt(row[c])}); a cell may have "
-                             f"at most {MAX_CELL}: fix the file")
-    twice = [h for h in dict.fromkeys(header) if header.count(h) > 1]
-    require(not twice, f"{where}: row 1: column {excerpt(twice[0]) if twice else ''} appears twice in the header; "
-                       f"rename or remove one")
-    require(rows, f"{where}: no data rows after the header")
-    lengths = np.fromiter((len(r) for r in rows), int, len(rows))
-    bad = np.nonzero(lengths != len(header))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}: {lengths[bad[0]] if len(bad) else 0} "
-                          f"fields, the header has {len(header)}")
-    return header, np.array(rows, dtype=object)
-
-
-def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value", limit: float = math.inf) -> np.ndarray:
-    """One column of text cells (R,) as finite floats of magnitude at most `limit`; the first bad
-    cell is refused with its row."""
-    try:
-        values = cells.astype(float)
-    except ValueError:
-        for r, text in enumerate(cells):
-            try:
-                float(text)
-            except ValueError:
-                raise ModelError(f"{at(where, r + 2, col)}: {excerpt(text)} is not a number; {fix}") from None
-    bad = np.nonzero(~np.isfinite(values))[0]
-    require(not len(bad), f"{at(where, bad[0] + 2 if len(bad) else 0, col)}: "
-                          f"{excerpt(cells[bad[0]]) if len(bad) else ''} is not finite; fix or remove the row")
-    big = np.nonzero(np.abs(values) > limit)[0]
-    require(not len(big), f"{at(where, big[0] + 2 if len(big) else 0, col)}: {excerpt(cells[big[0]]) if len(big) else ''} "
-                          f"is beyond +-{limit:g}, more than any real reading there; {fix}")
-    return values
-
-
-def pose_id_column(cells: np.ndarray, col: str, where: str) -> np.ndarray:
+def pose_id_column(table: Table, col: str) -> np.ndarray:
     """A column of integer pose ids (R,); beyond 2**53 distinct ids would merge silently."""
-    ids = numbers(cells, col, where)
+    ids = table.numbers(col)
     bad = np.nonzero((ids != np.round(ids)) | (np.abs(ids) >= MAX_POSE_ID))[0]
-    require(not len(bad), f"{at(where, bad[0] + 2 if len(bad) else 0, col)}: not an integer pose id within +-2**53 "
-                          f"({excerpt(cells[bad[0]]) if len(bad) else ''}); number the poses 0, 1, 2, ...")
+    require(not len(bad), f"{at(table.where, bad[0] + 2 if len(bad) else 0, col)}: not an integer pose id within "
+                          f"+-2**53 ({excerpt(table.cells(col)[bad[0]]) if len(bad) else ''}); number the poses 0, 1, 2, ...")
     return ids.astype(np.int64)
 
 
@@ -169,7 +99,8 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     where = str(path)
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     required = ["pose", *qcols, "target", "x", "y", "z"]
-    header, table = read_table(path, "measurement file", ", ".join(required))
+    table = read_table(path, "measurement file", ", ".join(required), text=("target",))
+    header = table.header
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
     extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
@@ -178,29 +109,30 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     wcols = [c for c in WRENCH if c in header]
     # station names the tracker frame of a row, not a signal the robot's errors may depend on
     aux_names = tuple(h for h in header if h not in required and h not in WRENCH and h != STATION)
-    idx = {h: k for k, h in enumerate(header)}
 
     def column(col: str) -> np.ndarray:
         if col in required:
-            return numbers(table[:, idx[col]], col, where)
+            return table.numbers(col)
         if col in WRENCH:
-            return numbers(table[:, idx[col]], col, where, limit=MAX_WRENCH)
-        return numbers(table[:, idx[col]], col, where, "fix it or remove the column (auxiliary columns must be "
-                                                       "numeric)", MAX_AUX)
+            return table.numbers(col, limit=MAX_WRENCH)
+        return table.numbers(col, "fix it or remove the column (auxiliary columns must be numeric)", MAX_AUX)
 
-    ids = pose_id_column(table[:, idx["pose"]], "pose", where)
+    ids = pose_id_column(table, "pose")
     targets = list(robot.targets)
     tindex = {t: k for k, t in enumerate(targets)}
-    names = [str(t).strip() for t in table[:, idx["target"]]]
-    unknown = [r for r, t in enumerate(names) if t not in tindex]
-    require(not unknown, f"{at(where, unknown[0] + 2 if unknown else 0, 'target')}: unknown target "
-                         f"{excerpt(names[unknown[0]]) if unknown else ''}; robot {robot.name} has {', '.join(targets)}")
-    target = np.array([tindex[t] for t in names])
+    names = table.cells("target")
+    target = np.fromiter((tindex.get(t.strip(), -1) for t in names), np.int64, len(names))
+    unknown = np.nonzero(target < 0)[0]
+    require(not len(unknown), f"{at(where, unknown[0] + 2 if len(unknown) else 0, 'target')}: unknown target "
+                              f"{excerpt(names[unknown[0]].strip()) if len(unknown) else ''}; robot {robot.name} has "
+                              f"{', '.join(targets)}")
     key = ids * len(targets) + target
     _, first = np.unique(key, return_index=True)
-    dup = np.setdiff1d(np.arange(len(table)), first)
+    dup = np.ones(len(table), bool)
+    dup[first] = False
+    dup = np.nonzero(dup)[0]
     require(not len(dup), f"{where}: row {dup[0] + 2 if len(dup) else 0}: pose {ids[dup[0]] if len(dup) else 0} "
-                          f"measures target '{names[dup[0]] if len(dup) else ''}' twice; keep one row")
+                          f"measures target '{names[dup[0]].strip() if len(dup) else ''}' twice; keep one row")
     state_cols = [*qcols, *wcols, *aux_names]
     state = np.column_stack([column(c) for c in state_cols])
     xyz = np.column_stack([column(c) for c in ("x", "y", "z")])
@@ -223,10 +155,10 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
                          f"{first[pose[r]] + 2}; rows of one pose must share joints, wrench and aux")
     station = np.zeros(len(xyz), np.int64)
     if STATION in header:
-        station = numbers(table[:, idx[STATION]], STATION, where, "give the integer id of the tracker stationing")
+        station = table.numbers(STATION, "give the integer id of the tracker stationing")
         bad = np.nonzero(station != np.round(station))[0]
         require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{STATION}': "
-                              f"{table[bad[0], idx[STATION]] if len(bad) else ''!r} is not an integer station id; "
+                              f"{table.cells(STATION)[bad[0]] if len(bad) else ''!r} is not an integer station id; "
                               f"give every row of one tracker stationing the same integer")
         station = station.astype(np.int64)
     ps = state[first]
@@ -281,22 +213,21 @@ def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = (
     """A CSV of nominal joint commands q1..qn, optional wrench and the aux columns the model uses."""
     where = str(path)
     qcols = [f"q{i + 1}" for i in range(robot.n)]
-    header, table = read_table(path, "file of joint commands", ", ".join(qcols))
+    # the output repeats every cell as the file has it: the csv module reads them all
+    table = read_table(path, "file of joint commands", ", ".join(qcols), verbatim=True)
+    header = table.header
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
     for col in aux_names:
         require(col in header, f"{where}: row 1: missing column {excerpt(col)}, an auxiliary signal the error model uses; "
                                f"add it" + (" (gecgen gravity writes tau_<joint> columns)" if col.startswith("tau_") else ""))
 
-    def column(col: str, limit: float = math.inf) -> np.ndarray:
-        return numbers(table[:, header.index(col)], col, where, limit=limit)
-
     w = np.zeros((len(table), 6))
     for j, c in enumerate(WRENCH):
         if c in header:
-            w[:, j] = column(c, MAX_WRENCH)
-    aux = np.column_stack([column(a, MAX_AUX) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
-    return Commands(np.column_stack([column(c) for c in qcols]), w, aux, aux_names, header, table.tolist(), where)
+            w[:, j] = table.numbers(c, limit=MAX_WRENCH)
+    aux = np.column_stack([table.numbers(a, limit=MAX_AUX) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
+    return Commands(np.column_stack([table.numbers(c) for c in qcols]), w, aux, aux_names, header, table.rows(), where)
 
 
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):

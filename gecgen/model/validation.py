@@ -1,6 +1,7 @@
 """The one error type for bad user input, the checks that raise it, and the guarded readers."""
 from __future__ import annotations
 
+import codecs
 import reprlib
 from pathlib import Path
 
@@ -45,18 +46,25 @@ def require_keys(spec: dict, where: str, required: set = frozenset(), optional: 
                          f"allowed keys are {sorted(required | optional)}")
 
 
-def read_text(path: Path, what: str) -> str:
-    """The text of a file that must be UTF-8 (a leading byte-order mark, as spreadsheets write it,
-    is dropped); `what` names it in messages ("robot file")."""
+def read_utf8(path: Path, what: str) -> bytes:
+    """The bytes of a file that must be UTF-8, a leading byte-order mark (as spreadsheets write it)
+    dropped; `what` names it in messages ("robot file")."""
     path = Path(path)
     require(path.is_file(), f"{path}: no such {what}")
     data = path.read_bytes()
     try:
-        return data.decode("utf-8-sig")
+        if not data.isascii():  # ASCII, the usual case, is UTF-8 and is checked far faster
+            data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         raise ModelError(f"{path}: line {line}: byte 0x{data[exc.start]:02x} is not UTF-8; "
                          f"save the {what} as UTF-8") from None
+    return data[len(codecs.BOM_UTF8):] if data.startswith(codecs.BOM_UTF8) else data
+
+
+def read_text(path: Path, what: str) -> str:
+    """The text of a file that must be UTF-8 (see `read_utf8`)."""
+    return read_utf8(path, what).decode()
 
 
 class _Loader(yaml.SafeLoader):

@@ -27,9 +27,9 @@ import math
 import numpy as np
 
 from gecgen.model.errors import is_aux_name
-from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Measurements, at, numbers, pose_id_column,
-                                        read_table)
+from gecgen.model.measurements import MAX_AUX, MAX_WRENCH, Measurements, pose_id_column
 from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, read_yaml, require, require_keys
 
 #: columns of the contract's measurement file, which an aux column must not shadow
@@ -117,16 +117,22 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     return mapping
 
 
-def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path) -> Measurements:
+def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path, sep: str = ",",
+                decimal: str = ".") -> Measurements:
     """Read a wide table (CSV, one row per pose) into Measurements.
 
-    `mapping` is a ColumnMap or the path of its YAML. Returns P poses (q (P, n), w (P, 6), aux
+    `mapping` is a ColumnMap or the path of its YAML. `sep` separates the table's columns and
+    `decimal` marks the decimals of its numbers ("," reads 1,234 as 1.234, as European exports
+    write; a point beside it is refused). Returns P poses (q (P, n), w (P, 6), aux
     (P, len(mapping.aux))) and P * T measured points, pose by pose, targets in mapping order.
     """
     if not isinstance(mapping, ColumnMap):
         mapping = load_mapping(mapping, robot)
     where = str(path)
-    header, table = read_table(path, "file", "the column names of the mapping " + str(mapping.source))
+    # ignored columns may hold anything: read them as text
+    table = read_table(path, "file", "the column names of the mapping " + str(mapping.source), text=mapping.ignore,
+                       sep=sep, decimal=decimal)
+    header = table.header
     for col in mapping.columns():
         require(col in header, f"{where}: row 1: no column {excerpt(col)} (named in {mapping.source}); "
                                f"fix the mapping or the table")
@@ -135,7 +141,7 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path)
                         f"{mapping.source}; map it, keep it under aux or list it under ignore")
 
     def column(col: str, limit: float = math.inf) -> np.ndarray:
-        return numbers(table[:, header.index(col)], col, where, limit=limit)
+        return table.numbers(col, limit=limit)
 
     P = len(table)
     q = np.column_stack([column(c) for c in mapping.joints])
@@ -146,7 +152,7 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path)
     if mapping.pose == "row":
         ids = np.arange(P)
     else:
-        ids = pose_id_column(table[:, header.index(mapping.pose)], mapping.pose, where)
+        ids = pose_id_column(table, mapping.pose)
         _, first = np.unique(ids, return_index=True)
         again = np.setdiff1d(np.arange(P), first)
         require(not len(again), f"{at(where, again[0] + 2 if len(again) else 0, mapping.pose)}: "
