@@ -29,15 +29,47 @@ def progress_status(enabled: bool):
     return Console(stderr=True).status("working")
 
 
+def add_orientation_length(p, default: str = "0.1"):
+    """The option that weighs measured orientations against positions (README "Pose measurements")."""
+    p.add_argument("--orientation-length", type=float, metavar="L",
+                   help=f"for data with orientation columns: an orientation error of 1 mrad counts as L * 1 mrad of "
+                        f"position error (m; default {default}); set L = position noise / orientation noise")
+
+
+def on_points(robot, length_m: float | None, *datasets):
+    """The robot and data a fit works on: when any data set measures orientations, the robot with
+    the virtual targets of pose measurements (length scale L, default `pose_targets.LENGTH_M`) and
+    every data set's oriented rows as their vertex points; otherwise all as given."""
+    from gecgen.model.pose_targets import LENGTH_M, as_points, with_pose_targets
+
+    if all(d is None or d.orientation is None for d in datasets):
+        return (robot, *datasets)
+    derived = with_pose_targets(robot, LENGTH_M if length_m is None else length_m)
+    return (derived, *(None if d is None else as_points(derived, d) for d in datasets))
+
+
+def measured_counts(robot, data) -> dict:
+    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point), and
+    n_orientations, the rows that measure a frame, when there are any."""
+    from gecgen.model.pose_targets import measured_rows
+
+    rows = measured_rows(robot, data)
+    oriented = int(rows.oriented.sum())
+    return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {})}
+
+
 def identify_inputs(args):
-    """(robot with its targets placed, error model, data, compiled model, placement or None)."""
+    """(robot with its targets placed, error model, data, compiled model, placement or None). When
+    the data measures orientations, the data is its vertex points and the compiled model that of
+    the derived robot (`on_points`); the robot stays the file's, placed."""
     from gecgen.model.measurements import read_measurements
 
     robot = load_robot(args.robot)
     data = read_measurements(args.data, robot)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
     robot, placement = placed(robot, data)
-    return robot, model, data, checked(model, robot, data), placement
+    fitted, data = on_points(robot, args.orientation_length, data)
+    return robot, model, data, checked(model, fitted, data), placement
 
 
 def checked(model, robot, *datas):

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import checked, placed, progress_status, robot_and_model
+from gecgen.cli.common import add_orientation_length, checked, on_points, placed, progress_status, robot_and_model
 from gecgen.model import ModelError, load_robot
 
 
@@ -30,6 +30,7 @@ def add_parser(command):
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
     p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "
                                                    "remains is only noise (default: from repeated poses, if any)")
+    add_orientation_length(p)
 
 
 def run(args) -> dict:
@@ -47,13 +48,14 @@ def run(args) -> dict:
         data, val = hold_out(data, args.holdout, args.seed)
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
     robot, placement = placed(robot, data)
-    checked(model, robot, data, val)
+    fitted, data, val = on_points(robot, args.orientation_length, data, val)
+    checked(model, fitted, data, val)
     with progress_status(not args.json) as status:
         def progress(round_no, rms_mm):
             if status:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
-        diag = diagnose(robot, model, data, val, registration_mode="auto" if register_val else args.register,
+        diag = diagnose(fitted, model, data, val, registration_mode="auto" if register_val else args.register,
                         progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds, seed=args.seed,
                         register_val=register_val)
     out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")

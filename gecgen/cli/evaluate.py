@@ -1,7 +1,7 @@
 """`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import checked, extrapolation
+from gecgen.cli.common import add_orientation_length, checked, extrapolation, measured_counts, on_points
 
 
 def add_parser(command):
@@ -12,18 +12,21 @@ def add_parser(command):
     p.add_argument("--register", action="store_true",
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
+    add_orientation_length(p, "the calibration's, else 0.1")
 
 
 def run(args) -> dict:
     from gecgen.model.measurements import read_measurements
     from gecgen.runtime import calibration
-    from gecgen.runtime.identify import fit_frames, position_errors, summary, to_world
+    from gecgen.runtime.identify import fit_frames, row_errors, summary, to_world
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
-    cm = checked(calib.model, calib.robot, data)
+    length = args.orientation_length if args.orientation_length is not None else calib.report.get("orientation_length_m")
+    robot, data = on_points(calib.robot, length, data)
+    cm = checked(calib.model, robot, data)
     outside = extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))
-    result = {"robot": calib.robot.name, "data": str(args.data), "n_poses": data.n_poses, "n_points": len(data.xyz),
+    result = {"robot": calib.robot.name, "data": str(args.data), **measured_counts(robot, data),
               "registered": args.register}
     if args.register:
         # a new stationing: each side is scored in the frame that fits it best, so that before and
@@ -40,5 +43,5 @@ def run(args) -> dict:
     else:
         y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: use evaluate --register")
         result.update(before_registration="the calibration's", tracker_frame="the calibration's")
-    return {**result, "before": summary(position_errors(cm, data, y_before, None)),
-            "after": summary(position_errors(cm, data, y, calib.c)), "extrapolation": outside}
+    return {**result, "before": summary(*row_errors(cm, data, y_before, None)[:2]),
+            "after": summary(*row_errors(cm, data, y, calib.c)[:2]), "extrapolation": outside}

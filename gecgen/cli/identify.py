@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import fit_options, identify_inputs, progress_status
+from gecgen.cli.common import add_orientation_length, fit_options, identify_inputs, measured_counts, progress_status
 
 
 def add_parser(command):
@@ -24,6 +24,7 @@ def add_parser(command):
                    help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
                         "on DATA); default: exact dependencies only (1e-7)")
+    add_orientation_length(p)
 
 
 def run(args) -> dict:
@@ -42,9 +43,11 @@ def run(args) -> dict:
         raise RuntimeError(f"the fit is not trustworthy, no calibration written: {fit.failures[0]}")
     calib = calibration.from_fit(robot, model, fit)
     calib.report.update({**options, "cv": cv_table, "placement": placement.to_dict() if placement else None})
+    if cm.robot.vertex_of:
+        calib.report["orientation_length_m"] = cm.robot.pose_length
     out = Path(args.output or f"{robot.name}.calib.json")
     calibration.save(calib, out)
-    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "n_poses": data.n_poses,
-              "n_points": len(data.xyz), **calib.report, "registration": fit.registration.to_dict(),
+    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), **measured_counts(cm.robot, data),
+              **calib.report, "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
     return result

@@ -1,7 +1,7 @@
 """`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
 from __future__ import annotations
 
-from gecgen.cli.common import checked, placed, robot_and_model
+from gecgen.cli.common import add_orientation_length, checked, on_points, placed, robot_and_model
 from gecgen.model import load_robot
 
 
@@ -11,6 +11,7 @@ def add_parser(command):
     p.add_argument("robot")
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
+    add_orientation_length(p)
 
 
 def run(args) -> dict:
@@ -24,5 +25,6 @@ def run(args) -> dict:
     robot, model = robot_and_model(args.robot, args.errors, data.aux_names if data else ())
     if data:
         robot = placed(robot, data)[0]
+        robot, data = on_points(robot, args.orientation_length, data)
     result = redundancy(checked(model, robot, data), data).to_dict()
     return {"robot": robot.name, "data": args.data, **result}

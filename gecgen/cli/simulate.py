@@ -26,6 +26,9 @@ def add_parser(command):
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="with --design paper: the validation half of set a")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
+    p.add_argument("--orientation", action="store_true",
+                   help="also write each row's measured orientation (quat_w..quat_z, README \"Pose measurements\"), "
+                        "with the truth file's noise.orientation (rad per axis, default 0)")
 
 
 def run(args) -> dict:
@@ -42,7 +45,7 @@ def run(args) -> dict:
         design = one_at_a_time(robot, {j + 1: args.step for j in range(robot.n)}, payloads)
     else:
         design = random_design(robot, args.poses, rng, payloads)
-    data = simulate(robot, truth, design, rng)
+    data = simulate(robot, truth, design, rng, args.orientation)
     files = {"data": args.output}
     if args.design == "paper":
         train, val = paper_split(design, rng)

@@ -36,9 +36,10 @@ from gecgen.loop.dictionary import candidates, refine_period
 from gecgen.loop.screening import MIN_CV_GAIN, Hit, cv_rms, folds, passing, screen, selection_cv_rms
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
+from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, fit_frames, identify, position_errors, rows_H_and_residual, summary, to_world
+from gecgen.runtime.identify import Fit, fit_frames, identify, row_errors, rows_H_and_residual, summary, to_world
 
 #: rounds at most: a safety net, not the stopping rule (that is the statistics)
 MAX_ROUNDS = 50
@@ -102,9 +103,11 @@ def _linear_system(rnd: Round, data: Measurements, y: np.ndarray):
     return np.vstack(H)[:, list(rnd.fit.redundancy.kept)], np.concatenate(r)
 
 
-def _rows_pose(data: Measurements) -> np.ndarray:
-    order = np.argsort(data.pose, kind="stable")  # the row order rows_H_and_residual yields
-    return np.repeat(data.pose[order], 3), order
+def _rows_pose(robot: Robot, data: Measurements) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of the linear system: its pose (3R,) and degrees of freedom (3R,; 1, or 1/2 for a
+    coordinate of a measured frame's vertex); and the point order rows_H_and_residual yields."""
+    order = np.argsort(data.pose, kind="stable")
+    return np.repeat(data.pose[order], 3), np.repeat(measured_rows(robot, data).dof[order] / 3, 3), order
 
 
 @dataclass
@@ -121,14 +124,14 @@ class Diagnosis:
     remaining: dict
 
 
-def _choose(found: list[Hit], cands, J, H, r, rows_pose, fold, n_tests: int, base_cv: float):
+def _choose(found: list[Hit], cands, J, H, r, rows_pose, fold, n_tests: int, base_cv: float, rows_dof):
     """The first candidate, most significant first, that passes the corrected chi-square test,
     lowers the cross-validated RMS, and whose choice cross-validates (`selection_cv_rms`): when a
     choice fails that check the next one is tried, with the failed one out of the folds' shortlist.
     Returns (hit, p, selection cv) or None."""
     shortlist = [(h.candidate, h.error) for h in found[:SHORTLIST]]
-    for hit, p, _ in passing(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv)[:SELECTION_TRIES]:
-        cv = selection_cv_rms(J, H, r, rows_pose, fold, cands, shortlist)
+    for hit, p, _ in passing(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv, rows_dof)[:SELECTION_TRIES]:
+        cv = selection_cv_rms(J, H, r, rows_pose, fold, cands, shortlist, rows_dof)
         if cv < (1 - MIN_CV_GAIN) * base_cv:
             return hit, p, cv  # the gain reported is that of the choice, not of the winner
         shortlist.remove((hit.candidate, hit.error))
@@ -144,7 +147,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     stops when nothing passes the statistics, or after `max_rounds`. `register_val`: `val` was
     measured from another tracker stationing; each scored model fits its frame on it first."""
     rng = np.random.default_rng(seed)
-    noise = noise_floor(data, noise_mm)
+    noise = noise_floor(data, noise_mm, robot)
     if val is None:
         held = rng.permutation(data.n_poses)
         n_val = max(1, data.n_poses // 5)
@@ -160,9 +163,9 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             progress(round_no, rnd.fit.train["rms_mm"])
         y = rnd.fit.to_world(data)
         H, r = _linear_system(rnd, data, y)
-        rows_pose, order = _rows_pose(data)
+        rows_pose, rows_dof, order = _rows_pose(robot, data)
         Q = np.linalg.qr(H / np.linalg.norm(H, axis=0))[0]
-        m, k = len(r), H.shape[1]
+        m, k = rows_dof.sum(), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
         cands = candidates(rnd.cm, data, rng)
         eps = rnd.cm.eps(data.q, data.w, data.aux_columns(rnd.model.aux), rnd.fit.c)
@@ -170,7 +173,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
         J *= np.repeat(np.sqrt(rnd.fit.weights[order]), 3)[:, None]  # weighted as H and r are
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
-        base_cv = cv_rms(H, r, rows_pose, fold)
+        base_cv = cv_rms(H, r, rows_pose, fold, rows_dof)
         present = [{t.text for t in ts} for ts in rnd.model.terms]
         chosen, results = None, []
         # a missing constant error first (few candidates, so a mild multiplicity correction), then the rest
@@ -183,7 +186,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             results += found
             n_tests = max(1, sum(len(errors) if cands[k].errors is None else len(cands[k].errors) for k in indices))
             tested += n_tests
-            chosen = _choose(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv)
+            chosen = _choose(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv, rows_dof)
             if chosen:
                 break
         results.sort(key=lambda h: h.log_p)
@@ -232,10 +235,12 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining)
 
 
-def noise_floor(data: Measurements, noise_mm: float | None = None) -> dict | None:
+def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot | None = None) -> dict | None:
     """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
     given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
-    wrench and aux, measuring the same target), else None (unknown)."""
+    wrench and aux, measuring the same target), else None (unknown). With the robot the data is
+    fitted on, a measured frame's vertices count with their weight and degrees of freedom
+    (`model.pose_targets`), so the noise is per degree of freedom as the fit's sigma is."""
     if noise_mm is not None:
         return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
     state = np.column_stack([data.q, data.w, data.aux])
@@ -245,12 +250,16 @@ def noise_floor(data: Measurements, noise_mm: float | None = None) -> dict | Non
     repeated = size[point_group] > 1
     if not repeated.any():
         return None
+    rows = measured_rows(robot, data) if robot is not None else None
+    weight, point_dof = (rows.weight, rows.dof) if rows is not None else (np.ones(len(key)), np.full(len(key), 3.0))
     mean = np.zeros((len(size), 3))
     np.add.at(mean, point_group, data.xyz)
     mean /= size[:, None]
     dev = data.xyz[repeated] - mean[point_group[repeated]]
-    dof = 3 * int(np.sum(size[size > 1] - 1))
-    return {"noise_mm": 1e3 * float(np.sqrt(np.sum(dev ** 2) / dof)), "source": "repeated poses", "dof": dof}
+    # each repeated point leaves its degrees of freedom times (size - 1) / size of them
+    dof = float(np.sum(point_dof[repeated] * (1 - 1 / size[point_group[repeated]])))
+    sq = float(np.sum(weight[repeated] * np.einsum("ni,ni->n", dev, dev)))
+    return {"noise_mm": 1e3 * float(np.sqrt(sq / dof)), "source": "repeated poses", "dof": dof}
 
 
 #: the residual is consistent with the noise when an F test of their variances passes at this level
@@ -266,18 +275,23 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
     False when it fails it, None when the noise is unknown (no repeated poses, no --noise-mm):
     then nobody can say that the model covers the data, only that nothing in the dictionary
     explains what remains."""
-    fit = rnd.fit
-    e = position_errors(rnd.cm, data, fit.to_world(data), fit.c)
+    fit, robot = rnd.fit, rnd.cm.robot
+    rows = measured_rows(robot, data)
+    pos, rot, length = row_errors(rnd.cm, data, fit.to_world(data), fit.c, rows)
+    e = length * np.sqrt(3 / rows.row_dof)  # as the robust fit scales it
     inliers = np.nonzero(e <= fit.outlier_limit_m)[0]  # outliers are counted, not ranked with the rest
     top = inliers[np.argsort(-e[inliers])[:LARGEST]]
+    names = robot.target_names
     out = {"train_rms_mm": fit.train_inliers["rms_mm"], "cv_rms_mm": cv_rms_mm, "sigma_mm": 1e3 * fit.sigma_m,
            "noise": noise, "covered": None, "outliers": len(fit.outliers),
            "largest": [{"row": int(data.file_rows[r]), "pose": int(data.pose_ids[data.pose[r]]),
-                        "target": rnd.cm.robot.target_names[data.target[r]], "residual_mm": 1e3 * float(e[r])}
-                       for r in top]}
+                        "target": robot.vertex_of.get(names[data.target[r]], (names[data.target[r]],))[0],
+                        "residual_mm": 1e3 * float(pos[g]),
+                        **({} if np.isnan(rot[g]) else {"rotation_mrad": 1e3 * float(rot[g])})}
+                       for g, r in zip(top, rows.first[top])]}
     if noise is not None and noise["noise_mm"] > 0:
         ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
-        dof_fit = max(3 * float(fit.weights.sum()) - fit.redundancy.n_identifiable, 1)
+        dof_fit = max(fit.measured_dof - fit.redundancy.n_identifiable, 1)
         p = float(stats.chi2.sf(ratio * dof_fit, dof_fit) if noise["dof"] is None
                   else stats.f.sf(ratio, dof_fit, noise["dof"]))
         out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))
@@ -312,12 +326,18 @@ def _effect_coefficients(robot: Robot, rnd: Round, error: int, n_new: int) -> li
 
 
 def _scores(rnd: Round, val: Measurements, register: bool) -> dict:
-    """Training RMS and validation RMS and max (mm); `register`: in val's own fitted frame."""
+    """Training RMS and validation RMS and max (mm), and with measured orientations the same in
+    mrad (`train_rot_rms_mrad`, `val_rot_rms_mrad`, `val_rot_max_mrad`); `register`: in val's own
+    fitted frame."""
     frames = fit_frames(rnd.cm, val, rnd.fit.c) if register else rnd.fit.registrations
     yv = to_world(frames, val, "use diagnose --register")
-    ev = position_errors(rnd.cm, val, yv, rnd.fit.c)
-    s = summary(ev)
-    return {"train_rms_mm": rnd.fit.train["rms_mm"], "val_rms_mm": s["rms_mm"], "val_max_mm": s["max_mm"]}
+    s = summary(*row_errors(rnd.cm, val, yv, rnd.fit.c)[:2])
+    out = {"train_rms_mm": rnd.fit.train["rms_mm"], "val_rms_mm": s["rms_mm"], "val_max_mm": s["max_mm"]}
+    if "rot_rms_mrad" in rnd.fit.train:
+        out["train_rot_rms_mrad"] = rnd.fit.train["rot_rms_mrad"]
+    if "rot_rms_mrad" in s:
+        out.update(val_rot_rms_mrad=s["rot_rms_mrad"], val_rot_max_mrad=s["rot_max_mrad"])
+    return out
 
 
 def write_error_model(robot: Robot, model: ErrorModel, effects: list[Effect], path: str | Path):

@@ -14,7 +14,8 @@ from gecgen.files import write_atomically  # noqa: E402
 from gecgen.loop.diagnose import Diagnosis, Round, verdict  # noqa: E402
 from gecgen.model.measurements import Measurements  # noqa: E402
 from gecgen.model.robot import WRENCH  # noqa: E402
-from gecgen.runtime.identify import position_errors  # noqa: E402
+from gecgen.model.pose_targets import measured_rows  # noqa: E402
+from gecgen.runtime.identify import row_errors  # noqa: E402
 
 
 def _variable(data: Measurements, name: str) -> np.ndarray:
@@ -28,9 +29,11 @@ def _variable(data: Measurements, name: str) -> np.ndarray:
 
 
 def _errors_by_pose(rnd: Round, data: Measurements) -> np.ndarray:
-    """RMS point error (mm) per pose."""
-    e = position_errors(rnd.cm, data, rnd.fit.to_world(data), rnd.fit.c)
-    sq = np.bincount(data.pose, e ** 2, minlength=data.n_poses) / np.maximum(np.bincount(data.pose, minlength=data.n_poses), 1)
+    """RMS position error (mm) of the measured points per pose."""
+    rows = measured_rows(rnd.cm.robot, data)
+    e = row_errors(rnd.cm, data, rnd.fit.to_world(data), rnd.fit.c, rows)[0]
+    pose = data.pose[rows.first]
+    sq = np.bincount(pose, e ** 2, minlength=data.n_poses) / np.maximum(np.bincount(pose, minlength=data.n_poses), 1)
     return 1e3 * np.sqrt(sq)
 
 
@@ -60,6 +63,9 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
              "| | training RMS (mm) | held-out RMS (mm) | held-out max (mm) |", "|---|---|---|---|",
              f"| declared model | {b['train_rms_mm']:.4f} | {b['val_rms_mm']:.4f} | {b['val_max_mm']:.4f} |",
              f"| after diagnose | {a['train_rms_mm']:.4f} | {a['val_rms_mm']:.4f} | {a['val_max_mm']:.4f} |", "",
+             *([f"Orientation (mrad): held-out RMS {b['val_rot_rms_mrad']:.4f} declared, {a['val_rot_rms_mrad']:.4f} "
+                f"after diagnose; max {b['val_rot_max_mrad']:.4f} and {a['val_rot_max_mrad']:.4f}.", ""]
+               if "val_rot_rms_mrad" in a else []),
              f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS "
              "on the training data.", ""]
@@ -67,7 +73,7 @@ def write_report(diag: Diagnosis, data: Measurements, outdir: str | Path, errors
         lines += ["diagnose added nothing to the declared model.", ""]
     lines += [verdict(diag.remaining), ""]
     if diag.remaining["outliers"]:
-        lines += [f"{diag.remaining['outliers']} training points were outliers of the robust fit (down-weighted, "
+        lines += [f"{diag.remaining['outliers']} training rows were outliers of the robust fit (down-weighted, "
                   f"listed by `gecgen identify`); they neither chose nor hid an effect.", ""]
     variables = []
     for k, eff in enumerate(diag.effects, 1):

@@ -2,7 +2,9 @@
 chance among everything tried, and whether it predicts poses it was not fitted on.
 
 The linear system is the current fit's, linearised: H (3R, k) over the kept coefficients and the
-residual r (3R,), rows scaled by the robust fit's point weights. A candidate group of terms f for
+residual r (3R,), rows scaled by the robust fit's point weights. rows_dof (3R,), where given, is
+the degrees of freedom each row carries: 1, or 1/2 for a coordinate of a measured frame's vertex
+(`model.pose_targets`), whose twelve coordinates hold six; None means 1 everywhere. A candidate group of terms f for
 generalized error e adds the columns J_e[:, e] * f(pose). Its worth is the drop in the residual sum
 of squares once the current model's columns are projected out; its significance is that drop
 against the residual variance as a chi-square with as many degrees of freedom as it has columns,
@@ -106,10 +108,17 @@ def _held_out_sq(X: np.ndarray, r: np.ndarray, test: np.ndarray) -> float:
     return float(np.sum((r[test] - X[test] @ dc) ** 2))
 
 
-def cv_rms(H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray) -> float:
-    """k-fold cross-validated RMS point error (m) of a linear correction H dc ~ r (3R rows)."""
+def _dof(rows_dof: np.ndarray | None, r: np.ndarray, rows=slice(None)) -> float:
+    """Degrees of freedom of the rows `rows` of r."""
+    return float(len(r[rows]) if rows_dof is None else rows_dof[rows].sum())
+
+
+def cv_rms(H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
+           rows_dof: np.ndarray | None = None) -> float:
+    """k-fold cross-validated RMS point error (m) of a linear correction H dc ~ r (3R rows), per
+    three degrees of freedom."""
     sq = sum(_held_out_sq(H, r, fold[rows_pose] == f) for f in range(FOLDS))
-    return float(np.sqrt(sq / (len(r) / 3)))
+    return float(np.sqrt(sq / (_dof(rows_dof, r) / 3)))
 
 
 def columns(J: np.ndarray, cand: Candidate, error: int, rows_pose: np.ndarray) -> np.ndarray:
@@ -118,7 +127,8 @@ def columns(J: np.ndarray, cand: Candidate, error: int, rows_pose: np.ndarray) -
 
 
 def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
-                     cands: list[Candidate], shortlist: list[tuple[int, int]]) -> float:
+                     cands: list[Candidate], shortlist: list[tuple[int, int]],
+                     rows_dof: np.ndarray | None = None) -> float:
     """k-fold cross-validated RMS point error (m) of the choice itself: in each fold the screening
     runs on the training part alone, its most significant candidate is added, and the held-out
     poses are predicted. The best of thousands of candidates always fits the poses it was picked on
@@ -134,16 +144,17 @@ def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.
         Ht, rt = H[~test], r[~test]
         Q = np.linalg.qr(Ht / np.maximum(np.linalg.norm(Ht, axis=0), 1e-300))[0]
         resid = rt - Q @ (Q.T @ rt)
-        sigma2 = float(resid @ resid) / max(len(rt) - H.shape[1], 1)
+        sigma2 = float(resid @ resid) / max(_dof(rows_dof, r, ~test) - H.shape[1], 1)
         hits = [(h.log_p, cis[h.candidate], e) for e, cis in by_error.items()
                 for h in screen(J[~test], rows_pose[~test], resid, Q, sigma2, [cands[k] for k in cis], [e])]
         best = min(hits, default=None)
         X = H if best is None else np.column_stack([H, columns(J, cands[best[1]], best[2], rows_pose)])
         sq += _held_out_sq(X, r, test)
-    return float(np.sqrt(sq / (len(r) / 3)))
+    return float(np.sqrt(sq / (_dof(rows_dof, r) / 3)))
 
 
-def passing(found: list[Hit], cands: list[Candidate], J, H, r, rows_pose, fold, n_tests: int, base_cv: float):
+def passing(found: list[Hit], cands: list[Candidate], J, H, r, rows_pose, fold, n_tests: int, base_cv: float,
+            rows_dof: np.ndarray | None = None):
     """The candidates, most significant first (at most TRIES), that pass the chi-square test with a
     Bonferroni correction for `n_tests` and lower the cross-validated RMS: [(hit, p, cv), ...]."""
     out = []
@@ -151,7 +162,8 @@ def passing(found: list[Hit], cands: list[Candidate], J, H, r, rows_pose, fold, 
         p = float(np.exp(hit.log_p))
         if hit.log_p + np.log(n_tests) > np.log(ALPHA):
             break  # sorted by significance: nothing further can pass either
-        cv = cv_rms(np.column_stack([H, columns(J, cands[hit.candidate], hit.error, rows_pose)]), r, rows_pose, fold)
+        cv = cv_rms(np.column_stack([H, columns(J, cands[hit.candidate], hit.error, rows_pose)]), r, rows_pose, fold,
+                    rows_dof)
         if cv < (1 - MIN_CV_GAIN) * base_cv:
             out.append((hit, p, cv))
     return out

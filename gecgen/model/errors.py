@@ -17,6 +17,7 @@ from pathlib import Path
 import sympy as sp
 
 from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
+from gecgen.model.orientation import PREFIXES as ORIENTATION_PREFIXES
 from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
 from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
 
@@ -269,8 +270,9 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
 
 
 def is_aux_name(name: str) -> bool:
-    """Auxiliary columns become C and Python identifiers next to the generated temporaries."""
-    return (name.isidentifier() and not name.startswith("_") and name not in RESERVED
+    """Auxiliary columns become C and Python identifiers next to the generated temporaries; the
+    prefixes of orientation columns are not theirs."""
+    return (name.isidentifier() and not name.startswith(("_", *ORIENTATION_PREFIXES)) and name not in RESERVED
             and not re.fullmatch(r"[tq]\d+", name))
 
 

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.files import write_atomically
+from gecgen.model.orientation import PREFIXES, QUATERNION, Convention, file_convention, quaternions, rotations
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.model.table import Table, at, read_table
+from gecgen.model.table import Table, at, numbers, read_table
 from gecgen.model.validation import ModelError, excerpt, require
 
 #: joint readings may exceed the limits by this much (m or rad) before a row is refused
@@ -49,7 +50,10 @@ class Measurements:
     robot.targets; xyz (R, 3) measured world positions in m; row (R,) the line of each point in
     its file (header = 1), None when the points were never read from a file (then they are
     numbered as `write_measurements` would write them); station (R,) the integer id of the tracker
-    stationing each point was measured from (zeros when the file has no `station` column).
+    stationing each point was measured from (zeros when the file has no `station` column);
+    orientation (R, 3, 3) the measured orientation of each row's target frame (parallel to the tool
+    frame) in the measuring frame, NaN for a row that measures the position only; None when no
+    row has one (README "Pose measurements").
     """
 
     q: np.ndarray
@@ -63,6 +67,7 @@ class Measurements:
     source: str = ""
     row: np.ndarray | None = None
     station: np.ndarray | None = None
+    orientation: np.ndarray | None = None
 
     def __post_init__(self):
         if self.station is None:  # one stationing: every point in the same tracker frame
@@ -85,7 +90,8 @@ class Measurements:
         remap[poses] = np.arange(len(poses))
         return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
                             remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
-                            self.file_rows[keep], self.station[keep])
+                            self.file_rows[keep], self.station[keep],
+                            None if self.orientation is None else self.orientation[keep])
 
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
@@ -107,8 +113,11 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     require(not extra_q, f"{where}: row 1: column {excerpt(extra_q[0]) if extra_q else ''} but robot {robot.name} has "
                          f"{robot.n} joints; remove it or use the right robot file")
     wcols = [c for c in WRENCH if c in header]
-    # station names the tracker frame of a row, not a signal the robot's errors may depend on
-    aux_names = tuple(h for h in header if h not in required and h not in WRENCH and h != STATION)
+    convention = file_convention(header, where)
+    # station names the tracker frame of a row and orientation columns its measured frame, not
+    # signals the robot's errors may depend on
+    aux_names = tuple(h for h in header if h not in required and h not in WRENCH and h != STATION
+                      and not h.startswith(PREFIXES))
 
     def column(col: str) -> np.ndarray:
         if col in required:
@@ -165,23 +174,61 @@ def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = L
     w = np.zeros((len(pose_ids), 6))
     for k, c in enumerate(wcols):
         w[:, WRENCH.index(c)] = ps[:, robot.n + k]
+    orientation = None if convention is None else _orientations(table, convention)
     return Measurements(q=ps[:, :robot.n], w=w, aux=ps[:, robot.n + len(wcols):], aux_names=aux_names,
                         pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where,
-                        row=np.arange(len(xyz)) + 2, station=station)
+                        row=np.arange(len(xyz)) + 2, station=station, orientation=orientation)
+
+
+def _orientations(table: Table, convention: Convention) -> np.ndarray | None:
+    """(R, 3, 3) measured orientations of a file's rows, NaN where a row leaves every orientation
+    cell empty (it measures the position only); None when no row has one. A row with some cells
+    empty, a cell that is not a finite number or values that are no rotation is refused."""
+    where, names = table.where, convention.columns()
+    fix = "fix the orientation, or leave all its columns empty for a position-only row"
+    span = f"columns {names[0]}..{names[-1]}"
+    try:  # the usual file: every row has its orientation, read as numbers by the fast reader
+        values = np.column_stack([table.numbers(c, fix) for c in names])
+    except ModelError:
+        values = None  # an empty cell (a position-only row) or a bad one: the cells below say which
+    if values is not None:
+        return rotations(values, convention, lambda r: f"{where}: row {r + 2}, {span}")
+    cells = np.column_stack([table.cells(c) for c in names])  # some cell is empty, or bad: find which
+    empty = np.char.strip(cells.astype(str)) == ""
+    partial = np.nonzero(empty.any(axis=1) & ~empty.all(axis=1))[0]
+    if len(partial):
+        r = partial[0]
+        raise ModelError(f"{at(where, r + 2, names[int(np.argmax(empty[r]))])}: empty, but the row gives other "
+                         f"orientation columns; give all of {', '.join(names)}, or none for a position-only row")
+    rows = np.nonzero(~empty[:, 0])[0]
+    if not len(rows):
+        return None
+    filled = np.where(empty, "0", cells)  # so that messages count rows as the file does
+    values = np.column_stack([numbers(filled[:, k], c, where, fix, decimal=table.decimal) for k, c in enumerate(names)])
+    R = np.full((len(table), 3, 3), np.nan)
+    R[rows] = rotations(values[rows], convention, lambda i: f"{where}: row {rows[i] + 2}, {span}")
+    return R
 
 
 def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrench: bool = True):
     """Write in the contract's layout; floats with full precision (repr); the station column only
-    when some point is not from station 0 (a file without it is station 0)."""
+    when some point is not from station 0 (a file without it is station 0); orientations, when
+    the data has any, as unit quaternions `quat_w..quat_z` (empty for position-only rows)."""
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     stations = bool(np.any(data.station != 0))
+    quat = [[]] * len(data.xyz)
+    if data.orientation is not None:
+        has = ~np.isnan(data.orientation[:, 0, 0])
+        quat = [[""] * 4] * len(data.xyz)
+        for r, qr in zip(np.nonzero(has)[0], quaternions(data.orientation[has])):
+            quat[r] = list(map(repr, qr.tolist()))
     header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, *([STATION] if stations else ()),
-              "target", "x", "y", "z"]
+              "target", "x", "y", "z", *(QUATERNION if data.orientation is not None else ())]
     targets = list(robot.targets)
     write_csv(path, header, ([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
                               *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
                               *([int(data.station[r])] if stations else ()),
-                              targets[data.target[r]], *map(repr, data.xyz[r].tolist())]
+                              targets[data.target[r]], *map(repr, data.xyz[r].tolist()), *quat[r]]
                              for r, k in enumerate(data.pose)))
 
 

@@ -89,6 +89,10 @@ class Robot:
     base_link: str = ""
     tip_link: str = ""  # with urdf: the link the tool hangs from
     gravity: tuple = tuple(sp.Rational(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
+    #: virtual targets standing for measured orientations (`model.pose_targets`): name -> (the
+    #: target whose frame they sample, vertex 0..3); none in a robot file
+    vertex_of: dict[str, tuple[str, int]] = field(default_factory=dict)
+    pose_length: float = 0.0  # m: 1 rad of orientation error counts as this much position error
 
     @property
     def joints(self) -> tuple[Joint, ...]:

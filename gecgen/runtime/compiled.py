@@ -80,8 +80,11 @@ def _emitter_hash() -> str:
 
 
 def model_key(robot: Robot, model: ErrorModel) -> str:
-    """Cache key of the generated code for a robot and error model (content, not file names)."""
-    spec = json.dumps([robot.source_hashes, model.to_yaml_dict(robot), CFLAGS, _emitter_hash()], sort_keys=True)
+    """Cache key of the generated code for a robot and error model (content, not file names). The
+    targets are content beyond the files: a derived robot (the virtual targets of pose
+    measurements) has the files of the robot it derives from."""
+    spec = json.dumps([robot.source_hashes, robot.targets, model.to_yaml_dict(robot), CFLAGS, _emitter_hash()],
+                      sort_keys=True)
     return hashlib.sha256(spec.encode()).hexdigest()[:24]
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
+from gecgen.model.pose_targets import Rows, measured_rows
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
 from gecgen.runtime import robust
@@ -46,29 +47,36 @@ OUTLIER_SHARE = 0.05
 
 @dataclass(frozen=True)
 class Outlier:
-    """A measured point the robust fit flagged: its file line (header = 1), pose id, target,
-    residual length (mm) and the weight it kept in the fit (1 = full)."""
+    """A measured row the robust fit flagged: its file line (header = 1), pose id, target,
+    position residual (mm), the weight it kept in the fit (1 = full) and, for a measured frame,
+    its orientation residual (mrad)."""
 
     row: int
     pose: int
     target: str
     residual_mm: float
     weight: float
+    rotation_mrad: float | None = None
 
     def to_dict(self) -> dict:
-        return {"row": self.row, "pose": self.pose, "target": self.target, "residual_mm": self.residual_mm,
-                "weight": self.weight}
+        out = {"row": self.row, "pose": self.pose, "target": self.target, "residual_mm": self.residual_mm,
+               "weight": self.weight}
+        return out if self.rotation_mrad is None else {**out, "rotation_mrad": self.rotation_mrad}
 
 
 @dataclass(frozen=True)
 class Fit:
     """Result of `identify`. c (nc,) all coefficients (eliminated ones 0); std (nc,) with NaN for
     eliminated; cov (k, k) over `redundancy.kept`; sigma_m the residual standard deviation per
-    coordinate (m), down-weighted points counted by their weight; metrics in mm over all points
-    (`train_inliers` without the outliers). weights (R,) the final weight of each point;
-    outlier_limit_m the residual length beyond which a point is an outlier (inf for l2); ranges
-    the span of each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with
-    `failures` must not be used: each says why."""
+    degree of freedom (m; a measured frame's orientation counted through the length scale, see
+    `model.pose_targets`), down-weighted rows counted by their weight; metrics in mm (and mrad)
+    over all measured rows (`train_inliers` without the outliers). weights (R,) the final weight
+    of each point in the least squares (a frame's vertices 1/4 of their row's); measured_dof the
+    degrees of freedom of the data, each row counted by its robust weight (3 per point, 6 per
+    frame); outlier_limit_m the residual length beyond which a point is an outlier (inf for l2;
+    a frame's limit is sqrt(2) times as long, for its six degrees of freedom); ranges the span of
+    each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with `failures`
+    must not be used: each says why."""
 
     c: np.ndarray
     std: np.ndarray
@@ -91,6 +99,7 @@ class Fit:
     train_inliers: dict | None = None
     ranges: dict | None = None
     registrations: dict[int, Registration] | None = None  # per station id; `registration` is the first's
+    measured_dof: float | None = None
 
     @property
     def trustworthy(self) -> bool:
@@ -165,8 +174,9 @@ RANK_TOL_GRID = (RANK_TOL, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3)
 
 
 def cross_validated_rms(cm: CompiledModel, data: Measurements, folds: int = 5, seed: int = 0, **options) -> float:
-    """k-fold cross-validated RMS point error (mm) of `identify(..., **options)`. Folds split
-    poses, never the targets of one pose, so a held-out pose is wholly unseen."""
+    """k-fold cross-validated RMS point error (mm) of `identify(..., **options)`: per three degrees
+    of freedom, so a measured frame counts as two points (its residual length, `row_errors`).
+    Folds split poses, never the targets of one pose, so a held-out pose is wholly unseen."""
     fold = np.random.default_rng(seed).permutation(data.n_poses) % folds
     sq, n = 0.0, 0
     for f in range(folds):
@@ -174,8 +184,9 @@ def cross_validated_rms(cm: CompiledModel, data: Measurements, folds: int = 5, s
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fit = identify(cm, train, **options)
-        e = position_errors(cm, test, fit.to_world(test), fit.c)
-        sq, n = sq + float(e @ e), n + len(e)
+        rows = measured_rows(cm.robot, test)
+        e = row_errors(cm, test, fit.to_world(test), fit.c, rows)[2]
+        sq, n = sq + float(e @ e), n + float(rows.row_dof.sum()) / 3
     return 1e3 * np.sqrt(sq / n)
 
 
@@ -200,9 +211,24 @@ def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.
     return np.linalg.norm(y - p[data.pose, data.target], axis=1)
 
 
-def summary(errors_m: np.ndarray) -> dict:
-    """{rms_mm, max_mm} of point position errors given in m."""
-    return {"rms_mm": float(1e3 * np.sqrt(np.mean(errors_m ** 2))), "max_mm": float(1e3 * errors_m.max())}
+def row_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None,
+               rows: Rows | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per measured row (`model.pose_targets.Rows`; one per point unless the data measures
+    frames): position error (G,) m, orientation error (G,) rad (NaN for a position-only row) and
+    residual length (G,) m, at coefficients c (None: the nominal model) with measured points y."""
+    q, w, aux = _poses_inputs(cm, data)
+    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
+    return (rows or measured_rows(cm.robot, data)).errors(y, p)
+
+
+def summary(errors_m: np.ndarray, rotation_rad: np.ndarray | None = None) -> dict:
+    """{rms_mm, max_mm} of position errors given in m; with orientation errors (rad, NaN for rows
+    without one) of any row, also {rot_rms_mrad, rot_max_mrad} over the rows that have one."""
+    out = {"rms_mm": float(1e3 * np.sqrt(np.mean(errors_m ** 2))), "max_mm": float(1e3 * errors_m.max())}
+    if rotation_rad is not None and not np.all(np.isnan(rotation_rad)):
+        rot = rotation_rad[~np.isnan(rotation_rad)]
+        out.update(rot_rms_mrad=float(1e3 * np.sqrt(np.mean(rot ** 2))), rot_max_mrad=float(1e3 * rot.max()))
+    return out
 
 
 def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -242,14 +268,16 @@ def structural_analysis(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
     return red
 
 
-def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray,
-                   rank_tol: float = RANK_TOL) -> tuple[Redundancy, np.ndarray, int]:
+def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, rank_tol: float = RANK_TOL,
+                   weights: np.ndarray | None = None) -> tuple[Redundancy, np.ndarray, int]:
     """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`);
-    A0 (s+1, k+1), [H | r] at c = 0 over the identifiable columns up to an orthogonal factor (s the
-    structurally kept count); the number of measured coordinates."""
+    A0 (s+1, k+1), [H | r] at c = 0 with rows scaled by the point weights (R,) over the
+    identifiable columns up to an orthogonal factor (s the structurally kept count); the number
+    of measured coordinates."""
     targets = np.unique(data.target)
     struct = structural_analysis(cm, targets)
-    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc)), np.array(struct.kept, int))
+    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc), weights=weights),
+                          np.array(struct.kept, int))
     red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
     return red, R0[:, [*np.searchsorted(struct.kept, red.kept), -1]], m
 
@@ -258,14 +286,17 @@ def redundancy(cm: CompiledModel, data: Measurements | None = None, registration
     """Structural analysis for the targets the data measures (all robot targets without data)."""
     if data is None:
         return structural_analysis(cm, np.arange(cm.dims.nt))
-    return _data_analysis(cm, data, to_world(fit_frames(cm, data, None, mode=registration_mode), data))[0]
+    return _data_analysis(cm, data, to_world(fit_frames(cm, data, None, mode=registration_mode), data), RANK_TOL,
+                          measured_rows(cm.robot, data).weight)[0]
 
 
 def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss: str = "cauchy",
                mode: str = "always") -> dict[int, Registration]:
     """The tracker frame of each station of `data` ({station id: Registration}) with the model held
     at coefficients c (nc,), None for the nominal model: the robust rigid transform taking the
-    modelled points onto the station's measured ones (`registration.register`: mode and loss)."""
+    modelled points onto the station's measured ones (`registration.register`: mode and loss; a
+    measured frame's vertices weigh 1/4 each, so a frame counts as much as a point)."""
+    prior = measured_rows(cm.robot, data).weight
     if c is None:
         p = cm.nominal_targets(data.q)[data.pose, data.target]
     else:
@@ -274,7 +305,7 @@ def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss
     for s in np.unique(data.station):
         rows = data.station == s
         try:
-            frames[int(s)] = register(p[rows], data.xyz[rows], mode, loss)
+            frames[int(s)] = register(p[rows], data.xyz[rows], mode, loss, prior[rows])
         except ModelError as exc:
             raise ModelError(f"{data.source}: station {s}: {exc}") from None
     return frames
@@ -382,22 +413,29 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
          progress, ridge: float, rank_tol: float, loss: str) -> Fit:
-    """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted."""
+    """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted.
+    The robust unit is the measured row (`model.pose_targets.Rows`): a point, or a frame whose
+    residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
     notes = []
     y = to_world(frames, data)
     nc = cm.dims.nc
     c = np.zeros(nc)
-    red, A0, m = _data_analysis(cm, data, y, rank_tol)
+    rows = measured_rows(cm.robot, data)
+    row_dof = rows.row_dof
+    red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight)
     kept = np.array(red.kept, int)
     k = len(kept)
+    m = float(row_dof.sum())
     if m <= k:
-        raise ModelError(f"{data.source}: {m} measured coordinates for {k} identifiable coefficients; "
+        raise ModelError(f"{data.source}: {m:.0f} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
     scale = np.linalg.norm(A0[:, :k], axis=0)
-    e = position_errors(cm, data, y, c)
-    before = summary(e)
+    norm, count = np.sqrt(3 / row_dof), row_dof / 3
+    pos, rot, length = row_errors(cm, data, y, c, rows)
+    e = length * norm
+    before = summary(pos, rot)
     limit = robust.outlier_limit(e, loss)
-    w = robust.weights(e, limit, loss)
+    wr = robust.weights(e, limit, loss)
     if loss == "l2":
         # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
         # from this small matrix rather than from a second pass over the data
@@ -408,10 +446,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
     for it in range(1, max_iter + 1):
         if stale:
-            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w), kept, scale)
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=rows.weight * wr[rows.group]), kept, scale)
             stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
-        objective = robust.objective(e, limit, loss) + ridge * float(x @ x)
+        objective = robust.objective(e, limit, loss, count) + ridge * float(x @ x)
         full_step = damped_step(Rk, z, 0.0, ridge, x)
         predicted = np.linalg.norm(Rk @ full_step)
         if predicted / np.sqrt(m) < step_tol_m or predicted ** 2 <= RSS_TOL * objective:
@@ -420,8 +458,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         for _ in range(16):
             trial = c.copy()
             trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
-            e_trial = position_errors(cm, data, y, trial)
-            trial_objective = robust.objective(e_trial, limit, loss) + ridge * float(np.sum((trial[kept] * scale) ** 2))
+            errors_trial = row_errors(cm, data, y, trial, rows)
+            e_trial = errors_trial[2] * norm
+            trial_objective = (robust.objective(e_trial, limit, loss, count)
+                               + ridge * float(np.sum((trial[kept] * scale) ** 2)))
             if trial_objective < objective:
                 break
             lam = 1e-6 if lam == 0 else 10 * lam
@@ -429,19 +469,20 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             why_not = ("the fit stalled: no step lowers the residual (strong nonlinearity or a poorly excited "
                        "model); measure poses that move the weak coefficients or reduce the model")
             break
-        c, e, lam, stale = trial, e_trial, (lam / 10 if lam > 1e-9 else 0.0), True
+        c, (pos, rot, _), e, lam, stale = trial, errors_trial, e_trial, (lam / 10 if lam > 1e-9 else 0.0), True
         new_limit = robust.outlier_limit(e, loss)
         settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
-        limit, w = new_limit, robust.weights(e, new_limit, loss)
+        limit, wr = new_limit, robust.weights(e, new_limit, loss)
         if progress:
             progress(it, 1e3 * np.sqrt(np.mean(e ** 2)))
         if settled and objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
             converged = True
             break
+    w = rows.weight * wr[rows.group]
     if stale:
         R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w), kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
-    m_eff = 3 * float(w.sum())  # down-weighted points count for their weight
+    m_eff = float(row_dof @ wr)  # down-weighted rows count for their weight
     sigma = float(np.sqrt(rss / max(m_eff - k, 1)))
     sv = np.linalg.svd(Rk, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
@@ -461,21 +502,28 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         notes.append(f"ill-conditioned: condition number {cond:.3g} of the scaled H_e; some coefficients are "
                      f"barely excited (see std), measure poses that move them or drop their terms")
     if m - k < k:
-        notes.append(f"few measurements: {m} coordinates for {k} coefficients; uncertainties are large")
+        notes.append(f"few measurements: {m:.0f} coordinates for {k} coefficients; uncertainties are large")
     flagged = np.nonzero(e > limit)[0]
-    outliers = tuple(Outlier(int(data.file_rows[r]), int(data.pose_ids[data.pose[r]]),
-                             cm.robot.target_names[data.target[r]], 1e3 * float(e[r]), float(w[r]))
-                     for r in flagged[np.argsort(-e[flagged])])
+    names = cm.robot.target_names
+    outliers = []
+    for g in flagged[np.argsort(-e[flagged])]:
+        r = rows.first[g]
+        target = names[data.target[r]]
+        outliers.append(Outlier(int(data.file_rows[r]), int(data.pose_ids[data.pose[r]]),
+                                cm.robot.vertex_of.get(target, (target,))[0], 1e3 * float(pos[g]), float(wr[g]),
+                                None if np.isnan(rot[g]) else 1e3 * float(rot[g])))
     if len(flagged) > OUTLIER_SHARE * len(e):
-        notes.append(f"{len(flagged)} of {len(e)} points are outliers: more than glitches usually make; the model "
+        what = "rows" if rows.oriented.any() else "points"
+        notes.append(f"{len(flagged)} of {len(e)} {what} are outliers: more than glitches usually make; the model "
                      f"may lack an effect (run diagnose) or the data mixes set-ups")
     inliers = e <= limit
     return Fit(c=c, std=std, cov=cov, redundancy=red, registration=frames[min(frames)], registrations=frames,
                sigma_m=sigma,
                condition_number=cond, observability_index=obs, iterations=it, converged=converged,
-               before=before, train=summary(e), warnings=tuple(notes), failures=tuple(failures),
-               loss=loss, outlier_limit_m=float(limit), weights=w, outliers=outliers,
-               train_inliers=summary(e[inliers]) if inliers.any() else summary(e), ranges=_ranges(cm, data))
+               before=before, train=summary(pos, rot), warnings=tuple(notes), failures=tuple(failures),
+               loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
+               train_inliers=summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot),
+               ranges=_ranges(cm, data), measured_dof=m_eff)
 
 
 def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarray:
@@ -489,4 +537,4 @@ def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarr
 
 
 __all__ = ["Fit", "IDENTITY", "Outlier", "fit_frames", "identify", "position_errors", "prediction_std", "redundancy",
-           "summary", "to_world"]
+           "row_errors", "summary", "to_world"]

@@ -79,9 +79,11 @@ def kabsch(p: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[n
 ROBUST_PASSES = 20
 
 
-def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
-    """`kabsch` iterated with robust point weights (`runtime.robust`); plain Kabsch for l2."""
-    R, t = kabsch(p, y)
+def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str, prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """`kabsch` iterated with robust point weights (`runtime.robust`) times the prior weights (N,)
+    (default 1; the vertices of a measured frame have 1/4); plain weighted Kabsch for l2."""
+    prior = np.ones(len(p)) if prior is None else prior
+    R, t = kabsch(p, y, prior)
     if loss == "l2":
         return R, t
     for _ in range(ROBUST_PASSES):
@@ -89,7 +91,7 @@ def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str) -> tuple[np.ndarray, 
         a = robust.outlier_limit(e, loss)
         if not a > 0:  # an exact fit: nothing to reweight
             break
-        R_new, t_new = kabsch(p, y, robust.weights(e, a, loss))
+        R_new, t_new = kabsch(p, y, prior * robust.weights(e, a, loss))
         moved = np.abs(R_new - R).max() + np.abs(t_new - t).max()
         R, t = R_new, t_new
         if moved < 1e-12:
@@ -97,8 +99,9 @@ def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str) -> tuple[np.ndarray, 
     return R, t
 
 
-def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str = "cauchy") -> Registration:
-    """Registration of measured points y onto nominal model points (N, 3).
+def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str = "cauchy",
+             prior: np.ndarray | None = None) -> Registration:
+    """Registration of measured points y onto nominal model points (N, 3), weighted by `prior` (N,).
 
     mode: "auto" applies it when the frames are far apart (over 1 degree or 20 mm), "always",
     or "never" (the data is already in the robot world frame). loss: see `runtime.robust`.
@@ -110,6 +113,6 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
             raise ModelError("registration needs at least three non-collinear measured points per tracker stationing; "
                              "measure more, or do not register (identify --register never)")
         return IDENTITY
-    R, t = robust_kabsch(p_nominal, y, loss)
+    R, t = robust_kabsch(p_nominal, y, loss, prior)
     far = _angle(R) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
     return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)))

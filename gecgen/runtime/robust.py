@@ -5,7 +5,11 @@ gives one point a residual far outside the others. Least squares lets that one p
 coefficient; here a point's weight falls once its residual passes a threshold, so it cannot.
 
 The unit is the measured point: its residual e is the length of its 3-D error (m), since a glitch
-spoils all three coordinates of a point at once. With Gaussian noise of sigma per coordinate,
+spoils all three coordinates of a point at once. A measured frame (position and orientation, see
+`model.pose_targets`) is one unit too: its residual sqrt(|e|^2 + L^2 theta^2) has six degrees of
+freedom, and scaled by sqrt(1/2) to three it follows nearly the law of a point's (median 1.63 sigma
+against 1.54), so points and frames share one scale and one limit; it then counts twice in the
+objective (`objective`'s count), as its six coordinates do in least squares. With Gaussian noise of sigma per coordinate,
 (e / sigma)^2 follows a chi-square law with 3 degrees of freedom, so
 
 * the robust scale is sigma = median(e) / sqrt(chi2.ppf(0.5, 3)) (the MAD idea for 3-D norms):
@@ -67,12 +71,15 @@ def weights(e: np.ndarray, a: float, loss: str) -> np.ndarray:
     return w
 
 
-def objective(e: np.ndarray, a: float, loss: str) -> float:
-    """sum of rho(e) (m^2): what the robust fit minimises at a fixed outlier limit a."""
+def objective(e: np.ndarray, a: float, loss: str, count: np.ndarray | None = None) -> float:
+    """sum of count * rho(e) (m^2): what the robust fit minimises at a fixed outlier limit a. count
+    (default 1) is what each residual stands for: a measured frame's residual, its length scaled
+    to three degrees of freedom, stands for two points."""
+    count = np.ones_like(e) if count is None else count
     beyond = e > a
-    inner = float(np.sum(e[~beyond] ** 2))
+    inner = float(np.sum(count[~beyond] * e[~beyond] ** 2))
     if not np.any(beyond):
         return inner
     if loss == "huber":
-        return inner + float(np.sum(2 * a * e[beyond] - a * a))
-    return inner + float(np.sum(a * a * (1 + 2 * np.log(e[beyond] / a))))
+        return inner + float(np.sum(count[beyond] * (2 * a * e[beyond] - a * a)))
+    return inner + float(np.sum(count[beyond] * a * a * (1 + 2 * np.log(e[beyond] / a))))

@@ -4,13 +4,16 @@
 
 gives what a laser tracker would record: the exact nonlinear chain at the true joints and
 generalized errors of every pose (`truth.true_state`), per-pose repeatability and per-point
-tracker noise, and the wrench a force/torque sensor in the robot's wrench frame reads.
+tracker noise, and the wrench a force/torque sensor in the robot's wrench frame reads; with
+`orientation`, what a 6-D probe or a camera rig records too: the orientation of the tool frame
+at every measured target, with the truth's orientation noise.
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from gecgen.model.kinematics import target_positions
+from gecgen.model.kinematics import target_positions, tool_pose
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.simulate.designs import Design, one_at_a_time, paper_pps, paper_split, random_design
@@ -29,8 +32,11 @@ def approach_directions(q: np.ndarray) -> np.ndarray:
     return np.where(d == 0, 1.0, d)
 
 
-def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator) -> Measurements:
-    """Measurements of `design` on the truth robot, in the contract's layout."""
+def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator,
+             orientation: bool = False) -> Measurements:
+    """Measurements of `design` on the truth robot, in the contract's layout; with `orientation`
+    every row also gives the measured orientation of its target's frame (the true tool
+    orientation turned by a random rotation vector of truth.orientation rad per axis)."""
     N = design.n_poses
     aux = thermal_profile(truth, N)
     q_true, eps = true_state(robot, truth, design.q, design.payload_kg, design.payload_at, aux,
@@ -41,7 +47,11 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     y = target_positions(robot, q_true, eps)[:, targets]  # (N, nt_measured, 3)
     y = y + rng.normal(0.0, truth.repeatability, (N, 1, 3)) + rng.normal(0.0, truth.tracker, y.shape)
     pose = np.repeat(np.arange(N), len(targets))
+    measured = None
+    if orientation:
+        R = tool_pose(robot, q_true, eps)[pose, :3, :3]
+        measured = Rotation.from_rotvec(rng.normal(0.0, truth.orientation, (len(pose), 3))).as_matrix() @ R
     aux_names = tuple(aux)
     return Measurements(q=design.q, w=wrench, aux=np.column_stack([aux[a] for a in aux_names]) if aux_names
                         else np.zeros((N, 0)), aux_names=aux_names, pose_ids=np.arange(N), pose=pose,
-                        target=np.tile(targets, N), xyz=y.reshape(-1, 3), source="simulated")
+                        target=np.tile(targets, N), xyz=y.reshape(-1, 3), source="simulated", orientation=measured)

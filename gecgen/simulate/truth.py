@@ -24,7 +24,9 @@ A truth file (YAML) looks like
       - {type: backlash, joint: 2, width: 2.0e-4}    # half the width, on the side of the last motion
       - {type: play, joint: 6, width: 1.0e-3}        # free play: half the width, on the side the load pushes
       - {type: thermal, error: "1.ez", per_kelvin: 3.6e-5, reference: 20, start: 20, end: 26}
-    noise: {repeatability: 5.0e-5, tracker: 4.0e-5}
+    noise: {repeatability: 5.0e-5, tracker: 4.0e-5, orientation: 2.0e-4}
+                                            # orientation (rad): per measured frame and axis, when
+                                            # simulated measurements give orientations
 """
 from __future__ import annotations
 
@@ -56,6 +58,7 @@ class Truth:
     repeatability: float  # m, per pose (all targets of a pose move together)
     tracker: float  # m, per measured point and coordinate
     spec: dict = field(default_factory=dict)
+    orientation: float = 0.0  # rad, per measured frame and axis (a small rotation in the measuring frame)
 
     @property
     def aux_names(self) -> tuple[str, ...]:
@@ -139,7 +142,7 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
             p.setdefault("column", "temp_c")
         sources.append(Source(s["type"], p))
     noise = spec.get("noise") or {}
-    require_keys(noise, f"{where}: noise", optional={"repeatability", "tracker"})
+    require_keys(noise, f"{where}: noise", optional={"repeatability", "tracker", "orientation"})
     masses = spec.get("masses") or []
     if masses == "urdf":
         require(robot.urdf, f"{where}: masses: urdf needs a robot built from a URDF")
@@ -153,7 +156,8 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     resolved["constant"] = {"values": {n: float(v) for n, v in zip(robot.error_names(), const)}}
     resolved["joint_offsets"] = {"values": offsets.tolist()}
     return Truth(const, offsets, tuple(sources), np.array(spec.get("gravity", [0.0, 0.0, -9.81]), float), masses,
-                 float(noise.get("repeatability", 0.0)), float(noise.get("tracker", 0.0)), resolved)
+                 float(noise.get("repeatability", 0.0)), float(noise.get("tracker", 0.0)), resolved,
+                 float(noise.get("orientation", 0.0)))
 
 
 def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
