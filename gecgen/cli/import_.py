@@ -42,7 +42,8 @@ def keep_targets(robot: Robot, data: Measurements, option: str) -> Measurements:
         require(t in names, f"--targets: '{t}' is not a target of {robot.name} ({', '.join(names)})")
     rows = np.isin(data.target, [names.index(t) for t in keep])
     require(rows.any(), f"--targets {option}: the table measures none of these targets")
-    return dataclasses.replace(data, pose=data.pose[rows], target=data.target[rows], xyz=data.xyz[rows])
+    return dataclasses.replace(data, pose=data.pose[rows], target=data.target[rows], xyz=data.xyz[rows],
+                               orientation=None if data.orientation is None else data.orientation[rows])
 
 
 def outside_limits(robot: Robot, data: Measurements) -> list[dict]:
@@ -82,4 +83,5 @@ def run(args) -> dict:
               f"row {worst['row']})", file=sys.stderr)
     return {"robot": robot.name, "output": str(args.output), "poses": data.n_poses, "rows": len(data.xyz),
             "targets": sorted({list(robot.targets)[t] for t in data.target}, key=list(robot.targets).index),
+            **({"orientations": int(np.sum(~np.isnan(data.orientation[:, 0, 0])))} if data.orientation is not None else {}),
             "outside_limits": outside}

@@ -124,7 +124,7 @@ def rotations(values: np.ndarray, conv: Convention, row_name: Callable[[int], st
         if len(bad):
             raise ModelError(f"{row_name(bad[0])}: quaternion of norm {norm[bad[0]]:.6g}; give a unit quaternion "
                              f"(norm 1 within {UNIT_TOL:g}), scalar first (w, x, y, z)")
-        return Rotation.from_quat(values, scalar_first=True).as_matrix()
+        return Rotation.from_quat(values[:, [1, 2, 3, 0]]).as_matrix()  # scipy writes the scalar last
     if conv.kind == "matrix":
         M = values.reshape(-1, 3, 3)
         off = np.abs(np.einsum("nki,nkj->nij", M, M) - np.eye(3)).max(axis=(1, 2))
@@ -139,4 +139,4 @@ def rotations(values: np.ndarray, conv: Convention, row_name: Callable[[int], st
 
 def quaternions(R: np.ndarray) -> np.ndarray:
     """(N, 4) unit quaternions, scalar first, of rotation matrices R (N, 3, 3)."""
-    return Rotation.from_matrix(R).as_quat(scalar_first=True) if len(R) else np.zeros((0, 4))
+    return Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]] if len(R) else np.zeros((0, 4))

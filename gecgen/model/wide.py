@@ -9,13 +9,20 @@ joint names as headers. A small YAML mapping says which column is what:
       arm_1_joint: arm_1_joint
     targets:                       # robot target -> its x, y, z columns (m)
       m1: [x1, y1, z1]
+    orientations:                  # optional: a mapped target -> the orientation of its frame
+      m1: {columns: [rx1, ry1, rz1], convention: rpy, unit: rad}
     wrench: {fz: force_z}          # optional: fx fy fz mx my mz -> column (sensor frame, N and N m)
     aux: [marker_std_mm]           # optional: columns kept as auxiliary signals
     ignore: [shipped_row]          # optional: columns deliberately dropped (absent ones are fine)
 
 Every column of the table must be mapped, kept as aux or ignored: nothing is dropped silently.
 Values are copied exactly (no unit conversion, no clipping); `read_measurements` applies the
-contract's checks (limits, millimetres) to the written file.
+contract's checks (limits, millimetres) to the written file. An orientation (the target frame's,
+parallel to the tool frame, in the measuring frame; `model.orientation`) has a `convention`:
+`quaternion` (columns w, x, y, z), `matrix` (nine columns, row by row), `rpy` (roll, pitch, yaw:
+R = Rz(yaw) Ry(pitch) Rx(roll), as URDF and pinocchio) or `euler_<seq>` (scipy's sequence: three of
+xyz, extrinsic, or XYZ, intrinsic), and for angles a `unit`, deg or rad. It is converted to a
+rotation matrix, checked (a unit quaternion, an orthonormal matrix) and written as a quaternion.
 """
 from __future__ import annotations
 
@@ -28,6 +35,7 @@ import numpy as np
 
 from gecgen.model.errors import is_aux_name
 from gecgen.model.measurements import MAX_AUX, MAX_WRENCH, Measurements, pose_id_column
+from gecgen.model.orientation import Convention, parse_convention, rotations
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, read_yaml, require, require_keys
@@ -47,11 +55,13 @@ class ColumnMap:
     aux: tuple[str, ...]
     ignore: tuple[str, ...]
     source: str  # the mapping file, for messages
+    orientations: dict[str, tuple[tuple[str, ...], Convention]] | None = None  # target -> its columns, convention
 
     def columns(self) -> list[str]:
         """Every column the mapping reads (ignored ones excluded), in mapping order."""
         return [*([] if self.pose == "row" else [self.pose]), *self.joints,
-                *[c for xyz in self.targets.values() for c in xyz], *self.wrench.values(), *self.aux]
+                *[c for xyz in self.targets.values() for c in xyz],
+                *[c for cols, _ in (self.orientations or {}).values() for c in cols], *self.wrench.values(), *self.aux]
 
 
 def _names(value, where: str, what: str) -> list[str]:
@@ -72,7 +82,7 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     spec = read_yaml(path, "column-mapping")
     require(isinstance(spec, dict), f"{where}: expected a mapping with pose, joints, targets, aux, ignore")
     require_keys(spec, where, required={"joints", "targets"},
-                 optional={"pose", "wrench", "aux", "ignore", "description"})
+                 optional={"pose", "wrench", "aux", "ignore", "description", "orientations"})
 
     qnames = [f"q{i + 1}" for i in range(robot.n)]
     joints: dict[str, str] = {}
@@ -94,6 +104,21 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
                 f"{where}: targets.{name}: expected three column names [x, y, z], got {excerpt(cols)}")
         targets[name] = tuple(cols)
 
+    orientations = {}
+    if "orientations" in spec:
+        for name, o in _mapping(spec["orientations"], f"{where}: orientations",
+                                "from target to {columns, convention, unit}").items():
+            ow = f"{where}: orientations.{excerpt(str(name))}"
+            require(name in targets, f"{ow}: not a target mapped under targets; an orientation belongs to a measured "
+                                     f"target's frame")
+            require(isinstance(o, dict), f"{ow}: expected {{columns: [...], convention: ..., unit: ...}}")
+            require_keys(o, ow, required={"columns", "convention"}, optional={"unit"})
+            convention = parse_convention(o["convention"], o.get("unit"), ow)
+            cols = _names(o["columns"], f"{ow}.columns", "column names")
+            require(len(cols) == convention.width, f"{ow}.columns: a {o['convention']} has {convention.width} "
+                                                   f"columns, got {len(cols)}")
+            orientations[name] = (tuple(cols), convention)
+
     wrench = _mapping(spec["wrench"], f"{where}: wrench", "from fx..mz to column") if "wrench" in spec else {}
     for k, col in wrench.items():
         require(k in WRENCH, f"{where}: wrench: {excerpt(k)} is not one of {', '.join(WRENCH)}")
@@ -107,7 +132,8 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     ignore = _names(spec.get("ignore") or [], f"{where}: ignore", "column names")
 
     mapping = ColumnMap(pose=spec.get("pose", "row"), joints=tuple(joints[q] for q in qnames), targets=targets,
-                        wrench=dict(wrench), aux=tuple(aux), ignore=tuple(ignore), source=where)
+                        wrench=dict(wrench), aux=tuple(aux), ignore=tuple(ignore), source=where,
+                        orientations=orientations or None)
     require(isinstance(mapping.pose, str) and mapping.pose,
             f"{where}: pose: expected 'row' or the name of the pose-id column, got {excerpt(mapping.pose)}")
     used = mapping.columns()
@@ -160,6 +186,15 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path,
     names = list(robot.targets)
     xyz = np.stack([np.column_stack([column(c) for c in cols]) for cols in mapping.targets.values()], axis=1)
     nt = len(mapping.targets)
+    orientation = None
+    if mapping.orientations:
+        orientation = np.full((P, nt, 3, 3), np.nan)
+        for k, target in enumerate(mapping.targets):
+            if target in mapping.orientations:
+                cols, convention = mapping.orientations[target]
+                orientation[:, k] = rotations(np.column_stack([column(c) for c in cols]), convention,
+                                              lambda r, cols=cols: f"{where}: row {r + 2}, columns {', '.join(cols)}")
+        orientation = orientation.reshape(P * nt, 3, 3)
     return Measurements(q=q, w=w, aux=aux, aux_names=mapping.aux, pose_ids=ids,
                         pose=np.repeat(np.arange(P), nt), target=np.tile([names.index(t) for t in mapping.targets], P),
-                        xyz=xyz.reshape(P * nt, 3), source=where)
+                        xyz=xyz.reshape(P * nt, 3), source=where, orientation=orientation)
