@@ -6,7 +6,9 @@ import json
 
 import numpy as np
 import pytest
-from conftest import ROBOTS, random_q
+from conftest import ROBOTS
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from gecgen.cli import main
@@ -63,6 +65,30 @@ def test_bad_orientations_are_refused_in_one_line(tmp_path, header, cells, expec
     with pytest.raises(ModelError) as err:
         read(tmp_path, header, cells)
     assert expect in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+QUATERNION_CELLS = st.one_of(st.floats(-1.2, 1.2).map(repr), st.sampled_from(["", " ", "nan", "inf", "1e308", "x"]))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(*[QUATERNION_CELLS] * 4), min_size=1, max_size=4), st.booleans())
+def test_any_quaternion_cells_read_as_rotations_or_are_refused_in_one_line(tmp_path, rows, unit):
+    """Whatever the cells (unit-normalised quaternions half the time, so that both outcomes are
+    common): every orientation read is a rotation or NaN, or the file is refused in one line."""
+    cells = []
+    for row in rows:
+        q = np.array([float(c) if c.strip() not in ("", "x") else np.nan for c in row])
+        if unit and np.isfinite(q).all() and 0 < np.abs(q).max() < 2:
+            row = tuple(map(repr, (q / np.linalg.norm(q)).tolist()))
+        cells.append(",".join(row))
+    try:
+        data = read(tmp_path, "quat_w,quat_x,quat_y,quat_z", *cells)
+    except ModelError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith(str(tmp_path)), str(exc)
+        return
+    if data.orientation is not None:
+        R = data.orientation[~np.isnan(data.orientation[:, 0, 0])]
+        assert np.abs(np.einsum("nki,nkj->nij", R, R) - np.eye(3)).max() < 1e-12 and (np.linalg.det(R) > 0).all()
 
 
 def test_a_frame_s_vertices_weigh_position_and_orientation_apart(rng):

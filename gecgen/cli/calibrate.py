@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import checked, placed, progress_status
+from gecgen.cli.common import add_orientation_length, checked, measured_counts, on_points, placed, progress_status
 from gecgen.loop.calibrate import NAMES
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.validation import require
@@ -32,6 +32,7 @@ def add_parser(command):
     p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md and "
                                                          "generated/ (the C and CasADi code, NAME_calibration.h with the "
                                                          "coefficients, NAME_example.c)")
+    add_orientation_length(p)
 
 
 def _default_model(args, robot, aux):
@@ -48,7 +49,7 @@ def run(args) -> dict:
     from gecgen.loop.report import write_calibrate_report
     from gecgen.model.measurements import hold_out, read_measurements
     from gecgen.runtime import calibration, export
-    from gecgen.runtime.identify import position_errors, summary, to_world
+    from gecgen.runtime.identify import row_errors, summary, to_world
 
     names = tuple(n.strip() for n in args.models.split(","))
     unknown = [n for n in names if n not in NAMES]
@@ -60,18 +61,21 @@ def run(args) -> dict:
         data, val = hold_out(data, args.holdout, args.seed)
     robot, placement = placed(robot, data)
     default = _default_model(args, robot, data.aux_names)
+    fitted, data, val = on_points(robot, args.orientation_length, data, val)
     if default is not None:
-        checked(default, robot, data, val)
+        checked(default, fitted, data, val)
     with progress_status(not args.json) as status:
         def progress(name):
             if status:
                 status.update(f"cross-validating the {name} model on the training poses")
 
-        choice = choose(robot, data, default, args.seed, progress=progress, names=names)
+        choice = choose(fitted, data, default, args.seed, progress=progress, names=names)
     out = Path(args.output)
     calib = calibration.from_fit(robot, choice.model, choice.fit)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
                          "placement": placement.to_dict() if placement else None})
+    if fitted.vertex_of:
+        calib.report["orientation_length_m"] = fitted.pose_length
     calibration.save(calib, out / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []
     write_error_model(robot, choice.model, effects, out / "errors.yaml")
@@ -79,17 +83,18 @@ def run(args) -> dict:
     code, _ = export.c_files(calib, choice.cm, str(out / "calibration.json"))
     for name, text in code.items():
         write_atomically(out / "generated" / name, text)
-    result = {"robot": robot.name, "train_data": str(args.train), "output": str(out), "model": choice.chosen.name,
+    result = {"robot": robot.name, "train_data": str(args.train), "output": str(out), **measured_counts(fitted, data),
+              "model": choice.chosen.name,
               "candidates": choice.table, "n_params": len(choice.model.coefficients),
               "n_identifiable": choice.fit.redundancy.n_identifiable, "before": choice.fit.before,
               "train": choice.fit.train, "outliers": [o.to_dict() for o in choice.fit.outliers],
               "effects": [e.to_dict() for e in effects], "placement": calib.report["placement"]}
     if val is not None:
-        checked(choice.model, robot, val)
+        checked(choice.model, fitted, val)
         y = to_world(calib.frames, val, "measure it from a station of TRAIN, or score it with gecgen evaluate --register")
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
-        result["val_before"] = summary(position_errors(choice.cm, val, y, None))
-        result["val"] = summary(position_errors(choice.cm, val, y, choice.fit.c))
+        result["val_before"] = summary(*row_errors(choice.cm, val, y, None)[:2])
+        result["val"] = summary(*row_errors(choice.cm, val, y, choice.fit.c)[:2])
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
     files["report"] = write_calibrate_report(result, out)

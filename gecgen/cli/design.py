@@ -8,6 +8,8 @@ columns once `target x y z` are filled in.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from gecgen.cli.common import robot_and_model
@@ -94,6 +96,10 @@ def run(args) -> dict:
             "reflector's largest incidence angle (deg)")
     robot = load_robot(args.robot)
     given = read_measurements(args.given, robot) if args.given else None
+    if given is not None and given.orientation is not None:
+        warnings.warn(f"{args.given}: design counts the measured positions of --given only, not its orientations "
+                      f"(designing for pose measurements is not supported yet): the information of the data "
+                      f"measured is underestimated")
     columns = given.aux_names if given is not None else ()
     if args.from_csv:
         header = read_table(args.from_csv, "file of candidate poses", "q1..qn").header

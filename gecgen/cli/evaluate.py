@@ -22,7 +22,7 @@ def run(args) -> dict:
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
-    length = args.orientation_length if args.orientation_length is not None else calib.report.get("orientation_length_m")
+    length = calib.report.get("orientation_length_m") if args.orientation_length is None else args.orientation_length
     robot, data = on_points(calib.robot, length, data)
     cm = checked(calib.model, robot, data)
     outside = extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))

@@ -18,7 +18,8 @@ def print_human(result: dict):
         if key == "outliers":
             print(f"outliers: {len(value)}" + (" (file row, pose, target, residual)" if value else ""))
             for o in value[:MAX_LISTED]:
-                print(f"  row {o['row']}: pose {o['pose']} {o['target']} {o['residual_mm']:.3f} mm")
+                rotation = f", {o['rotation_mrad']:.3f} mrad" if "rotation_mrad" in o else ""
+                print(f"  row {o['row']}: pose {o['pose']} {o['target']} {o['residual_mm']:.3f} mm{rotation}")
             if len(value) > MAX_LISTED:
                 print(f"  ... {len(value) - MAX_LISTED} more (use --json for the list)")
         elif key == "candidates":

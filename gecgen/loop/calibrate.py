@@ -31,7 +31,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, identify, position_errors
+from gecgen.runtime.identify import Fit, identify, squared_error
 
 FOLDS = 5
 #: cross-validated RMS this close (relative) counts as a tie, won by the smaller model
@@ -112,8 +112,9 @@ def run_pipeline(robot: Robot, pipeline: Pipeline, data: Measurements,
 
 def pipeline_cv(robot: Robot, pipeline: Pipeline, data: Measurements, seed: int = 0,
                 registration_mode: str = "auto") -> float:
-    """Cross-validated RMS (mm) over all measured points of the held-out poses, the pipeline run
-    whole on the other folds. Raises RuntimeError when a fold's fit cannot be trusted."""
+    """Cross-validated RMS (mm) over all measured points of the held-out poses (a measured frame
+    counting as two, `identify.squared_error`), the pipeline run whole on the other folds. Raises
+    RuntimeError when a fold's fit cannot be trusted."""
     fold = np.random.default_rng(seed).permutation(data.n_poses) % FOLDS
     sq, n = 0.0, 0
     for f in range(FOLDS):
@@ -123,8 +124,8 @@ def pipeline_cv(robot: Robot, pipeline: Pipeline, data: Measurements, seed: int 
         if fit.failures:
             raise RuntimeError(f"fold {f + 1}: {fit.failures[0]}")
         test = data.subset(np.nonzero(fold == f)[0])
-        e = position_errors(cm, test, fit.to_world(test), fit.c)
-        sq, n = sq + float(e @ e), n + len(e)
+        sq_f, n_f = squared_error(cm, test, fit.to_world(test), fit.c)
+        sq, n = sq + sq_f, n + n_f
     return 1e3 * float(np.sqrt(sq / n))
 
 

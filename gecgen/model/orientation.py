@@ -119,20 +119,22 @@ def rotations(values: np.ndarray, conv: Convention, row_name: Callable[[int], st
     if not len(values):
         return np.zeros((0, 3, 3))
     if conv.kind == "quaternion":
-        norm = np.linalg.norm(values, axis=1)
-        bad = np.nonzero(np.abs(norm - 1) > UNIT_TOL)[0]
+        with np.errstate(over="ignore"):  # a cell near the largest float: its norm is inf, refused below
+            norm = np.linalg.norm(values, axis=1)
+        bad = np.nonzero(~(np.abs(norm - 1) <= UNIT_TOL))[0]
         if len(bad):
             raise ModelError(f"{row_name(bad[0])}: quaternion of norm {norm[bad[0]]:.6g}; give a unit quaternion "
                              f"(norm 1 within {UNIT_TOL:g}), scalar first (w, x, y, z)")
         return Rotation.from_quat(values[:, [1, 2, 3, 0]]).as_matrix()  # scipy writes the scalar last
     if conv.kind == "matrix":
         M = values.reshape(-1, 3, 3)
-        off = np.abs(np.einsum("nki,nkj->nij", M, M) - np.eye(3)).max(axis=(1, 2))
-        bad = np.nonzero((off > UNIT_TOL) | (np.linalg.det(M) <= 0))[0]
+        with np.errstate(over="ignore", invalid="ignore"):  # huge entries: inf or NaN, refused below
+            off = np.abs(np.einsum("nki,nkj->nij", M, M) - np.eye(3)).max(axis=(1, 2))
+            det = np.linalg.det(M)
+        bad = np.nonzero(~(off <= UNIT_TOL) | ~(det > 0))[0]
         if len(bad):
             raise ModelError(f"{row_name(bad[0])}: not a rotation matrix (R^T R - I up to {off[bad[0]]:.3g}, det "
-                             f"{np.linalg.det(M[bad[0]]):.6g}); give R row by row, orthonormal within {UNIT_TOL:g}, "
-                             f"det +1")
+                             f"{det[bad[0]]:.6g}); give R row by row, orthonormal within {UNIT_TOL:g}, det +1")
         return Rotation.from_matrix(M).as_matrix()
     return Rotation.from_euler(conv.seq, values, degrees=conv.degrees).as_matrix()
 

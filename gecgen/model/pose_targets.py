@@ -50,8 +50,8 @@ def vertex_radius(length_m: float) -> float:
 def with_pose_targets(robot: Robot, length_m: float = LENGTH_M) -> Robot:
     """The robot with four virtual targets per target, `<target>__v1..v4` at t + r v_k in the tool
     frame (r from the length scale L, m), after the robot's own targets (whose indices stay)."""
-    require(np.isfinite(length_m) and length_m > 0, f"orientation length {length_m!r}: give a positive length "
-                                                    f"in m (1 rad of orientation error counts as this much position)")
+    require(np.isfinite(length_m) and length_m > 0, f"--orientation-length {length_m!r}: give a positive length in "
+                                                    f"m (1 rad of orientation error counts as this much position)")
     r = vertex_radius(length_m)
     extra, vertex_of = {}, {}
     for name, t in robot.targets.items():

@@ -184,9 +184,8 @@ def cross_validated_rms(cm: CompiledModel, data: Measurements, folds: int = 5, s
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fit = identify(cm, train, **options)
-        rows = measured_rows(cm.robot, test)
-        e = row_errors(cm, test, fit.to_world(test), fit.c, rows)[2]
-        sq, n = sq + float(e @ e), n + float(rows.row_dof.sum()) / 3
+        sq_f, n_f = squared_error(cm, test, fit.to_world(test), fit.c)
+        sq, n = sq + sq_f, n + n_f
     return 1e3 * np.sqrt(sq / n)
 
 
@@ -219,6 +218,16 @@ def row_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
     q, w, aux = _poses_inputs(cm, data)
     p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
     return (rows or measured_rows(cm.robot, data)).errors(y, p)
+
+
+def squared_error(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> tuple[float, float]:
+    """(sum of the measured rows' squared residual lengths (m^2), the number of points they count
+    for): a measured frame counts as two points, its six degrees of freedom, so that the square
+    root of their ratio is an RMS point error for position data and the fit's weighted residual
+    per three degrees of freedom for pose data."""
+    rows = measured_rows(cm.robot, data)
+    e = row_errors(cm, data, y, c, rows)[2]
+    return float(e @ e), float(rows.row_dof.sum()) / 3
 
 
 def summary(errors_m: np.ndarray, rotation_rad: np.ndarray | None = None) -> dict:
@@ -537,4 +546,4 @@ def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarr
 
 
 __all__ = ["Fit", "IDENTITY", "Outlier", "fit_frames", "identify", "position_errors", "prediction_std", "redundancy",
-           "row_errors", "summary", "to_world"]
+           "row_errors", "squared_error", "summary", "to_world"]
