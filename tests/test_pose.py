@@ -2,6 +2,7 @@
 refusals, the tetrahedron of virtual targets, identification on a simulated truth (more
 coefficients identifiable than from points, orientation residuals checked against scipy on the
 exact numpy chain) and figaroh's real UR10 tool poses."""
+import dataclasses
 import json
 
 import numpy as np
@@ -17,7 +18,7 @@ from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.model.pose_targets import as_points, measured_rows, with_pose_targets
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify, row_errors
+from gecgen.runtime.identify import identify, row_errors, summary
 from gecgen.simulate import load_truth, random_design, simulate
 
 UR10 = ROBOTS.parent / "tests" / "data" / "ur10"
@@ -166,6 +167,27 @@ def test_orientations_identify_what_a_point_on_the_last_axis_cannot(ur10_sim):
                                                     np.random.default_rng(3), orientation=True)))
     position, angle, _ = row_errors(cm, y, exact.to_world(y), exact.c)
     assert position.max() < 1e-12 and angle.max() < 1e-12
+
+
+def test_a_frame_off_by_30_mrad_is_one_outlier_and_position_only_rows_mix_in(ur10_sim):
+    """One row's orientation turned by 30 mrad (100 robust sigmas) is listed once, by its file row,
+    with its orientation error, and barely moves the fit; rows without an orientation in the same
+    data count as points."""
+    robot, model, _, train, val = ur10_sim
+    fitted = with_pose_targets(robot)
+    cm = CompiledModel(fitted, model)
+    orientation = train.orientation.copy()
+    orientation[11] = Rotation.from_rotvec([0.03, 0, 0]).as_matrix() @ orientation[11]
+    orientation[20:30] = np.nan  # position only
+    data = as_points(fitted, dataclasses.replace(train, orientation=orientation, row=np.arange(40) + 2))
+    fit = identify(cm, data)
+    assert fit.trustworthy and fit.redundancy.n_identifiable == 30
+    assert [(o.row, o.pose, o.target) for o in fit.outliers] == [(13, 11, "flange")]
+    assert abs(fit.outliers[0].rotation_mrad - 30) < 1 and fit.outliers[0].weight < 0.02
+    # 30 frames and 10 points, the outlier's six counted by its weight
+    assert fit.measured_dof == pytest.approx(30 * 6 + 10 * 3 - 6 * (1 - fit.outliers[0].weight), rel=1e-12)
+    y = as_points(fitted, val)
+    assert summary(*row_errors(cm, y, fit.to_world(y), fit.c)[:2])["rot_rms_mrad"] < 0.2
 
 
 def test_the_command_line_reads_writes_and_reports_orientations(ur10_sim, tmp_path, capsys):
