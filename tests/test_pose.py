@@ -71,7 +71,8 @@ def test_bad_orientations_are_refused_in_one_line(tmp_path, header, cells, expec
 QUATERNION_CELLS = st.one_of(st.floats(-1.2, 1.2).map(repr), st.sampled_from(["", " ", "nan", "inf", "1e308", "x"]))
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.lists(st.tuples(*[QUATERNION_CELLS] * 4), min_size=1, max_size=4), st.booleans())
 def test_any_quaternion_cells_read_as_rotations_or_are_refused_in_one_line(tmp_path, rows, unit):
     """Whatever the cells (unit-normalised quaternions half the time, so that both outcomes are

@@ -22,7 +22,9 @@ def run(args) -> dict:
 
     calib = calibration.load(args.calibration)
     data = read_measurements(args.data, calib.robot)
-    length = calib.report.get("orientation_length_m") if args.orientation_length is None else args.orientation_length
+    length = args.orientation_length
+    if length is None:  # the length scale the calibration was fitted with, if it measured frames
+        length = calib.report.get("orientation_length_m")
     robot, data = on_points(calib.robot, length, data)
     cm = checked(calib.model, robot, data)
     outside = extrapolation(calib, data.q, data.w, data.aux_columns(calib.model.aux))

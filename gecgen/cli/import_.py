@@ -81,7 +81,7 @@ def run(args) -> dict:
         print(f"gecgen import: warning: {len(outside)} joint readings outside the limits of {robot.name}, kept as read "
               f"(largest: {worst['joint']} = {worst['value']:g} beyond {worst['limit']:g} by {worst['excess']:.3g}, "
               f"row {worst['row']})", file=sys.stderr)
+    oriented = {} if data.orientation is None else {"orientations": int(np.sum(~np.isnan(data.orientation[:, 0, 0])))}
     return {"robot": robot.name, "output": str(args.output), "poses": data.n_poses, "rows": len(data.xyz),
             "targets": sorted({list(robot.targets)[t] for t in data.target}, key=list(robot.targets).index),
-            **({"orientations": int(np.sum(~np.isnan(data.orientation[:, 0, 0])))} if data.orientation is not None else {}),
-            "outside_limits": outside}
+            **oriented, "outside_limits": outside}

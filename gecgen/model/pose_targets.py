@@ -76,9 +76,11 @@ def as_points(robot: Robot, data: Measurements) -> Measurements:
     k = np.arange(len(src)) - np.repeat(np.cumsum(count) - count, count)  # vertex number within its row
     vertex = oriented[src]
     names = robot.target_names
-    index = {(origin, kk): names.index(v) for v, (origin, kk) in robot.vertex_of.items()}
+    index = np.full((len(names), len(VERTICES)), -1)  # (target, vertex) -> the virtual target
+    for v, (origin, kk) in robot.vertex_of.items():
+        index[names.index(origin), kk] = names.index(v)
     target = data.target[src].copy()
-    target[vertex] = [index[(names[t], kk)] for t, kk in zip(data.target[src][vertex], k[vertex])]
+    target[vertex] = index[target[vertex], k[vertex]]
     xyz = data.xyz[src].copy()
     r = vertex_radius(robot.pose_length)
     xyz[vertex] += r * np.einsum("nij,nj->ni", data.orientation[src][vertex], VERTICES[k[vertex]])
@@ -116,20 +118,28 @@ class Rows:
         sqrt(sum of weight |y - p|^2) (G,) m, which is sqrt(|e|^2 + L^2 (2 sin(theta/2))^2) for a frame."""
         G = len(self.first)
         d = y - p
-        mean = np.zeros((G, 3))
-        np.add.at(mean, self.group, self.weight[:, None] * d)
+        if G == len(d):  # one point per row (no frames): nothing to sum
+            e = np.empty(G)
+            e[self.group] = np.linalg.norm(d, axis=1)
+            return e, np.full(G, np.nan), e
+        mean = _sums(self.group, self.weight[:, None] * d, G)
         length = np.sqrt(np.bincount(self.group, self.weight * np.einsum("ni,ni->n", d, d), G))
         rotation = np.full(G, np.nan)
         at = self.vertex >= 0
         if at.any():
             v = VERTICES[self.vertex[at]]
-            My, Mp = np.zeros((G, 3, 3)), np.zeros((G, 3, 3))
-            np.add.at(My, self.group[at], np.einsum("ni,nj->nij", y[at], v))
-            np.add.at(Mp, self.group[at], np.einsum("ni,nj->nij", p[at], v))
+            My, Mp = (_sums(self.group[at], np.einsum("ni,nj->nij", x[at], v).reshape(-1, 9), G).reshape(G, 3, 3)
+                      for x in (y, p))
             rows = self.oriented
             scale = 3 / (4 * self.radius)
             rotation[rows] = Rotation.from_matrix(scale ** 2 * My[rows] @ np.swapaxes(Mp[rows], 1, 2)).magnitude()
         return np.linalg.norm(mean, axis=1), rotation, length
+
+
+def _sums(group: np.ndarray, values: np.ndarray, G: int) -> np.ndarray:
+    """(G, k) sums of values (R, k) over the rows of each group (R,); bincount, which is many
+    times faster than np.add.at."""
+    return np.column_stack([np.bincount(group, values[:, k], G) for k in range(values.shape[1])])
 
 
 def measured_rows(robot: Robot, data: Measurements) -> Rows:
