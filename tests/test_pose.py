@@ -117,6 +117,25 @@ def test_a_frame_s_vertices_weigh_position_and_orientation_apart(rng):
     assert np.array_equal(rows.row_dof, np.full(n, 6.0))
 
 
+def test_robots_that_differ_only_in_their_targets_compile_apart(tmp_path, monkeypatch):
+    """The compiled code is cached by content, and the targets are content beyond the robot file: a
+    derived robot (virtual targets) or placed targets once loaded the library of the robot file's
+    targets, and with it their positions."""
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path))
+    from gecgen.runtime.placement import with_targets
+
+    robot = load_robot(UR10 / "ur10.yaml")
+    model = load_error_model(None, robot)
+    q = np.zeros((1, 6))
+    flange = CompiledModel(robot, model).nominal_targets(q)[0, 0]
+    moved = CompiledModel(with_targets(robot, {"flange": (0.1, 0.0, 0.0)}), model).nominal_targets(q)[0, 0]
+    turned = tool_pose(robot, q)[0, :3, 0]  # the tool's x axis in the world
+    assert np.allclose(moved - flange, 0.1 * turned, rtol=0, atol=1e-12)
+    fitted = with_pose_targets(robot, 0.2)
+    vertices = CompiledModel(fitted, model).nominal_targets(q)[0]
+    assert np.allclose(vertices[0], flange) and np.allclose(np.linalg.norm(vertices[1:] - flange, axis=1), 0.2 * np.sqrt(1.5))
+
+
 @pytest.fixture(scope="module")
 def ur10_sim():
     """UR10 measured at the flange centre, on joint 6's axis, with a constant-error truth: 40
