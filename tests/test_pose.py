@@ -133,7 +133,8 @@ def test_robots_that_differ_only_in_their_targets_compile_apart(tmp_path, monkey
     assert np.allclose(moved - flange, 0.1 * turned, rtol=0, atol=1e-12)
     fitted = with_pose_targets(robot, 0.2)
     vertices = CompiledModel(fitted, model).nominal_targets(q)[0]
-    assert np.allclose(vertices[0], flange) and np.allclose(np.linalg.norm(vertices[1:] - flange, axis=1), 0.2 * np.sqrt(1.5))
+    assert np.allclose(vertices[0], flange)
+    assert np.allclose(np.linalg.norm(vertices[1:] - flange, axis=1), 0.2 * np.sqrt(1.5))
 
 
 @pytest.fixture(scope="module")
@@ -226,7 +227,8 @@ def test_the_command_line_reads_writes_and_reports_orientations(ur10_sim, tmp_pa
                  "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["n_points"] == 30 and out["n_orientations"] == 30 and out["n_identifiable"] == 30
-    assert set(out["train"]) == {"rms_mm", "max_mm", "rot_rms_mrad", "rot_max_mrad"} and out["orientation_length_m"] == 0.1
+    assert set(out["train"]) == {"rms_mm", "max_mm", "rot_rms_mrad", "rot_max_mrad"}
+    assert out["orientation_length_m"] == 0.1
     assert out["train"]["rot_rms_mrad"] < 0.25 * out["before"]["rot_rms_mrad"]
     write_measurements(tmp_path / "val.csv", robot, val)
     assert main(["evaluate", str(calib), str(tmp_path / "val.csv"), "--json"]) == 0
