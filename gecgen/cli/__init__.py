@@ -11,6 +11,7 @@ import json
 import sys
 import warnings
 
+from gecgen import __version__
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file
 from gecgen.model import ModelError
@@ -37,6 +38,7 @@ OUTPUTS = {
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gecgen", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def command(name, fn, help_text):

@@ -1,7 +1,9 @@
 """What several commands share: the robot and its error model, fit options, progress, extrapolation."""
 from __future__ import annotations
 
+import math
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -19,14 +21,36 @@ def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str,
 
 
 def progress_status(enabled: bool):
-    """A rich status line for long steps on a terminal; silent under --json or when piped."""
+    """Where long steps say how far they are (`status.update(text)`): a rich status line on a
+    terminal; log lines on stderr when stderr is a file or a pipe (a CI log, `2> log`), at most one
+    every LOG_EVERY_S seconds; nothing under --json, whose stderr holds only warnings and the
+    one-line reason of a failure."""
     from contextlib import nullcontext
 
-    if not enabled or not sys.stderr.isatty():
+    if not enabled:
         return nullcontext(None)
+    if not sys.stderr.isatty():
+        return nullcontext(_LogLines())
     from rich.console import Console
 
     return Console(stderr=True).status("working")
+
+
+#: seconds between two progress log lines when stderr is not a terminal
+LOG_EVERY_S = 2.0
+
+
+class _LogLines:
+    """status.update(text) as time-stamped lines on stderr, rate-limited."""
+
+    def __init__(self):
+        self.last = -math.inf
+
+    def update(self, text: str):
+        now = time.monotonic()
+        if now - self.last >= LOG_EVERY_S:
+            self.last = now
+            print(f"{time.strftime('%H:%M:%S')} gecgen: {text}", file=sys.stderr, flush=True)
 
 
 def add_orientation_length(p, default: str = "0.1"):
