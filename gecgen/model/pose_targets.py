@@ -112,19 +112,18 @@ class Rows:
         """(G,) True for a row that measures a frame."""
         return self.vertex[self.first] >= 0
 
-    def errors(self, y: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per row, for measured points y and modelled points p (R, 3): the position error (G,) m,
-        the orientation error angle (G,) rad (NaN for a position-only row) and the residual length
-        sqrt(sum of weight |y - p|^2) (G,) m, which is sqrt(|e|^2 + L^2 (2 sin(theta/2))^2) for a frame."""
+    def signed(self, y: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per row, for measured points y and modelled points p (R, 3): the position error
+        measured - modelled (G, 3) m, and the orientation error as a rotation vector in the
+        measuring frame (G, 3) rad (NaN for a position-only row)."""
         G = len(self.first)
         d = y - p
+        rotation = np.full((G, 3), np.nan)
         if G == len(d):  # one point per row (no frames): nothing to sum
-            e = np.empty(G)
-            e[self.group] = np.linalg.norm(d, axis=1)
-            return e, np.full(G, np.nan), e
+            mean = np.empty((G, 3))
+            mean[self.group] = d
+            return mean, rotation
         mean = _sums(self.group, self.weight[:, None] * d, G)
-        length = np.sqrt(np.bincount(self.group, self.weight * np.einsum("ni,ni->n", d, d), G))
-        rotation = np.full(G, np.nan)
         at = self.vertex >= 0
         if at.any():
             v = VERTICES[self.vertex[at]]
@@ -132,8 +131,20 @@ class Rows:
                       for x in (y, p))
             rows = self.oriented
             scale = 3 / (4 * self.radius)
-            rotation[rows] = Rotation.from_matrix(scale ** 2 * My[rows] @ np.swapaxes(Mp[rows], 1, 2)).magnitude()
-        return np.linalg.norm(mean, axis=1), rotation, length
+            rotation[rows] = Rotation.from_matrix(scale ** 2 * My[rows] @ np.swapaxes(Mp[rows], 1, 2)).as_rotvec()
+        return mean, rotation
+
+    def errors(self, y: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per row, for measured points y and modelled points p (R, 3): the position error (G,) m,
+        the orientation error angle (G,) rad (NaN for a position-only row) and the residual length
+        sqrt(sum of weight |y - p|^2) (G,) m, which is sqrt(|e|^2 + L^2 (2 sin(theta/2))^2) for a frame."""
+        mean, rotation = self.signed(y, p)
+        e = np.linalg.norm(mean, axis=1)
+        if len(self.first) == len(y):
+            return e, rotation[:, 0], e
+        d = y - p
+        length = np.sqrt(np.bincount(self.group, self.weight * np.einsum("ni,ni->n", d, d), len(self.first)))
+        return e, np.linalg.norm(rotation, axis=1), length
 
 
 def _sums(group: np.ndarray, values: np.ndarray, G: int) -> np.ndarray:
