@@ -30,7 +30,7 @@ def add_parser(command):
     p.add_argument("--seed", type=int, default=0, help="seed of the cross-validation folds and of --holdout "
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md and "
-                                                         "generated/ (the C and CasADi code, NAME_calibration.h with the "
+                                                         "report.html, generated/ (the C and CasADi code, NAME_calibration.h with the "
                                                          "coefficients, NAME_example.c)")
     add_orientation_length(p)
 
@@ -43,10 +43,10 @@ def _default_model(args, robot, aux):
 
 
 def run(args) -> dict:
+    from gecgen import report
     from gecgen.files import write_atomically
     from gecgen.loop.calibrate import choose
     from gecgen.loop.diagnose import write_error_model
-    from gecgen.loop.report import write_calibrate_report
     from gecgen.model.measurements import hold_out, read_measurements
     from gecgen.runtime import calibration, export
     from gecgen.runtime.identify import row_errors, summary, to_world
@@ -97,7 +97,7 @@ def run(args) -> dict:
         result["val"] = summary(*row_errors(choice.cm, val, y, choice.fit.c)[:2])
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
-    files["report"] = write_calibrate_report(result, out)
+    files.update(report.write(report.content.calibrate(result, choice, calib, data, val), out))
     result["files"] = {k: str(v) for k, v in files.items()}
     return result
 

@@ -21,7 +21,7 @@ def add_parser(command):
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
-    p.add_argument("--report", help="folder for report.md and its plots")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
                    help="registration of DATA onto the nominal model: auto (when far apart), always or never; "
                         "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
@@ -70,7 +70,7 @@ def run(args) -> dict:
               if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
     if args.report:
-        from gecgen.loop.report import write_report
+        from gecgen import report
 
-        result["report"] = str(write_report(diag, data, args.report, str(out)))
+        result.update(report.write(report.content.diagnose(diag, data, val, str(out), register_val), args.report))
     return result

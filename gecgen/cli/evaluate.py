@@ -12,6 +12,7 @@ def add_parser(command):
     p.add_argument("--register", action="store_true",
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     add_orientation_length(p, "the calibration's, else 0.1")
 
 
@@ -45,5 +46,11 @@ def run(args) -> dict:
     else:
         y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: use evaluate --register")
         result.update(before_registration="the calibration's", tracker_frame="the calibration's")
-    return {**result, "before": summary(*row_errors(cm, data, y_before, None)[:2]),
-            "after": summary(*row_errors(cm, data, y, calib.c)[:2]), "extrapolation": outside}
+    result = {**result, "before": summary(*row_errors(cm, data, y_before, None)[:2]),
+              "after": summary(*row_errors(cm, data, y, calib.c)[:2]), "extrapolation": outside}
+    if args.report:
+        from gecgen import report
+
+        result.update(report.write(report.content.evaluate(calib, cm, data, y_before, y, outside, args.calibration),
+                                   args.report))
+    return result

@@ -24,6 +24,7 @@ def add_parser(command):
                    help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
                         "on DATA); default: exact dependencies only (1e-7)")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     add_orientation_length(p)
 
 
@@ -50,4 +51,8 @@ def run(args) -> dict:
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), **measured_counts(cm.robot, data),
               **calib.report, "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
+    if args.report:
+        from gecgen import report
+
+        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out)), args.report))
     return result

@@ -1,0 +1,359 @@
+"""What each command's report shows, as sections of paragraphs, bullets, tables and figures.
+
+Built from the objects a command already holds (Fit, Calibration, Diagnosis, Measurements): the
+residuals are the modelled points at coefficients already fitted, never a new fit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gecgen.model.measurements import Measurements
+from gecgen.model.pose_targets import measured_rows
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.runtime.identify import fit_frames, summary, to_world
+
+
+@dataclass(frozen=True)
+class Table:
+    header: tuple[str, ...]
+    rows: list[tuple[str, ...]]
+
+
+@dataclass(frozen=True)
+class Figure:
+    name: str  # file stem of the Markdown report's PNG
+    caption: str
+    png: bytes
+
+
+@dataclass(frozen=True)
+class Bullets:
+    items: list[str]
+
+
+@dataclass
+class Section:
+    """A titled part of a report; blocks are paragraphs (str, `code` in backticks), Bullets, Table or Figure."""
+
+    title: str
+    blocks: list = field(default_factory=list)
+
+
+@dataclass
+class Report:
+    title: str
+    intro: list[str]
+    sections: list[Section]
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """One model state (stage) on one data set, per measured row (G of them): the pose index (G,),
+    measured - modelled position (G, 3) mm in the robot world, and the orientation error as a
+    rotation vector about the world x, y, z (G, 3) mrad, NaN for position-only rows; None when no
+    row measures a frame."""
+
+    stage: str
+    pose: np.ndarray
+    position_mm: np.ndarray
+    rotation_mrad: np.ndarray | None
+
+    def summary(self) -> dict:
+        """{rms_mm, max_mm} and with orientations {rot_rms_mrad, rot_max_mrad} (`identify.summary`)."""
+        rot = None if self.rotation_mrad is None else 1e-3 * np.linalg.norm(self.rotation_mrad, axis=1)
+        return summary(1e-3 * np.linalg.norm(self.position_mm, axis=1), rot)
+
+
+@dataclass(frozen=True)
+class DataSet:
+    name: str  # "training" or "validation"
+    data: Measurements
+    stages: list[Residuals]
+
+
+def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> Residuals:
+    """Residuals of compiled model cm at coefficients c (None: nominal) against measured world points y (R, 3) m."""
+    rows = measured_rows(cm.robot, data)
+    p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), np.zeros(cm.dims.nc) if c is None else c)
+    d, rot = rows.signed(y, p[data.pose, data.target])
+    return Residuals(stage, data.pose[rows.first], 1e3 * d, 1e3 * rot if rows.oriented.any() else None)
+
+
+def variable(data: Measurements, name: str) -> np.ndarray:
+    """Values (P,) of a term variable (q<k>, a wrench component, payload, an auxiliary signal) per pose."""
+    if name.startswith("q") and name[1:].isdigit():
+        return data.q[:, int(name[1:]) - 1]
+    if name in WRENCH:
+        return data.w[:, WRENCH.index(name)]
+    if name == "payload":
+        return np.linalg.norm(data.w[:, :3], axis=1)
+    return data.aux[:, data.aux_names.index(name)]
+
+
+def joint_label(robot: Robot, k: int) -> str:
+    """'q2 shoulder (deg)': joint variable k (0-based) with its name and the unit plots use."""
+    j = robot.joints[k]
+    name = "" if j.name == f"q{k + 1}" else f" {j.name}"
+    return f"q{k + 1}{name} ({'deg' if j.kind == 'R' else 'mm'})"
+
+
+def joint_values(robot: Robot, data: Measurements, k: int) -> np.ndarray:
+    """Joint k (0-based) per pose in the plots' unit: deg for revolute, mm for prismatic joints."""
+    return np.degrees(data.q[:, k]) if robot.joints[k].kind == "R" else 1e3 * data.q[:, k]
+
+
+# -- sections every report shares ---------------------------------------------------------------
+
+def headline(sets: list[DataSet]) -> Section:
+    """Per stage, RMS and max point error on each data set (and orientation error when measured)."""
+    header, cols = ["model"], []
+    for ds in sets:
+        s = ds.stages[0].summary()
+        header += [f"{ds.name} RMS (mm)", f"{ds.name} max (mm)"]
+        cols.append(("rms_mm", "max_mm"))
+        if "rot_rms_mrad" in s:
+            header += [f"{ds.name} orientation RMS (mrad)", f"{ds.name} orientation max (mrad)"]
+    rows = []
+    for k, st in enumerate(sets[0].stages):
+        row = [st.stage]
+        for ds in sets:
+            s = ds.stages[k].summary()
+            row += [f"{s['rms_mm']:.4f}", f"{s['max_mm']:.4f}"]
+            if "rot_rms_mrad" in s:
+                row += [f"{s['rot_rms_mrad']:.4f}", f"{s['rot_max_mrad']:.4f}"]
+        rows.append(tuple(row))
+    counts = "; ".join(f"{ds.name}: {ds.data.n_poses} poses, {len(ds.stages[0].pose)} measured rows "
+                       f"(`{ds.data.source or 'in memory'}`)" for ds in sets)
+    return Section("Summary", [Table(tuple(header), rows),
+                               f"Point error: the distance between measured and modelled point. {counts}."])
+
+
+def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> list[Section]:
+    """Error distributions of every stage, and signed residuals per axis against each joint of
+    the last `compare` stages (each in its own figure and scale), per data set."""
+    from gecgen.report import plots
+
+    dist = Section("Distribution of point errors",
+                   ["Histogram and cumulative distribution of the point errors of each model (log scale: the "
+                    "uncalibrated errors are often a hundred times the calibrated ones)."])
+    joints = Section("Residuals against each joint",
+                     ["Signed residual (measured minus modelled) along the world x, y, z axes"
+                      + (" and orientation error about them" if any(s.rotation_mrad is not None for ds in sets
+                                                                    for s in ds.stages) else "")
+                      + ", against each joint (one point per measured row). What a model lacks shows here as a "
+                        "pattern: a sine against a joint is a periodic error of it (a gear, a bearing), a slope "
+                        "a scale or compliance error. The figures of one data set share no scale between "
+                        "models: compare shapes, and read the size on the axes."])
+    for ds in sets:
+        dist.blocks.append(plots.error_distribution(robot, ds))
+        for st in ds.stages[-compare:]:
+            joints.blocks.append(plots.residuals_per_joint(robot, ds, st))
+    return [dist, joints]
+
+
+def glossary(robot: Robot) -> Section:
+    """What ex..ep mean and which frame is which, with the robot's joint names."""
+    frames = [f"frame 0: the base (after `base`, before the first joint)"]
+    for i, j in enumerate(robot.chain, start=1):
+        mimic = f", a mimic of {j.mimic.name}" if j.mimic else ""
+        tool = "; it also carries the tool" if i == robot.n_frames else ""
+        frames.append(f"frame {i}: after joint {i}, `{j.name}` ({'revolute' if j.kind == 'R' else 'prismatic'}"
+                      f"{mimic}){tool}")
+    return Section("Glossary", [
+        "Each frame i carries six generalized errors, applied right after its nominal transform: "
+        "`E_i = Trans(ex, ey, ez) RotY(es) RotZ(er) RotX(ep)`.",
+        Bullets(["`ex`, `ey`, `ez`: translations along the frame's x, y, z (reported in mm)",
+                 "`es`, `er`, `ep`: rotations about the frame's y, z, x, in that order (reported in mrad)",
+                 "a coefficient `3.ey:q2` is the error ey of frame 3 per unit of its term q2 (rad or m); "
+                 "its value is in mm or mrad per unit of the term, and with the term `1` a constant"]),
+        "Frames:", Bullets(frames)])
+
+
+def coefficient_section(robot: Robot, calib) -> list[Section]:
+    """The coefficients (mm, mrad) with std, and the eliminated ones with what they merge into."""
+    names = calib.model.coefficient_names(robot)
+    kept = set(calib.kept)
+    eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
+    rows = []
+    for j, (coef, name) in enumerate(zip(calib.model.coefficients, names)):
+        frame, err = robot.error_names()[coef.error].split(".")
+        unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
+        term = coef.term.label
+        unit = unit if term == "1" else f"{unit} per unit of {term}"
+        std = "eliminated" if j not in kept else f"{1e3 * calib.std[j]:.4g}"
+        rows.append((frame, err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}", std, unit))
+    out = [Section("Coefficients", [
+        f"{len(kept)} of {len(names)} coefficients identified; std is the standard deviation from the fit's "
+        "covariance. A frame's constant errors are its geometry's; the others scale their term.",
+        Table(("frame", "error", "term", "value", "std", "unit"), rows)])]
+    if eliminated:
+        rows = [(f"`{p}`", e["reason"], ", ".join(f"`{m['param']}` x {m['factor']:.4g}" for m in e["merged_into"])
+                 or "nothing (not seen by the data)") for p, e in eliminated.items()]
+        out.append(Section("Eliminated parameters", [
+            "Held at zero: the data cannot tell them from others. Their effect is carried by the kept "
+            "coefficients they merge into (the coefficient gains the factor times the eliminated value).",
+            Table(("parameter", "reason", "merged into"), rows)]))
+    return out
+
+
+def extrapolation_section(robot: Robot, calib, counts: dict[str, int] | None, n_poses: int | None) -> Section:
+    """The inputs' training ranges; with counts, the poses of the reported data outside them."""
+    from gecgen.runtime.calibration import extrapolation_note
+
+    ranges = calib.report.get("training_ranges") or {}
+    label = {f"q{k + 1}": joint_label(robot, k) for k in range(robot.n)}
+    rows = []
+    for name, (lo, hi) in ranges.items():
+        if name in label:
+            scale = 180 / np.pi if robot.joints[int(name[1:]) - 1].kind == "R" else 1e3
+            rows.append((label[name], f"{scale * lo:.4g}", f"{scale * hi:.4g}",
+                         str(counts.get(name, 0)) if counts is not None else "-"))
+        else:
+            rows.append((name, f"{lo:.4g}", f"{hi:.4g}", str(counts.get(name, 0)) if counts is not None else "-"))
+    note = (extrapolation_note(counts, n_poses, robot) or "every pose lies inside the training ranges"
+            ) if counts is not None else "the calibration is validated only inside these ranges"
+    return Section("Extrapolation", [
+        "Outside the span each input was fitted over the model extrapolates, and a polynomial term "
+        f"can grow without bound: {note}.", Table(("input", "training min", "training max", "poses outside"), rows)])
+
+
+def effect_sections(robot: Robot, effects, model, c: np.ndarray, before: Residuals, after: Residuals,
+                    data: Measurements) -> list[Section]:
+    """One section per effect diagnose added, with its fitted error and the residual it removed against its variable."""
+    from gecgen.report import plots
+
+    names = model.coefficient_names(robot)
+    out = []
+    for k, eff in enumerate(effects, 1):
+        idx = [names.index(co["name"]) for co in eff.coefficients]
+        blocks = [f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.",
+                  Table(("coefficient", "value (x 1e3: mm or mrad per unit of term)", "std"),
+                        [(f"`{co['name']}`", f"{1e3 * co['value']:.6g}",
+                          "eliminated" if co["std"] is None else f"{1e3 * co['std']:.2g}") for co in eff.coefficients])]
+        if eff.alternatives:
+            blocks += ["Indistinguishable on this data (the same fitted effect):",
+                       Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
+                                for alt in eff.alternatives])]
+        blocks += [plots.effect(robot, eff, [model.coefficients[j] for j in idx], c[idx], v, before, after, data)
+                   for v in eff.variables]
+        out.append(Section(f"Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", blocks))
+    return out
+
+
+# -- one report per command ----------------------------------------------------------------------
+
+def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str) -> Report:
+    y0 = to_world(fit_frames(cm, data, None, fit.loss), data)  # the nominal model's registration, as Fit.before
+    train = DataSet("training", data, [residuals("uncalibrated", cm, data, y0, None),
+                                       residuals("calibrated", cm, data, fit.to_world(data), fit.c)])
+    return Report(f"gecgen identify: {robot.name}",
+                  [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses). "
+                   "Training data only: score it on new data with `gecgen evaluate --report`."],
+                  [headline([train]), *residual_sections(robot, [train]), *coefficient_section(robot, calib),
+                   glossary(robot), extrapolation_section(robot, calib, None, None)])
+
+
+def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray, outside: dict[str, int],
+             calib_path: str) -> Report:
+    robot = calib.robot
+    val = DataSet("validation", data, [residuals("uncalibrated", cm, data, y_before, None),
+                                       residuals("calibrated", cm, data, y, calib.c)])
+    return Report(f"gecgen evaluate: {robot.name}",
+                  [f"Calibration `{calib_path}` scored on `{data.source}` ({data.n_poses} poses), data it was not "
+                   "fitted on."],
+                  [headline([val]), *residual_sections(robot, [val]), *coefficient_section(robot, calib),
+                   glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
+
+
+def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool) -> list[DataSet]:
+    """Uncalibrated, declared model and diagnosed model on the training and validation data, each
+    scored as diagnose scored it."""
+    init, final = diag.initial, diag.final
+    sets = [DataSet("training", data, [
+        residuals("uncalibrated", init.cm, data, to_world(fit_frames(init.cm, data, None), data), None),
+        residuals("calibrated (declared model)", init.cm, data, init.fit.to_world(data), init.fit.c),
+        residuals("diagnosed", final.cm, data, final.fit.to_world(data), final.fit.c)])]
+    if val is not None:
+        stages = []
+        for label, rnd, c in (("uncalibrated", init, None), ("calibrated (declared model)", init, init.fit.c),
+                              ("diagnosed", final, final.fit.c)):
+            frames = fit_frames(rnd.cm, val, c) if register_val else rnd.fit.registrations
+            stages.append(residuals(label, rnd.cm, val, to_world(frames, val), c))
+        sets.append(DataSet("validation", val, stages))
+    return sets
+
+
+def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str, register_val: bool = False) -> Report:
+    from gecgen.loop.diagnose import verdict
+    from gecgen.runtime.calibration import from_fit
+
+    robot = diag.robot
+    sets = _diagnosed_sets(diag, data, val, register_val)
+    calib = from_fit(robot, diag.final.model, diag.final.fit)
+    found = [f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
+             "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS on the "
+             "training data.", verdict(diag.remaining)]
+    if not diag.effects:
+        found.insert(1, "diagnose added nothing to the declared model.")
+    if diag.remaining["outliers"]:
+        found.append(f"{diag.remaining['outliers']} training rows were outliers of the robust fit (down-weighted, "
+                     "listed by `gecgen identify`); they neither chose nor hid an effect.")
+    rounds = Table(("round", "training RMS (mm)", "CV RMS (mm)", "candidates", "accepted"),
+                   [(str(h["round"]), f"{h['train_rms_mm']:.4f}", f"{h['cv_rms_mm']:.4f}", str(h["candidates"]),
+                     h["accepted"] or "-") for h in diag.history])
+    return Report(f"gecgen diagnose: {robot.name}",
+                  [f"Training data `{data.source}` ({data.n_poses} poses); validation "
+                   f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
+                   f"terms. New error model: `{errors_out}`."],
+                  [headline(sets), Section("What diagnose found", found),
+                   *effect_sections(robot, diag.effects, diag.final.model, diag.final.fit.c, sets[0].stages[1],
+                                    sets[0].stages[2], data),
+                   *residual_sections(robot, sets), *coefficient_section(robot, calib), glossary(robot),
+                   extrapolation_section(robot, calib, None, None), Section("Rounds", [rounds])])
+
+
+def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements | None) -> Report:
+    robot = calib.robot
+    fit, cm = choice.fit, choice.cm
+    diag = choice.diagnosis
+    if diag is not None:
+        sets = _diagnosed_sets(diag, data, val, False)
+    else:
+        sets = [DataSet("training", data, [
+            residuals("uncalibrated", cm, data, to_world(fit_frames(cm, data, None), data), None),
+            residuals("calibrated", cm, data, fit.to_world(data), fit.c)])]
+        if val is not None:
+            yv = to_world(calib.frames, val)
+            sets.append(DataSet("validation", val, [residuals("uncalibrated", cm, val, yv, None),
+                                                    residuals("calibrated", cm, val, yv, fit.c)]))
+    rows = []
+    for c in result["candidates"]:
+        cv = f"{c['cv_rms_mm']:.4f}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
+        size = f"{c['n_params']} + what diagnose adds" if c["diagnose"] else str(c["n_params"])
+        rows.append((c["model"] + (" (chosen)" if c["model"] == result["model"] else ""), size, cv))
+    choose = Section("Model choice", [
+        "The model is chosen on the training data alone: each candidate is fitted whole (diagnose's choices "
+        "included) on four fifths of the training poses and scored on the fifth left out, in turn; the lowest "
+        "cross-validated RMS wins, a tie within 1% going to the smaller model.",
+        Table(("model", "coefficients", "training CV RMS (mm)"), rows),
+        f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} coefficients."])
+    if result["outliers"]:
+        choose.blocks.append(f"{len(result['outliers'])} training points were outliers of the robust fit "
+                             "(down-weighted; `calibration.json` lists them).")
+    if result["placement"]:
+        choose.blocks.append("Targets placed from the training data before the fit: " + ", ".join(
+            f"{n} {[round(v, 4) for v in xyz]} m" for n, xyz in result["placement"]["targets_m"].items()))
+    effects = effect_sections(robot, diag.effects, choice.model, fit.c, sets[0].stages[1], sets[0].stages[2],
+                              data) if diag is not None else []
+    files = Section("Files", ["`calibration.json` (for `gecgen evaluate` and `gecgen compensate`), `errors.yaml` (the "
+                              "chosen error model), `generated/` (its C and CasADi code, `NAME_calibration.h` with the "
+                              "coefficients in the code's order, `NAME_example.c`: `gecgen export` says how to build "
+                              "it)."])
+    return Report(f"gecgen calibrate: {robot.name}",
+                  [f"Training data `{result['train_data']}` ({data.n_poses} poses)"
+                   + (f"; validation {result['validation']}, scored after the choice." if val is not None else ".")],
+                  [headline(sets), choose, *effects, *residual_sections(robot, sets),
+                   *coefficient_section(robot, calib), glossary(robot), extrapolation_section(robot, calib, None, None),
+                   files])
