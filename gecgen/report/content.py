@@ -26,6 +26,7 @@ class Figure:
     name: str  # file stem of the Markdown report's PNG
     caption: str
     png: bytes
+    axes: tuple[str, ...] = ()  # the labels of its axes
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,11 @@ def joint_values(robot: Robot, data: Measurements, k: int) -> np.ndarray:
     return np.degrees(data.q[:, k]) if robot.joints[k].kind == "R" else 1e3 * data.q[:, k]
 
 
+def frame_label(robot: Robot, i: int) -> str:
+    """'0 base' or '2 after a2': frame i with the joint it follows."""
+    return f"{i} base" if i == 0 else f"{i} after {robot.chain[i - 1].name}"
+
+
 # -- sections every report shares ---------------------------------------------------------------
 
 def headline(sets: list[DataSet]) -> Section:
@@ -177,16 +183,17 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
     kept = set(calib.kept)
     eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
     rows = []
-    for j, (coef, name) in enumerate(zip(calib.model.coefficients, names)):
+    for j in sorted(kept):
+        coef = calib.model.coefficients[j]
         frame, err = robot.error_names()[coef.error].split(".")
         unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
         term = coef.term.label
         unit = unit if term == "1" else f"{unit} per unit of {term}"
-        std = "eliminated" if j not in kept else f"{1e3 * calib.std[j]:.4g}"
-        rows.append((frame, err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}", std, unit))
+        rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}", f"{1e3 * calib.std[j]:.4g}", unit))
     out = [Section("Coefficients", [
-        f"{len(kept)} of {len(names)} coefficients identified; std is the standard deviation from the fit's "
-        "covariance. A frame's constant errors are its geometry's; the others scale their term.",
+        f"The {len(kept)} identified coefficients of {len(names)} (the others are eliminated: see below); std is "
+        "the standard deviation from the fit's covariance. A term `1` is a constant error (the frame's geometry); "
+        "any other term's coefficient is per unit of the term (rad or m for joints, N or N m for the wrench).",
         Table(("frame", "error", "term", "value", "std", "unit"), rows)])]
     if eliminated:
         rows = [(f"`{p}`", e["reason"], ", ".join(f"`{m['param']}` x {m['factor']:.4g}" for m in e["merged_into"])
@@ -219,25 +226,33 @@ def extrapolation_section(robot: Robot, calib, counts: dict[str, int] | None, n_
         f"can grow without bound: {note}.", Table(("input", "training min", "training max", "poses outside"), rows)])
 
 
-def effect_sections(robot: Robot, effects, model, c: np.ndarray, before: Residuals, after: Residuals,
+def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, after: Residuals,
                     data: Measurements) -> list[Section]:
-    """One section per effect diagnose added, with its fitted error and the residual it removed against its variable."""
+    """One section per effect diagnose added to compiled model cm (coefficients c, training data
+    with measured world points y): its fitted error, and against each of its variables the partial
+    residual (the effect's coefficients zeroed, all else held) with the part the effect removed."""
     from gecgen.report import plots
 
-    names = model.coefficient_names(robot)
+    names = cm.model.coefficient_names(robot)
+    q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
     out = []
     for k, eff in enumerate(effects, 1):
         idx = [names.index(co["name"]) for co in eff.coefficients]
+        zeroed = c.copy()
+        zeroed[idx] = 0.0
+        partial = residuals("without the effect", cm, data, y, zeroed)
+        removed = Residuals("removed", partial.pose, partial.position_mm - after.position_mm, None)
+        error = cm.model.coefficients[idx[0]].error
+        size = 1e3 * (cm.eps(q, w, aux, c) - cm.eps(q, w, aux, zeroed))[:, error]
         blocks = [f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.",
-                  Table(("coefficient", "value (x 1e3: mm or mrad per unit of term)", "std"),
+                  Table(("coefficient", "value (mm or mrad per unit of term)", "std"),
                         [(f"`{co['name']}`", f"{1e3 * co['value']:.6g}",
                           "eliminated" if co["std"] is None else f"{1e3 * co['std']:.2g}") for co in eff.coefficients])]
         if eff.alternatives:
             blocks += ["Indistinguishable on this data (the same fitted effect):",
                        Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
                                 for alt in eff.alternatives])]
-        blocks += [plots.effect(robot, eff, [model.coefficients[j] for j in idx], c[idx], v, before, after, data)
-                   for v in eff.variables]
+        blocks += [plots.effect(robot, eff, size, v, partial, removed, data) for v in eff.variables]
         out.append(Section(f"Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", blocks))
     return out
 
@@ -308,8 +323,8 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                    f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
                    f"terms. New error model: `{errors_out}`."],
                   [headline(sets), Section("What diagnose found", found),
-                   *effect_sections(robot, diag.effects, diag.final.model, diag.final.fit.c, sets[0].stages[1],
-                                    sets[0].stages[2], data),
+                   *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit.c,
+                                    diag.final.fit.to_world(data), sets[0].stages[2], data),
                    *residual_sections(robot, sets), *coefficient_section(robot, calib), glossary(robot),
                    extrapolation_section(robot, calib, None, None), Section("Rounds", [rounds])])
 
@@ -345,7 +360,7 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     if result["placement"]:
         choose.blocks.append("Targets placed from the training data before the fit: " + ", ".join(
             f"{n} {[round(v, 4) for v in xyz]} m" for n, xyz in result["placement"]["targets_m"].items()))
-    effects = effect_sections(robot, diag.effects, choice.model, fit.c, sets[0].stages[1], sets[0].stages[2],
+    effects = effect_sections(robot, diag.effects, cm, fit.c, fit.to_world(data), sets[0].stages[-1],
                               data) if diag is not None else []
     files = Section("Files", ["`calibration.json` (for `gecgen evaluate` and `gecgen compensate`), `errors.yaml` (the "
                               "chosen error model), `generated/` (its C and CasADi code, `NAME_calibration.h` with the "

@@ -3,13 +3,13 @@ residuals against each joint, and each diagnosed effect against its variable."""
 from __future__ import annotations
 
 import io
+import re
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import sympy as sp  # noqa: E402
 
 from gecgen.model.robot import Robot  # noqa: E402
 from gecgen.report.content import DataSet, Figure, Residuals, joint_label, joint_values, variable  # noqa: E402
@@ -19,15 +19,17 @@ COLOURS = ("tab:red", "tab:blue", "tab:green")
 DPI = 100
 
 
-def _png(fig) -> bytes:
+def _figure(fig, name: str, caption: str) -> Figure:
+    """The figure as PNG, with the labels of its axes (the page's alt text names them)."""
+    labels = tuple(dict.fromkeys(t for ax in fig.axes for t in (ax.get_xlabel(), ax.get_ylabel()) if t))
     out = io.BytesIO()
     fig.savefig(out, format="png", dpi=DPI)
     plt.close(fig)
-    return out.getvalue()
+    return Figure(name, caption, out.getvalue(), labels)
 
 
 def _slug(text: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in text).strip("_")
+    return re.sub(r"[^A-Za-z0-9]+", "_", text).strip("_")
 
 
 def error_distribution(robot: Robot, ds: DataSet) -> Figure:
@@ -52,7 +54,18 @@ def error_distribution(robot: Robot, ds: DataSet) -> Figure:
     ax.set_title(f"{robot.name}, {ds.name} data: histogram of point errors")
     cx.set_title(f"{robot.name}, {ds.name} data: cumulative distribution")
     fig.tight_layout()
-    return Figure(f"errors_{ds.name}", f"Point errors on the {ds.name} data, each model", _png(fig))
+    return _figure(fig, f"errors_{ds.name}", f"Point errors on the {ds.name} data, each model")
+
+
+def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
+    """The mean of y in equal bins of x, as a line: a periodic or sloped pattern stands out of the scatter."""
+    ok = np.isfinite(y)
+    edges = np.linspace(x.min(), x.max(), bins + 1)
+    at = np.clip(np.searchsorted(edges, x[ok], side="right") - 1, 0, bins - 1)
+    count = np.bincount(at, minlength=bins)
+    mean = np.bincount(at, y[ok], minlength=bins) / np.maximum(count, 1)
+    centre = (edges[:-1] + edges[1:]) / 2
+    ax.plot(centre[count >= 3], mean[count >= 3], "-", color="black", lw=1.0)
 
 
 def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
@@ -71,52 +84,45 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
             ax = axes[r, k]
             ax.plot(joint_values(robot, ds.data, k)[st.pose], values, ".", ms=3, alpha=0.7, color=colour)
             ax.axhline(0, color="0.5", lw=0.6)
+            _binned_mean(ax, joint_values(robot, ds.data, k)[st.pose], values)
             ax.set_ylim(-limit, limit)
             ax.set_xlabel(joint_label(robot, k), fontsize=7, labelpad=1)
             ax.set_ylabel(ylabel, fontsize=7, labelpad=1)
             ax.tick_params(labelsize=6, pad=1)
+            ax.locator_params(nbins=4)  # fewer ticks: drawing them is most of the figure's time
             ax.grid(alpha=0.3)
     fig.suptitle(f"{robot.name}, {ds.name} data, {st.stage}: signed residuals against each joint", fontsize=10)
-    fig.tight_layout(h_pad=0.4, w_pad=0.3)
-    return Figure(f"residuals_{ds.name}_{_slug(st.stage)}",
-                  f"Signed residuals, {st.stage} model, {ds.name} data", _png(fig))
+    # fixed margins: tight_layout on this many axes costs a second per figure
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.05, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, wspace=0.42,
+                        hspace=0.55)
+    return _figure(fig, f"residuals_{ds.name}_{_slug(st.stage)}",
+                   f"Signed residuals, {st.stage} model, {ds.name} data")
 
 
-def _rms_per_pose(st: Residuals, n_poses: int) -> np.ndarray:
-    """RMS point error (mm) of the measured rows of each pose (P,)."""
-    sq = np.bincount(st.pose, np.einsum("gi,gi->g", st.position_mm, st.position_mm), n_poses)
-    return np.sqrt(sq / np.maximum(np.bincount(st.pose, minlength=n_poses), 1))
-
-
-def effect(robot: Robot, eff, coefficients, c: np.ndarray, name: str, before: Residuals, after: Residuals,
-           data) -> Figure:
-    """Left: the generalized error the effect adds (sum of its coefficients times their terms, mm
-    or mrad) at each training pose against `name`; right: the RMS residual per pose before and after."""
-    values = {str(s): None for co in coefficients for s in co.term.expr.free_symbols}
-    args = sorted(values)
-    funcs = [sp.lambdify([sp.Symbol(a) for a in args], co.term.expr, "numpy") for co in coefficients]
-    inputs = [variable(data, a) for a in args]
-    size = 1e3 * sum(ck * np.broadcast_to(f(*inputs), (data.n_poses,)) for ck, f in zip(c, funcs))
-    x = variable(data, name)
+def effect(robot: Robot, eff, size: np.ndarray, name: str, partial: Residuals, removed: Residuals, data) -> Figure:
+    """Left: the generalized error the effect adds (its coefficients times their terms, mm or mrad)
+    at each training pose (P,) against variable `name`; right, per axis x, y, z: the partial
+    residual (what remains without the effect, all else fitted) and the part the effect removed (mm)."""
     k = int(name[1:]) - 1 if name.startswith("q") and name[1:].isdigit() else None
-    if k is not None:
-        x = joint_values(robot, data, k)
+    x = joint_values(robot, data, k) if k is not None else variable(data, name)
     label = joint_label(robot, k) if k is not None else name
     unit = "mm" if eff.error.split(".")[-1] in ("ex", "ey", "ez") else "mrad"
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 3.4))
-    order = np.argsort(x)
-    ax.plot(x[order], size[order], ".-", ms=3, lw=0.8, color=COLOURS[2])
-    ax.set_xlabel(label)
-    ax.set_ylabel(f"{eff.error} added ({unit})")
-    ax.set_title(f"fitted {eff.error}: {' + '.join(eff.terms)}", fontsize=9)
-    for st, colour in ((before, COLOURS[1]), (after, COLOURS[2])):
-        bx.plot(x, _rms_per_pose(st, data.n_poses), ".", ms=4, alpha=0.7, color=colour, label=st.stage)
-    bx.set_xlabel(label)
-    bx.set_ylabel("residual per pose, RMS (mm)")
-    bx.set_title("training residual before and after diagnose", fontsize=9)
-    bx.legend(fontsize=8)
-    for a in (ax, bx):
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    return Figure(f"effect_{_slug(eff.error)}_{_slug(name)}", f"{eff.error} against {label}: what the effect removed",
-                  _png(fig))
+    fig, axes = plt.subplots(1, 4, figsize=(12, 3.0))
+    axes[0].plot(x, size, ".", ms=3, color=COLOURS[2])
+    axes[0].set_ylabel(f"{eff.error} added ({unit})", fontsize=8)
+    axes[0].set_title(f"fitted {eff.error}", fontsize=9)
+    for a, ax in enumerate(axes[1:]):
+        ax.plot(x[partial.pose], partial.position_mm[:, a], ".", ms=3, alpha=0.6, color=COLOURS[1],
+                label="residual without it")
+        ax.plot(x[removed.pose], removed.position_mm[:, a], ".", ms=3, color=COLOURS[2], label="what it removed")
+        ax.set_ylabel(f"{'xyz'[a]} residual (mm)", fontsize=8)
+        ax.set_title(f"{'xyz'[a]}: partial residual", fontsize=9)
+    axes[1].legend(fontsize=7)
+    for ax in axes:
+        ax.set_xlabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    fig.tight_layout(w_pad=0.6)
+    return _figure(fig, f"effect_{_slug(eff.error)}_{_slug(eff.terms[0])}_{_slug(name)}",
+                   f"{eff.error} ({', '.join(eff.terms)}) against {label}: the effect and the residual it removed")

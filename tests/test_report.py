@@ -1,0 +1,115 @@
+"""Reports people read: each command's report.html is one self-contained page with the sections a
+person needs, axes named after the robot's joints; rendered in a real browser when chromium is there."""
+import base64
+import contextlib
+import io
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import ROBOTS
+
+from gecgen.cli import main
+
+ROBOT = ROBOTS / "industrial6r.yaml"
+ERRORS = ROBOTS / "constant.errors.yaml"
+#: sections every report has, and those of one command only
+COMMON = ("Summary", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
+          "Extrapolation")
+ONLY = {"identify": (), "evaluate": (), "diagnose": ("What diagnose found", "Rounds"),
+        "calibrate": ("Model choice", "Files")}
+BROWSER = shutil.which("chromium")
+
+
+def gecgen(*args) -> dict:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        assert main([*map(str, args), "--json"]) == 0
+    return json.loads(out.getvalue())
+
+
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory):
+    """{command: its JSON result}, each with --report, on 40 simulated industrial6r poses (30 to train)."""
+    d = tmp_path_factory.mktemp("report")
+    gecgen("simulate", ROBOT, "--poses", 40, "--seed", 3, "-o", d / "all.csv")
+    rows = np.loadtxt(d / "all.csv", delimiter=",", skiprows=1, usecols=0)
+    text = (d / "all.csv").read_text().splitlines()
+    for name, keep in (("train", rows < 30), ("val", rows >= 30)):
+        (d / f"{name}.csv").write_text("\n".join([text[0], *(t for t, k in zip(text[1:], keep) if k)]) + "\n")
+    out = {"identify": gecgen("identify", ROBOT, d / "train.csv", "--errors", ERRORS, "-o", d / "cal.json",
+                              "--report", d / "identify")}
+    out["evaluate"] = gecgen("evaluate", d / "cal.json", d / "val.csv", "--report", d / "evaluate")
+    out["diagnose"] = gecgen("diagnose", ROBOT, d / "train.csv", "--val", d / "val.csv", "--errors", ERRORS,
+                             "--max-rounds", 1, "-o", d / "diag.errors.yaml", "--report", d / "diagnose")
+    out["calibrate"] = gecgen("calibrate", ROBOT, d / "train.csv", "--val", d / "val.csv", "--errors", ERRORS,
+                              "--models", "geometric", "-o", d / "calibrate")
+    return out
+
+
+def html_of(result: dict) -> str:
+    return open(result.get("report_html") or result["files"]["report_html"]).read()
+
+
+@pytest.mark.parametrize("command", list(ONLY))
+def test_report_is_self_contained_with_its_sections(reports, command):
+    html = html_of(reports[command])
+    sources = re.findall(r'(?:src|href)="([^"#][^"]*)"', html)
+    assert sources and all(s.startswith("data:image/png;base64,") for s in sources), sources[:3]
+    assert "http" not in html.replace("http-equiv", "")
+    for title in (*COMMON, *ONLY[command]):
+        assert f"<h2>{title}</h2>" in html, title
+    # every embedded figure is a PNG, and the Markdown report beside it names the same sections
+    assert all(base64.b64decode(s.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n" for s in sources)
+    md = open((reports[command].get("report") or reports[command]["files"]["report"])).read()
+    assert all(f"## {title}" in md for title in (*COMMON, *ONLY[command]))
+
+
+def test_report_numbers_are_the_commands(reports):
+    """The headline table holds the numbers the command printed (independently computed there)."""
+    ev = reports["evaluate"]
+    cells = re.search(r"<td>calibrated</td>(.*?)</tr>", html_of(ev)).group(1)
+    assert f"{ev['after']['rms_mm']:.4f}" in cells and f"{ev['after']['max_mm']:.4f}" in cells
+    cells = re.search(r"<td>uncalibrated</td>(.*?)</tr>", html_of(ev)).group(1)
+    assert f"{ev['before']['rms_mm']:.4f}" in cells
+
+
+@pytest.mark.parametrize("command", list(ONLY))
+def test_residual_axes_name_the_joints_with_units(reports, command):
+    """Every residual figure labels its axes with each joint's name and unit and the residual's
+    axis and unit (the page's alt text lists the labels matplotlib drew)."""
+    alts = re.findall(r'<img alt="Signed residuals[^"]*"', html_of(reports[command]))
+    assert len(alts) >= 2  # before and after, on each data set
+    for alt in alts:
+        assert all(f"q{k} a{k} (deg)" in alt for k in range(1, 7)), alt
+        assert all(f"{a} residual (mm)" in alt for a in "xyz"), alt
+
+
+def test_glossary_and_coefficients_name_frames_and_units(reports):
+    md = open(reports["identify"]["report"]).read()
+    assert "`ex`, `ey`, `ez`: translations along the frame's x, y, z (reported in mm)" in md
+    assert "frame 0: the base" in md and "frame 2: after joint 2, `a2` (revolute)" in md
+    # constant errors: translations in mm, rotations in mrad, each with its std
+    assert re.search(r"\| 2 after a2 \| ex \| `1` \| -?[0-9.]+ \| [0-9.e-]+ \| mm \|", md)
+    assert re.search(r"\| 2 after a2 \| es \| `1` \| -?[0-9.]+ \| [0-9.e-]+ \| mrad \|", md)
+    assert "## Eliminated parameters" in md and "structural" in md
+
+
+@pytest.mark.skipif(BROWSER is None, reason="chromium is not installed (apt-get install chromium)")
+@pytest.mark.parametrize("command", list(ONLY))
+def test_report_renders_in_a_browser(reports, command, tmp_path):
+    from PIL import Image
+
+    html = reports[command].get("report_html") or reports[command]["files"]["report_html"]
+    png = tmp_path / f"{command}.png"
+    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                    f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={png}", "--window-size=1200,3000",
+                    f"file://{html}"], capture_output=True, timeout=120, check=True)
+    pixels = np.asarray(Image.open(png).convert("L"), float)
+    assert pixels.shape == (3000, 1200)
+    # not blank: text and plots make dark pixels in every third of the page's height
+    assert all((band < 128).mean() > 0.005 for band in np.array_split(pixels, 3))
