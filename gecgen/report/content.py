@@ -206,31 +206,37 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
 
 
 def extrapolation_section(robot: Robot, calib, counts: dict[str, int] | None, n_poses: int | None) -> Section:
-    """The inputs' training ranges; with counts, the poses of the reported data outside them."""
-    from gecgen.runtime.calibration import extrapolation_note
-
+    """The inputs' training ranges; with counts ({input: poses}, `calibration.extrapolation`) the
+    poses of the reported data outside them."""
     ranges = calib.report.get("training_ranges") or {}
     label = {f"q{k + 1}": joint_label(robot, k) for k in range(robot.n)}
-    rows = []
+    unit = {**{n: "N" for n in WRENCH[:3]}, **{n: "N m" for n in WRENCH[3:]}}
+    rows, constant = [], []
     for name, (lo, hi) in ranges.items():
-        if name in label:
-            scale = 180 / np.pi if robot.joints[int(name[1:]) - 1].kind == "R" else 1e3
-            rows.append((label[name], f"{scale * lo:.4g}", f"{scale * hi:.4g}",
-                         str(counts.get(name, 0)) if counts is not None else "-"))
-        else:
-            rows.append((name, f"{lo:.4g}", f"{hi:.4g}", str(counts.get(name, 0)) if counts is not None else "-"))
-    note = (extrapolation_note(counts, n_poses, robot) or "every pose lies inside the training ranges"
-            ) if counts is not None else "the calibration is validated only inside these ranges"
-    return Section("Extrapolation", [
-        "Outside the span each input was fitted over the model extrapolates, and a polynomial term "
-        f"can grow without bound: {note}.", Table(("input", "training min", "training max", "poses outside"), rows)])
+        outside = (counts or {}).get(name, 0)
+        if lo == hi and not outside:
+            constant.append(f"{name} = {lo:g}")
+            continue
+        scale = (180 / np.pi if robot.joints[int(name[1:]) - 1].kind == "R" else 1e3) if name in label else 1.0
+        rows.append((label.get(name, f"{name} ({unit[name]})" if name in unit else name), f"{scale * lo:.4g}",
+                     f"{scale * hi:.4g}", str(outside) if counts is not None else "-"))
+    blocks = ["Outside the span each input was fitted over the model extrapolates (a polynomial term can grow "
+              "without bound); the calibration is not validated there."
+              + (f" Of these {n_poses} poses, the table counts per input those outside." if counts is not None else "")]
+    if counts is not None:
+        blocks.append(f"**{max(counts.values())} or more of {n_poses} poses extrapolate.**" if counts
+                      else f"All {n_poses} poses lie inside the training ranges.")
+    blocks.append(Table(("input", "training min", "training max", "poses outside"), rows))
+    if constant:
+        blocks.append(f"Constant over the training data (any other value extrapolates): {', '.join(constant)}.")
+    return Section("Extrapolation", blocks)
 
 
 def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, after: Residuals,
                     data: Measurements) -> list[Section]:
     """One section per effect diagnose added to compiled model cm (coefficients c, training data
-    with measured world points y): its fitted error, and against each of its variables the partial
-    residual (the effect's coefficients zeroed, all else held) with the part the effect removed."""
+    with measured world points y; `after` its residuals): its fitted error, and against each of its
+    variables the residual without it (its coefficients zeroed, all else held) and with it."""
     from gecgen.report import plots
 
     names = cm.model.coefficient_names(robot)
@@ -240,8 +246,7 @@ def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, aft
         idx = [names.index(co["name"]) for co in eff.coefficients]
         zeroed = c.copy()
         zeroed[idx] = 0.0
-        partial = residuals("without the effect", cm, data, y, zeroed)
-        removed = Residuals("removed", partial.pose, partial.position_mm - after.position_mm, None)
+        without = residuals("without the effect", cm, data, y, zeroed)
         error = cm.model.coefficients[idx[0]].error
         size = 1e3 * (cm.eps(q, w, aux, c) - cm.eps(q, w, aux, zeroed))[:, error]
         blocks = [f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.",
@@ -252,7 +257,7 @@ def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, aft
             blocks += ["Indistinguishable on this data (the same fitted effect):",
                        Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
                                 for alt in eff.alternatives])]
-        blocks += [plots.effect(robot, eff, size, v, partial, removed, data) for v in eff.variables]
+        blocks += [plots.effect(robot, eff, size, v, without, after, data) for v in eff.variables]
         out.append(Section(f"Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", blocks))
     return out
 

@@ -8,6 +8,7 @@ import re
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.ticker  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -46,6 +47,8 @@ def error_distribution(robot: Robot, ds: DataSet) -> Figure:
         cx.step(np.sort(e), np.arange(1, len(e) + 1) / len(e), where="post", color=colour, label=s.stage)
     for a in (ax, cx):
         a.set_xscale("log")
+        a.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+        a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         a.set_xlabel("point error (mm)")
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize=8)
@@ -100,10 +103,10 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
                    f"Signed residuals, {st.stage} model, {ds.name} data")
 
 
-def effect(robot: Robot, eff, size: np.ndarray, name: str, partial: Residuals, removed: Residuals, data) -> Figure:
+def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, after: Residuals, data) -> Figure:
     """Left: the generalized error the effect adds (its coefficients times their terms, mm or mrad)
-    at each training pose (P,) against variable `name`; right, per axis x, y, z: the partial
-    residual (what remains without the effect, all else fitted) and the part the effect removed (mm)."""
+    at each training pose (P,) against variable `name`; right, per axis x, y, z (mm): the residual
+    without the effect (its coefficients zeroed, all else held) and that of the diagnosed model."""
     k = int(name[1:]) - 1 if name.startswith("q") and name[1:].isdigit() else None
     x = joint_values(robot, data, k) if k is not None else variable(data, name)
     label = joint_label(robot, k) if k is not None else name
@@ -113,11 +116,12 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, partial: Residuals, r
     axes[0].set_ylabel(f"{eff.error} added ({unit})", fontsize=8)
     axes[0].set_title(f"fitted {eff.error}", fontsize=9)
     for a, ax in enumerate(axes[1:]):
-        ax.plot(x[partial.pose], partial.position_mm[:, a], ".", ms=3, alpha=0.6, color=COLOURS[1],
-                label="residual without it")
-        ax.plot(x[removed.pose], removed.position_mm[:, a], ".", ms=3, color=COLOURS[2], label="what it removed")
+        ax.plot(x[without.pose], without.position_mm[:, a], ".", ms=3, alpha=0.7, color=COLOURS[1],
+                label="without this effect")
+        ax.plot(x[after.pose], after.position_mm[:, a], ".", ms=3, alpha=0.7, color=COLOURS[2], label=after.stage)
+        ax.axhline(0, color="0.5", lw=0.6)
         ax.set_ylabel(f"{'xyz'[a]} residual (mm)", fontsize=8)
-        ax.set_title(f"{'xyz'[a]}: partial residual", fontsize=9)
+        ax.set_title(f"{'xyz'[a]} residual", fontsize=9)
     axes[1].legend(fontsize=7)
     for ax in axes:
         ax.set_xlabel(label, fontsize=8)
@@ -125,4 +129,5 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, partial: Residuals, r
         ax.grid(alpha=0.3)
     fig.tight_layout(w_pad=0.6)
     return _figure(fig, f"effect_{_slug(eff.error)}_{_slug(eff.terms[0])}_{_slug(name)}",
-                   f"{eff.error} ({', '.join(eff.terms)}) against {label}: the effect and the residual it removed")
+                   f"{eff.error} ({', '.join(eff.terms)}) against {label}: the fitted effect, and the residual "
+                   "without it and with it")
