@@ -44,10 +44,11 @@ def test_the_elastic_model_is_chosen_when_a_payload_bends_the_arm(payload_data, 
     ev = run(capsys, "evaluate", d / "elastic" / "calibration.json", d / "val.csv")
     assert ev["after"]["rms_mm"] == pytest.approx(out["val"]["rms_mm"], rel=1e-9)
     assert out["val"]["rms_mm"] < 0.25 * out["val_before"]["rms_mm"]
-    for f in ("calibration.json", "errors.yaml", "report.md", "generated/industrial6r.c",
+    for f in ("calibration.json", "errors.yaml", "report.md", "report.html", "generated/industrial6r.c",
               "generated/industrial6r_calibration.h", "generated/industrial6r_example.c"):
         assert (d / "elastic" / f).is_file(), f
-    assert "elastic **(chosen)**" in (d / "elastic" / "report.md").read_text()
+    assert "| elastic (chosen) |" in (d / "elastic" / "report.md").read_text()
+    assert "elastic (chosen)" in (d / "elastic" / "report.html").read_text()
 
 
 def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):

@@ -101,7 +101,8 @@ def test_cli_diagnose_writes_model_code_and_report(tmp_path, capsys):
     assert res["errors_out"] == str(out) and out.exists()
     new = load_error_model(out, robot)  # the written model reads back and holds the new terms
     assert len(new.coefficients) > 42
-    assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_q1.png").exists()
+    assert res["report_html"] == str(tmp_path / "rep" / "report.html")
+    assert (tmp_path / "rep" / "report.md").exists() and list((tmp_path / "rep").glob("effect_*_q1.png"))
     assert any(p.suffix == ".c" for p in (tmp_path / "new_generated").iterdir())
 
 

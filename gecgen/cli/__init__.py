@@ -23,7 +23,8 @@ COMMANDS = ("generate", "identify", "evaluate", "compensate", "export", "redunda
 #: per command, the options naming what it writes: option -> (what, is a folder)
 OUTPUTS = {
     "generate": {"output": ("generated code", True)},
-    "identify": {"output": ("calibration", False)},
+    "identify": {"output": ("calibration", False), "report": ("report", True)},
+    "evaluate": {"report": ("report", True)},
     "compensate": {"output": ("corrected commands", False)},
     "export": {"c": ("generated code", True), "urdf": ("URDF", False)},
     "diagnose": {"output": ("error model", False), "generated": ("generated code", True), "report": ("report", True)},
