@@ -68,13 +68,15 @@ def test_report_is_self_contained_with_its_sections(reports, command):
     assert all(f"## {title}" in md for title in (*COMMON, *ONLY[command]))
 
 
-def test_report_numbers_are_the_commands(reports):
-    """The headline table holds the numbers the command printed (independently computed there)."""
-    ev = reports["evaluate"]
-    cells = re.search(r"<td>calibrated</td>(.*?)</tr>", html_of(ev)).group(1)
-    assert f"{ev['after']['rms_mm']:.4f}" in cells and f"{ev['after']['max_mm']:.4f}" in cells
-    cells = re.search(r"<td>uncalibrated</td>(.*?)</tr>", html_of(ev)).group(1)
-    assert f"{ev['before']['rms_mm']:.4f}" in cells
+@pytest.mark.parametrize("command, before, after", [("identify", "before", "train"), ("evaluate", "before", "after"),
+                                                     ("calibrate", "before", "train")])
+def test_report_numbers_are_the_commands(reports, command, before, after):
+    """The headline table holds the numbers the command printed (computed there by the fit or
+    `row_errors`; the report recomputes them from signed residuals)."""
+    res = reports[command]
+    for stage, key in (("uncalibrated", before), ("calibrated", after)):
+        cells = re.search(rf"<td>{stage}</td>(.*?)</tr>", html_of(res)).group(1)
+        assert f"{res[key]['rms_mm']:.4f}" in cells and f"{res[key]['max_mm']:.4f}" in cells, (stage, cells)
 
 
 @pytest.mark.parametrize("command", list(ONLY))

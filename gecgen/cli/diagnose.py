@@ -72,5 +72,6 @@ def run(args) -> dict:
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.diagnose(diag, data, val, str(out), register_val), args.report))
+        result.update(report.write(report.content.diagnose(diag, data, val, str(out), register_val,
+                                                           "auto" if register_val else args.register), args.report))
     return result

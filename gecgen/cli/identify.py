@@ -54,5 +54,5 @@ def run(args) -> dict:
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out)), args.report))
+        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out), args.register), args.report))
     return result

@@ -264,8 +264,14 @@ def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, aft
 
 # -- one report per command ----------------------------------------------------------------------
 
-def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str) -> Report:
-    y0 = to_world(fit_frames(cm, data, None, fit.loss), data)  # the nominal model's registration, as Fit.before
+def _nominal_world(cm, data: Measurements, loss: str, registration_mode: str) -> np.ndarray:
+    """The measured points in the frame registered onto the nominal model, as `Fit.before` scores them."""
+    return to_world(fit_frames(cm, data, None, loss, registration_mode), data)
+
+
+def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, registration_mode: str = "auto"
+             ) -> Report:
+    y0 = _nominal_world(cm, data, fit.loss, registration_mode)
     train = DataSet("training", data, [residuals("uncalibrated", cm, data, y0, None),
                                        residuals("calibrated", cm, data, fit.to_world(data), fit.c)])
     return Report(f"gecgen identify: {robot.name}",
@@ -287,12 +293,13 @@ def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray,
                    glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
 
 
-def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool) -> list[DataSet]:
+def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
+                    registration_mode: str) -> list[DataSet]:
     """Uncalibrated, declared model and diagnosed model on the training and validation data, each
     scored as diagnose scored it."""
     init, final = diag.initial, diag.final
     sets = [DataSet("training", data, [
-        residuals("uncalibrated", init.cm, data, to_world(fit_frames(init.cm, data, None), data), None),
+        residuals("uncalibrated", init.cm, data, _nominal_world(init.cm, data, init.fit.loss, registration_mode), None),
         residuals("calibrated (declared model)", init.cm, data, init.fit.to_world(data), init.fit.c),
         residuals("diagnosed", final.cm, data, final.fit.to_world(data), final.fit.c)])]
     if val is not None:
@@ -305,12 +312,13 @@ def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register
     return sets
 
 
-def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str, register_val: bool = False) -> Report:
+def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str, register_val: bool = False,
+             registration_mode: str = "auto") -> Report:
     from gecgen.loop.diagnose import verdict
     from gecgen.runtime.calibration import from_fit
 
     robot = diag.robot
-    sets = _diagnosed_sets(diag, data, val, register_val)
+    sets = _diagnosed_sets(diag, data, val, register_val, registration_mode)
     calib = from_fit(robot, diag.final.model, diag.final.fit)
     found = [f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS on the "
@@ -339,10 +347,10 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     fit, cm = choice.fit, choice.cm
     diag = choice.diagnosis
     if diag is not None:
-        sets = _diagnosed_sets(diag, data, val, False)
+        sets = _diagnosed_sets(diag, data, val, False, "auto")
     else:
         sets = [DataSet("training", data, [
-            residuals("uncalibrated", cm, data, to_world(fit_frames(cm, data, None), data), None),
+            residuals("uncalibrated", cm, data, _nominal_world(cm, data, fit.loss, "auto"), None),
             residuals("calibrated", cm, data, fit.to_world(data), fit.c)])]
         if val is not None:
             yv = to_world(calib.frames, val)
