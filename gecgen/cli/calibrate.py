@@ -29,9 +29,9 @@ def add_parser(command):
                         "to the robot and data are skipped)")
     p.add_argument("--seed", type=int, default=0, help="seed of the cross-validation folds and of --holdout "
                                                        "(default %(default)s)")
-    p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md and "
-                                                         "report.html, generated/ (the C and CasADi code, NAME_calibration.h with the "
-                                                         "coefficients, NAME_example.c)")
+    p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md, "
+                                                         "report.html and generated/ (the C and CasADi code, "
+                                                         "NAME_calibration.h with the coefficients, NAME_example.c)")
     add_orientation_length(p)
 
 

@@ -21,7 +21,8 @@ def add_parser(command):
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
-    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
+    p.add_argument("--report", metavar="DIR",
+                   help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
                    help="registration of DATA onto the nominal model: auto (when far apart), always or never; "
                         "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "

@@ -12,7 +12,8 @@ def add_parser(command):
     p.add_argument("--register", action="store_true",
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
-    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
+    p.add_argument("--report", metavar="DIR",
+                   help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     add_orientation_length(p, "the calibration's, else 0.1")
 
 

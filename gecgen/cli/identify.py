@@ -24,7 +24,8 @@ def add_parser(command):
                    help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
                         "on DATA); default: exact dependencies only (1e-7)")
-    p.add_argument("--report", metavar="DIR", help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
+    p.add_argument("--report", metavar="DIR",
+                   help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     add_orientation_length(p)
 
 
@@ -54,5 +55,6 @@ def run(args) -> dict:
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out), args.register), args.report))
+        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out), args.register),
+                                   args.report))
     return result

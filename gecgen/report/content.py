@@ -161,7 +161,7 @@ def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> li
 
 def glossary(robot: Robot) -> Section:
     """What ex..ep mean and which frame is which, with the robot's joint names."""
-    frames = [f"frame 0: the base (after `base`, before the first joint)"]
+    frames = ["frame 0: the base (after `base`, before the first joint)"]
     for i, j in enumerate(robot.chain, start=1):
         mimic = f", a mimic of {j.mimic.name}" if j.mimic else ""
         tool = "; it also carries the tool" if i == robot.n_frames else ""
@@ -189,7 +189,8 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
         unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
         term = coef.term.label
         unit = unit if term == "1" else f"{unit} per unit of {term}"
-        rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}", f"{1e3 * calib.std[j]:.4g}", unit))
+        rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}",
+                     f"{1e3 * calib.std[j]:.4g}", unit))
     out = [Section("Coefficients", [
         f"The {len(kept)} identified coefficients of {len(names)} (the others are eliminated: see below); std is "
         "the standard deviation from the fit's covariance. A term `1` is a constant error (the frame's geometry); "
@@ -366,7 +367,8 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
         "included) on four fifths of the training poses and scored on the fifth left out, in turn; the lowest "
         "cross-validated RMS wins, a tie within 1% going to the smaller model.",
         Table(("model", "coefficients", "training CV RMS (mm)"), rows),
-        f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} coefficients."])
+        f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} "
+        "coefficients."])
     if result["outliers"]:
         choose.blocks.append(f"{len(result['outliers'])} training points were outliers of the robust fit "
                              "(down-weighted; `calibration.json` lists them).")
