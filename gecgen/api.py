@@ -315,7 +315,7 @@ class Calibrator:
         counts = _calibration.extrapolation(calib, q, w, aux)
         note = _calibration.extrapolation_note(counts, len(q), calib.robot)
         if note:
-            warnings.warn(note)
+            warnings.warn(note, stacklevel=3)  # at the caller of score, predict or compensate
         return counts
 
     def predict(self, q, w=None, aux=None) -> np.ndarray:
