@@ -229,17 +229,14 @@ class Calibrator:
         """Fit to measurements of `robot` (a Robot or its file): a CSV path, a DataFrame or
         Measurements. progress(iteration, rms_mm) is called after each Gauss-Newton step. Raises
         RuntimeError when the fit cannot be trusted (nothing is fitted then). Returns self."""
-        from gecgen.runtime.identify import choose, identify
+        from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
 
         loss, register = _choice(self.loss, "loss", LOSSES), _choice(self.register, "register", REGISTER)
-        options = {"loss": loss}
-        grids = {}
-        for name, value in (("ridge", self.ridge), ("rank_tol", self.rank_tol)):
+        options, grids = {"loss": loss}, {}
+        for name, value, grid in (("ridge", self.ridge, RIDGE_GRID), ("rank_tol", self.rank_tol, RANK_TOL_GRID)):
             value = fit_option(value, name)
             if value == "auto":
-                from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID
-
-                grids[name] = RIDGE_GRID if name == "ridge" else RANK_TOL_GRID
+                grids[name] = grid
             elif value is not None:
                 options[name] = value
         robot = _robot(robot)
@@ -289,7 +286,8 @@ class Calibrator:
         N = len(q)
         w = np.zeros((N, 6)) if w is None else np.asarray(w, dtype=float)
         w = w[None] if w.ndim == 1 else w
-        require(w.shape in ((N, 6), (1, 6)), f"w: shape {w.shape}; give the wrench fx..mz (N and N m) as (N, 6) or (6,)")
+        require(w.shape in ((N, 6), (1, 6)),
+                f"w: shape {w.shape}; give the wrench fx..mz (N and N m) as (N, 6) or (6,)")
         if isinstance(aux, dict):
             missing = [a for a in names if a not in aux]
             require(not missing, f"aux: no values for {excerpt(missing[0]) if missing else ''}, an auxiliary signal "
@@ -325,8 +323,8 @@ class Calibrator:
         `robot_.target_names` order."""
         q, w, aux = self._inputs(q, w, aux, "q")
         cm = self._model()
-        check_terms_finite(self.calibration_.model, cm.robot, Commands(q, w, aux, self.calibration_.model.aux, [], [], "q"),
-                           cm.load_signals)
+        model = self.calibration_.model
+        check_terms_finite(model, cm.robot, Commands(q, w, aux, model.aux, [], [], "q"), cm.load_signals)
         self._extrapolation(q, w, aux)
         return cm.model_targets(q, w, aux, self.calibration_.c)
 
@@ -352,7 +350,8 @@ class Calibrator:
         if len(failed):
             k = failed[0]
             why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
-                   if status[k] == NONFINITE else "the correction did not converge; the command may be near a singularity")
+                   if status[k] == NONFINITE else
+                   "the correction did not converge; the command may be near a singularity")
             raise RuntimeError(f"{row(k)}: {why} ({len(failed)} rows failed)")
         dq = np.abs(q - cmds.q)
         return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),
@@ -505,8 +504,9 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
     return names
 
 
-def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None, models: tuple[str, ...] | None = None,
-              seed: int = 0, orientation_length: float | None = None, progress=None) -> Selection:
+def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
+              models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
+              progress=None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
@@ -535,7 +535,8 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     val_before = val_after = None
     if val is not None:
         checked(choice.model, fitted, val)
-        y = to_world(calib.frames, val, "measure it from a station of TRAIN, or score it with gecgen evaluate --register")
+        y = to_world(calib.frames, val, "measure it from a station of the training data, or score it with "
+                                        "Calibrator.score(val, register=True) (gecgen evaluate --register)")
         val_before, val_after = (Errors.of(_summary(choice.cm, val, y, c)) for c in (None, choice.fit.c))
-    return Selection(choice.chosen.name, choice.table, cal, choice, choice.diagnosis.effects if choice.diagnosis else [],
-                     cal.counts_, val_before, val_after)
+    effects = choice.diagnosis.effects if choice.diagnosis else []
+    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, val_before, val_after)

@@ -37,4 +37,5 @@ def fit_options(args) -> dict:
     naming the option."""
     from gecgen.api import fit_option
 
-    return {name: fit_option(getattr(args, name), name, f"--{name.replace('_', '-')}") for name in ("ridge", "rank_tol")}
+    return {name: fit_option(getattr(args, name), name, "--" + name.replace("_", "-"))
+            for name in ("ridge", "rank_tol")}

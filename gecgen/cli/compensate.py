@@ -29,5 +29,6 @@ def run(args) -> dict:
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
-    return {"robot": cal.robot_.name, "output": str(args.output), "n_poses": len(done.q), "outside_limits_rows": outside,
+    return {"robot": cal.robot_.name, "output": str(args.output), "n_poses": len(done.q),
+            "outside_limits_rows": outside,
             "extrapolation": done.extrapolation, "max_correction": done.max_correction}

@@ -230,7 +230,8 @@ def _source(path, what: str) -> tuple[bytes, str]:
 
 def read_table(path, what: str, expect: str, text: Collection[str] = (), verbatim: bool = False,
                sep: str = ",", decimal: str = ".") -> Table:
-    """Read a CSV, given by its path or as a pandas DataFrame with the file's columns. Refuses a missing, empty or non-UTF-8 file, a header that shows another separator
+    """Read a CSV, given by its path or as a pandas DataFrame with the file's columns (`_source`).
+    Refuses a missing, empty or non-UTF-8 file, a header that shows another separator
     or repeats a name, a cell over MAX_CELL characters, no data rows and rows whose field count
     differs from the header's; `what` names the file kind in messages ("measurement file") and
     `expect` says what the header should hold.
