@@ -43,6 +43,10 @@ def test_the_python_api_page_runs(files, monkeypatch, capsys):
     before, after = map(float, re.search(r"validation: ([\d.]+) mm before, ([\d.]+) mm after", out).groups())
     assert after < 0.2 * before  # the calibration removes most of the simulated error
     assert (files / "industrial6r.calib.json").is_file()
+    diag, chosen = namespace["diag"], namespace["chosen"]
+    assert diag.effects_ and len(diag.error_model_.coefficients) > 42  # terms added to the constant errors
+    assert diag.diagnosis_.after["val_rms_mm"] < 0.5 * namespace["score"].after.rms_mm
+    assert chosen.model in ("geometric", "default") and chosen.val.rms_mm > 0 and len(chosen.table) == 2
 
 
 def test_api_and_cli_give_the_same_numbers(files, fitted, tmp_path, capsys):
