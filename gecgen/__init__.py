@@ -19,3 +19,7 @@ def __getattr__(name):
 
         return getattr(api, name)
     raise AttributeError(f"module 'gecgen' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_API])

@@ -228,7 +228,8 @@ class Calibrator:
     def fit(self, robot, data, progress=None) -> "Calibrator":
         """Fit to measurements of `robot` (a Robot or its file): a CSV path, a DataFrame or
         Measurements. progress(iteration, rms_mm) is called after each Gauss-Newton step. Raises
-        RuntimeError when the fit cannot be trusted (nothing is fitted then). Returns self."""
+        RuntimeError when the fit cannot be trusted (the Calibrator is left as it was). Returns
+        self."""
         from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
 
         loss, register = _choice(self.loss, "loss", LOSSES), _choice(self.register, "register", REGISTER)
