@@ -50,10 +50,15 @@ def read_measurements(source, robot) -> Measurements:
     measurement file's columns (CONTRACTS.md section 3: pose, q1..qn, target, x, y, z in m, and
     optional fx..mz, station, orientation and aux columns). A DataFrame is checked as the file would
     be; messages name it `DataFrame`, its rows numbered as in `to_csv(index=False)` (iloc[i] is row
-    i + 2). Measurements are passed through unchanged."""
+    i + 2). Measurements are passed through, after checking that they fit the robot."""
+    robot = _robot(robot)
     if isinstance(source, Measurements):
+        require(source.q.shape[1] == robot.n and (source.target < len(robot.targets)).all(),
+                f"{source.source or 'Measurements'}: {source.q.shape[1]} joints and targets up to #"
+                f"{source.target.max() + 1 if len(source.target) else 0}, but robot {robot.name} has {robot.n} joints "
+                f"and {len(robot.targets)} targets; read the data with this robot's file")
         return source
-    return _read_measurements(source, _robot(robot))
+    return _read_measurements(source, robot)
 
 
 def error_model(errors, robot: Robot, aux: tuple[str, ...] = (), constant: bool = True) -> ErrorModel | None:

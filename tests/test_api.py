@@ -69,6 +69,9 @@ def test_api_and_cli_give_the_same_numbers(files, fitted, tmp_path, capsys):
     capsys.readouterr()
     done = fitted.compensate(q)
     assert np.array_equal(pd.read_csv(tmp_path / "out.csv").to_numpy(), done.q)
+    frame = pd.read_csv(tmp_path / "cmd.csv")  # commands as a DataFrame or a path: the same numbers
+    for commands in (frame, tmp_path / "cmd.csv"):
+        assert np.array_equal(fitted.compensate(commands).q, done.q)
 
 
 def test_predict_and_compensate_agree_with_the_calibrated_model(fitted, files):
@@ -123,6 +126,9 @@ def test_boundary_checks_name_the_fix(fitted, files):
     with pytest.raises(gecgen.ModelError) as exc:  # measurements of another robot
         gecgen.Calibrator().fit(ROBOTS / "pps.yaml", files / "train.csv")
     assert "train.csv" in one_line(exc)
+    with pytest.raises(gecgen.ModelError) as exc:
+        gecgen.Calibrator().fit(ROBOTS / "panda.yaml", gecgen.read_measurements(files / "train.csv", ROBOT))
+    assert "robot panda has 7 joints" in one_line(exc)
     for options, text in (({"loss": "l1"}, "loss='l1': choose one of cauchy, huber, l2"),
                           ({"ridge": -1}, "ridge -1: give a non-negative number, or auto"),
                           ({"rank_tol": 2}, "rank_tol 2: give a number from 0 to below 1, or auto"),
@@ -133,3 +139,9 @@ def test_boundary_checks_name_the_fix(fitted, files):
     with pytest.raises(gecgen.ModelError) as exc:
         gecgen.calibrate(ROBOT, files / "train.csv", models=("geometric", "bogus"))
     assert "models: 'bogus' is not a candidate" in one_line(exc)
+    with pytest.raises(gecgen.ModelError) as exc:
+        gecgen.Diagnoser().save(files / "x.errors.yaml")
+    assert "not fitted yet" in one_line(exc)
+    with pytest.raises(gecgen.ModelError) as exc:
+        gecgen.Diagnoser(register_val=True).fit(ROBOT, files / "train.csv")
+    assert "pass val" in one_line(exc)
