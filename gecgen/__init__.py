@@ -1,2 +1,25 @@
-"""gecgen: Geometric and Elastic Error Compensation compiler and toolkit for large robots."""
+"""gecgen: Geometric and Elastic Error Compensation compiler and toolkit for large robots.
+
+The Python API (docs/python-api.md) is importable from here: `gecgen.Calibrator`, `gecgen.Diagnoser`,
+`gecgen.calibrate`, `gecgen.load_robot`, `gecgen.read_measurements`, `gecgen.load_calibration`,
+the results `gecgen.Score`, `gecgen.Errors`, `gecgen.Compensation`, `gecgen.Selection`, and the
+error type `gecgen.ModelError`.
+"""
 __version__ = "0.1.0"
+
+_API = ("Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
+        "load_calibration", "load_robot", "read_measurements")
+__all__ = list(_API)
+
+
+def __getattr__(name):
+    # imported on first use: the command line starts without sympy, scipy and the compiled models
+    if name in _API:
+        from gecgen import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'gecgen' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_API])

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import sys
 
-from gecgen.cli.common import checked, extrapolation
 from gecgen.model import ModelError
 
 
@@ -17,30 +16,19 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    import numpy as np
-
+    from gecgen.api import load_calibration
     from gecgen.model.measurements import read_commands, write_commands
-    from gecgen.runtime import calibration
-    from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS
 
     if args.max_iter < 0:
         raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
-    calib = calibration.load(args.calibration)  # refuses non-finite coefficients, naming the first
-    cmds = read_commands(args.poses, calib.robot, calib.model.aux)
-    cm = checked(calib.model, calib.robot, cmds)
-    q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=args.max_iter)
-    failed = np.nonzero(np.isin(status, FAILED))[0]
-    if len(failed):
-        k = failed[0]
-        why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
-               if status[k] == NONFINITE else "the correction did not converge; the command may be near a singularity")
-        raise RuntimeError(f"{args.poses}: row {k + 2}: {why} ({len(failed)} rows failed)")
-    write_commands(args.output, calib.robot, cmds, q)
-    outside = [int(k) + 2 for k in np.nonzero(status == OUTSIDE_LIMITS)[0]]
+    cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
+    cmds = read_commands(args.poses, cal.robot_, cal.calibration_.model.aux)
+    done = cal.compensate(cmds, max_iter=args.max_iter)
+    write_commands(args.output, cal.robot_, cmds, done.q)
+    outside = [k + 2 for k in done.outside_limits]
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
-    dq = q - cmds.q
-    return {"robot": calib.robot.name, "output": str(args.output), "n_poses": len(q), "outside_limits_rows": outside,
-            "extrapolation": extrapolation(calib, cmds.q, cmds.w, cmds.aux),
-            "max_correction": {name: float(np.abs(dq[:, j]).max()) for j, name in enumerate(calib.robot.joint_names)}}
+    return {"robot": cal.robot_.name, "output": str(args.output), "n_poses": len(done.q),
+            "outside_limits_rows": outside,
+            "extrapolation": done.extrapolation, "max_correction": done.max_correction}

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import add_orientation_length, checked, on_points, placed, progress_status, robot_and_model
-from gecgen.model import ModelError, load_robot
+from gecgen.cli.common import add_orientation_length, progress_status
+from gecgen.model import ModelError
 
 
 def add_parser(command):
@@ -35,44 +35,35 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    from gecgen.api import Diagnoser
     from gecgen.emit import generate
-    from gecgen.loop.diagnose import diagnose, verdict, write_error_model
-    from gecgen.model.measurements import hold_out, read_measurements
 
     register_val = args.register == "val"
     if register_val and not args.val:
         raise ModelError("diagnose --register re-fits the tracker frame of the validation file; give it with --val VAL")
-    robot = load_robot(args.robot)
-    data = read_measurements(args.data, robot)
-    val = read_measurements(args.val, robot) if args.val else None
-    if args.holdout is not None:
-        data, val = hold_out(data, args.holdout, args.seed)
-    robot, model = robot_and_model(args.robot, args.errors, data.aux_names)
-    robot, placement = placed(robot, data)
-    fitted, data, val = on_points(robot, args.orientation_length, data, val)
-    checked(model, fitted, data, val)
+    diagnoser = Diagnoser(args.errors, register="auto" if register_val else args.register, register_val=register_val,
+                          max_rounds=args.max_rounds, noise_mm=args.noise_mm, seed=args.seed, holdout=args.holdout,
+                          orientation_length=args.orientation_length)
     with progress_status(not args.json) as status:
         def progress(round_no, rms_mm):
             if status:
                 status.update(f"diagnose round {round_no}: training RMS {rms_mm:.4f} mm; screening candidates")
 
-        diag = diagnose(fitted, model, data, val, registration_mode="auto" if register_val else args.register,
-                        progress=progress, noise_mm=args.noise_mm, max_rounds=args.max_rounds, seed=args.seed,
-                        register_val=register_val)
-    out = Path(args.output or f"{robot.name}.diagnosed.errors.yaml")
-    write_error_model(robot, diag.final.model, diag.effects, out)
+        diagnoser.fit(args.robot, args.data, args.val, progress=progress)
+    diag, robot, placement = diagnoser.diagnosis_, diagnoser.robot_, diagnoser.placement_
+    out = diagnoser.save(args.output or f"{robot.name}.diagnosed.errors.yaml")
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
     generate(robot, diag.final.model, generated)
     result = {"robot": robot.name, "before": diag.before, "after": diag.after,
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
-              "verdict": verdict(diag.remaining),
+              "verdict": diagnoser.verdict_,
               "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
               if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.diagnose(diag, data, val, str(out), register_val,
+        result.update(report.write(report.content.diagnose(diag, diagnoser.data_, diagnoser.val_, str(out), register_val,
                                                            "auto" if register_val else args.register), args.report))
     return result

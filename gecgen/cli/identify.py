@@ -1,9 +1,8 @@
 """`gecgen identify ROBOT DATA [-o CALIB.json]`: fit the error model to measured data, write a calibration."""
 from __future__ import annotations
 
-from pathlib import Path
 
-from gecgen.cli.common import add_orientation_length, fit_options, identify_inputs, measured_counts, progress_status
+from gecgen.cli.common import add_orientation_length, fit_options, progress_status
 
 
 def add_parser(command):
@@ -24,37 +23,30 @@ def add_parser(command):
                    help="numerical rank tolerance on DATA: coefficients whose normalised column keeps less than this "
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
                         "on DATA); default: exact dependencies only (1e-7)")
+    add_orientation_length(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
-    add_orientation_length(p)
 
 
 def run(args) -> dict:
-    from gecgen.runtime import calibration
-    from gecgen.runtime.identify import identify
+    from gecgen.api import Calibrator
 
-    robot, model, data, cm, placement = identify_inputs(args)
+    cal = Calibrator(args.errors, loss=args.loss, register=args.register, orientation_length=args.orientation_length,
+                     **fit_options(args))
     with progress_status(not args.json) as status:
         def progress(it, rms_mm):
             if status:
                 status.update(f"Gauss-Newton iteration {it}: linearised residual {rms_mm:.4f} mm rms")
 
-        options, cv_table = fit_options(args, cm, data)
-        fit = identify(cm, data, registration_mode=args.register, progress=progress, **options)
-    if fit.failures:
-        raise RuntimeError(f"the fit is not trustworthy, no calibration written: {fit.failures[0]}")
-    calib = calibration.from_fit(robot, model, fit)
-    calib.report.update({**options, "cv": cv_table, "placement": placement.to_dict() if placement else None})
-    if cm.robot.vertex_of:
-        calib.report["orientation_length_m"] = cm.robot.pose_length
-    out = Path(args.output or f"{robot.name}.calib.json")
-    calibration.save(calib, out)
-    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), **measured_counts(cm.robot, data),
-              **calib.report, "registration": fit.registration.to_dict(),
+        cal.fit(args.robot, args.data, progress=progress)  # an untrustworthy fit raises: nothing is written
+    out = cal.save(args.output or f"{cal.robot_.name}.calib.json")
+    fit = cal.fit_
+    result = {"robot": cal.robot_.name, "data": str(args.data), "calibration": str(out), **cal.counts_, **cal.report_,
+              "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.identify(robot, cm, data, fit, calib, str(out), args.register),
-                                   args.report))
+        result.update(report.write(report.content.identify(cal.robot_, cal.cm_, cal.data_, fit, cal.calibration_,
+                                                           str(out), args.register), args.report))
     return result

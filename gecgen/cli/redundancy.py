@@ -1,7 +1,7 @@
 """`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
 from __future__ import annotations
 
-from gecgen.cli.common import add_orientation_length, checked, on_points, placed, robot_and_model
+from gecgen.cli.common import add_orientation_length, robot_and_model
 from gecgen.model import load_robot
 
 
@@ -15,6 +15,7 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    from gecgen.api import checked, on_points, placed
     from gecgen.runtime.identify import redundancy
 
     data = None

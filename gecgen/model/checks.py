@@ -37,7 +37,8 @@ def check_terms_finite(model: ErrorModel, robot: Robot, data: Measurements | Com
         bad = np.nonzero(~np.isfinite(v))[0]
         if len(bad):
             p = bad[0]
-            place = f"pose {data.pose_ids[p]}" if isinstance(data, Measurements) else f"row {p + 2}"
+            place = (f"pose {data.pose_ids[p]}" if isinstance(data, Measurements) else
+                     f"row {p + 2}" if data.header else f"row {p} (0-based)")  # a file's line, or an array's row
             at = ", ".join(f"{s.name} = {values[s.name][p]:g}" for s in symbols[:3])
             raise ModelError(f"{data.source}: {place}: the term {excerpt(term.label)} of {Path(model.source).name} is "
                              f"{'NaN' if np.isnan(v[p]) else 'infinite'} at {at}; change the term or check the data")

@@ -101,11 +101,13 @@ class Measurements:
         return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
 
 
-def read_measurements(path: str | Path, robot: Robot, limit_tolerance: float = LIMIT_TOLERANCE) -> Measurements:
-    where = str(path)
+def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERANCE) -> Measurements:
+    """The measurements of a CSV file (its path), or of a pandas DataFrame with the file's columns
+    (messages name it `DataFrame`, its rows numbered as in the CSV `to_csv(index=False)` writes)."""
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     required = ["pose", *qcols, "target", "x", "y", "z"]
     table = read_table(path, "measurement file", ", ".join(required), text=("target",))
+    where = table.where
     header = table.header
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
@@ -256,12 +258,13 @@ class Commands:
     source: str = ""
 
 
-def read_commands(path: str | Path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
-    """A CSV of nominal joint commands q1..qn, optional wrench and the aux columns the model uses."""
-    where = str(path)
+def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
+    """A CSV (path or pandas DataFrame) of nominal joint commands q1..qn, optional wrench and the aux
+    columns the model uses."""
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     # the output repeats every cell as the file has it: the csv module reads them all
     table = read_table(path, "file of joint commands", ", ".join(qcols), verbatim=True)
+    where = table.where
     header = table.header
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")

@@ -213,9 +213,25 @@ class Table:
         return numbers(self.cells(col), col, self.where, fix, limit, self.decimal)
 
 
-def read_table(path: str | Path, what: str, expect: str, text: Collection[str] = (), verbatim: bool = False,
+#: how messages name a table given as a pandas DataFrame: its rows are numbered as in the CSV that
+#: `DataFrame.to_csv(index=False)` writes (header = row 1, so iloc[i] is row i + 2)
+DATAFRAME = "DataFrame"
+
+
+def _source(path, what: str) -> tuple[bytes, str]:
+    """The bytes and name of a table: a file, or a pandas DataFrame as the CSV it writes (its
+    index left out, missing values as empty cells) so that one reader checks both alike."""
+    if hasattr(path, "to_csv") and hasattr(path, "columns"):
+        require(not any(isinstance(c, tuple) for c in path.columns),
+                f"{DATAFRAME}: the columns are a MultiIndex; give one level of column names (the {what}'s header)")
+        return path.to_csv(index=False, lineterminator="\n").encode(), DATAFRAME
+    return read_utf8(Path(path), what), str(path)
+
+
+def read_table(path, what: str, expect: str, text: Collection[str] = (), verbatim: bool = False,
                sep: str = ",", decimal: str = ".") -> Table:
-    """Read a CSV. Refuses a missing, empty or non-UTF-8 file, a header that shows another separator
+    """Read a CSV, given by its path or as a pandas DataFrame with the file's columns (`_source`).
+    Refuses a missing, empty or non-UTF-8 file, a header that shows another separator
     or repeats a name, a cell over MAX_CELL characters, no data rows and rows whose field count
     differs from the header's; `what` names the file kind in messages ("measurement file") and
     `expect` says what the header should hold.
@@ -224,8 +240,7 @@ def read_table(path: str | Path, what: str, expect: str, text: Collection[str] =
     by the fast reader, and a file where that fails is read by the csv module. `verbatim`: the caller
     wants the text of every cell (it writes them back), so the csv module reads the file.
     `sep` separates the columns, `decimal` marks the decimals of numbers ("." or ",")."""
-    where = str(path)
-    data = read_utf8(Path(path), what)
+    data, where = _source(path, what)
     plain = None if verbatim else _plain_columns(data, sep, decimal, text)
     if plain is None:
         header, cells = _read_cells(data.decode(), where, expect, sep)

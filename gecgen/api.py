@@ -1,0 +1,561 @@
+"""The Python API: calibrate a robot in a few lines, scikit-learn style (docs/python-api.md).
+
+Nouns with their options in the constructor, verbs that fit, score, predict and compensate, and
+results with named attributes. Every `gecgen` command that fits or applies a calibration is a thin
+layer over this module, so the API and the command line give the same numbers. Bad input raises
+`ModelError` (a ValueError) with one line naming what is wrong and the fix; a result that cannot be
+trusted raises RuntimeError. Warnings (targets placed from the data, extrapolation) are Python
+warnings.
+
+Units: lengths in m (errors reported in mm), angles in rad (orientation errors in mrad), wrenches
+in N and N m. Shapes: N poses, n joints, nt targets.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gecgen.model import ErrorModel, ModelError, Robot, load_error_model
+from gecgen.model import load_robot as _load_robot
+from gecgen.model.checks import check_terms_finite
+from gecgen.model.measurements import Commands, Measurements, read_commands
+from gecgen.model.measurements import read_measurements as _read_measurements
+from gecgen.model.validation import excerpt, require
+from gecgen.runtime import calibration as _calibration
+from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
+
+__all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
+           "load_calibration", "load_robot", "read_measurements"]
+
+LOSSES = ("cauchy", "huber", "l2")
+REGISTER = ("auto", "always", "never")
+
+
+# -- reading ---------------------------------------------------------------------------------
+
+def load_robot(path: str | Path) -> Robot:
+    """The robot of a robot file (robots/NAME.yaml, or a URDF import's), validated."""
+    return _load_robot(path)
+
+
+def _robot(robot) -> Robot:
+    return robot if isinstance(robot, Robot) else _load_robot(robot)
+
+
+def read_measurements(source, robot) -> Measurements:
+    """Measurements of `robot` (a Robot or its file) from a CSV path or a pandas DataFrame with the
+    measurement file's columns (CONTRACTS.md section 3: pose, q1..qn, target, x, y, z in m, and
+    optional fx..mz, station, orientation and aux columns). A DataFrame is checked as the file would
+    be; messages name it `DataFrame`, its rows numbered as in `to_csv(index=False)` (iloc[i] is row
+    i + 2). Measurements are passed through, after checking that they fit the robot."""
+    robot = _robot(robot)
+    if isinstance(source, Measurements):
+        require(source.q.shape[1] == robot.n and (source.target < len(robot.targets)).all(),
+                f"{source.source or 'Measurements'}: {source.q.shape[1]} joints and targets up to #"
+                f"{source.target.max() + 1 if len(source.target) else 0}, but robot {robot.name} has {robot.n} joints "
+                f"and {len(robot.targets)} targets; read the data with this robot's file")
+        return source
+    return _read_measurements(source, robot)
+
+
+def error_model(errors, robot: Robot, aux: tuple[str, ...] = (), constant: bool = True) -> ErrorModel | None:
+    """The error model: an ErrorModel as given, a file's, or (None) robots/NAME.errors.yaml beside
+    the robot file when there is one, else six constant errors per frame (`constant`) or None.
+    `aux` are the data's auxiliary columns, usable as variables."""
+    if isinstance(errors, ErrorModel):
+        return errors
+    if errors is None and robot.source:
+        default = Path(robot.source).with_name(f"{robot.name}.errors.yaml")
+        errors = default if default.is_file() else None
+    return load_error_model(errors, robot, aux) if errors is not None or constant else None
+
+
+# -- what fitting shares with the command line ---------------------------------------------
+
+def placed(robot: Robot, data: Measurements):
+    """The robot with the targets the data must place placed (runtime.placement), and the placement
+    or None; a warning says which targets moved and how far."""
+    from gecgen.runtime.placement import FAR_M, place_targets
+
+    robot, placement = place_targets(robot, data)
+    if placement:
+        moves = ", ".join(f"{n} estimated" if d is None else f"{n} {d:.0f} mm from the robot file's"
+                          for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M)
+        warnings.warn(f"targets placed from the data before the fit: {moves} (nominal model residual "
+                      f"{placement.rms_mm:.2f} mm rms with them)")
+    return robot, placement
+
+
+def on_points(robot: Robot, length_m: float | None, *datasets):
+    """The robot and data a fit works on: when any data set measures orientations, the robot with
+    the virtual targets of pose measurements (length scale L, default `pose_targets.LENGTH_M`) and
+    every data set's oriented rows as their vertex points; otherwise all as given."""
+    from gecgen.model.pose_targets import LENGTH_M, as_points, with_pose_targets
+
+    if all(d is None or d.orientation is None for d in datasets):
+        return (robot, *datasets)
+    derived = with_pose_targets(robot, LENGTH_M if length_m is None else length_m)
+    return (derived, *(None if d is None else as_points(derived, d) for d in datasets))
+
+
+def measured_counts(robot: Robot, data: Measurements) -> dict:
+    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point), and
+    n_orientations, the rows that measure a frame, when there are any."""
+    from gecgen.model.pose_targets import measured_rows
+
+    rows = measured_rows(robot, data)
+    oriented = int(rows.oriented.sum())
+    return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {})}
+
+
+def checked(model: ErrorModel, robot: Robot, *datas) -> CompiledModel:
+    """The compiled model, after refusing (one line) a term that is not finite on any of `datas`
+    (measurements or commands; None entries skipped)."""
+    cm = CompiledModel(robot, model)
+    for data in filter(None, datas):
+        check_terms_finite(model, robot, data, cm.load_signals)
+    return cm
+
+
+def fit_option(value, name: str, label: str | None = None):
+    """ridge or rank_tol as identify takes it: None (identify's default), "auto" (chosen by 5-fold
+    cross-validation) or a number (ridge >= 0, 0 <= rank_tol < 1); `label` names it in messages."""
+    if value is None or value == "auto":
+        return value
+    upper = 1.0 if name == "rank_tol" else np.inf
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    bound = "a non-negative number" if upper == np.inf else f"a number from 0 to below {upper:g}"
+    require(0 <= number < upper, f"{label or name} {excerpt(value)}: give {bound}, or auto")
+    return number
+
+
+def _choice(value, name: str, allowed: tuple):
+    require(value in allowed, f"{name}={excerpt(value)}: choose one of {', '.join(allowed)}")
+    return value
+
+
+def _length(value):
+    require(value is None or (isinstance(value, (int, float)) and 0 < value < np.inf),
+            f"orientation_length={excerpt(value)}: give a positive length in m (default 0.1)")
+    return value
+
+
+# -- results ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Errors:
+    """Errors of the measured points: RMS and largest distance (mm); with measured orientations,
+    RMS and largest orientation error (mrad) of the rows that measure one, else None."""
+
+    rms_mm: float
+    max_mm: float
+    rot_rms_mrad: float | None = None
+    rot_max_mrad: float | None = None
+
+    @classmethod
+    def of(cls, summary: dict) -> "Errors":
+        """From `runtime.identify.summary`'s dict."""
+        return cls(**summary)
+
+    def to_dict(self) -> dict:
+        """The command line's JSON for it (the rot_ keys only with orientations)."""
+        return {k: v for k, v in vars(self).items() if v is not None}
+
+
+@dataclass(frozen=True)
+class Score:
+    """`Calibrator.score`: the errors of data before (the nominal model) and after the calibration;
+    n_poses, n_points (a measured frame is one point) and n_orientations (rows that measure a frame)
+    of the data; extrapolation the number of poses outside the training span per input
+    ({"q2": 3}, only inputs with any); registrations, with register=True, each station's tracker
+    frame fitted on the data and its distance from the calibration's (angle_deg, distance_mm)."""
+
+    before: Errors
+    after: Errors
+    n_poses: int
+    n_points: int
+    n_orientations: int
+    extrapolation: dict
+    registrations: dict | None = None
+    #: what a report plots: the compiled model scored, the data as points (a measured frame is its
+    #: vertices), and the data in the robot world before and after (R, 3) m
+    cm: object = field(default=None, repr=False, compare=False)
+    data: Measurements | None = field(default=None, repr=False, compare=False)
+    y_before: np.ndarray | None = field(default=None, repr=False, compare=False)
+    y: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """`Calibrator.compensate`: corrected joint commands q (N, n) (m or rad) for the nominal ones,
+    and per row its status (N,): OK 0, OUTSIDE_LIMITS 3 (converged outside the joint limits;
+    `outside_limits` lists those rows, 0-based); max_correction the largest |q - q_cmd| per joint
+    name; extrapolation as in `Score`."""
+
+    q: np.ndarray
+    status: np.ndarray
+    outside_limits: list[int]
+    max_correction: dict
+    extrapolation: dict
+
+
+# -- the calibrator --------------------------------------------------------------------------
+
+class Calibrator:
+    """Identify a robot's error model from measured points, then score, predict and compensate.
+
+    errors: the error model (None: robots/NAME.errors.yaml beside the robot file, else six constant
+    errors per frame; a path; or an ErrorModel). loss: "cauchy" (default), "huber" or "l2" on each
+    point's residual (outliers down-weighted and listed in `report_["outliers"]`). ridge: a prior on
+    the column-scaled coefficients (0: plain least squares; "auto": 5-fold cross-validation).
+    rank_tol: coefficients whose normalised column keeps less than this outside the better-excited
+    ones are held at zero (None: exact dependencies only; "auto"). register: "auto" (register the
+    measurement frame onto the robot world when far apart), "always" or "never". orientation_length:
+    for data with orientation columns, an orientation error of 1 mrad counts as L * 1 mrad of
+    position error (m; None: 0.1 when fitting, the calibration's when scoring).
+
+    Fitted attributes: calibration_ (runtime.calibration.Calibration, what `save` writes), fit_
+    (runtime.identify.Fit), report_ (the report the calibration file holds: metrics in mm, outliers,
+    eliminated coefficients...), robot_ (the robot with its targets placed), placement_ (where the
+    data placed the targets, or None), cv_ (the cross-validation table of ridge/rank_tol "auto"),
+    counts_ ({n_poses, n_points[, n_orientations]} of the training data).
+    """
+
+    def __init__(self, errors=None, *, loss: str = "cauchy", ridge=0.0, rank_tol=None, register: str = "auto",
+                 orientation_length: float | None = None):
+        self.errors, self.loss, self.ridge, self.rank_tol = errors, loss, ridge, rank_tol
+        self.register, self.orientation_length = register, orientation_length
+
+    def __repr__(self) -> str:
+        state = f"fitted on {self.calibration_.robot.name}" if hasattr(self, "calibration_") else "not fitted"
+        return f"Calibrator(loss={self.loss!r}, ridge={self.ridge!r}, register={self.register!r}; {state})"
+
+    def fit(self, robot, data, progress=None) -> "Calibrator":
+        """Fit to measurements of `robot` (a Robot or its file): a CSV path, a DataFrame or
+        Measurements. progress(iteration, rms_mm) is called after each Gauss-Newton step. Raises
+        RuntimeError when the fit cannot be trusted (the Calibrator is left as it was). Returns
+        self."""
+        from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
+
+        loss, register = _choice(self.loss, "loss", LOSSES), _choice(self.register, "register", REGISTER)
+        options, grids = {"loss": loss}, {}
+        for name, value, grid in (("ridge", self.ridge, RIDGE_GRID), ("rank_tol", self.rank_tol, RANK_TOL_GRID)):
+            value = fit_option(value, name)
+            if value == "auto":
+                grids[name] = grid
+            elif value is not None:
+                options[name] = value
+        robot = _robot(robot)
+        data = read_measurements(data, robot)
+        model = error_model(self.errors, robot, data.aux_names)
+        robot, placement = placed(robot, data)
+        fitted, data = on_points(robot, _length(self.orientation_length), data)
+        cm = checked(model, fitted, data)
+        cv = []
+        if grids:
+            chosen, cv = choose(cm, data, grids, **options)
+            options.update(chosen)
+        fit = identify(cm, data, registration_mode=register, progress=progress, **options)
+        if fit.failures:
+            raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {fit.failures[0]}")
+        calib = _calibration.from_fit(robot, model, fit)
+        calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
+        if fitted.vertex_of:
+            calib.report["orientation_length_m"] = fitted.pose_length
+        self._set(calib, fit)
+        self.placement_, self.cv_, self.counts_ = placement, cv, measured_counts(fitted, data)
+        self.cm_, self.data_ = cm, data  # the model fitted (a measured frame as its vertices) and its data
+        return self
+
+    def _set(self, calib, fit=None):
+        self.calibration_, self.fit_, self.report_, self.robot_ = calib, fit, calib.report, calib.robot
+        self._cm = None
+
+    def _fitted(self):
+        if not hasattr(self, "calibration_"):
+            raise ModelError("this Calibrator is not fitted yet: call fit(robot, data) first, or load one with "
+                             "gecgen.load_calibration(path)")
+        return self.calibration_
+
+    def _model(self) -> CompiledModel:
+        if self._cm is None:
+            self._cm = CompiledModel(self.calibration_.robot, self.calibration_.model)
+        return self._cm
+
+    def _inputs(self, q, w, aux, what: str):
+        """q (N, n), w (N, 6) and aux (N, naux) as float arrays, checked against the robot."""
+        calib = self._fitted()
+        n, names = calib.robot.n, calib.model.aux
+        q = np.asarray(q, dtype=float)
+        q = q[None] if q.ndim == 1 else q
+        require(q.ndim == 2 and q.shape[1] == n, f"{what}: shape {np.shape(q)}; give (N, {n}) joint values in m or "
+                                                 f"rad (robot {calib.robot.name} has {n} joints)")
+        N = len(q)
+        w = np.zeros((N, 6)) if w is None else np.asarray(w, dtype=float)
+        w = w[None] if w.ndim == 1 else w
+        require(w.shape in ((N, 6), (1, 6)),
+                f"w: shape {w.shape}; give the wrench fx..mz (N and N m) as (N, 6) or (6,)")
+        if isinstance(aux, dict):
+            missing = [a for a in names if a not in aux]
+            require(not missing, f"aux: no values for {excerpt(missing[0]) if missing else ''}, an auxiliary signal "
+                                 f"the error model uses ({', '.join(names)})")
+            aux = np.column_stack([np.broadcast_to(np.asarray(aux[a], float), (N,)) for a in names]) if names else None
+        require(not names or aux is not None, f"aux: the error model uses auxiliary signals {', '.join(names)}; "
+                                              f"pass aux as (N, {len(names)}) values in that order, or a dict by name")
+        if names:
+            aux = np.asarray(aux, dtype=float)
+            aux = aux[None] if aux.ndim == 1 else aux
+            require(aux.shape in ((N, len(names)), (1, len(names))),
+                    f"aux: shape {aux.shape}; give (N, {len(names)}) values of {', '.join(names)}")
+        else:
+            aux = np.zeros((N, 0))
+        for name, a in (("q", q), ("w", w), ("aux", aux)):
+            bad = np.argwhere(~np.isfinite(a))
+            require(not len(bad), f"{what if name == 'q' else name}: row {bad[0][0] if len(bad) else 0} is not "
+                                  f"finite; give finite numbers")
+        return q, np.broadcast_to(w, (N, 6)).copy(), np.broadcast_to(aux, (N, aux.shape[1])).copy()
+
+    def _extrapolation(self, q, w, aux) -> dict:
+        calib = self.calibration_
+        counts = _calibration.extrapolation(calib, q, w, aux)
+        note = _calibration.extrapolation_note(counts, len(q), calib.robot)
+        if note:
+            warnings.warn(note, stacklevel=3)  # at the caller of score, predict or compensate
+        return counts
+
+    def predict(self, q, w=None, aux=None) -> np.ndarray:
+        """Calibrated positions of every target (N, nt, 3) in m, in the robot world, at joint values
+        q (N, n) m/rad, wrench w (N, 6) N and N m (default zero) and aux (N, naux) or {name: (N,)}
+        (the error model's auxiliary signals, `calibration_.model.aux`). Targets in
+        `robot_.target_names` order."""
+        q, w, aux = self._inputs(q, w, aux, "q")
+        cm = self._model()
+        model = self.calibration_.model
+        check_terms_finite(model, cm.robot, Commands(q, w, aux, model.aux, [], [], "q"), cm.load_signals)
+        self._extrapolation(q, w, aux)
+        return cm.model_targets(q, w, aux, self.calibration_.c)
+
+    def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50) -> Compensation:
+        """Corrected joint commands: the joint values that put the calibrated robot where the nominal
+        one goes at q_cmd. q_cmd: (N, n) m/rad, or a CSV path or DataFrame of commands (q1..qn and
+        optional fx..mz and aux columns; w and aux are then read from it). Raises RuntimeError when a
+        row does not converge (near a singularity) or overflows, naming the row."""
+        calib = self._fitted()
+        require(isinstance(max_iter, int) and max_iter >= 0,
+                f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
+        if isinstance(q_cmd, Commands):
+            cmds, row = q_cmd, (lambda k: f"{q_cmd.source}: row {k + 2}")
+        elif isinstance(q_cmd, (str, Path)) or hasattr(q_cmd, "to_csv"):
+            cmds = read_commands(q_cmd, calib.robot, calib.model.aux)
+            row = (lambda k: f"{cmds.source}: row {k + 2}")
+        else:
+            q, w, aux = self._inputs(q_cmd, w, aux, "q_cmd")
+            cmds, row = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd"), (lambda k: f"q_cmd: row {k} (0-based)")
+        cm = checked(calib.model, calib.robot, cmds)
+        q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter)
+        failed = np.nonzero(np.isin(status, FAILED))[0]
+        if len(failed):
+            k = failed[0]
+            why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
+                   if status[k] == NONFINITE else
+                   "the correction did not converge; the command may be near a singularity")
+            raise RuntimeError(f"{row(k)}: {why} ({len(failed)} rows failed)")
+        dq = np.abs(q - cmds.q)
+        return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),
+                            {name: float(dq[:, j].max()) for j, name in enumerate(calib.robot.joint_names)},
+                            self._extrapolation(cmds.q, cmds.w, cmds.aux))
+
+    def score(self, data, register: bool = False) -> Score:
+        """Errors of new measurements (CSV path, DataFrame or Measurements) before and after the
+        calibration, in the calibration's tracker frames. register=True: the data was measured from
+        a new tracker stationing; each side is scored in the frame fitted on the data (the
+        calibration's coefficients held), so before and after differ by the calibration alone."""
+        from gecgen.runtime.identify import fit_frames, to_world
+
+        calib = self._fitted()
+        data = read_measurements(data, calib.robot)
+        length = self.orientation_length
+        if length is None:  # the length scale the calibration was fitted with, if it measured frames
+            length = calib.report.get("orientation_length_m")
+        robot, data = on_points(calib.robot, _length(length), data)
+        cm = checked(calib.model, robot, data)
+        outside = self._extrapolation(data.q, data.w, data.aux_columns(calib.model.aux))
+        moved = None
+        if register:
+            frames = fit_frames(cm, data, calib.c)
+            y_before, y = to_world(fit_frames(cm, data, None), data), to_world(frames, data)
+            known = calib.frames
+            moved = {k: {**r.to_dict(), **r.relative_to(known.get(k, calib.registration))} for k, r in frames.items()}
+        else:
+            y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: score it with register=True "
+                                                        "(gecgen evaluate --register)")
+        counts = measured_counts(robot, data)
+        return Score(Errors.of(_summary(cm, data, y_before, None)), Errors.of(_summary(cm, data, y, calib.c)),
+                     counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,
+                     cm, data, y_before, y)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the calibration JSON (CONTRACTS.md; read back by `load_calibration`, `gecgen
+        evaluate`, `compensate` and `export`). Returns the path."""
+        _calibration.save(self._fitted(), path)
+        return Path(path)
+
+
+def _summary(cm, data, y, c) -> dict:
+    from gecgen.runtime.identify import row_errors, summary
+
+    return summary(*row_errors(cm, data, y, c)[:2])
+
+
+def load_calibration(path: str | Path, orientation_length: float | None = None) -> Calibrator:
+    """A fitted Calibrator from a calibration file (refused when its robot file changed, or any
+    number in it is not finite); fit_ is None (the file keeps the fit's report, `report_`)."""
+    cal = Calibrator(orientation_length=orientation_length)
+    cal._set(_calibration.load(path))
+    cal.placement_, cal.cv_, cal.counts_ = None, cal.report_.get("cv", []), None
+    return cal
+
+
+# -- diagnose and calibrate ------------------------------------------------------------------
+
+def _held_out(data, val, holdout, seed, robot):
+    from gecgen.model.measurements import hold_out
+
+    require(val is None or holdout is None, "give val or holdout, not both")
+    val = None if val is None else read_measurements(val, robot)
+    if holdout is not None:
+        data, val = hold_out(data, holdout, seed)
+    return data, val
+
+
+class Diagnoser:
+    """Trace the residual of a fit to missing effects, add them to the error model, refit.
+
+    errors: the declared error model (as for Calibrator). register: "auto", "always" or "never", the
+    registration of the training data; register_val: the validation data was measured from another
+    tracker stationing, and each round's model re-fits its frame before scoring it. max_rounds:
+    rounds at most. noise_mm: measurement noise per coordinate (mm), to say whether what remains is
+    only noise (None: from repeated poses, if any). seed: of the hold-out split and the folds.
+    holdout: share of the data's poses held out for the report when no val is given (None: an
+    internal fifth). orientation_length: as for Calibrator.
+
+    Fitted attributes: diagnosis_ (loop.diagnose.Diagnosis: before/after, history, remaining),
+    effects_ (the effects added, loop.diagnose.Effect: error, terms, gain_mm, p_value),
+    error_model_ (the new ErrorModel: pass it to Calibrator(errors=...)), verdict_ (one line: what
+    remains), robot_ (targets placed), placement_, data_ (the training measurements fitted).
+    """
+
+    def __init__(self, errors=None, *, register: str = "auto", register_val: bool = False, max_rounds: int = 50,
+                 noise_mm: float | None = None, seed: int = 0, holdout: float | None = None,
+                 orientation_length: float | None = None):
+        self.errors, self.register, self.register_val, self.max_rounds = errors, register, register_val, max_rounds
+        self.noise_mm, self.seed, self.holdout, self.orientation_length = noise_mm, seed, holdout, orientation_length
+
+    def fit(self, robot, data, val=None, progress=None) -> "Diagnoser":
+        """Diagnose on `data` (CSV path, DataFrame or Measurements of `robot`); `val` is scored only,
+        never used to choose terms. progress(round, rms_mm) is called each round. Returns self."""
+        from gecgen.loop.diagnose import diagnose, verdict
+
+        register = _choice(self.register, "register", REGISTER)
+        require(not self.register_val or val is not None,
+                "register_val re-fits the tracker frame of the validation data: pass val")
+        robot = _robot(robot)
+        data, val = _held_out(read_measurements(data, robot), val, self.holdout, self.seed, robot)
+        model = error_model(self.errors, robot, data.aux_names)
+        robot, placement = placed(robot, data)
+        fitted, data, val = on_points(robot, _length(self.orientation_length), data, val)
+        checked(model, fitted, data, val)
+        diag = diagnose(fitted, model, data, val, registration_mode=register, progress=progress,
+                        noise_mm=self.noise_mm, max_rounds=self.max_rounds, seed=self.seed,
+                        register_val=self.register_val)
+        self.diagnosis_, self.effects_, self.error_model_ = diag, diag.effects, diag.final.model
+        self.verdict_, self.robot_, self.placement_, self.data_ = verdict(diag.remaining), robot, placement, data
+        self.val_ = val  # None: diagnose held part of data out itself
+        return self
+
+    def save(self, path: str | Path) -> Path:
+        """Write the new error model (YAML, each added effect commented). Returns the path."""
+        from gecgen.loop.diagnose import write_error_model
+
+        require(hasattr(self, "diagnosis_"), "this Diagnoser is not fitted yet: call fit(robot, data) first")
+        write_error_model(self.robot_, self.error_model_, self.effects_, path)
+        return Path(path)
+
+
+@dataclass
+class Selection:
+    """`calibrate`: the model chosen on the training data and its calibration. model: the chosen
+    candidate's name; table: every candidate's cross-validated RMS (mm); calibrator: a fitted
+    Calibrator (score, predict, compensate, save); choice: loop.calibrate.Choice (its error model,
+    fit and diagnosis); effects: what diagnose added, if the choice was diagnosed; counts: of the
+    training data; val_before, val: the validation data's errors (nominal and calibrated), None
+    without validation data."""
+
+    model: str
+    table: list[dict]
+    calibrator: Calibrator
+    choice: object
+    effects: list
+    counts: dict
+    val_before: Errors | None
+    val: Errors | None
+    #: the training and validation data as fitted and scored (a measured frame as its vertices)
+    data: Measurements | None = field(default=None, repr=False, compare=False)
+    val_data: Measurements | None = field(default=None, repr=False, compare=False)
+
+
+def model_names(names, label: str = "models") -> tuple[str, ...]:
+    """The candidate names of `calibrate`, each one of loop.calibrate.NAMES; `label` names them in
+    messages."""
+    from gecgen.loop.calibrate import NAMES
+
+    names = (names,) if isinstance(names, str) else tuple(names)
+    unknown = [n for n in names if n not in NAMES]
+    require(names and not unknown, f"{label}: {excerpt(unknown[0]) if unknown else 'none given'} is not a candidate; "
+                                   f"choose from {', '.join(NAMES)}")
+    return names
+
+
+def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
+              models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
+              progress=None) -> Selection:
+    """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
+    all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
+    and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
+    errors: the robot's default model among the candidates (as for Calibrator; skipped when None
+    and the robot has no error-model file). progress(name) is called per candidate."""
+    from gecgen.loop.calibrate import NAMES, choose
+    from gecgen.runtime.identify import to_world
+
+    names = model_names(NAMES if models is None else models)
+    robot = _robot(robot)
+    data, val = _held_out(read_measurements(data, robot), val, holdout, seed, robot)
+    robot, placement = placed(robot, data)
+    default = error_model(errors, robot, data.aux_names, constant=False)
+    fitted, data, val = on_points(robot, _length(orientation_length), data, val)
+    if default is not None:
+        checked(default, fitted, data, val)
+    choice = choose(fitted, data, default, seed, progress=progress, names=names)
+    calib = _calibration.from_fit(robot, choice.model, choice.fit)
+    calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
+                         "placement": placement.to_dict() if placement else None})
+    if fitted.vertex_of:
+        calib.report["orientation_length_m"] = fitted.pose_length
+    cal = Calibrator(choice.model, orientation_length=orientation_length)
+    cal._set(calib, choice.fit)
+    cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(fitted, data)
+    val_before = val_after = None
+    if val is not None:
+        checked(choice.model, fitted, val)
+        y = to_world(calib.frames, val, "measure it from a station of the training data, or score it with "
+                                        "Calibrator.score(val, register=True) (gecgen evaluate --register)")
+        val_before, val_after = (Errors.of(_summary(choice.cm, val, y, c)) for c in (None, choice.fit.c))
+    effects = choice.diagnosis.effects if choice.diagnosis else []
+    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, val_before, val_after,
+                     data, val)
