@@ -42,3 +42,19 @@ def test_human_output_is_one_short_line_per_key():
     lines = run.stdout.splitlines()
     assert "n_identifiable: 30" in lines and "eliminated: 12 (use --json for the list)" in lines
     assert all(len(line) < 200 for line in lines) and not any(line.startswith("identifiable:") for line in lines)
+
+
+def test_every_argument_is_explained_with_its_default():
+    """`gecgen CMD --help` explains every positional and option, and states each default."""
+    import argparse
+
+    from gecgen.cli import build_parser
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    unexplained = [f"{name} {'/'.join(a.option_strings) or a.dest}"
+                   for name, sub in commands.items() for a in sub._actions
+                   if not isinstance(a, argparse._HelpAction)
+                   and (not a.help or (a.option_strings and a.default not in (None, False) and "default" not in a.help))]
+    assert unexplained == []
+    assert len(commands) == 12

@@ -38,7 +38,10 @@ OUTPUTS = {
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gecgen", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
+                                   "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
+                                   "README has a walk-through and the file formats.")
     parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 

@@ -57,7 +57,7 @@ def run(args) -> dict:
     for name, text in code.items():
         write_atomically(out / "generated" / name, text)
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
-              "model": sel.model, "candidates": sel.table, "n_params": len(choice.model.coefficients),
+              "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table, "n_params": len(choice.model.coefficients),
               "n_identifiable": choice.fit.redundancy.n_identifiable, "before": choice.fit.before,
               "train": choice.fit.train, "outliers": [o.to_dict() for o in choice.fit.outliers],
               "effects": [e.to_dict() for e in sel.effects], "placement": cal.report_["placement"]}

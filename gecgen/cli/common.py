@@ -8,6 +8,12 @@ import time
 from gecgen.model import load_robot
 
 
+#: the positionals most commands share
+ROBOT_HELP = "robot file (robots/NAME.yaml: DH rows or a URDF, targets; README \"Files\")"
+DATA_HELP = "measurement CSV (pose, q1..qn, target, x y z[, wrench, station, orientation, aux]; README \"Files\")"
+CALIBRATION_HELP = "calibration JSON written by gecgen identify or calibrate"
+
+
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
     """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
     from gecgen.api import error_model

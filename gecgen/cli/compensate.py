@@ -1,6 +1,8 @@
 """`gecgen compensate CALIB POSES.csv -o OUT.csv`: corrected joint commands for nominal commands."""
 from __future__ import annotations
 
+from gecgen.cli.common import CALIBRATION_HELP
+
 import sys
 
 from gecgen.model import ModelError
@@ -9,10 +11,10 @@ from gecgen.model import ModelError
 def add_parser(command):
     """Register `compensate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("compensate", run, "corrected joint commands for nominal commands")
-    p.add_argument("calibration")
+    p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
-    p.add_argument("-o", "--output", required=True)
-    p.add_argument("--max-iter", type=int, default=50)
+    p.add_argument("-o", "--output", required=True, help="CSV to write: the same rows and columns, q1..qn corrected")
+    p.add_argument("--max-iter", type=int, default=50, help="Newton steps at most per command (default %(default)s)")
 
 
 def run(args) -> dict:
@@ -29,6 +31,6 @@ def run(args) -> dict:
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
-    return {"robot": cal.robot_.name, "output": str(args.output), "n_poses": len(done.q),
+    return {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "output": str(args.output), "n_poses": len(done.q),
             "outside_limits_rows": outside,
             "extrapolation": done.extrapolation, "max_correction": done.max_correction}

@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from gecgen.cli.common import robot_and_model
+from gecgen.cli.common import ROBOT_HELP, robot_and_model
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
@@ -26,7 +26,7 @@ DEFAULT_CANDIDATES = 5000
 def add_parser(command):
     """Register `design` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("design", run, "choose the poses to measure (D-optimal experiment design)")
-    p.add_argument("robot")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
@@ -133,6 +133,6 @@ def run(args) -> dict:
         row += [repr(float(chosen.payload_kg[p]))] if chosen.payload_kg is not None else []
         rows.append(row + list(map(repr, chosen.aux[p].tolist())))
     write_csv(args.output, header, rows)
-    return {"robot": robot.name, "output": str(args.output), **result.to_dict(),
+    return {"robot": robot.name, "error_model": model.source, "output": str(args.output), **result.to_dict(),
             "targets": [robot.target_names[t] for t in targets], "constraints": constraints,
             "n_sampled": len(ok), "seed": args.seed, "given": args.given}

@@ -3,15 +3,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import add_orientation_length, progress_status
+from gecgen.cli.common import DATA_HELP, ROBOT_HELP, add_orientation_length, progress_status
 from gecgen.model import ModelError
 
 
 def add_parser(command):
     """Register `diagnose` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("diagnose", run, "trace the residual to missing effects, add them, refit, report")
-    p.add_argument("robot")
-    p.add_argument("data")
+    p.add_argument("robot", help=ROBOT_HELP)
+    p.add_argument("data", help=DATA_HELP)
     p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
     held = p.add_mutually_exclusive_group()
     held.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
@@ -24,7 +24,7 @@ def add_parser(command):
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
     p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
-                   help="registration of DATA onto the nominal model: auto (when far apart), always or never; "
+                   help="registration of DATA onto the nominal model: auto (default; when far apart), always or never; "
                         "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
                         "the --val file, measured from another stationing, before scoring it")
     p.add_argument("--max-rounds", type=int, default=50,
@@ -54,7 +54,7 @@ def run(args) -> dict:
     out = diagnoser.save(args.output or f"{robot.name}.diagnosed.errors.yaml")
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
     generate(robot, diag.final.model, generated)
-    result = {"robot": robot.name, "before": diag.before, "after": diag.after,
+    result = {"robot": robot.name, "error_model": diag.initial.model.source, "before": diag.before, "after": diag.after,
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,
               "verdict": diagnoser.verdict_,
@@ -66,4 +66,6 @@ def run(args) -> dict:
 
         result.update(report.write(report.content.diagnose(diag, diagnoser.data_, diagnoser.val_, str(out), register_val,
                                                            "auto" if register_val else args.register), args.report))
+    # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
+    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {robot.name}.calib.json"
     return result

@@ -1,14 +1,14 @@
 """`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import add_orientation_length
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length
 
 
 def add_parser(command):
     """Register `evaluate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("evaluate", run, "position errors of new data before and after the calibration")
-    p.add_argument("calibration")
-    p.add_argument("data")
+    p.add_argument("calibration", help=CALIBRATION_HELP)
+    p.add_argument("data", help=DATA_HELP)
     p.add_argument("--register", action="store_true",
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
@@ -22,7 +22,7 @@ def run(args) -> dict:
 
     cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
     score = cal.score(args.data, register=args.register)
-    result = {"robot": cal.robot_.name, "data": str(args.data), "n_poses": score.n_poses, "n_points": score.n_points,
+    result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data), "n_poses": score.n_poses, "n_points": score.n_points,
               **({"n_orientations": score.n_orientations} if score.n_orientations else {}),
               "registered": args.register}
     if args.register:

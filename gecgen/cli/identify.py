@@ -2,18 +2,19 @@
 from __future__ import annotations
 
 
-from gecgen.cli.common import add_orientation_length, fit_options, progress_status
+from gecgen.cli.common import ROBOT_HELP, add_orientation_length, fit_options, progress_status
 
 
 def add_parser(command):
     """Register `identify` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("identify", run, "fit the error model to measured data and write a calibration")
-    p.add_argument("robot")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("data", help="measurement CSV (CONTRACTS.md section 3)")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
     p.add_argument("--register", choices=["auto", "always", "never"], default="auto",
-                   help="register the measurement frame onto the robot world first (auto: when far apart)")
+                   help="register the measurement frame onto the robot world first: auto (default; when over 1 degree "
+                        "or 20 mm apart), always, or never (the data is in the robot's world frame)")
     p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
                                                "(5-fold cross-validation on DATA); default 0, plain least squares")
     p.add_argument("--loss", choices=["cauchy", "huber", "l2"], default="cauchy",
@@ -41,7 +42,7 @@ def run(args) -> dict:
         cal.fit(args.robot, args.data, progress=progress)  # an untrustworthy fit raises: nothing is written
     out = cal.save(args.output or f"{cal.robot_.name}.calib.json")
     fit = cal.fit_
-    result = {"robot": cal.robot_.name, "data": str(args.data), "calibration": str(out), **cal.counts_, **cal.report_,
+    result = {"robot": cal.robot_.name, "data": str(args.data), "calibration": str(out), "error_model": cal.calibration_.model.source, **cal.counts_, **cal.report_,
               "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
     if args.report:
@@ -49,4 +50,6 @@ def run(args) -> dict:
 
         result.update(report.write(report.content.identify(cal.robot_, cal.cm_, cal.data_, fit, cal.calibration_,
                                                            str(out), args.register), args.report))
+    result["next"] = (f"gecgen evaluate {out} VAL.csv (new poses), gecgen diagnose {args.robot} {args.data} "
+                      f"(what the model lacks), gecgen export {out} --c DIR (the controller's code)")
     return result

@@ -8,6 +8,8 @@ warning on stderr), never clipped: the values are written as read.
 """
 from __future__ import annotations
 
+from gecgen.cli.common import ROBOT_HELP
+
 import dataclasses
 import sys
 
@@ -24,7 +26,7 @@ from gecgen.model.wide import import_wide, load_mapping
 def add_parser(command):
     """Register `import` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("import", run, "convert a wide table (points side by side) into a measurement CSV")
-    p.add_argument("robot")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("table", help="CSV with one row per pose")
     p.add_argument("--mapping", required=True, help="column mapping YAML (see gecgen/model/wide.py)")
     p.add_argument("--targets", help="comma-separated targets to keep (default: every mapped target)")

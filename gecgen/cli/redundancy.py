@@ -1,14 +1,14 @@
 """`gecgen redundancy ROBOT [DATA]`: which coefficients are eliminated and what they merge into."""
 from __future__ import annotations
 
-from gecgen.cli.common import add_orientation_length, robot_and_model
+from gecgen.cli.common import ROBOT_HELP, add_orientation_length, robot_and_model
 from gecgen.model import load_robot
 
 
 def add_parser(command):
     """Register `redundancy` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("redundancy", run, "which coefficients are eliminated and what they merge into")
-    p.add_argument("robot")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     add_orientation_length(p)
@@ -28,4 +28,4 @@ def run(args) -> dict:
         robot = placed(robot, data)[0]
         robot, data = on_points(robot, args.orientation_length, data)
     result = redundancy(checked(model, robot, data), data).to_dict()
-    return {"robot": robot.name, "data": args.data, **result}
+    return {"robot": robot.name, "error_model": model.source, "data": args.data, **result}

@@ -1,6 +1,8 @@
 """`gecgen simulate`: measurements of a truth robot, as a tracker would record them."""
 from __future__ import annotations
 
+from gecgen.cli.common import ROBOT_HELP
+
 from pathlib import Path
 
 import numpy as np
@@ -16,13 +18,16 @@ from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, r
 
 def add_parser(command):
     p = command("simulate", run, "simulated measurements of a robot with physical error sources")
-    p.add_argument("robot")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--truth", help="truth file (default: robots/NAME.truth.yaml beside the robot, else geometric only)")
-    p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random")
-    p.add_argument("--poses", type=int, default=200, help="poses of the random design")
-    p.add_argument("--step", type=float, default=0.05, help="step (m or rad) of the one-at-a-time design")
-    p.add_argument("--payload-kg", default="0", help="comma-separated payloads (kg), at the tool origin")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
+                   help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
+                        "(default %(default)s)")
+    p.add_argument("--poses", type=int, default=200, help="poses of the random design (default %(default)s)")
+    p.add_argument("--step", type=float, default=0.05, help="step (m or rad) of the one-at-a-time design (default %(default)s)")
+    p.add_argument("--payload-kg", default="0", help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the poses, the truth's draws and the noise "
+                                                       "(default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="with --design paper: the validation half of set a")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
