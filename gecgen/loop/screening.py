@@ -72,7 +72,9 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarra
         offered = [ci for ci, c in enumerate(cands) if c.errors is None or e in c.errors]
         if not offered:
             continue
-        X = J[:, e:e + 1] * F  # all candidate columns for error e
+        # column-major: each candidate's columns are then contiguous, and its Gram matrix one small
+        # product over contiguous memory (row-major, thousands of poses made it the bottleneck)
+        X = np.multiply(J[:, e:e + 1], F, order="F")  # all candidate columns for error e
         if not np.any(X):
             continue
         QtX = Q.T @ X
@@ -80,8 +82,9 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarra
         for ci in offered:
             s = slice(starts[ci], starts[ci + 1])
             Xs = X[:, s]
-            G = Xs.T @ Xs - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
-            scale = np.sqrt(np.maximum(np.diag(Xs.T @ Xs), 1e-300))
+            XtX = Xs.T @ Xs
+            G = XtX - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
+            scale = np.sqrt(np.maximum(np.diag(XtX), 1e-300))
             Gs = G / np.outer(scale, scale)
             if np.linalg.eigvalsh(Gs).min() < MIN_INDEPENDENCE:
                 continue  # (nearly) inside the current model: nothing new to add
@@ -145,8 +148,9 @@ def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.
         Q = np.linalg.qr(Ht / np.maximum(np.linalg.norm(Ht, axis=0), 1e-300))[0]
         resid = rt - Q @ (Q.T @ rt)
         sigma2 = float(resid @ resid) / max(_dof(rows_dof, r, ~test) - H.shape[1], 1)
+        Jt, pt = J[~test], rows_pose[~test]  # once per fold: the copies are large at thousands of poses
         hits = [(h.log_p, cis[h.candidate], e) for e, cis in by_error.items()
-                for h in screen(J[~test], rows_pose[~test], resid, Q, sigma2, [cands[k] for k in cis], [e])]
+                for h in screen(Jt, pt, resid, Q, sigma2, [cands[k] for k in cis], [e])]
         best = min(hits, default=None)
         X = H if best is None else np.column_stack([H, columns(J, cands[best[1]], best[2], rows_pose)])
         sq += _held_out_sq(X, r, test)
