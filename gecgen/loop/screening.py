@@ -93,7 +93,8 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarra
             drop = float(b @ beta)
             dof = cands[ci].dof
             if drop > max(9, 3 * dof) * sigma2:  # cheap pre-filter; the real test follows
-                fitted = (Xs - Q @ QtX[:, s]) @ (beta / scale)
+                v = beta / scale  # the fitted effect, projected off the model: R x (c + k), not R x k x c
+                fitted = Xs @ v - Q @ (QtX[:, s] @ v)
                 results.append(Hit(drop, float(stats.chi2.logsf(drop / max(sigma2, 1e-300), dof)), ci, e, fitted))
     results.sort(key=lambda h: h.log_p)
     return results
