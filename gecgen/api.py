@@ -141,8 +141,10 @@ def _choice(value, name: str, allowed: tuple):
 
 
 def _length(value):
+    from gecgen.model.pose_targets import LENGTH_M
+
     require(value is None or (isinstance(value, (int, float)) and 0 < value < np.inf),
-            f"orientation_length={excerpt(value)}: give a positive length in m (default 0.1)")
+            f"orientation_length={excerpt(value)}: give a positive length in m (default {LENGTH_M:g})")
     return value
 
 

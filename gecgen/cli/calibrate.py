@@ -34,11 +34,12 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    from gecgen import report
     from gecgen.api import calibrate, model_names
     from gecgen.files import write_atomically
     from gecgen.loop.diagnose import write_error_model
-    from gecgen import report
     from gecgen.runtime import export
+    from gecgen.runtime.compiled import CompiledModel
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
     with progress_status(not args.json) as status:
@@ -52,12 +53,16 @@ def run(args) -> dict:
     cal, choice = sel.calibrator, sel.choice
     cal.save(out / "calibration.json")
     write_error_model(cal.robot_, choice.model, sel.effects, out / "errors.yaml")
-    # the code, the coefficient header and an example program: what `gecgen export --c` writes
-    code, _ = export.c_files(cal.calibration_, choice.cm, str(out / "calibration.json"))
+    # the code, the coefficient header and an example program: what `gecgen export --c` writes, its
+    # example command chosen on the calibration's own targets (the fit's model of pose data has the
+    # measured frames' vertices as targets, which the emitted code does not)
+    calib = cal.calibration_
+    code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
     for name, text in code.items():
         write_atomically(out / "generated" / name, text)
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
-              "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table, "n_params": len(choice.model.coefficients),
+              "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table,
+              "n_params": len(choice.model.coefficients),
               "n_identifiable": choice.fit.redundancy.n_identifiable, "before": choice.fit.before,
               "train": choice.fit.train, "outliers": [o.to_dict() for o in choice.fit.outliers],
               "effects": [e.to_dict() for e in sel.effects], "placement": cal.report_["placement"]}
@@ -66,6 +71,6 @@ def run(args) -> dict:
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
-    files.update(report.write(report.content.calibrate(result, choice, cal.calibration_, sel.data, sel.val_data), out))
+    files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data), out))
     result["files"] = {k: str(v) for k, v in files.items()}
     return result

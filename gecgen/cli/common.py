@@ -55,8 +55,12 @@ class _LogLines:
             print(f"{time.strftime('%H:%M:%S')} gecgen: {text}", file=sys.stderr, flush=True)
 
 
-def add_orientation_length(p, default: str = "0.1"):
-    """The option that weighs measured orientations against positions (README "Pose measurements")."""
+def add_orientation_length(p, calibration_first: bool = False):
+    """The option that weighs measured orientations against positions (README "Pose measurements");
+    `calibration_first`: unset, it is the length the calibration was fitted with."""
+    from gecgen.model.pose_targets import LENGTH_M
+
+    default = f"the calibration's, else {LENGTH_M:g}" if calibration_first else f"{LENGTH_M:g}"
     p.add_argument("--orientation-length", type=float, metavar="L",
                    help=f"for data with orientation columns: an orientation error of 1 mrad counts as L * 1 mrad of "
                         f"position error (m; default {default}); set L = position noise / orientation noise")

@@ -31,6 +31,6 @@ def run(args) -> dict:
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
-    return {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "output": str(args.output), "n_poses": len(done.q),
-            "outside_limits_rows": outside,
-            "extrapolation": done.extrapolation, "max_correction": done.max_correction}
+    return {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "output": str(args.output),
+            "n_poses": len(done.q), "outside_limits_rows": outside, "extrapolation": done.extrapolation,
+            "max_correction": done.max_correction}

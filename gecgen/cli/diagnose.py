@@ -64,8 +64,9 @@ def run(args) -> dict:
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.diagnose(diag, diagnoser.data_, diagnoser.val_, str(out), register_val,
-                                                           "auto" if register_val else args.register), args.report))
+        content = report.content.diagnose(diag, diagnoser.data_, diagnoser.val_, str(out), register_val,
+                                          "auto" if register_val else args.register)
+        result.update(report.write(content, args.report))
     # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
     result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {robot.name}.calib.json"
     return result

@@ -12,7 +12,7 @@ def add_parser(command):
     p.add_argument("--register", action="store_true",
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
-    add_orientation_length(p, "the calibration's, else 0.1")
+    add_orientation_length(p, calibration_first=True)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
 
@@ -22,7 +22,8 @@ def run(args) -> dict:
 
     cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
     score = cal.score(args.data, register=args.register)
-    result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data), "n_poses": score.n_poses, "n_points": score.n_points,
+    result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data),
+              "n_poses": score.n_poses, "n_points": score.n_points,
               **({"n_orientations": score.n_orientations} if score.n_orientations else {}),
               "registered": args.register}
     if args.register:

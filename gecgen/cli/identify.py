@@ -42,7 +42,8 @@ def run(args) -> dict:
         cal.fit(args.robot, args.data, progress=progress)  # an untrustworthy fit raises: nothing is written
     out = cal.save(args.output or f"{cal.robot_.name}.calib.json")
     fit = cal.fit_
-    result = {"robot": cal.robot_.name, "data": str(args.data), "calibration": str(out), "error_model": cal.calibration_.model.source, **cal.counts_, **cal.report_,
+    result = {"robot": cal.robot_.name, "data": str(args.data), "calibration": str(out),
+              "error_model": cal.calibration_.model.source, **cal.counts_, **cal.report_,
               "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
     if args.report:

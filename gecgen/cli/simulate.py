@@ -24,8 +24,10 @@ def add_parser(command):
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
     p.add_argument("--poses", type=int, default=200, help="poses of the random design (default %(default)s)")
-    p.add_argument("--step", type=float, default=0.05, help="step (m or rad) of the one-at-a-time design (default %(default)s)")
-    p.add_argument("--payload-kg", default="0", help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
+    p.add_argument("--step", type=float, default=0.05,
+                   help="step (m or rad) of the one-at-a-time design (default %(default)s)")
+    p.add_argument("--payload-kg", default="0",
+                   help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the poses, the truth's draws and the noise "
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")

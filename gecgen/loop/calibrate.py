@@ -24,9 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.loop.diagnose import Diagnosis, diagnose
-from gecgen.loop.dictionary import SIGNAL, own_errors
+from gecgen.loop.dictionary import loads_by_joint, own_errors
 from gecgen.model.errors import ErrorModel, error_model_from_dict
-from gecgen.model.loads import catalog
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import ModelError
@@ -64,17 +63,13 @@ def elastic_spec(robot: Robot, data: Measurements, seed: int = 0) -> dict | None
     """Error-model spec of geometric + joint compliance under the loads the robot and the data
     give (gravity torque from known masses, wrench torque), for every joint whose own error exists
     and whose load varies over the data; None when no joint has one."""
-    names = catalog(robot).names
-    wanted = [k for k, n in enumerate(names) if SIGNAL.match(n) and SIGNAL.match(n).group(1) in
-              ("gravity_torque", "wrench_torque")]
-    if not wanted:
-        return None
     geometric = error_model_from_dict({"default": ["1"]}, robot, "<geometric>")
-    values = CompiledModel(robot, geometric).load_signals(data.q, data.w)[1][:, wanted]
-    varies = np.ptp(values, axis=0) > 1e-9 * np.maximum(1.0, np.abs(values).max(axis=0))
+    names, values = CompiledModel(robot, geometric).load_signals(data.q, data.w)
+    by_joint = loads_by_joint(names, values)
     frames: dict[int, dict[str, list[str]]] = {}
     for joint, error in own_errors(robot, np.random.default_rng(seed)).items():
-        terms = [names[k] for k, v in zip(wanted, varies) if v and SIGNAL.match(names[k]).group(2) == f"q{joint + 1}"]
+        loads = by_joint.get(joint, {})
+        terms = [names[k] for k in loads.get("gravity_torque", []) + loads.get("wrench_torque", [])]
         if terms:
             frame, e = divmod(error, 6)
             frames.setdefault(frame, {})[ERROR_NAMES[e]] = ["1", *terms]
@@ -134,10 +129,9 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     """Score the named pipelines that apply (see the module docstring) on the training data, fit
     the choice on all of it. Raises RuntimeError when none applies or can be fitted, or when the
     chosen fit cannot be trusted."""
-    require_poses = 2 * FOLDS
-    if data.n_poses < require_poses:
+    if data.n_poses < 2 * FOLDS:
         raise RuntimeError(f"{data.n_poses} poses: the model is chosen by {FOLDS}-fold cross-validation over poses, "
-                           f"which needs at least {require_poses}; measure more poses")
+                           f"which needs at least {2 * FOLDS}; measure more poses")
     table, scored = [], []
     candidates = pipelines(robot, data, default, names)
     if not candidates:

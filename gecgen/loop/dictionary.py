@@ -170,15 +170,22 @@ def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
     return out
 
 
-def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
-    """Joint compliance, link bending and free play (see the module docstring) for every joint
-    whose own error exists and whose loads vary over the data."""
-    names, values = cm.load_signals(data.q, data.w)
+def loads_by_joint(names: list[str], values: np.ndarray) -> dict[int, dict[str, list[int]]]:
+    """The load signals (`CompiledModel.load_signals`: names, values (P, L)) that vary over the
+    data, by joint (0-based) and kind: {joint: {"gravity": [columns], "wrench_torque": [...], ...}}."""
     by_joint: dict[int, dict[str, list[int]]] = {}
     for k, name in enumerate(names):
         m = SIGNAL.match(name)
         if m and _range(values[:, k]) > 1e-12 * max(1.0, float(np.abs(values[:, k]).max())):
             by_joint.setdefault(int(m.group(2)[1:]) - 1, {}).setdefault(m.group(1), []).append(k)
+    return by_joint
+
+
+def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
+    """Joint compliance, link bending and free play (see the module docstring) for every joint
+    whose own error exists and whose loads vary over the data."""
+    names, values = cm.load_signals(data.q, data.w)
+    by_joint = loads_by_joint(names, values)
     out: list[Candidate] = []
     for i, e in own_errors(cm.robot, rng).items():
         loads = by_joint.get(i, {})

@@ -33,6 +33,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime import robust
+from gecgen.runtime.registration import kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
@@ -93,8 +94,6 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     largest = np.argmax(np.bincount(sidx))
     R0, t0, m0 = _closed_form(T, local, np.nonzero(sidx == largest)[0], k)
     # the other stationings start from a Kabsch fit of their points to the first estimate
-    from gecgen.runtime.registration import kabsch
-
     p0 = np.einsum("nij,nj->ni", T[data.pose, :3, :3], m0[index]) + T[data.pose, :3, 3]
     frames = [(R0, t0) if s == largest else kabsch(p0[sidx == s], data.xyz[sidx == s]) for s in range(len(stations))]
     x0 = np.concatenate([np.concatenate([Rotation.from_matrix(R).as_rotvec(), t]) for R, t in frames] + [m0.ravel()])
