@@ -24,7 +24,7 @@ Each round:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ from scipy import stats
 
 from gecgen.files import write_atomically
 from gecgen.loop.dictionary import candidates, refine_period
-from gecgen.loop.screening import MIN_CV_GAIN, Hit, cv_rms, folds, passing, screen, selection_cv_rms
+from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import measured_rows
@@ -124,14 +124,14 @@ class Diagnosis:
     remaining: dict
 
 
-def _choose(found: list[Hit], cands, J, H, r, rows_pose, fold, n_tests: int, base_cv: float, rows_dof):
+def _choose(found: list[Hit], cands, fs: Folded, J, rows_pose, n_tests: int, base_cv: float):
     """The first candidate, most significant first, that passes the corrected chi-square test,
     lowers the cross-validated RMS, and whose choice cross-validates (`selection_cv_rms`): when a
     choice fails that check the next one is tried, with the failed one out of the folds' shortlist.
     Returns (hit, p, selection cv) or None."""
     shortlist = [(h.candidate, h.error) for h in found[:SHORTLIST]]
-    for hit, p, _ in passing(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv, rows_dof)[:SELECTION_TRIES]:
-        cv = selection_cv_rms(J, H, r, rows_pose, fold, cands, shortlist, rows_dof)
+    for hit, p, _ in passing(found, cands, fs, J, rows_pose, n_tests, base_cv)[:SELECTION_TRIES]:
+        cv = selection_cv_rms(fs, J, rows_pose, cands, shortlist)
         if cv < (1 - MIN_CV_GAIN) * base_cv:
             return hit, p, cv  # the gain reported is that of the choice, not of the winner
         shortlist.remove((hit.candidate, hit.error))
@@ -164,7 +164,8 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         y = rnd.fit.to_world(data)
         H, r = _linear_system(rnd, data, y)
         rows_pose, rows_dof, order = _rows_pose(robot, data)
-        Q = np.linalg.qr(H / np.linalg.norm(H, axis=0))[0]
+        fs = Folded(H, r, rows_pose, fold, rows_dof)
+        base = fs.basis()
         m, k = rows_dof.sum(), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
         cands = candidates(rnd.cm, data, rng)
@@ -173,20 +174,20 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
         J *= np.repeat(np.sqrt(rnd.fit.weights[order]), 3)[:, None]  # weighted as H and r are
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
-        base_cv = cv_rms(H, r, rows_pose, fold, rows_dof)
+        base_cv = fs.cv_rms()
         present = [{t.text for t in ts} for ts in rnd.model.terms]
         chosen, results = None, []
         # a missing constant error first (few candidates, so a mild multiplicity correction), then the rest
         for tier in (lambda c: c.family == "geometric", lambda c: c.family != "geometric"):
             indices = [k for k, c in enumerate(cands) if tier(c)]
-            found = screen(J, rows_pose, r, Q, sigma2, [cands[k] for k in indices], errors)
+            found = screen(J, rows_pose, r, base, sigma2, [cands[k] for k in indices], errors)
             # a term the error already has (kept or eliminated) is never new, however its column moved
-            found = [Hit(h.drop, h.log_p, indices[h.candidate], h.error, h.fitted) for h in found
+            found = [replace(h, candidate=indices[h.candidate]) for h in found
                      if not set(cands[indices[h.candidate]].terms) & present[h.error]]
             results += found
             n_tests = max(1, sum(len(errors) if cands[k].errors is None else len(cands[k].errors) for k in indices))
             tested += n_tests
-            chosen = _choose(found, cands, J, H, r, rows_pose, fold, n_tests, base_cv, rows_dof)
+            chosen = _choose(found, cands, fs, J, rows_pose, n_tests, base_cv)
             if chosen:
                 break
         results.sort(key=lambda h: h.log_p)
@@ -201,17 +202,19 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         e, c = hit.error, cands[hit.candidate]
         if c.family == "fourier":
             def drop_of(cand, e=e):
-                found = screen(J, rows_pose, r, Q, 0.0, [cand], [e])
+                found = screen(J, rows_pose, r, base, 0.0, [cand], [e])
                 return found[0].drop if found else 0.0
             c = refine_period(c, data, drop_of)
         history[-1]["accepted"] = f"{robot.error_names()[e]}: {', '.join(c.terms)}"
         alternatives, seen = [], {(e, cands[hit.candidate].terms)}
+        effect = hit.fitted / np.linalg.norm(hit.fitted)
         for h in results[:200]:
             key = (h.error, cands[h.candidate].terms)
             if key in seen or h.drop < 0.5 * hit.drop:
                 continue
             seen.add(key)
-            cos = abs(h.fitted @ hit.fitted) / (np.linalg.norm(h.fitted) * np.linalg.norm(hit.fitted))
+            other = h.fitted
+            cos = abs(other @ effect) / np.linalg.norm(other)
             if cos > SAME_EFFECT:
                 alternatives.append({"error": robot.error_names()[h.error], "terms": list(key[1]),
                                      "similarity": float(cos)})

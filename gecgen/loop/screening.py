@@ -12,10 +12,10 @@ so a group of ten load columns is not preferred over one sinusoid for its size a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy import linalg, sparse, stats
 
 #: family-wise false-alarm rate of one screening round
 ALPHA = 1e-3
@@ -46,43 +46,97 @@ class Candidate:
 
 
 @dataclass(frozen=True)
+class Basis:
+    """An orthonormal basis Q = B R^-1 (3R, k) of the current model's columns B (3R, k), kept as B
+    and R, the triangular factor of B's QR: Q itself is never formed, which would cost 3R k^2
+    multiply-adds per fold and round."""
+
+    B: np.ndarray
+    R: np.ndarray
+
+    def project(self, BtY: np.ndarray) -> np.ndarray:
+        """Q^T Y (k, ...) from B^T Y."""
+        return linalg.solve_triangular(self.R, BtY, trans="T")
+
+    def span(self, z: np.ndarray) -> np.ndarray:
+        """Q z (3R,) for z (k,)."""
+        return self.B @ linalg.solve_triangular(self.R, z)
+
+    def residual(self, r: np.ndarray) -> np.ndarray:
+        """r less its projection on the columns (3R,)."""
+        return r - self.span(self.project(self.B.T @ r))
+
+
+def basis(B: np.ndarray, R_blocks: list[np.ndarray]) -> Basis:
+    """The Basis of B (3R, k) from the R factors of blocks of its rows (their QR stacked gives
+    B's); when B is (numerically) rank-deficient Q is formed explicitly (R = I)."""
+    R = np.linalg.qr(np.vstack(R_blocks), mode="r")
+    d = np.abs(np.diag(R))
+    if len(d) < B.shape[1] or d.min() <= 1e-10 * d.max():
+        return Basis(np.linalg.qr(B)[0], np.eye(B.shape[1]))
+    return Basis(B, R)
+
+
+@dataclass(frozen=True)
 class Hit:
     """A (candidate, error) pair that explains part of the residual: the drop in the residual sum
-    of squares (m^2), log of its chi-square p-value, and the fitted effect projected out of the
-    current model (3R,)."""
+    of squares (m^2) and log of its chi-square p-value. `parts` hold what its fitted effect is made
+    of; most hits are never looked at again, so it is formed only when asked for."""
 
     drop: float
     log_p: float
     candidate: int
     error: int
-    fitted: np.ndarray
+    parts: tuple = field(repr=False, compare=False)  # (J_e column (3R,), F v (G,), group (3R,), Basis, Q^T X v)
+
+    @property
+    def fitted(self) -> np.ndarray:
+        """The fitted effect projected off the current model (3R,): J_e (F v) - Q (Q^T X v), R x (c + k)."""
+        j, Fv, group, base, qv = self.parts
+        return j * Fv[group] - base.span(qv)
 
 
-def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarray, sigma2: float,
+def _pose_sums(rows_pose: np.ndarray) -> tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
+    """The sum over each pose's rows, which must be adjacent: (S (G, 3R) of ones, the poses (G,),
+    the group of each row (3R,)); S with J_e's column as its values sums Q J_e, J_e r per pose."""
+    new = np.r_[True, rows_pose[1:] != rows_pose[:-1]]
+    poses = rows_pose[new]
+    if len(np.unique(poses)) != len(poses):
+        raise ValueError("screen needs each pose's rows adjacent (sort the rows by pose)")
+    n = len(rows_pose)
+    S = sparse.csr_matrix((np.ones(n), np.arange(n), np.r_[np.flatnonzero(new), n]), shape=(len(poses), n))
+    return S, poses, np.cumsum(new) - 1
+
+
+def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis, sigma2: float,
            cands: list[Candidate], errors: list[int]) -> list[Hit]:
     """Every (candidate, error) pair that explains more than noise would, most significant first.
 
     J (3R, ne) is J_e at the current fit for the measured rows; rows_pose (3R,) the pose of each
-    row; resid (3R,) is orthogonal to the columns of Q (3R, k); sigma2 the residual variance per
-    coordinate (m^2)."""
-    results = []
-    F = np.concatenate([c.values for c in cands], axis=1)[rows_pose]  # (3R, total columns)
-    starts = np.cumsum([0] + [c.values.shape[1] for c in cands])
+    row, a pose's rows adjacent; resid (3R,) is orthogonal to the current model's columns, whose
+    orthonormal basis is Q (3R, k) of `base`; sigma2 the
+    residual variance per coordinate (m^2).
+
+    A candidate's column is J_e[row] f(pose of row), so every product with it sums first over the
+    rows of a pose: Q^T X = A^T F with A (poses, k) the per-pose sums of Q J_e, and X^T X = F^T
+    diag(sum of J_e^2) F. The products then run over poses, not over the 3 nt rows of each."""
+    S, poses, group = _pose_sums(rows_pose)
+    F = np.asfortranarray(np.concatenate([c.values for c in cands], axis=1)[poses])  # (G, total columns)
+    bounds = np.cumsum([0] + [c.values.shape[1] for c in cands])
+    found = []  # (drop, dof, candidate, error, v, QtX v)
     for e in errors:
         offered = [ci for ci, c in enumerate(cands) if c.errors is None or e in c.errors]
-        if not offered:
+        j = J[:, e]
+        if not offered or not np.any(j):
             continue
-        # column-major: each candidate's columns are then contiguous, and its Gram matrix one small
-        # product over contiguous memory (row-major, thousands of poses made it the bottleneck)
-        X = np.multiply(J[:, e:e + 1], F, order="F")  # all candidate columns for error e
-        if not np.any(X):
-            continue
-        QtX = Q.T @ X
-        rX = resid @ X
+        S.data = j  # the sums over each pose's rows of J_e times what follows
+        QtX = base.project((S @ base.B).T @ F)
+        rX = (S @ resid) @ F
+        w = S @ j
+        Fw = np.multiply(w[:, None], F, order="F")
         for ci in offered:
-            s = slice(starts[ci], starts[ci + 1])
-            Xs = X[:, s]
-            XtX = Xs.T @ Xs
+            s = slice(bounds[ci], bounds[ci + 1])
+            XtX = F[:, s].T @ Fw[:, s]
             G = XtX - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
             scale = np.sqrt(np.maximum(np.diag(XtX), 1e-300))
             Gs = G / np.outer(scale, scale)
@@ -93,11 +147,17 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, Q: np.ndarra
             drop = float(b @ beta)
             dof = cands[ci].dof
             if drop > max(9, 3 * dof) * sigma2:  # cheap pre-filter; the real test follows
-                v = beta / scale  # the fitted effect, projected off the model: R x (c + k), not R x k x c
-                fitted = Xs @ v - Q @ (QtX[:, s] @ v)
-                results.append(Hit(drop, float(stats.chi2.logsf(drop / max(sigma2, 1e-300), dof)), ci, e, fitted))
-    results.sort(key=lambda h: h.log_p)
-    return results
+                v = beta / scale
+                found.append((drop, dof, ci, e, v, QtX[:, s] @ v))
+    if not found:
+        return []
+    drops, dofs = np.array([h[0] for h in found]), np.array([h[1] for h in found])
+    log_p = stats.chi2.logsf(drops / max(sigma2, 1e-300), dofs)
+    # the fitted effect, projected off the model: J_e (F v) - Q (Q^T X v), R x (c + k)
+    hits = [Hit(drop, float(lp), ci, e, (J[:, e], F[:, bounds[ci]:bounds[ci + 1]] @ v, group, base, qv))
+            for (drop, _, ci, e, v, qv), lp in zip(found, log_p)]
+    hits.sort(key=lambda h: h.log_p)
+    return hits
 
 
 def folds(n_poses: int, rng: np.random.Generator) -> np.ndarray:
@@ -105,11 +165,76 @@ def folds(n_poses: int, rng: np.random.Generator) -> np.ndarray:
     return rng.permutation(n_poses) % FOLDS
 
 
-def _held_out_sq(X: np.ndarray, r: np.ndarray, test: np.ndarray) -> float:
-    """Squared error on the `test` rows of the correction X dc ~ r fitted on the other rows."""
-    scale = np.maximum(np.linalg.norm(X[~test], axis=0), 1e-300)
-    dc = np.linalg.lstsq(X[~test] / scale, r[~test], rcond=None)[0] / scale
-    return float(np.sum((r[test] - X[test] @ dc) ** 2))
+def _solve_gram(G: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """dc of the normal equations G dc = b, columns scaled to a unit diagonal; a singular G (a
+    column with nothing left outside the others) gets the minimum-norm solution, as lstsq would."""
+    s = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    Gs, bs = G / np.outer(s, s), b / s
+    try:
+        return linalg.cho_solve(linalg.cho_factor(Gs), bs) / s
+    except linalg.LinAlgError:
+        lam, V = np.linalg.eigh(Gs)
+        keep = lam > 1e-13 * lam.max()
+        return V[:, keep] @ ((V[:, keep].T @ bs) / lam[keep]) / s
+
+
+class Folded:
+    """The current fit's linear system H dc ~ r (3R rows, k columns) split into FOLDS folds of
+    poses, for cross-validating corrections of it (H alone, or with a candidate's columns) and for
+    screening a fold's training rows alone.
+
+    H's columns are scaled to unit norm (B). Each fold keeps the R factor of its rows of B, its
+    Gram matrix R^T R, B_f^T r_f and r_f^T r_f; the folds partition the rows, so fold f's training
+    system is the sum of the others' (a candidate's c columns cost 3R k c, not the 3R (k + c)^2 of
+    a least-squares fit per fold) and its R the QR of the others' R stacked (k^3, not 3R k^2)."""
+
+    def __init__(self, H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
+                 rows_dof: np.ndarray | None = None):
+        # row-major: every screened error multiplies B by a sparse matrix, which wants it so
+        self.B = np.ascontiguousarray(H / np.maximum(np.linalg.norm(H, axis=0), 1e-300))
+        self.r, self.rows_dof = r, rows_dof
+        self.rows = [np.flatnonzero(fold[rows_pose] == f) for f in range(FOLDS)]
+        self.R = [np.linalg.qr(self.B[i], mode="r") for i in self.rows]
+        self.parts = [(R.T @ R, self.B[i].T @ r[i], float(r[i] @ r[i])) for R, i in zip(self.R, self.rows)]
+
+    def basis(self, f: int | None = None) -> Basis:
+        """The Basis of all rows (f None), or of fold f's training rows `self.training(f)`."""
+        if f is None:
+            return basis(self.B, self.R)
+        return basis(self.B[self.training(f)], [R for g, R in enumerate(self.R) if g != f])
+
+    def training(self, f: int) -> np.ndarray:
+        """The rows outside fold f (ascending)."""
+        return np.setdiff1d(np.arange(len(self.r)), self.rows[f], assume_unique=True)
+
+    def _parts(self, X: np.ndarray | None) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Per fold, the Gram matrix, right-hand side and r^T r of [H X] (X (3R, c), or None)."""
+        if X is None:
+            return self.parts
+        out = []
+        for (Gf, bf, rrf), i in zip(self.parts, self.rows):
+            Xi = X[i]
+            HX = self.B[i].T @ Xi
+            out.append((np.block([[Gf, HX], [HX.T, Xi.T @ Xi]]), np.r_[bf, Xi.T @ self.r[i]], rrf))
+        return out
+
+    @staticmethod
+    def _held_out(parts, f: int) -> float:
+        Gf, bf, rrf = parts[f]
+        dc = _solve_gram(sum(p[0] for p in parts) - Gf, sum(p[1] for p in parts) - bf)
+        return max(rrf - 2 * dc @ bf + dc @ Gf @ dc, 0.0)
+
+    def held_out_sq(self, f: int, X: np.ndarray | None = None) -> float:
+        """Squared error on fold f's rows of the correction [H X] dc ~ r fitted on the other folds;
+        X (3R, c) extra columns, or None."""
+        return self._held_out(self._parts(X), f)
+
+    def cv_rms(self, X: np.ndarray | None = None) -> float:
+        """k-fold cross-validated RMS point error (m) of the correction [H X] dc ~ r, per three
+        degrees of freedom."""
+        parts = self._parts(X)
+        sq = sum(self._held_out(parts, f) for f in range(FOLDS))
+        return float(np.sqrt(sq / (_dof(self.rows_dof, self.r) / 3)))
 
 
 def _dof(rows_dof: np.ndarray | None, r: np.ndarray, rows=slice(None)) -> float:
@@ -117,22 +242,13 @@ def _dof(rows_dof: np.ndarray | None, r: np.ndarray, rows=slice(None)) -> float:
     return float(len(r[rows]) if rows_dof is None else rows_dof[rows].sum())
 
 
-def cv_rms(H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
-           rows_dof: np.ndarray | None = None) -> float:
-    """k-fold cross-validated RMS point error (m) of a linear correction H dc ~ r (3R rows), per
-    three degrees of freedom."""
-    sq = sum(_held_out_sq(H, r, fold[rows_pose] == f) for f in range(FOLDS))
-    return float(np.sqrt(sq / (_dof(rows_dof, r) / 3)))
-
-
 def columns(J: np.ndarray, cand: Candidate, error: int, rows_pose: np.ndarray) -> np.ndarray:
     """The new columns (3R, dof) of a candidate on one generalized error."""
     return J[:, error:error + 1] * cand.values[rows_pose]
 
 
-def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.ndarray, fold: np.ndarray,
-                     cands: list[Candidate], shortlist: list[tuple[int, int]],
-                     rows_dof: np.ndarray | None = None) -> float:
+def selection_cv_rms(fs: Folded, J: np.ndarray, rows_pose: np.ndarray, cands: list[Candidate],
+                     shortlist: list[tuple[int, int]]) -> float:
     """k-fold cross-validated RMS point error (m) of the choice itself: in each fold the screening
     runs on the training part alone, its most significant candidate is added, and the held-out
     poses are predicted. The best of thousands of candidates always fits the poses it was picked on
@@ -144,22 +260,19 @@ def selection_cv_rms(J: np.ndarray, H: np.ndarray, r: np.ndarray, rows_pose: np.
         by_error.setdefault(e, []).append(ci)
     sq = 0.0
     for f in range(FOLDS):
-        test = fold[rows_pose] == f
-        Ht, rt = H[~test], r[~test]
-        Q = np.linalg.qr(Ht / np.maximum(np.linalg.norm(Ht, axis=0), 1e-300))[0]
-        resid = rt - Q @ (Q.T @ rt)
-        sigma2 = float(resid @ resid) / max(_dof(rows_dof, r, ~test) - H.shape[1], 1)
-        Jt, pt = J[~test], rows_pose[~test]  # once per fold: the copies are large at thousands of poses
+        train, base = fs.training(f), fs.basis(f)
+        resid = base.residual(fs.r[train])
+        sigma2 = float(resid @ resid) / max(_dof(fs.rows_dof, fs.r, train) - fs.B.shape[1], 1)
+        Jt, pt = J[train], rows_pose[train]  # once per fold: the copies are large at thousands of poses
         hits = [(h.log_p, cis[h.candidate], e) for e, cis in by_error.items()
-                for h in screen(Jt, pt, resid, Q, sigma2, [cands[k] for k in cis], [e])]
+                for h in screen(Jt, pt, resid, base, sigma2, [cands[k] for k in cis], [e])]
         best = min(hits, default=None)
-        X = H if best is None else np.column_stack([H, columns(J, cands[best[1]], best[2], rows_pose)])
-        sq += _held_out_sq(X, r, test)
-    return float(np.sqrt(sq / (_dof(rows_dof, r) / 3)))
+        sq += fs.held_out_sq(f, None if best is None else columns(J, cands[best[1]], best[2], rows_pose))
+    return float(np.sqrt(sq / (_dof(fs.rows_dof, fs.r) / 3)))
 
 
-def passing(found: list[Hit], cands: list[Candidate], J, H, r, rows_pose, fold, n_tests: int, base_cv: float,
-            rows_dof: np.ndarray | None = None):
+def passing(found: list[Hit], cands: list[Candidate], fs: Folded, J: np.ndarray, rows_pose: np.ndarray,
+            n_tests: int, base_cv: float):
     """The candidates, most significant first (at most TRIES), that pass the chi-square test with a
     Bonferroni correction for `n_tests` and lower the cross-validated RMS: [(hit, p, cv), ...]."""
     out = []
@@ -167,8 +280,7 @@ def passing(found: list[Hit], cands: list[Candidate], J, H, r, rows_pose, fold, 
         p = float(np.exp(hit.log_p))
         if hit.log_p + np.log(n_tests) > np.log(ALPHA):
             break  # sorted by significance: nothing further can pass either
-        cv = cv_rms(np.column_stack([H, columns(J, cands[hit.candidate], hit.error, rows_pose)]), r, rows_pose, fold,
-                    rows_dof)
+        cv = fs.cv_rms(columns(J, cands[hit.candidate], hit.error, rows_pose))
         if cv < (1 - MIN_CV_GAIN) * base_cv:
             out.append((hit, p, cv))
     return out

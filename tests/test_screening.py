@@ -1,0 +1,69 @@
+"""diagnose's statistics (gecgen/loop/screening.py) against plain least squares on the full rows.
+
+screen() sums each pose's rows before its products and Folded cross-validates from per-fold Gram
+matrices; both must give what fitting the explicit columns J_e[:, e] * f(pose) by lstsq gives."""
+import numpy as np
+import pytest
+
+from gecgen.loop.screening import FOLDS, Candidate, Folded, basis, columns, folds, screen
+
+
+@pytest.fixture(scope="module")
+def system():
+    """A random linear system of 40 poses x 3 targets: H (360, 6), the residual orthogonal to
+    it, J_e (360, 4) and two candidates; the residual holds one of them on error 2."""
+    rng = np.random.default_rng(3)
+    P, k, ne = 40, 6, 4
+    rows_pose = np.repeat(np.arange(P), 9)
+    H = rng.normal(size=(9 * P, k))
+    J = rng.normal(size=(9 * P, ne))
+    cands = [Candidate("polynomial", ("q1",), ("q1", "q1**2"), rng.normal(size=(P, 2))),
+             Candidate("fourier", ("q2",), ("s", "c", "t"), rng.normal(size=(P, 3)))]
+    Q = np.linalg.qr(H)[0]
+    r = 0.01 * rng.normal(size=9 * P) + columns(J, cands[1], 2, rows_pose) @ np.array([0.003, -0.002, 0.001])
+    r -= Q @ (Q.T @ r)
+    return rows_pose, H, J, Q, r, cands, folds(P, rng)
+
+
+def _projected(Q, X):
+    return X - Q @ (Q.T @ X)
+
+
+def test_screen_drops_and_fitted_effects_equal_least_squares_on_the_explicit_columns(system):
+    rows_pose, H, J, Q, r, cands, _ = system
+    base = basis(H, [np.linalg.qr(H[:100], mode="r"), np.linalg.qr(H[100:], mode="r")])  # Q never formed
+    hits = screen(J, rows_pose, r, base, float(r @ r) / (len(r) - H.shape[1]), cands, [0, 1, 2, 3])
+    assert hits and (hits[0].candidate, hits[0].error) == (1, 2)
+    assert [h.log_p for h in hits] == sorted(h.log_p for h in hits)
+    for h in hits:
+        X = _projected(Q, columns(J, cands[h.candidate], h.error, rows_pose))
+        beta = np.linalg.lstsq(X, r, rcond=None)[0]
+        assert h.drop == pytest.approx(float(np.sum((X @ beta) ** 2)), rel=1e-9)
+        assert np.allclose(h.fitted, X @ beta, rtol=0, atol=1e-12)
+
+
+def test_screen_refuses_rows_of_one_pose_apart(system):
+    rows_pose, H, J, Q, r, cands, _ = system
+    shuffled = np.r_[rows_pose[1:], rows_pose[:1]]
+    with pytest.raises(ValueError, match="adjacent"):
+        screen(J, shuffled, r, basis(Q, [np.eye(Q.shape[1])]), 1e-4, cands, [0])
+
+
+def test_folded_cross_validation_equals_lstsq_per_fold(system):
+    rows_pose, H, J, Q, r, cands, fold = system
+    fs = Folded(H, r, rows_pose, fold)
+    extra = columns(J, cands[1], 2, rows_pose)
+    for X in (H, np.column_stack([H, extra])):
+        sq = 0.0
+        for f in range(FOLDS):
+            test = fold[rows_pose] == f
+            dc = np.linalg.lstsq(X[~test], r[~test], rcond=None)[0]
+            sq += np.sum((r[test] - X[test] @ dc) ** 2)
+            if X is H:  # the fold's training basis projects as lstsq's residual does
+                assert np.allclose(fs.basis(f).residual(r[fs.training(f)]), r[~test] - X[~test] @ dc, rtol=0, atol=1e-12)
+            else:
+                assert fs.held_out_sq(f, extra) == pytest.approx(np.sum((r[test] - X[test] @ dc) ** 2), rel=1e-9)
+        expected = np.sqrt(sq / (len(r) / 3))
+        assert fs.cv_rms(None if X is H else extra) == pytest.approx(expected, rel=1e-9)
+    # the true effect (0.004 m RMS beside 0.01 m of noise) predicts held-out poses better
+    assert fs.cv_rms(extra) < 0.97 * fs.cv_rms()
