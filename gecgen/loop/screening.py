@@ -130,7 +130,8 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
         if not offered or not np.any(j):
             continue
         S.data = j  # the sums over each pose's rows of J_e times what follows
-        QtX = base.project((S @ base.B).T @ F)
+        BtS = (S @ base.B).T  # (k, G): B^T X = BtS F; R^-T on whichever side is smaller
+        QtX = base.project(BtS) @ F if BtS.shape[1] < F.shape[1] else base.project(BtS @ F)
         rX = (S @ resid) @ F
         w = S @ j
         Fw = np.multiply(w[:, None], F, order="F")
