@@ -40,6 +40,7 @@ from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, fit_frames, identify, row_errors, rows_H_and_residual, summary, to_world
+from gecgen.runtime.threads import one_blas_thread
 
 #: rounds at most: a safety net, not the stopping rule (that is the statistics)
 MAX_ROUNDS = 50
@@ -138,6 +139,7 @@ def _choose(found: list[Hit], cands, fs: Folded, J, rows_pose, n_tests: int, bas
     return None
 
 
+@one_blas_thread
 def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
              registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None,
              max_rounds: int = MAX_ROUNDS, register_val: bool = False) -> Diagnosis:

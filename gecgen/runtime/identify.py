@@ -28,6 +28,7 @@ from gecgen.runtime import robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
 from gecgen.runtime.redundancy import RANK_TOL, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
+from gecgen.runtime.threads import one_blas_thread
 
 BLOCK_POSES = 2000
 #: condition number of the column-scaled kept H_e above which the fit is reported ill-posed
@@ -370,6 +371,7 @@ STATION_ROUNDS = 50
 STATION_TOL_M = 1e-6  # a micrometre: a fiftieth of a good tracker's noise
 
 
+@one_blas_thread
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
              step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
              loss: str = "cauchy") -> Fit:
