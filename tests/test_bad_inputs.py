@@ -135,6 +135,8 @@ CASES = {
     "CSV cell of 200,000 characters": (
         lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace(",t2,", "," + "x" * 200_000 + ",", 1))],
         "data.csv", "row 3, column 'target': 200000 characters"),
+    "CSV blank line between rows": (lambda t: ["identify", ROBOTS / "pps.yaml", write(t, "data.csv", table().replace("\n2,", "\n\n2,", 1))],
+                                    "data.csv", "row 8: a blank line between the rows; remove it"),
     "wrench of 1e308": (lambda t: ["identify", ROBOTS / "pps.yaml",
                                    write(t, "data.csv", table(header=HEADER + ",fx", extra=",1e308"))],
                         "data.csv", "row 2, column 'fx': '1e308' is beyond +-1e+07"),
@@ -188,11 +190,14 @@ def test_a_byte_order_mark_and_modest_aliases_are_accepted(tmp_path):
 
 
 def test_quoted_cells_and_windows_line_ends_read_as_the_plain_file(tmp_path):
-    """The csv module reads what the fast reader declines (quotes); CRLF the fast reader takes."""
+    """The csv module reads what the fast reader declines (quotes); CRLF the fast reader takes; blank
+    lines after the last row end the file."""
     robot = load_robot(ROBOTS / "pps.yaml")
     plain = read_measurements(write(tmp_path, "plain.csv", table()), robot)
     quoted = table().replace(",t1,", ',"t1",').replace(",0.6,", ',"0.6",')
-    for name, text in (("quoted.csv", quoted), ("crlf.csv", table().replace("\n", "\r\n"))):
+    blank_end = table() + "\n \n\t\n"  # a spreadsheet's empty lines after the last row
+    for name, text in (("quoted.csv", quoted), ("crlf.csv", table().replace("\n", "\r\n")),
+                       ("blank_end.csv", blank_end), ("blank_end_crlf.csv", blank_end.replace("\n", "\r\n"))):
         data = read_measurements(write(tmp_path, name, text.encode()), robot)
         for key in ("q", "pose_ids", "target", "xyz"):
             assert getattr(data, key).tolist() == getattr(plain, key).tolist(), (name, key)

@@ -91,6 +91,21 @@ def test_a_placement_the_data_cannot_give_is_refused(long_tool):
         estimate_placement(robot, dataclasses.replace(data, q=q))
 
 
+def test_too_few_poses_place_nothing(long_tool, capsys):
+    """Two poses give 6 coordinates for the tracker frame's 6 unknowns and the target's 3: the
+    placement is refused (it once returned a target 5e20 m away and a fit that claimed success)."""
+    d, truth_robot, user_robot = long_tool
+    robot = load_robot(user_robot)
+    data = read_measurements(d / "data.csv", robot).subset(np.arange(2))
+    with pytest.raises(ModelError, match="does not place target"):
+        estimate_placement(robot, data)
+    # the robot file's target stands when the data cannot place it; identify then says the data is too little
+    write_measurements(d / "two.csv", robot, data, wrench=False)
+    assert main(["identify", str(truth_robot), str(d / "two.csv"), "--errors", str(CONSTANT), "-o", str(d / "two.json")]) == 2
+    err = capsys.readouterr().err
+    assert "measure more poses" in err and "placed" not in err
+
+
 def test_nothing_compiles_before_the_targets_are_placed(long_tool, capsys):
     d, truth_robot, user_robot = long_tool
     assert main(["redundancy", str(user_robot), "--errors", str(CONSTANT), "--json"]) == 2

@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
 import sys
 from collections.abc import Collection
 from pathlib import Path
@@ -116,8 +117,10 @@ def _read_cells(text: str, where: str, expect: str, sep: str) -> tuple[list[str]
     require(rows, f"{where}: no data rows after the header")
     lengths = np.fromiter((len(r) for r in rows), int, len(rows))
     bad = np.nonzero(lengths != len(header))[0]
-    require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}: {lengths[bad[0]] if len(bad) else 0} "
-                          f"fields, the header has {len(header)}")
+    if len(bad):
+        row, n = bad[0] + 2, lengths[bad[0]]
+        require(n, f"{where}: row {row}: a blank line between the rows; remove it (blank lines may only end the file)")
+        raise ModelError(f"{where}: row {row}: {n} fields, the header has {len(header)}")
     return header, np.array(rows, dtype=object)
 
 
@@ -229,6 +232,7 @@ def _source(path, what: str) -> tuple[bytes, str]:
     return read_utf8(Path(path), what), str(path)
 
 
+_BLANK_END = re.compile(rb"(?:\r?\n[ \t\r]*)+\Z")
 #: files smaller than this (bytes) are read by the csv module unless pandas is already loaded
 SMALL_BYTES = 1_000_000
 
@@ -246,6 +250,9 @@ def read_table(path, what: str, expect: str, text: Collection[str] = (), verbati
     wants the text of every cell (it writes them back), so the csv module reads the file.
     `sep` separates the columns, `decimal` marks the decimals of numbers ("." or ",")."""
     data, where = _source(path, what)
+    # blank lines after the last row end the file (spreadsheets and tracker software write them);
+    # a blank line between rows is refused below
+    data = _BLANK_END.sub(b"\n", data)
     # below SMALL_BYTES the csv module is done before pandas would even be imported (0.25 s): the
     # two readers give the same arrays and messages, so the choice is speed alone
     small = len(data) < SMALL_BYTES and "pandas" not in sys.modules

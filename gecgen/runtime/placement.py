@@ -116,7 +116,8 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     J = sol.jac * np.maximum(np.linalg.norm(sol.jac, axis=0), 1e-300) ** -1
     s = np.linalg.svd(J, compute_uv=False)
     names = [robot.target_names[t] for t in measured]
-    if not (np.isfinite(sol.x).all() and s[-1] > RANK_TOL * s[0]):
+    # fewer residuals than unknowns leave directions without a singular value at all
+    if not (np.isfinite(sol.x).all() and len(s) == J.shape[1] and s[-1] > RANK_TOL * s[0]):
         raise ModelError(f"the data does not place target(s) {', '.join(names)} on the tool: the poses turn the "
                          f"tool about fewer than two independent axes; give the targets' positions in the robot "
                          f"file, or measure poses that turn the tool more")
