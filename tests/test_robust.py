@@ -4,6 +4,7 @@ absurd or undetermined fit is a failure, and what a measured point cannot see is
 The robot is the issue's: a 200-pose industrial6r simulation (its truth file: geometric errors
 plus shoulder and elbow compliance under gravity) fitted with the default model, validated on 200
 other poses."""
+import dataclasses
 import json
 
 import numpy as np
@@ -138,6 +139,16 @@ def test_absurd_or_undetermined_values_are_failures(arm):
     c[rotation], std[rotation] = 0.0, np.nan
     assert "3.ep:1 has no finite uncertainty" in _fit_failures(cm, train, c, std, kept, True, "")[0]
     assert _fit_failures(cm, train, c, np.full(cm.dims.nc, 1e-6), kept, False, "did not converge") == ["did not converge"]
+
+
+def test_data_of_another_robot_is_a_failure_not_a_fit(arm):
+    """Points a metre from anywhere this robot reaches leave metres of residual whatever the
+    coefficients: a failure, however small the errors the fit settles on."""
+    robot, cm, train, val = arm
+    scattered = dataclasses.replace(train, xyz=train.xyz + np.random.default_rng(5).normal(0, 1.0, train.xyz.shape))
+    fit = identify(cm, scattered)
+    assert any("rms at the measured points (limit 0.5 m)" in f for f in fit.failures), fit.failures
+    assert not any("rms at the measured points" in f for f in identify(cm, train).failures)
 
 
 def test_cli_refuses_an_untrustworthy_fit_with_one_line(arm, tmp_path, capsys):
