@@ -282,3 +282,29 @@ def test_figaroh_s_ur10_tool_poses_import_and_calibrate(tmp_path, capsys):
     positions.write_text("\n".join(",".join(line.split(",")[:11]) for line in csv.read_text().splitlines()) + "\n")
     assert main(["redundancy", str(robot_file), str(positions), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["n_identifiable"] == 27
+
+
+def test_a_measured_frame_turned_any_way_on_the_tool_is_placed_from_the_orientations(tmp_path, capsys):
+    """The UR10's probe frame is turned 0.515 rad about x on the flange; a robot file that says it
+    is parallel to the tool frame, or turned 1.5 rad elsewhere, gets the same fit: the measured
+    orientations give the frame's rotation in the tool frame (R = R_tracker R_tool X) before the
+    fit, the calibration carries it, and evaluate repeats the fit."""
+    csv = tmp_path / "poses.csv"
+    assert main(["import", str(UR10 / "ur10_probe.yaml"), str(UR10 / "calibration.csv"), "--mapping",
+                 str(UR10 / "calibration.mapping.yaml"), "-o", str(csv)]) == 0
+    capsys.readouterr()
+    text = (UR10 / "ur10_probe.yaml").read_text().replace("urdf: ur10_robot.urdf", f"urdf: {UR10 / 'ur10_robot.urdf'}")
+    for rpy, turned in (("[0.0, 0.0, 0.0]", 515), ("[1.0, 0.0, 1.5]", None)):
+        robot_file = tmp_path / "probe.yaml"
+        robot_file.write_text(text.replace("rpy: [-0.5, 0.0, 0.0]", f"rpy: {rpy}"))
+        assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+        out, err = capsys.readouterr()
+        fit = json.loads(out)
+        assert "probe's measured frame turned" in err
+        if turned:
+            assert abs(fit["placement"]["turned_mrad"]["probe"] - turned) < 2
+        assert abs(fit["train"]["rms_mm"] - FIGAROH_MM[0]) < 0.01
+        assert abs(fit["train"]["rot_rms_mrad"] - 1e3 * np.radians(FIGAROH_DEG[0])) < 0.05
+        assert main(["evaluate", str(tmp_path / "c.json"), str(csv), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["after"]["rot_rms_mrad"] == pytest.approx(
+            fit["train"]["rot_rms_mrad"], rel=1e-9)

@@ -1,7 +1,7 @@
 """Pose measurements as points: a measured frame is four virtual targets.
 
 A row that measures a target's position p and the orientation R of its frame (parallel to the
-tool frame; `Measurements.orientation`) says as much as four measured points rigidly attached to
+tool frame, or turned by `Robot.target_frames`; `Measurements.orientation`) says as much as four measured points rigidly attached to
 that frame: the vertices p + r R v_k of a regular tetrahedron around the target. So a robot with
 pose data gets four virtual targets per target, t + r v_k in the tool frame (`with_pose_targets`,
 a derived robot whose code is generated and compiled by content like any other), each oriented
@@ -48,18 +48,20 @@ def vertex_radius(length_m: float) -> float:
 
 
 def with_pose_targets(robot: Robot, length_m: float = LENGTH_M) -> Robot:
-    """The robot with four virtual targets per target, `<target>__v1..v4` at t + r v_k in the tool
-    frame (r from the length scale L, m), after the robot's own targets (whose indices stay)."""
+    """The robot with four virtual targets per target, `<target>__v1..v4` at t + r X v_k in the tool
+    frame (r from the length scale L, m; X the measured frame's rotation in the tool frame,
+    `Robot.target_frames`, else the identity), after the robot's own targets (whose indices stay)."""
     require(np.isfinite(length_m) and length_m > 0, f"--orientation-length {length_m!r}: give a positive length in "
                                                     f"m (1 rad of orientation error counts as this much position)")
     r = vertex_radius(length_m)
     extra, vertex_of = {}, {}
     for name, t in robot.targets.items():
+        turn = Rotation.from_rotvec(robot.target_frames.get(name, (0.0, 0.0, 0.0))).as_matrix()
         for k, v in enumerate(VERTICES):
             virtual = f"{name}__v{k + 1}"
             require(virtual not in robot.targets, f"{robot.source}: targets: {virtual} is the name of a virtual target "
                                                   f"of pose measurements; rename the target")
-            extra[virtual] = tuple(float(x) for x in np.asarray(t) + r * v)
+            extra[virtual] = tuple(float(x) for x in np.asarray(t) + r * turn @ v)
             vertex_of[virtual] = (name, k)
     return replace(robot, targets={**robot.targets, **extra}, vertex_of=vertex_of, pose_length=float(length_m))
 

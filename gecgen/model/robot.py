@@ -93,6 +93,10 @@ class Robot:
     #: target whose frame they sample, vertex 0..3); none in a robot file
     vertex_of: dict[str, tuple[str, int]] = field(default_factory=dict)
     pose_length: float = 0.0  # m: 1 rad of orientation error counts as this much position error
+    #: the frames pose measurements give, where they are not parallel to the tool frame: target ->
+    #: rotation vector (rad) of the measured frame in the tool frame; estimated by
+    #: `runtime.placement` from the measured orientations, none in a robot file
+    target_frames: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
     @property
     def joints(self) -> tuple[Joint, ...]:

@@ -61,6 +61,8 @@ class Calibration:
             "error_model": self.model.to_yaml_dict(self.robot),
             "error_model_hash": model_hash(self.robot, self.model),
             "targets": {n: list(xyz) for n, xyz in self.robot.targets.items()},
+            **({"target_frames": {n: list(x) for n, x in self.robot.target_frames.items()}}
+               if self.robot.target_frames else {}),
             "coefficients": [{"name": n, "value": float(v), "std": None if np.isnan(s) else float(s),
                               "identified": k in set(self.kept)}
                              for k, (n, v, s) in enumerate(zip(names, self.c, self.std))],
@@ -88,7 +90,7 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
 #: keys every calibration file holds; the rest, but for these three, is its report
 REQUIRED = ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
             "covariance", "registration")
-NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", "targets", *REQUIRED}
+NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", "targets", "target_frames", *REQUIRED}
 #: R^T R may differ from the identity by this much (JSON keeps R to full precision)
 ROTATION_TOL = 1e-6
 
@@ -162,20 +164,29 @@ def _robot(d: dict, path: Path) -> Robot:
     raise ModelError(f"{where}: the robot file {found[0]} changed since this calibration was made; identify again")
 
 
-def _targets(robot: Robot, d, where: str) -> Robot:
+def _targets(robot: Robot, d, where: str, frames=None) -> Robot:
     """The robot with the targets the calibration was fitted with: those the robot file leaves to
-    estimate, or that the data placed elsewhere (runtime.placement). A file written before targets
-    were recorded holds the robot file's."""
+    estimate, or that the data placed elsewhere (runtime.placement), and the measured frames of
+    pose data the data turned (`frames`, target -> rotation vector, rad). A file written before
+    targets were recorded holds the robot file's."""
+    turned = {}
+    if frames is not None:
+        ok = isinstance(frames, dict) and set(frames) <= set(robot.targets)
+        turned = {n: _finite_array(v, (3,)) for n, v in frames.items()} if ok else {}
+        require(ok and all(v is not None for v in turned.values()),
+                f"{where}: target_frames: expected some of the robot's targets ({', '.join(robot.targets)}) each "
+                f"as a rotation vector of three finite numbers (rad); identify again")
+        turned = {n: tuple(v.tolist()) for n, v in turned.items()}
     if d is None:
         require(not robot.estimated, f"{where}: targets: missing, and the robot file leaves "
                                      f"'{robot.estimated[0] if robot.estimated else ''}' to estimate; identify again")
-        return robot
+        return with_targets(robot, {}, turned)
     ok = isinstance(d, dict) and set(d) == set(robot.targets)
     xyz = {n: _finite_array(v, (3,)) for n, v in d.items()} if ok else {}
     require(ok and all(v is not None for v in xyz.values()),
             f"{where}: targets: expected the robot's targets ({', '.join(robot.targets)}) each as three finite "
             f"numbers (m); identify again")
-    return with_targets(robot, {n: tuple(v.tolist()) for n, v in xyz.items()})
+    return with_targets(robot, {n: tuple(v.tolist()) for n, v in xyz.items()}, turned)
 
 
 def _registration(d, where: str) -> Registration:
@@ -203,7 +214,7 @@ def load(path: str | Path) -> Calibration:
     require(isinstance(d, dict), f"{where}: not a calibration file (a JSON object is expected)")
     for key in REQUIRED:
         require(key in d, f"{where}: missing key '{key}'; not a gecgen calibration file")
-    robot = _targets(_robot(d, path), d.get("targets"), where)
+    robot = _targets(_robot(d, path), d.get("targets"), where, d.get("target_frames"))
     spec = dict(d["error_model"])
     spec["frames"] = {int(k): v for k, v in spec.get("frames", {}).items()}  # JSON keys are strings
     model = error_model_from_dict(spec, robot, f"{where}: error_model")

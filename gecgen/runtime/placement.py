@@ -15,6 +15,12 @@ refinement over every stationing's frame and every target at once. The data dete
 placement only when the tool turns about at least two independent axes; otherwise the estimate
 is refused, never guessed.
 
+Pose data measures the target's frame too: R = R_s R_i X with R_s the stationing's tracker
+rotation (from the positions, above) and X the measured frame's rotation in the tool frame, so X
+is the rotation nearest to sum_i R_i^T R_s^T R (SVD). A frame far from the robot's is turned to it
+(`Robot.target_frames`): the fit's linearisation then starts near the truth, however the probe is
+mounted.
+
 Identification then fits the generalized errors around the estimated targets: the placement is a
 starting point (frame n's errors still absorb what the nominal kinematics got wrong), recorded in
 the calibration so that evaluate and compensate use the same targets.
@@ -37,6 +43,8 @@ from gecgen.runtime.registration import kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
+#: a measured frame (pose data) this far (rad) from the robot's is turned to the estimate before the fit
+FAR_RAD = 0.02
 #: singular values of the refinement's column-scaled Jacobian below this share of the largest leave a
 #: direction of the placement undetermined
 RANK_TOL = 1e-7
@@ -54,10 +62,16 @@ class Placement:
     targets: dict[str, tuple[float, float, float]]
     rms_mm: float
     moved_mm: dict[str, float | None]
+    #: pose data: the measured frame of each target as a rotation vector (rad) in the tool frame, and
+    #: its angle from the robot's (mrad)
+    frames: dict[str, tuple[float, float, float]] = dataclasses.field(default_factory=dict)
+    turned_mrad: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        frames = {"frames_rotvec_rad": {k: list(v) for k, v in self.frames.items()},
+                  "turned_mrad": self.turned_mrad} if self.frames else {}
         return {"targets_m": {k: list(v) for k, v in self.targets.items()}, "rms_mm": self.rms_mm,
-                "moved_mm": self.moved_mm}
+                "moved_mm": self.moved_mm, **frames}
 
 
 def _closed_form(T: np.ndarray, data: Measurements, rows: np.ndarray, k_targets: int):
@@ -126,19 +140,46 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     placed = {n: tuple(float(v) for v in xyz) for n, xyz in zip(names, m)}
     moved = {n: None if n in robot.estimated else float(1e3 * np.linalg.norm(np.subtract(placed[n], robot.targets[n])))
              for n in names}
-    return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved)
+    frames = [Rotation.from_rotvec(sol.x[6 * s:6 * s + 3]).as_matrix() for s in range(len(stations))]
+    turns = _measured_frames(T, data, index, sidx, frames, names)
+    turned = {n: float(1e3 * (Rotation.from_rotvec(x) * Rotation.from_rotvec(robot.target_frames.get(n, (0.0,) * 3)).inv())
+                       .magnitude()) for n, x in turns.items()}
+    return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved, turns, turned)
 
 
-def with_targets(robot: Robot, targets: dict[str, tuple[float, float, float]]) -> Robot:
-    """The robot with the given targets placed (the rest as they were), none left to estimate."""
+def _measured_frames(T, data: Measurements, index, sidx, frames, names) -> dict[str, tuple[float, float, float]]:
+    """Pose data: the rotation X_k of each target's measured frame in the tool frame, from every
+    measured orientation R = R_s R_i X_k (R_s the station's tracker rotation, R_i the nominal tool
+    rotation): X_k is the rotation nearest to sum R_i^T R_s^T R (SVD), as a rotation vector (rad)."""
+    if data.orientation is None:
+        return {}
+    out = {}
+    oriented = ~np.isnan(data.orientation[:, 0, 0])
+    Rs = np.stack(frames)[sidx]
+    for k, name in enumerate(names):
+        rows = oriented & (index == k)
+        if rows.any():
+            S = np.einsum("nji,nkj,nkl->il", T[data.pose[rows], :3, :3], Rs[rows], data.orientation[rows])
+            U, _, Vt = np.linalg.svd(S)
+            X = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+            out[name] = tuple(float(v) for v in Rotation.from_matrix(X).as_rotvec())
+    return out
+
+
+def with_targets(robot: Robot, targets: dict[str, tuple[float, float, float]],
+                 frames: dict[str, tuple[float, float, float]] | None = None) -> Robot:
+    """The robot with the given targets placed (the rest as they were), none left to estimate, and
+    the given measured frames (rotation vectors, rad, in the tool frame) for pose data."""
     placed = {n: tuple(float(v) for v in targets.get(n, xyz)) for n, xyz in robot.targets.items()}
     left = tuple(n for n in robot.estimated if n not in targets)
-    return dataclasses.replace(robot, targets=placed, estimated=left)
+    turned = {**robot.target_frames, **{n: tuple(float(v) for v in x) for n, x in (frames or {}).items()}}
+    return dataclasses.replace(robot, targets=placed, estimated=left, target_frames=turned)
 
 
 def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tuple[Robot, Placement | None]:
     """The robot to fit `data` with: the targets the robot file leaves to the data are estimated,
-    and given ones that the data puts more than FAR_M away start from where the data puts them.
+    and given ones that the data puts more than FAR_M away start from where the data puts them; a
+    measured frame (pose data) more than FAR_RAD from the robot's is turned to where the data puts it.
     (robot, None) when the given targets stand; a target left to estimate that `data` does not
     measure is refused."""
     measured = {robot.target_names[t] for t in np.unique(data.target)}
@@ -153,6 +194,7 @@ def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tup
             raise
         return robot, None  # the data cannot place the targets, and the robot file does
     far = {n: d for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M}
-    if not far:
+    turned = {n: placement.frames[n] for n, a in placement.turned_mrad.items() if a > 1e3 * FAR_RAD}
+    if not far and not turned:
         return robot, None
-    return with_targets(robot, {n: placement.targets[n] for n in far}), placement
+    return with_targets(robot, {n: placement.targets[n] for n in far}, turned), placement
