@@ -398,7 +398,7 @@ class Calibrator:
             moved = {k: {**r.to_dict(), **r.relative_to(known.get(k, calib.registration))} for k, r in frames.items()}
         else:
             y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: score it with register=True "
-                                                        "(gecgen evaluate --register)")
+                                                        "(gecgen evaluate or calibrate --register)")
         counts = measured_counts(robot, data)
         return Score(Errors.of(_summary(cm, data, y_before, None)), Errors.of(_summary(cm, data, y, calib.c)),
                      counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,
@@ -528,21 +528,24 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
-              progress=None) -> Selection:
+              register_val: bool = False, progress=None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
-    and the robot has no error-model file). progress(name) is called per candidate."""
+    and the robot has no error-model file). register_val: `val` was measured from another tracker
+    stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
+    per candidate."""
     from gecgen.loop.calibrate import NAMES, choose
-    from gecgen.runtime.identify import to_world
 
     names = model_names(NAMES if models is None else models)
     robot = _robot(robot)
-    data, val = _held_out(read_measurements(data, robot), val, holdout, seed, robot)
+    require(not register_val or val is not None, "register_val re-fits the tracker frame of the validation data: "
+                                                 "pass val")
+    data, raw_val = _held_out(read_measurements(data, robot), val, holdout, seed, robot)
     robot, placement = placed(robot, data)
     default = error_model(errors, robot, data.aux_names, constant=False)
-    fitted, data, val = on_points(robot, _length(orientation_length), data, val)
+    fitted, data, val = on_points(robot, _length(orientation_length), data, raw_val)
     if default is not None:
         checked(default, fitted, data, val)
     choice = choose(fitted, data, default, seed, progress=progress, names=names)
@@ -554,12 +557,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     cal = Calibrator(choice.model, orientation_length=orientation_length)
     cal._set(calib, choice.fit)
     cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(fitted, data)
-    val_before = val_after = None
-    if val is not None:
-        checked(choice.model, fitted, val)
-        y = to_world(calib.frames, val, "measure it from a station of the training data, or score it with "
-                                        "Calibrator.score(val, register=True) (gecgen evaluate --register)")
-        val_before, val_after = (Errors.of(_summary(choice.cm, val, y, c)) for c in (None, choice.fit.c))
+    scored = None if raw_val is None else cal.score(raw_val, register=register_val)
     effects = choice.diagnosis.effects if choice.diagnosis else []
-    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, val_before, val_after,
-                     data, val)
+    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_,
+                     scored and scored.before, scored and scored.after, data, scored and scored.data)

@@ -190,3 +190,16 @@ def test_diagnose_scores_the_validation_file_in_its_own_frame(setup, calibration
     assert registered["val_registered"] is True and stale["val_registered"] is False
     assert abs(registered["after"]["val_rms_mm"] - evaluated) <= 0.01 * evaluated
     assert stale["after"]["val_rms_mm"] > 100 * evaluated
+
+
+def test_calibrate_scores_a_validation_file_from_another_stationing(setup, calibrations, capsys):
+    """calibrate --register scores day 2 as evaluate --register does; without it the unknown
+    frame is not guessed: the validation of the training frame is far off (100x)."""
+    robot, truth, d, files = setup
+    args = ["calibrate", ROBOT, d / "one.csv", "--errors", CONSTANT, "--models", "geometric", "--val", d / "day2.csv"]
+    registered = run(capsys, *args, "-o", d / "cal_registered", "--register")
+    stale = run(capsys, *args, "-o", d / "cal_stale")
+    evaluated = run(capsys, "evaluate", d / "cal_registered" / "calibration.json", d / "day2.csv", "--register")
+    assert registered["val_registered"] is True and stale["val_registered"] is False
+    assert registered["val"] == evaluated["after"] and registered["val_before"] == evaluated["before"]
+    assert stale["val"]["rms_mm"] > 100 * registered["val"]["rms_mm"]

@@ -20,6 +20,9 @@ def add_parser(command):
     held.add_argument("--val", help="validation measurement CSV, scored after the choice (never used to choose)")
     held.add_argument("--holdout", type=float, help="share of TRAIN's poses to hold out for validation instead "
                                                     "(split by pose, seeded by --seed), e.g. 0.2")
+    p.add_argument("--register", action="store_true",
+                   help="--val was measured from another tracker stationing: fit its frame (the calibration's "
+                        "coefficients held) before scoring it, as evaluate --register does (default: off)")
     p.add_argument("--errors", help="the robot's default error model among the candidates (default: "
                                     "robots/NAME.errors.yaml beside the robot file, if any)")
     p.add_argument("--models", default=",".join(NAMES),
@@ -48,7 +51,8 @@ def run(args) -> dict:
                 status.update(f"cross-validating the {name} model on the training poses")
 
         sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
-                        seed=args.seed, orientation_length=args.orientation_length, progress=progress)
+                        seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
+                        progress=progress)
     out = Path(args.output)
     cal, choice = sel.calibrator, sel.choice
     cal.save(out / "calibration.json")
@@ -69,6 +73,7 @@ def run(args) -> dict:
     if sel.val is not None:
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
+        result["val_registered"] = args.register
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
     files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data), out))
