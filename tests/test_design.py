@@ -1,4 +1,4 @@
-"""gecgen design: D-optimal choice of the poses to measure (gecgen/runtime/design.py)."""
+"""gecgen design: D- and I-optimal choice of the poses to measure (gecgen/runtime/design.py)."""
 import csv
 import json
 import warnings
@@ -79,15 +79,61 @@ def test_exchange_from_a_poor_start_only_raises_log_det():
     assert D.logdet(1e-3 * np.eye(8) + np.einsum("pik,pil->kl", Hc, Hc)) == pytest.approx(history[-1])
 
 
-def test_greedy_picks_the_largest_gain_first():
-    """The first pick maximises log det(I + H_i M0^-1 H_i^T), checked by brute force."""
+def test_i_exchange_from_a_poor_start_only_lowers_the_trace():
+    """I criterion: from a random start every pass lowers tr(M^-1) (never raises it), the trace it
+    ends with is that of the chosen poses' information computed afresh, and no single swap (all
+    of them tried here) lowers it by more than a pass's tolerance."""
+    rng = np.random.default_rng(0)
+    # unequal columns: D's choice ignores their scale, I's does not
+    H = rng.normal(size=(300, 3, 8)) * rng.uniform(0.1, 2.0, (300, 1, 1)) * np.logspace(-1, 1, 8)
+    H = H.astype(np.float32).astype(float)
+    search = D._Search(H, 1e-3 * np.eye(8), rng, D.I_OPTIMAL)
+    search.start(range(6))
+    swaps, passes, history = search.exchange()
+    trace = np.exp(-np.array(history))  # the objective is -log tr(M^-1)
+    assert swaps > 0 and np.all(np.diff(trace) <= 0) and trace[-1] < 0.5 * trace[0]
+    info = np.einsum("pik,pjk->pij", H.transpose(0, 2, 1), H.transpose(0, 2, 1))  # H_p^T H_p
+    M = 1e-3 * np.eye(8) + info[search.chosen].sum(axis=0)
+    assert trace[-1] == pytest.approx(np.trace(np.linalg.inv(M)))
+    best = min(np.trace(np.linalg.inv(M - info[j] + info[i])) for j in search.chosen
+               for i in np.setdiff1d(np.arange(300), search.chosen))
+    assert best > trace[-1] * np.exp(-D.PASS_TOL)
+
+
+@pytest.mark.parametrize("criterion, value", [
+    (D.D_OPTIMAL, D.logdet), (D.I_OPTIMAL, lambda M: -np.trace(np.linalg.inv(M)))])
+def test_greedy_picks_the_largest_gain_first(criterion, value):
+    """The first pick maximises log det M, or minimises tr(M^-1), checked by brute force."""
     rng = np.random.default_rng(1)
     H = rng.normal(size=(50, 3, 5))
     M0 = np.diag(rng.uniform(0.5, 2.0, 5))
-    search = D._Search(H, M0, rng)
+    search = D._Search(H, M0, rng, criterion)
     search.greedy(1)
-    brute = [D.logdet(M0 + h.astype(np.float32).astype(float).T @ h.astype(np.float32).astype(float)) for h in H]
+    brute = [value(M0 + h.astype(np.float32).astype(float).T @ h.astype(np.float32).astype(float)) for h in H]
     assert search.chosen == [int(np.argmax(brute))]
+
+
+def test_i_design_value_is_the_mean_variance_and_below_d():
+    """The I design's value is tr(M^-1 W) (W the candidates' mean information per pose), computed
+    here from H_e without the search's whitening; it is below that of D's design (5.1 against 5.6
+    here: not a tie, so the two criteria really choose differently), which in turn has the larger
+    log det."""
+    robot, cm = _model("industrial6r")
+    cands = D.uniform_candidates(robot, 300, np.random.default_rng(2))
+    i_design = D.design_poses(cm, cands, 10, np.array([0]), seed=2, criterion="I")
+    d_design = D.design_poses(cm, cands, 10, np.array([0]), seed=2, criterion="D")
+    assert i_design.criterion == "I" and i_design.to_dict()["criterion"] == "I"
+    _, H = cm.model_targets(cands.q, None, None, np.zeros(cm.dims.nc), with_H=True)
+    H = H[:, :3][:, :, i_design.columns]
+    W = np.einsum("pik,pil->kl", H, H) / len(H)
+
+    def mean_variance(idx):
+        return np.trace(np.linalg.solve(np.einsum("pik,pil->kl", H[idx], H[idx]), W))
+
+    assert i_design.value == pytest.approx(mean_variance(i_design.chosen), rel=1e-6)
+    assert i_design.random_value == pytest.approx(mean_variance(i_design.random), rel=1e-6)
+    assert i_design.value < 0.98 * mean_variance(d_design.chosen) < i_design.random_value
+    assert d_design.value >= i_design.values["design"]["D"]
 
 
 def test_given_information_is_the_start(tmp_path):
@@ -118,8 +164,10 @@ def test_given_information_is_the_start(tmp_path):
 
     out = tmp_path / "more.csv"
     run = gecgen("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses", 10,
-                 "--candidates", 300, "--given", path, "-o", out, "--json")
+                 "--candidates", 300, "--given", path, "--criterion", "I", "-o", out, "--json")
     assert run.returncode == 0, run.stderr
+    result = json.loads(run.stdout)
+    assert result["criterion"] == "I" and result["value"] == result["mean_variance"] < result["random_mean_variance"]
     ids = [int(r["pose"]) for r in _read(out)]
     assert ids == list(range(15, 25))  # appended after the given file's pose ids
 

@@ -2,7 +2,7 @@
 
 Candidates are uniform samples within the joint limits (`--candidates K`, `--seed`) or the rows
 of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/runtime/design.py`
-chooses N of the rest (D-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
+chooses N of the rest (`--criterion`: D- or I-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
 of the pose, `fx..mz` and `payload_kg`: the commands to send, and the measurement file's joint
 columns once `target x y z` are filled in.
 """
@@ -25,7 +25,7 @@ DEFAULT_CANDIDATES = 5000
 
 def add_parser(command):
     """Register `design` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("design", run, "choose the poses to measure (D-optimal experiment design)")
+    p = command("design", run, "choose the poses to measure (optimal experiment design)")
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
@@ -47,6 +47,10 @@ def add_parser(command):
     p.add_argument("--max-incidence-deg", type=float, help="largest angle between the line of sight to the tracker "
                                                            "and the tool z axis (the reflector's acceptance, deg)")
     p.add_argument("--given", help="measurement CSV already measured: the design adds poses to its information")
+    p.add_argument("--criterion", choices=list(D.CRITERIA), default=D.DEFAULT_CRITERION,
+                   help="D: maximise log det of the information (the coefficients' joint confidence region); I: "
+                        "minimise the mean predicted variance of the measured positions over the candidates "
+                        "(default %(default)s)")
     p.add_argument("--noise-mm", type=float, default=1e3 * D.NOISE_M,
                    help="measurement noise per coordinate (mm) for the predicted uncertainty (default %(default)s)")
 
@@ -119,7 +123,7 @@ def run(args) -> dict:
     allowed = np.nonzero(ok)[0]
     cands = cands.subset(allowed)
     result = D.design_poses(CompiledModel(robot, model), cands, args.poses, targets, given, args.seed,
-                            args.noise_mm / 1e3)
+                            args.noise_mm / 1e3, criterion=args.criterion)
     first = int(given.pose_ids.max()) + 1 if given is not None else 0  # appends to the given file's ids
     chosen = cands.subset(result.chosen)
     header = ["pose", *(f"q{i + 1}" for i in range(robot.n))]

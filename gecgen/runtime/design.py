@@ -2,24 +2,27 @@
 
 The measured target errors are linear in the coefficients through H_e, so the information a set
 of poses carries about them is M = sum_p H_p^T H_p (H_p: the 3 nt rows of the measured targets at
-pose p, nt targets, over the identifiable coefficients). The design maximises log det M
-(D-optimality: the smallest joint confidence region of the coefficients) over a finite set of
-candidate poses:
+pose p, nt targets, over the identifiable coefficients). Over a finite set of candidate poses the
+design either maximises log det M (criterion "D", D-optimality: the smallest joint confidence
+region of the coefficients) or minimises tr(M^-1 W), W the candidates' mean information per pose
+(criterion "I", I-optimality: the mean over the candidates of the predicted variance of the
+measured positions, what a validation RMS over poses like the candidates measures):
 
 * columns: the coefficients the structural analysis keeps for the measured targets, less those
   no candidate excites (a wrench term when every candidate carries the same load); the reported
-  values scale each column by its RMS over the candidates, so metres and radians, newtons and
+  log det scales each column by its RMS over the candidates, so metres and radians, newtons and
   squared joint angles weigh alike. The search itself runs in whitened coordinates (the mean
-  candidate informs every direction alike): D-optimal choices do not depend on a linear change of
-  the coefficients, only log det's constant does;
-* greedy start: the pose with the largest gain log det(I + H_i M^-1 H_i^T) (the matrix
-  determinant lemma for a block of 3 nt rows), every candidate's H_i M^-1 H_i^T updated by
-  Woodbury after each pick. A small ridge makes M invertible before the chosen poses span every
-  coefficient;
+  candidate informs every direction alike, W = I): D-optimal choices do not depend on a linear
+  change of the coefficients, only log det's constant does, and I's criterion becomes tr(M^-1);
+* greedy start: the pose with the largest gain, log det(I + D_i) for D (the matrix determinant
+  lemma for a block of 3 nt rows) or the fall tr((I + D_i)^-1 E_i) of tr(M^-1) for I (Woodbury),
+  D_i = H_i M^-1 H_i^T and E_i = H_i M^-2 H_i^T of every candidate updated by Woodbury after each
+  pick. A small ridge makes M invertible before the chosen poses span every coefficient;
 * exchanges (Fedorov, one chosen pose at a time): remove pose j (M_-j), find the candidate i with
-  the largest gain against M_-j, swap when that raises log det M by more than SWAP_TOL, each swap
-  checked again from the inverse, so the criterion never falls; passes over the chosen poses
-  until one gains less than PASS_TOL, or MAX_PASSES;
+  the largest gain against M_-j, swap when that improves the criterion by more than SWAP_TOL
+  (on a log scale: log det M, or -log tr(M^-1)), each swap checked again from the inverse, so the
+  criterion never worsens; passes over the chosen poses until one gains less than PASS_TOL, or
+  MAX_PASSES;
 * scale: candidates' H_e is computed in blocks of BLOCK poses; at most MAX_POOL candidates (and
   POOL_BYTES of their H_e, in single precision) are held at once. With more, the pool is the
   candidates of largest gain against the information N average candidates would give, and after
@@ -31,6 +34,7 @@ candidate poses:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -56,15 +60,18 @@ BASIS_SAMPLE = 20_000
 #: while the greedy start spans the coefficients (a new direction then gains log(1/RIDGE) = 7, far
 #: above what strengthening a spanned one gains), and negligible once N poses inform every one
 RIDGE = 1e-3
-#: a swap must raise log det M by more than this; smaller gains are rounding and could cycle
+#: a swap must raise the objective (log det M, or -log tr(M^-1)) by more than this; smaller gains
+#: are rounding and could cycle
 SWAP_TOL = 1e-6
-#: exchange passes stop when one raises log det M by less than this (det by 1%; for k coefficients
-#: the confidence ellipsoid's axes by 1/k % on average) or after MAX_PASSES
+#: exchange passes stop when one raises the objective by less than this (det, or 1 / tr(M^-1), by
+#: 1%; for k coefficients the confidence ellipsoid's axes by 1/k % on average) or after MAX_PASSES
 PASS_TOL = 1e-2
 MAX_PASSES = 10
 MAX_ROUNDS = 1
-#: multiply-adds an exchange trial may spend on the candidates (T r^2 (k + r) for T candidates)
+#: multiply-adds an exchange trial may spend on the candidates (T r^2 (k + r) for T candidates, twice
+#: that for a criterion that uses E_i = H_i M^-2 H_i^T as well)
 EXCHANGE_BUDGET = 2e7
+DEFAULT_CRITERION = "D"
 N_VALIDATION = 500
 NOISE_M = 5e-5
 GRAVITY = (0.0, 0.0, -9.81)
@@ -142,11 +149,23 @@ def constraint_mask(robot: Robot, cands: Candidates, targets: np.ndarray, min_z:
     return ok
 
 
-def _logdet_blocks(D: np.ndarray) -> np.ndarray:
+def _logdet_blocks(D: np.ndarray, E=None, t=None) -> np.ndarray:
     """log det(I + D_i) for a stack D (T, r, r) of symmetric blocks; -inf where I + D_i is not
-    positive definite (a removal that would leave M singular)."""
+    positive definite (a removal that would leave M singular). (E, t: see Criterion.)"""
     sign, value = np.linalg.slogdet(D + np.eye(D.shape[-1]))
     return np.where(sign > 0, value, -np.inf)
+
+
+def _log_trace_blocks(D: np.ndarray, E: np.ndarray, t: float) -> np.ndarray:
+    """-log(1 - tr((I + D_i)^-1 E_i) / t) for stacks D, E (T, r, r): how much adding block i lowers
+    log tr(M^-1), t = tr(M^-1) (Woodbury: the trace falls by tr((I + D_i)^-1 E_i)); -inf where
+    I + D_i is not positive definite."""
+    A = D + np.eye(D.shape[-1])
+    sign, _ = np.linalg.slogdet(A)
+    ok = sign > 0
+    drop = np.zeros(len(D))
+    drop[ok] = np.einsum("tii->t", np.linalg.solve(A[ok], E[ok]))
+    return np.where(ok, -np.log1p(-drop / t), -np.inf)
 
 
 def logdet(M: np.ndarray) -> float:
@@ -161,6 +180,36 @@ def inverse(M: np.ndarray) -> np.ndarray:
     """Inverse of a symmetric positive definite matrix, symmetric to the last bit."""
     L_inv = np.linalg.inv(np.linalg.cholesky(M))
     return L_inv.T @ L_inv
+
+
+def trace_inverse(M: np.ndarray) -> float:
+    """tr(M^-1) of a symmetric matrix; inf when it is not positive definite."""
+    try:
+        return float(np.trace(inverse(M)))
+    except np.linalg.LinAlgError:
+        return np.inf
+
+
+@dataclass(frozen=True)
+class Criterion:
+    """What the search maximises, on a log scale so that one set of tolerances serves every criterion:
+    `objective(M)` of the whitened information M (k, k); `gain(D, E, t)` (T,) what adding each block
+    H_i raises it by, from D_i = H_i M^-1 H_i^T, E_i = H_i M^-2 H_i^T (None unless `uses_E`) and
+    t = tr(M^-1); removing a chosen block H_j raises it by gain(-D_j, -E_j, t)."""
+
+    name: str
+    objective: Callable[[np.ndarray], float]
+    gain: Callable[..., np.ndarray]
+    uses_E: bool
+
+
+#: D-optimality: log det M, the (log) volume of the coefficients' confidence ellipsoid, flipped
+D_OPTIMAL = Criterion("D", logdet, _logdet_blocks, False)
+#: I-optimality: -log tr(M^-1). In whitened coordinates tr(M^-1) = tr(M_raw^-1 W), W the candidates'
+#: mean information per pose: the mean over the candidates of the predicted variance of the measured
+#: coordinates per unit noise variance, which the validation RMS over such poses measures
+I_OPTIMAL = Criterion("I", lambda M: -np.log(trace_inverse(M)), _log_trace_blocks, True)
+CRITERIA = {c.name: c for c in (D_OPTIMAL, I_OPTIMAL)}
 
 
 def observability(M: np.ndarray, m: int) -> dict:
@@ -183,11 +232,11 @@ class _Search:
 
     REFACTOR = 32
 
-    def __init__(self, H: np.ndarray, M0: np.ndarray, rng: np.random.Generator):
+    def __init__(self, H: np.ndarray, M0: np.ndarray, rng: np.random.Generator, criterion: Criterion = D_OPTIMAL):
         # single precision: the passes over the pool are memory-bound, and a gain's relative
         # rounding (1e-6) is far below the differences that decide; M accumulates the rounded
         # blocks in double, so every checked swap is exact for the problem held
-        self.H, self.rng = H.astype(np.float32), rng
+        self.H, self.rng, self.criterion = H.astype(np.float32), rng, criterion
         self.P, self.r, self.k = H.shape
         self.M = M0.copy()
         self.chosen: list[int] = []
@@ -221,31 +270,56 @@ class _Search:
         W = self.Minv @ Hi.T
         self.Minv -= sign * W @ np.linalg.solve(np.eye(self.r) + sign * (Hi @ W), W.T)
 
-    def _all_D(self) -> np.ndarray:
-        """H_i M^-1 H_i^T for the whole pool, (P, r, r), in chunks that bound the temporaries."""
-        D = np.empty((self.P, self.r, self.r))
+    def _gain(self, D, E, Minv) -> np.ndarray:
+        return self.criterion.gain(D, E, float(np.trace(Minv)))
+
+    def _blocks(self, H: np.ndarray, Minv: np.ndarray):
+        """(D, E) of the blocks H (T, r, k) against the inverse Minv: H_i Minv H_i^T and, when the
+        criterion uses it, H_i Minv^2 H_i^T (else None); in chunks that bound the temporaries."""
+        D = np.empty((len(H), self.r, self.r))
+        E = np.empty_like(D) if self.criterion.uses_E else None
         step = max(1, int(5e6 // (self.r * self.k)))
-        for s in range(0, self.P, step):
-            D[s:s + step] = _quadratic(self.H[s:s + step], self.Minv)
-        return D
+        for s in range(0, len(H), step):
+            D[s:s + step], e = _quadratic(H[s:s + step], Minv, Minv if E is not None else None)
+            if E is not None:
+                E[s:s + step] = e
+        return D, E
+
+    def _after(self, D, E, flat, Minv, Ha, sign):
+        """(D, E, C) of the blocks flat (T r, k) against M + sign H_a^T H_a from (D, E) against M
+        (inverse Minv), C_i = H_i M^-1 H_a^T. Woodbury: the new inverse is Minv - sign W G W^T with
+        W = Minv H_a^T, G = (I + sign H_a W)^-1, so D_i falls by sign C_i G C_i^T and E_i changes by
+        -sign (P_i + P_i^T) + (C_i G) W^T W (C_i G)^T, P_i = C_i G F_i^T, F_i = H_i Minv W."""
+        W = Minv @ Ha.T
+        G = np.linalg.inv(np.eye(self.r) + sign * (Ha @ W))
+        C = self._cross(flat, W)
+        D = D - sign * _sandwich(C, G)
+        if E is not None:
+            CG = np.matmul(C, G)
+            P = np.matmul(CG, self._cross(flat, Minv @ W).transpose(0, 2, 1))
+            E = E - sign * (P + P.transpose(0, 2, 1)) + _sandwich(CG, W.T @ W)
+        return D, E, C
 
     def greedy(self, n: int):
-        """Add n poses one by one, each of largest gain. Every candidate's H_i M^-1 H_i^T is
-        updated after each addition by Woodbury (r^2 k per candidate, not r k^2 afresh), and
-        recomputed whenever the inverse is refactored."""
+        """Add n poses one by one, each of largest gain. Every candidate's D_i (and E_i) is updated
+        after each addition by Woodbury (r^2 k per candidate, not r k^2 afresh), and recomputed
+        whenever the inverse is refactored or tr(M^-1) has fallen tenfold since: an update's
+        rounding is relative to the blocks before it, and while the chosen poses span the
+        coefficients the ridge's directions make those blocks 1/RIDGE times larger than after."""
         flat = self.H.reshape(-1, self.k)
-        D = self._all_D()
+        D, E = self._blocks(self.H, self.Minv)
+        fresh = np.trace(self.Minv)
         for _ in range(n):
-            g = _logdet_blocks(D)
+            g = self._gain(D, E, self.Minv)
             g[self.chosen] = -np.inf
             i = int(np.argmax(g))
             Hi = self.row(i)
-            C = self._cross(flat, self.Minv @ Hi.T)
-            D -= _sandwich(C, np.linalg.inv(np.eye(self.r) + D[i]))
+            D, E, _ = self._after(D, E, flat, self.Minv, Hi, 1.0)
             self.chosen.append(i)
             self._update(Hi, 1.0)
-            if self.updates == 0:  # just refactored: D afresh too, so rounding never accumulates
-                D = self._all_D()
+            if self.updates == 0 or np.trace(self.Minv) < fresh / 10:
+                D, E = self._blocks(self.H, self.Minv)
+                fresh = np.trace(self.Minv)
 
     def _trial_set(self, size: int) -> np.ndarray:
         """Candidates an exchange pass evaluates: every unchosen one when they fit the budget, else
@@ -253,76 +327,73 @@ class _Search:
         free = np.setdiff1d(np.arange(self.P), self.chosen)
         if len(free) <= size:
             return free
-        g = _logdet_blocks(self._all_D()[free])  # the gain of adding each
+        g = self._gain(*self._blocks(self.H[free], self.Minv), self.Minv)  # the gain of adding each
         top = free[np.argsort(-g)[:size // 2]]
         rest = np.setdiff1d(free, top)
         return np.concatenate([top, self.rng.choice(rest, size - len(top), replace=False)])
 
-    def _swap_gain(self, i: int, j: int) -> float:
-        """log det(M - H_j^T H_j + H_i^T H_i) - log det M from the current inverse alone."""
-        Hi, Hj = self.row(i), self.row(j)
-        W = self.Minv @ Hj.T
-        S = np.eye(self.r) - Hj @ W
-        C = Hi @ W
-        D = Hi @ self.Minv @ Hi.T + C @ np.linalg.solve(S, C.T)
-        return _logdet_blocks(-(np.eye(self.r) - S)[None])[0] + _logdet_blocks(D[None])[0]
-
     def exchange(self, max_passes: int = MAX_PASSES) -> tuple[int, int, list[float]]:
-        """Fedorov exchanges; returns (swaps, passes, log det M after the greedy start and each pass).
+        """Fedorov exchanges; returns (swaps, passes, the objective after the greedy start and each pass).
 
         For chosen pose j, with W = M^-1 H_j^T and S = I - H_j W, every trial candidate's
-        H_i M_-j^-1 H_i^T is D_i + C_i S^-1 C_i^T (C_i = H_i W, Woodbury), so the log det after
-        swapping j for i is log det M + log det S + log det(I + that): one pass over the trial set
-        per chosen pose. The best swap is checked once more from the inverse before it is made."""
-        size = max(1, int(EXCHANGE_BUDGET // (self.r ** 2 * (self.k + self.r))))
-        I = np.eye(self.r)
-        history, swaps, passes = [logdet(self.M)], 0, 0
+        H_i M_-j^-1 H_i^T is D_i + C_i S^-1 C_i^T (C_i = H_i W, Woodbury; E_i likewise), so the
+        objective after swapping j for i is the current one plus the gain of removing j plus that
+        of adding i against M_-j: one pass over the trial set per chosen pose. The best swap is
+        checked once more from the inverse before it is made."""
+        size = max(1, int(EXCHANGE_BUDGET // ((1 + self.criterion.uses_E) * self.r ** 2 * (self.k + self.r))))
+        history, swaps, passes = [self.criterion.objective(self.M)], 0, 0
         for passes in range(1, max_passes + 1):
             self._refactor()
             trial = self._trial_set(size)
             Ht = self.H[trial]  # contiguous: one read per chosen pose
             flat = Ht.reshape(-1, self.k)
-            D = _quadratic(Ht, self.Minv)
+            D, E = self._blocks(Ht, self.Minv)
             made = 0
             for slot in range(len(self.chosen)):
                 j = self.chosen[slot]
                 Hj = self.row(j)
-                W = self.Minv @ Hj.T  # (k, r)
-                S = I - Hj @ W  # positive definite while M - H_j^T H_j is
-                loss = _logdet_blocks(-(I - S)[None])[0]
+                Dj, Ej = self._blocks(Hj[None], self.Minv)
+                loss = self._gain(-Dj, None if Ej is None else -Ej, self.Minv)[0]
                 if not np.isfinite(loss):
                     continue  # the other poses leave a direction only j spans: j stays
-                Sinv = np.linalg.inv(S)
-                C = self._cross(flat, W)
-                D_minus = D + _sandwich(C, Sinv)
-                net = _logdet_blocks(D_minus) + loss
+                W = self.Minv @ Hj.T
+                minus = self.Minv + W @ np.linalg.solve(np.eye(self.r) - Hj @ W, W.T)  # (M - H_j^T H_j)^-1
+                D_minus, E_minus, _ = self._after(D, E, flat, self.Minv, Hj, -1.0)
+                net = self._gain(D_minus, E_minus, minus) + loss
                 b = int(np.argmax(net))
-                if net[b] <= SWAP_TOL or self._swap_gain(int(trial[b]), j) <= SWAP_TOL:
-                    continue
                 i = int(trial[b])
-                # D against M_-j + H_i^T H_i: Woodbury again, with W2 = M_-j^-1 H_i^T
                 Hi = self.row(i)
-                W2 = self.Minv @ Hi.T + W @ Sinv @ C[b].T
-                C2 = self._cross(flat, W2)
-                D = D_minus - _sandwich(C2, np.linalg.inv(I + D_minus[b]))
+                # checked in double from the inverse alone: the pool's blocks are single precision
+                if net[b] <= SWAP_TOL or loss + self._gain(*self._blocks(Hi[None], minus), minus)[0] <= SWAP_TOL:
+                    continue
+                D, E, _ = self._after(D_minus, E_minus, flat, minus, Hi, 1.0)
                 self.chosen[slot] = i
                 self._update(Hj, -1.0)
                 self._update(Hi, 1.0)
                 trial[b], Ht[b] = j, Hj  # j becomes a trial candidate in i's place
-                D[b] = Hj @ self.Minv @ Hj.T
+                Db, Eb = self._blocks(Hj[None], self.Minv)
+                D[b] = Db[0]
+                if E is not None:
+                    E[b] = Eb[0]
                 made += 1
             swaps += made
-            history.append(logdet(self.M))
+            history.append(self.criterion.objective(self.M))
             if history[-1] - history[-2] < PASS_TOL:
                 break
         return swaps, passes, history
 
 
-def _quadratic(H: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """H_i A H_i^T for a stack H (T, r, k), (T, r, r) in double (computed in H's precision)."""
-    HA = (H.reshape(-1, H.shape[-1]) @ A.astype(H.dtype)).reshape(H.shape)
+def _quadratic(H: np.ndarray, A: np.ndarray, B: np.ndarray | None = None):
+    """(D, E) for a stack H (T, r, k): D_i = H_i A H_i^T and, with B, E_i = (H_i B)(H_i B)^T (else
+    None), (T, r, r) in double (computed in H's precision); B = A reuses the product."""
+    shape = (-1, H.shape[-1])
+    HA = (H.reshape(shape) @ A.astype(H.dtype)).reshape(H.shape)
     # optimize: BLAS, 10x numpy's own loop
-    return np.einsum("tik,tjk->tij", HA, H, optimize=True).astype(float)
+    D = np.einsum("tik,tjk->tij", HA, H, optimize=True).astype(float)
+    if B is None:
+        return D, None
+    HB = HA if B is A else (H.reshape(shape) @ B.astype(H.dtype)).reshape(H.shape)
+    return D, np.einsum("tik,tjk->tij", HB, HB, optimize=True).astype(float)
 
 
 def _sandwich(C: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -334,8 +405,12 @@ def _sandwich(C: np.ndarray, A: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class PoseDesign:
     """A design: `chosen` (N,) candidate indices in the order chosen; `random` (N,) the seeded
-    random comparison. Values are log det of the scaled information (given poses included, no
-    ridge); `history` the criterion (with the ridge) after the greedy start and each exchange pass.
+    random comparison; `criterion` the one chosen by, "D" or "I". `values` maps "design" and
+    "random" to both criteria's values (given poses included, no ridge): "D" log det of the scaled
+    information (higher is better), "I" tr(M^-1) in whitened coordinates, the mean over the
+    candidates of the summed variance of the measured coordinates' prediction per unit noise
+    variance (lower is better); `value`, `random_value` those of `criterion`. `history` the
+    criterion's value (with the ridge) after the greedy start and each exchange pass.
     `columns` the coefficient indices of the criterion, `scale` (k,) their RMS over the
     candidates (the column scaling of the reported values); `observability` and
     `predicted_std_mm` map "design" and "random" to {O1, O2, O3} and to {rms_mm, max_mm} of the
@@ -343,8 +418,8 @@ class PoseDesign:
 
     chosen: np.ndarray
     random: np.ndarray
-    value: float
-    random_value: float
+    criterion: str
+    values: dict
     observability: dict
     predicted_std_mm: dict
     noise_mm: float
@@ -359,6 +434,14 @@ class PoseDesign:
     rounds: int
     history: list = field(default_factory=list)
 
+    @property
+    def value(self) -> float:
+        return self.values["design"][self.criterion]
+
+    @property
+    def random_value(self) -> float:
+        return self.values["random"][self.criterion]
+
     def to_dict(self) -> dict:
         names = self.redundancy.names
         unexcitable = [e.param for e in self.redundancy.eliminated if e.reason == "unexcited"]
@@ -366,8 +449,10 @@ class PoseDesign:
         obs = {**self.observability["design"], **{f"random_{k}": v for k, v in self.observability["random"].items()}}
         std = {**self.predicted_std_mm["design"],
                **{f"random_{k}": v for k, v in self.predicted_std_mm["random"].items()}}
-        return {"n_poses": len(self.chosen), "criterion": "D", "value": _finite(self.value),
-                "random_value": _finite(self.random_value), "observability": obs,
+        both = {f"{prefix}{key}": _finite(self.values[name][c]) for name, prefix in (("design", ""), ("random", "random_"))
+                for c, key in (("D", "log_det"), ("I", "mean_variance"))}
+        return {"n_poses": len(self.chosen), "criterion": self.criterion, "value": _finite(self.value),
+                "random_value": _finite(self.random_value), **both, "observability": obs,
                 "predicted_std": {"noise_mm": self.noise_mm, "n_validation_poses": self.n_validation, **std},
                 "n_candidates": self.n_candidates, "n_identifiable": len(self.columns),
                 "identifiable": [names[j] for j in self.columns], "unexcitable": unexcitable,
@@ -476,10 +561,15 @@ def predicted_std(M: np.ndarray, H: np.ndarray, noise_m: float, nt: int) -> np.n
 
 def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np.ndarray,
                  given: Measurements | None = None, seed: int = 0, noise_m: float = NOISE_M,
-                 n_validation: int = N_VALIDATION, max_passes: int = MAX_PASSES) -> PoseDesign:
-    """Choose n_poses of the candidates measuring `targets` (indices into robot.targets) that
-    maximise log det of the scaled information, added to that of `given` measurements if any.
-    The random comparison and the validation poses are drawn (seeded) from the same candidates."""
+                 n_validation: int = N_VALIDATION, max_passes: int = MAX_PASSES,
+                 criterion: str = DEFAULT_CRITERION) -> PoseDesign:
+    """Choose n_poses of the candidates measuring `targets` (indices into robot.targets), added to
+    `given` measurements if any, by `criterion`: "D" maximises log det of the information, "I"
+    minimises the mean over the candidates of the predicted variance of the measured positions
+    (tr(M^-1 W), W the candidates' mean information per pose). The random comparison and the
+    validation poses are drawn (seeded) from the same candidates."""
+    require(criterion in CRITERIA, f"--criterion {criterion}: expected one of {', '.join(CRITERIA)}")
+    crit = CRITERIA[criterion]
     K = len(cands)
     require(n_poses >= 1, f"--poses {n_poses}: give at least 1 pose to design")
     require(n_poses <= K, f"--poses {n_poses}: only {K} candidates to choose from; raise --candidates, "
@@ -508,18 +598,18 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
     if K <= pool_cap:
         pool = np.arange(K)
     else:  # rank by the gain against what N average candidates would give (I each, whitened)
-        pool = _top_gains(cm, cands, basis, M_start + n_poses * np.eye(k), pool_cap, [])
-    search = _Search(_whitened(cm, cands, pool, basis), M_start, rng)
+        pool = _top_gains(cm, cands, basis, M_start + n_poses * np.eye(k), pool_cap, [], crit)
+    search = _Search(_whitened(cm, cands, pool, basis), M_start, rng, crit)
     search.greedy(n_poses)
     swaps, passes, history = search.exchange(max_passes)
     chosen = pool[search.chosen]
     while K > pool_cap and rounds < MAX_ROUNDS:
         rounds += 1
-        new_pool = _top_gains(cm, cands, basis, search.M, pool_cap - n_poses, chosen)
+        new_pool = _top_gains(cm, cands, basis, search.M, pool_cap - n_poses, chosen, crit)
         if np.isin(new_pool, pool).all():
             break  # no candidate outside the pool ranks among the best: nothing new to try
         pool = np.concatenate([chosen, new_pool])
-        search = _Search(_whitened(cm, cands, pool, basis), M_start, rng)
+        search = _Search(_whitened(cm, cands, pool, basis), M_start, rng, crit)
         search.start(range(n_poses))
         more, p, h = search.exchange(max_passes)
         swaps, passes, history = swaps + more, passes + p, history + h[1:]
@@ -535,27 +625,32 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
         Hc = _whitened(cm, cands, idx, basis)
         M = M0 + np.einsum("pik,pil->kl", Hc, Hc)
         std = predicted_std(M, H_val, noise_m, len(targets))
-        out[name] = (basis.scaled_logdet(M), observability(basis.scaled_information(M), m),
+        out[name] = ({"D": basis.scaled_logdet(M), "I": trace_inverse(M)},
+                     observability(basis.scaled_information(M), m),
                      {"rms_mm": _finite(1e3 * np.sqrt(np.mean(std ** 2))), "max_mm": _finite(1e3 * std.max())})
     shift = basis.scaled_logdet(np.eye(k))  # whitened -> column-scaled log det
-    return PoseDesign(chosen=chosen, random=random_pick, value=out["design"][0], random_value=out["random"][0],
+    history = [v + shift for v in history] if crit is D_OPTIMAL else [float(np.exp(-v)) for v in history]
+    return PoseDesign(chosen=chosen, random=random_pick, criterion=criterion, values={n: o[0] for n, o in out.items()},
                       observability={n: o[1] for n, o in out.items()},
                       predicted_std_mm={n: o[2] for n, o in out.items()}, noise_mm=1e3 * noise_m,
                       n_validation=len(val), columns=basis.columns, scale=basis.scale, redundancy=red,
                       targets=np.asarray(targets), n_candidates=K, swaps=swaps, passes=passes, rounds=rounds,
-                      history=[v + shift for v in history])
+                      history=history)
 
 
 def _finite(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
-def _top_gains(cm, cands, basis: _Basis, M: np.ndarray, n: int, exclude) -> np.ndarray:
-    """The n candidates (not in `exclude`) of largest gain log det(I + H_i M^-1 H_i^T), whitened M,
-    streamed over all candidates."""
-    A = basis.T_inv @ inverse(M) @ basis.T_inv.T  # M^-1 in the raw columns: no whitening pass
+def _top_gains(cm, cands, basis: _Basis, M: np.ndarray, n: int, exclude, criterion: Criterion) -> np.ndarray:
+    """The n candidates (not in `exclude`) of largest gain against the whitened M, streamed over all
+    candidates."""
+    Minv = inverse(M)
+    # in the raw columns, no whitening pass: H_w M^-1 H_w^T = H A H^T, H_w M^-1 = H B
+    B = basis.T_inv @ Minv
+    A = B @ basis.T_inv.T
     gains = np.empty(len(cands))
     for s, H in measured_blocks(cm, cands, np.arange(len(cands)), basis.rows, basis.columns):
-        gains[s:s + len(H)] = _logdet_blocks(_quadratic(H, A))
+        gains[s:s + len(H)] = criterion.gain(*_quadratic(H, A, B if criterion.uses_E else None), float(np.trace(Minv)))
     gains[np.asarray(exclude, int)] = -np.inf
     return np.sort(np.argsort(-gains)[:n])
