@@ -45,6 +45,7 @@ from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structural_analysis
 from gecgen.runtime.redundancy import Redundancy, unexcited
+from gecgen.runtime.threads import one_blas_thread
 from gecgen.simulate.designs import random_design, with_payloads
 from gecgen.simulate.truth import sensor_wrench
 
@@ -559,6 +560,7 @@ def predicted_std(M: np.ndarray, H: np.ndarray, noise_m: float, nt: int) -> np.n
     return noise_m * np.sqrt(var)
 
 
+@one_blas_thread
 def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np.ndarray,
                  given: Measurements | None = None, seed: int = 0, noise_m: float = NOISE_M,
                  n_validation: int = N_VALIDATION, max_passes: int = MAX_PASSES,

@@ -5,7 +5,7 @@ wait for work. gecgen's matrices are small (a few hundred columns) and its calls
 alternating between the two libraries; with another busy process on the machine the pools spend
 their time waiting on each other. Measured on the 2-core machine with one other process busy:
 diagnose of the Panda's 5,000 poses took 407 s with the default pools and 50 s with one thread
-each (identical results). The heavy verbs (identify, diagnose, design) therefore run with one
+each (identical results). The heavy verbs (identify, diagnose, design_poses) therefore run with one
 BLAS thread per library; `threadpoolctl` restores the caller's setting when they return.
 """
 from __future__ import annotations
