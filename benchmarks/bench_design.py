@@ -47,7 +47,7 @@ def main():
         r = run(robot, errors, poses, candidates, extra, tmp / "design.csv")
         rows.append((label, poses, candidates, target, load, r))
         print(f"{label:40s} {poses:4d} of {candidates:7d}: {r['seconds']:7.1f} s  peak {r['peak_mb']:6.0f} MB  "
-              f"load {load:.1f}  value {r['value']:.2f} (random {r['random_value']:.2f})  swaps {r['swaps']} "
+              f"load {load:.1f}  value {r['log_det']:.2f} (random {r['random_log_det']:.2f})  swaps {r['swaps']} "
               f"passes {r['passes']} rounds {r['rounds']}", flush=True)
     cpu = cpu_model()
     lines = ["## Design: choosing the poses to measure", "",
@@ -63,7 +63,7 @@ def main():
     for label, poses, candidates, target, load, r in rows:
         std = r["predicted_std"]
         lines.append(f"| {label} | {poses} | {candidates:,} | {load:.1f} | {r['seconds']:.1f} | {target} | "
-                     f"{r['peak_mb']:.0f} | {r['n_identifiable']} | {r['value']:.1f} / {r['random_value']:.1f} | "
+                     f"{r['peak_mb']:.0f} | {r['n_identifiable']} | {r['log_det']:.1f} / {r['random_log_det']:.1f} | "
                      f"{std['rms_mm']:.4f} / {std['random_rms_mm']:.4f} | "
                      f"{r['swaps']}, {r['passes']}, {r['rounds']} |")
     lines += ["", "Targets: 50 of 10,000 for industrial6r with the constant model under 10 s; 200 of 100,000 for "

@@ -153,7 +153,10 @@ def main():
     lines += ["", "Targets: identify on 450 poses under 0.5 s end to end, the robust fit (cauchy, the default) at "
                   "most 2x the plain one (l2); 100,000 poses with bounded memory "
                   "(rows stream through the QR in blocks of 2,000 poses); diagnose on 450 poses under 60 s and "
-                  "on 5,000 poses under 5 minutes; on the 7-joint Panda under 30 s (450 poses) and 3 minutes (5,000)."]
+                  "on 5,000 poses under 5 minutes; on the 7-joint Panda under 30 s (450 poses) and 3 minutes (5,000).",
+              "", "identify and diagnose run with one BLAS thread per library (gecgen/runtime/threads.py): the "
+                  "same Panda 5,000-pose diagnose took 407 s with numpy's and scipy's default thread pools while "
+                  "one other process was busy on the machine."]
     write_section("runtime", "\n".join(lines))
 
 
