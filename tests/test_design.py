@@ -245,3 +245,19 @@ def test_designed_poses_calibrate_better_than_random():
             rms.append(np.sqrt(np.mean(position_errors(cm, val, val.xyz, fit.c) ** 2)))
         better += rms[0] < rms[1]
     assert better == 3
+
+
+def test_the_i_gain_of_a_pose_that_spans_every_direction_is_finite():
+    """A pose whose rows inform all 6 coefficients takes (in single precision) a hair over the
+    whole of tr(M^-1) at the start: its gain must rank first, not be NaN (which argmax would pick
+    blindly). 40 of 50 such random searches met it before the fix."""
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        H = rng.normal(size=(400, 12, 6)) * np.exp(rng.normal(size=(400, 1, 1)))
+        H /= np.sqrt(np.einsum("pik,pil->kl", H, H).trace() / 400 / 6)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # log of a negative number warns
+            search = D._Search(H, D.RIDGE * np.eye(6), rng, D.I_OPTIMAL)
+            search.greedy(10)
+            search.exchange()
+        assert len(set(search.chosen)) == 10

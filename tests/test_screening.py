@@ -67,3 +67,28 @@ def test_folded_cross_validation_equals_lstsq_per_fold(system):
         assert fs.cv_rms(None if X is H else extra) == pytest.approx(expected, rel=1e-9)
     # the true effect (0.004 m RMS beside 0.01 m of noise) predicts held-out poses better
     assert fs.cv_rms(extra) < 0.97 * fs.cv_rms()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_folded_holds_on_columns_one_fold_carries_and_on_singular_training_rows(seed):
+    """Two edges of the Gram route, against lstsq: a column that lives (to 1e-10) on one fold only,
+    whose training Gram a whole-less-fold subtraction would leave as rounding; and a candidate that
+    is a combination of H's columns on the training rows (singular there), where lstsq gives the
+    minimum-norm fit and a Cholesky that passes on rounding would not."""
+    rng = np.random.default_rng(seed)
+    P, k = 50, 5
+    rows_pose, fold = np.repeat(np.arange(P), 3), folds(P, rng)
+    f = fold[0]
+    test = fold[rows_pose] == f
+    H = rng.normal(size=(3 * P, k))
+    H[:, -1] = np.where(test, rng.normal(size=3 * P), 1e-10 * rng.normal(size=3 * P))
+    r = 1e-3 * rng.normal(size=3 * P)
+    r -= H @ np.linalg.lstsq(H, r, rcond=None)[0]
+    X = (H[:, :3] @ rng.normal(size=3))[:, None]
+    X[test] = rng.normal(size=(test.sum(), 1))
+    fs = Folded(H, r, rows_pose, fold)
+    for extra in (None, X):
+        A = H if extra is None else np.column_stack([H, extra])
+        scale = np.linalg.norm(A[~test], axis=0)
+        dc = np.linalg.lstsq(A[~test] / scale, r[~test], rcond=None)[0] / scale
+        assert fs.held_out_sq(f, extra) == pytest.approx(np.sum((r[test] - A[test] @ dc) ** 2), rel=1e-6)

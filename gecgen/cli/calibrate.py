@@ -76,6 +76,6 @@ def run(args) -> dict:
         result["val_registered"] = args.register
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
-    files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data), out))
+    files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), out))
     result["files"] = {k: str(v) for k, v in files.items()}
     return result

@@ -26,6 +26,8 @@ FOLDS = 5
 MIN_INDEPENDENCE = 1e-6
 #: candidates tried, most significant first, before a tier is declared empty
 TRIES = 8
+#: eigenvalues of a unit-diagonal Gram matrix below this (its rounding level) count as zero
+SINGULAR_GRAM = 1e-13
 
 
 @dataclass(frozen=True)
@@ -73,7 +75,8 @@ def basis(B: np.ndarray, R_blocks: list[np.ndarray]) -> Basis:
     R = np.linalg.qr(np.vstack(R_blocks), mode="r")
     d = np.abs(np.diag(R))
     if len(d) < B.shape[1] or d.min() <= 1e-10 * d.max():
-        return Basis(np.linalg.qr(B)[0], np.eye(B.shape[1]))
+        Q = np.linalg.qr(B)[0]  # (3R, min(3R, k))
+        return Basis(Q, np.eye(Q.shape[1]))
     return Basis(B, R)
 
 
@@ -172,11 +175,15 @@ def _solve_gram(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     s = np.sqrt(np.maximum(np.diag(G), 1e-300))
     Gs, bs = G / np.outer(s, s), b / s
     try:
-        return linalg.cho_solve(linalg.cho_factor(Gs), bs) / s
+        factor = linalg.cho_factor(Gs)
+        if np.diag(factor[0]).min() ** 2 > SINGULAR_GRAM:
+            return linalg.cho_solve(factor, bs) / s
     except linalg.LinAlgError:
-        lam, V = np.linalg.eigh(Gs)
-        keep = lam > 1e-13 * lam.max()
-        return V[:, keep] @ ((V[:, keep].T @ bs) / lam[keep]) / s
+        pass
+    # Cholesky also "succeeds" on a Gram matrix singular to rounding: one cut-off for both cases
+    lam, V = np.linalg.eigh(Gs)
+    keep = lam > SINGULAR_GRAM * lam.max()
+    return V[:, keep] @ ((V[:, keep].T @ bs) / lam[keep]) / s
 
 
 class Folded:
@@ -222,7 +229,10 @@ class Folded:
     @staticmethod
     def _held_out(parts, f: int) -> float:
         Gf, bf, rrf = parts[f]
-        dc = _solve_gram(sum(p[0] for p in parts) - Gf, sum(p[1] for p in parts) - bf)
+        # the sum of the other folds, not the whole less fold f: a column that lives almost only on
+        # fold f would keep nothing but rounding from that subtraction
+        train = [p for g, p in enumerate(parts) if g != f]
+        dc = _solve_gram(sum(p[0] for p in train), sum(p[1] for p in train))
         return max(rrf - 2 * dc @ bf + dc @ Gf @ dc, 0.0)
 
     def held_out_sq(self, f: int, X: np.ndarray | None = None) -> float:

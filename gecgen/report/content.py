@@ -343,20 +343,25 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                    extrapolation_section(robot, calib, None, None), Section("Rounds", [rounds])])
 
 
-def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements | None) -> Report:
+def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements | None,
+              register_val: bool = False) -> Report:
+    """register_val: val was measured from another tracker stationing; each stage is scored in the
+    frame fitted on it (its coefficients held), as calibrate's JSON scores it."""
     robot = calib.robot
     fit, cm = choice.fit, choice.cm
     diag = choice.diagnosis
     if diag is not None:
-        sets = _diagnosed_sets(diag, data, val, False, "auto")
+        sets = _diagnosed_sets(diag, data, val, register_val, "auto")
     else:
         sets = [DataSet("training", data, [
             residuals("uncalibrated", cm, data, _nominal_world(cm, data, fit.loss, "auto"), None),
             residuals("calibrated", cm, data, fit.to_world(data), fit.c)])]
         if val is not None:
-            yv = to_world(calib.frames, val)
-            sets.append(DataSet("validation", val, [residuals("uncalibrated", cm, val, yv, None),
-                                                    residuals("calibrated", cm, val, yv, fit.c)]))
+            stages = []
+            for label, c in (("uncalibrated", None), ("calibrated", fit.c)):
+                frames = fit_frames(cm, val, c) if register_val else calib.frames
+                stages.append(residuals(label, cm, val, to_world(frames, val), c))
+            sets.append(DataSet("validation", val, stages))
     rows = []
     for c in result["candidates"]:
         cv = f"{c['cv_rms_mm']:.4f}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"

@@ -166,7 +166,10 @@ def _log_trace_blocks(D: np.ndarray, E: np.ndarray, t: float) -> np.ndarray:
     ok = sign > 0
     drop = np.zeros(len(D))
     drop[ok] = np.einsum("tii->t", np.linalg.solve(A[ok], E[ok]))
-    return np.where(ok, -np.log1p(-drop / t), -np.inf)
+    # single-precision blocks can put a pose that spans nearly every direction a hair above the
+    # whole trace; its gain is then the largest, not NaN
+    left = np.maximum(1.0 - drop / t, 1e-300)
+    return np.where(ok, -np.log(left), -np.inf)
 
 
 def logdet(M: np.ndarray) -> float:
