@@ -1,8 +1,12 @@
 """The simulator: each error source does what it says, the paper design is the paper's, and the
 sensor reads the payload's weight."""
+import json
+
 import numpy as np
 import pytest
 from conftest import ROBOTS
+
+from gecgen.cli import main
 
 from gecgen.model import ModelError, load_robot
 from gecgen.model.kinematics import target_positions
@@ -106,3 +110,24 @@ def test_bad_truth_files_are_refused(pps, spec, expect):
     with pytest.raises(ModelError) as err:
         load_truth(spec, pps, "t.yaml")
     assert expect in str(err.value) and "t.yaml" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_random_design_writes_validation_poses_of_the_same_truth(tmp_path, capsys):
+    """--val-out with the random design: new poses (--val-poses), measured on the same truth (the
+    calibration fitted on the training file predicts them as well as its training poses)."""
+    robot, truth = ROBOTS / "industrial6r.yaml", ROBOTS / "industrial6r.truth.yaml"
+    args = ["simulate", str(robot), "--truth", str(truth), "--poses", "80", "-o", str(tmp_path / "t.csv"),
+            "--val-out", str(tmp_path / "v.csv"), "--val-poses", "30", "--json"]
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["files"]["val"] == str(tmp_path / "v.csv")
+    val = read_measurements(tmp_path / "v.csv", load_robot(robot))
+    train = read_measurements(tmp_path / "t.csv", load_robot(robot))
+    assert val.n_poses == 30 and not (set(map(tuple, val.q.round(9))) & set(map(tuple, train.q.round(9))))
+    assert main(["identify", str(robot), str(tmp_path / "t.csv"), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out)["train"]["rms_mm"]
+    assert main(["evaluate", str(tmp_path / "c.json"), str(tmp_path / "v.csv"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["after"]["rms_mm"] < 3 * fit
+    # a validation file the design cannot give is refused, not skipped
+    assert main(["simulate", str(robot), "--design", "one-at-a-time", "-o", str(tmp_path / "o.csv"),
+                 "--val-out", str(tmp_path / "ov.csv")]) == 2
+    assert "--val-out with --design one-at-a-time" in capsys.readouterr().err

@@ -31,7 +31,9 @@ def add_parser(command):
     p.add_argument("--seed", type=int, default=0, help="seed of the poses, the truth's draws and the noise "
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
-    p.add_argument("--val-out", help="with --design paper: the validation half of set a")
+    p.add_argument("--val-out", help="validation CSV: with --design paper the validation half of set a; with "
+                                      "--design random --val-poses new random poses of the same truth")
+    p.add_argument("--val-poses", type=int, help="poses of --val-out with --design random (default: --poses)")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
     p.add_argument("--orientation", action="store_true",
                    help="also write each row's measured orientation (quat_w..quat_z, README \"Pose measurements\"), "
@@ -45,6 +47,8 @@ def run(args) -> dict:
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
     payloads = [float(x) for x in str(args.payload_kg).split(",")]
+    require(args.val_poses is None or (args.design == "random" and args.val_out),
+            "--val-poses sets the poses of --val-out with --design random; give both, or neither")
     if args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
         design = paper_pps(robot, payloads_kg=payloads if args.payload_kg != "0" else (0.0, 70.0))
@@ -61,7 +65,15 @@ def run(args) -> dict:
             write_measurements(args.val_out, robot, data.subset(val))
             files["val"] = args.val_out
     else:
+        require(args.design == "random" or not args.val_out,
+                f"--val-out with --design {args.design}: validation poses come with --design random or paper")
         write_measurements(args.output, robot, data)
+        if args.val_out:
+            n_val = args.poses if args.val_poses is None else args.val_poses
+            require(n_val >= 1, f"--val-poses {n_val}: give 1 or more")
+            val = simulate(robot, truth, random_design(robot, n_val, rng, payloads), rng, args.orientation)
+            write_measurements(args.val_out, robot, val)
+            files["val"] = args.val_out
     if args.truth_out:
         write_atomically(args.truth_out, yaml.safe_dump(truth.spec, sort_keys=False))
         files["truth"] = args.truth_out
