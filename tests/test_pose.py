@@ -224,8 +224,12 @@ def test_the_command_line_reads_writes_and_reports_orientations(ur10_sim, tmp_pa
     calib = tmp_path / "c.json"
     capsys.readouterr()
     assert main(["identify", str(UR10 / "ur10.yaml"), str(csv), "-o", str(calib), "--orientation-length", "0.1",
-                 "--json"]) == 0
+                 "--report", str(tmp_path / "report"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
+    # the report shows the orientation errors' distribution beside the points'
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "(errors_training.png)" in report and "![Orientation errors on the training data, each model]" in report
+    assert (tmp_path / "report" / "rotation_errors_training.png").read_bytes()[:4] == b"\x89PNG"
     assert out["n_points"] == 30 and out["n_orientations"] == 30 and out["n_identifiable"] == 30
     assert set(out["train"]) == {"rms_mm", "max_mm", "rot_rms_mrad", "rot_max_mrad"}
     assert out["orientation_length_m"] == 0.1

@@ -143,7 +143,8 @@ def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> li
 
     dist = Section("Distribution of point errors",
                    ["Histogram and cumulative distribution of the point errors of each model (log scale: the "
-                    "uncalibrated errors are often a hundred times the calibrated ones)."])
+                    "uncalibrated errors are often a hundred times the calibrated ones), and of the orientation "
+                    "errors where the data measures frames."])
     joints = Section("Residuals against each joint",
                      ["Signed residual (measured minus modelled) along the world x, y, z axes"
                       + (" and orientation error about them" if any(s.rotation_mrad is not None for ds in sets
@@ -154,6 +155,8 @@ def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> li
                         "models: compare shapes, and read the size on the axes."])
     for ds in sets:
         dist.blocks.append(plots.error_distribution(robot, ds))
+        if any(s.rotation_mrad is not None for s in ds.stages):
+            dist.blocks.append(plots.error_distribution(robot, ds, orientation=True))
         for st in ds.stages[-compare:]:
             joints.blocks.append(plots.residuals_per_joint(robot, ds, st))
     return [dist, joints]

@@ -33,9 +33,16 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "_", text).strip("_")
 
 
-def error_distribution(robot: Robot, ds: DataSet) -> Figure:
-    """Histogram and cumulative distribution of the point errors (mm, log scale) of every stage."""
-    errors = [np.linalg.norm(s.position_mm, axis=1) for s in ds.stages]
+def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> Figure:
+    """Histogram and cumulative distribution of the point errors (mm, log scale) of every stage, or
+    (`orientation`) of the orientation errors (mrad) of the rows that measure a frame."""
+    if orientation:
+        errors = [np.linalg.norm(s.rotation_mrad, axis=1) for s in ds.stages]
+        errors = [e[np.isfinite(e)] for e in errors]
+        what, unit, name = "orientation error", "mrad", f"rotation_errors_{ds.name}"
+    else:
+        errors = [np.linalg.norm(s.position_mm, axis=1) for s in ds.stages]
+        what, unit, name = "point error", "mm", f"errors_{ds.name}"
     positive = np.concatenate(errors)
     positive = positive[positive > 0]
     lo, hi = (positive.min(), positive.max()) if len(positive) else (1e-3, 1.0)
@@ -49,15 +56,15 @@ def error_distribution(robot: Robot, ds: DataSet) -> Figure:
         a.set_xscale("log")
         a.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        a.set_xlabel("point error (mm)")
+        a.set_xlabel(f"{what} ({unit})")
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize=8)
-    ax.set_ylabel("measured rows")
-    cx.set_ylabel("share of rows at or below")
-    ax.set_title(f"{robot.name}, {ds.name} data: histogram of point errors")
+    ax.set_ylabel("measured frames" if orientation else "measured rows")
+    cx.set_ylabel("share of them at or below" if orientation else "share of rows at or below")
+    ax.set_title(f"{robot.name}, {ds.name} data: histogram of {what}s")
     cx.set_title(f"{robot.name}, {ds.name} data: cumulative distribution")
     fig.tight_layout()
-    return _figure(fig, f"errors_{ds.name}", f"Point errors on the {ds.name} data, each model")
+    return _figure(fig, name, f"{what.capitalize()}s on the {ds.name} data, each model")
 
 
 def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
