@@ -418,7 +418,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                                          f"they are hard to tell from the robot's errors; measure more poses, "
                                          f"spread wider, from each station"))
     for note in [*fit.failures, *fit.warnings]:
-        warnings.warn(note, stacklevel=2)
+        warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
     return fit
 
 
