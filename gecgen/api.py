@@ -557,7 +557,9 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     cal = Calibrator(choice.model, orientation_length=orientation_length)
     cal._set(calib, choice.fit)
     cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(fitted, data)
-    scored = None if raw_val is None else cal.score(raw_val, register=register_val)
     effects = choice.diagnosis.effects if choice.diagnosis else []
-    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_,
-                     scored and scored.before, scored and scored.after, data, scored and scored.data)
+    if raw_val is None:
+        return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
+    scored = cal.score(raw_val, register=register_val)
+    return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
+                     data, scored.data)

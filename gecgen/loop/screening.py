@@ -117,12 +117,12 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
 
     J (3R, ne) is J_e at the current fit for the measured rows; rows_pose (3R,) the pose of each
     row, a pose's rows adjacent; resid (3R,) is orthogonal to the current model's columns, whose
-    orthonormal basis is Q (3R, k) of `base`; sigma2 the
-    residual variance per coordinate (m^2).
+    orthonormal basis Q (3R, k) `base` holds; sigma2 the residual variance per coordinate (m^2).
 
     A candidate's column is J_e[row] f(pose of row), so every product with it sums first over the
-    rows of a pose: Q^T X = A^T F with A (poses, k) the per-pose sums of Q J_e, and X^T X = F^T
-    diag(sum of J_e^2) F. The products then run over poses, not over the 3 nt rows of each."""
+    rows of a pose: B^T X = A^T F with A (poses, k) the per-pose sums of B J_e (then Q^T X =
+    R^-T B^T X), and X^T X = F^T diag(sum of J_e^2) F. The products run over poses, not over the
+    3 nt rows of each."""
     S, poses, group = _pose_sums(rows_pose)
     F = np.asfortranarray(np.concatenate([c.values for c in cands], axis=1)[poses])  # (G, total columns)
     bounds = np.cumsum([0] + [c.values.shape[1] for c in cands])

@@ -1,8 +1,8 @@
 """Pose measurements as points: a measured frame is four virtual targets.
 
 A row that measures a target's position p and the orientation R of its frame (parallel to the
-tool frame, or turned by `Robot.target_frames`; `Measurements.orientation`) says as much as four measured points rigidly attached to
-that frame: the vertices p + r R v_k of a regular tetrahedron around the target. So a robot with
+tool frame, or turned by `Robot.target_frames`; `Measurements.orientation`) says as much as four
+measured points rigidly attached to that frame: the vertices p + r R v_k of a regular tetrahedron around the target. So a robot with
 pose data gets four virtual targets per target, t + r v_k in the tool frame (`with_pose_targets`,
 a derived robot whose code is generated and compiled by content like any other), each oriented
 row becomes its four vertices (`as_points`), and everything downstream - J_e, registration,

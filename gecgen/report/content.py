@@ -297,6 +297,12 @@ def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray,
                    glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
 
 
+def _scored(stage: str, cm, data: Measurements, c, frames, register: bool) -> Residuals:
+    """Residuals of one stage on validation data, in the fit's tracker `frames`, or (`register`)
+    in frames fitted on the data with the stage's coefficients c held."""
+    return residuals(stage, cm, data, to_world(fit_frames(cm, data, c) if register else frames, data), c)
+
+
 def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
                     registration_mode: str) -> list[DataSet]:
     """Uncalibrated, declared model and diagnosed model on the training and validation data, each
@@ -307,12 +313,10 @@ def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register
         residuals("calibrated (declared model)", init.cm, data, init.fit.to_world(data), init.fit.c),
         residuals("diagnosed", final.cm, data, final.fit.to_world(data), final.fit.c)])]
     if val is not None:
-        stages = []
-        for label, rnd, c in (("uncalibrated", init, None), ("calibrated (declared model)", init, init.fit.c),
-                              ("diagnosed", final, final.fit.c)):
-            frames = fit_frames(rnd.cm, val, c) if register_val else rnd.fit.registrations
-            stages.append(residuals(label, rnd.cm, val, to_world(frames, val), c))
-        sets.append(DataSet("validation", val, stages))
+        sets.append(DataSet("validation", val, [
+            _scored(label, rnd.cm, val, c, rnd.fit.registrations, register_val)
+            for label, rnd, c in (("uncalibrated", init, None), ("calibrated (declared model)", init, init.fit.c),
+                                  ("diagnosed", final, final.fit.c))]))
     return sets
 
 
@@ -360,11 +364,8 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
             residuals("uncalibrated", cm, data, _nominal_world(cm, data, fit.loss, "auto"), None),
             residuals("calibrated", cm, data, fit.to_world(data), fit.c)])]
         if val is not None:
-            stages = []
-            for label, c in (("uncalibrated", None), ("calibrated", fit.c)):
-                frames = fit_frames(cm, val, c) if register_val else calib.frames
-                stages.append(residuals(label, cm, val, to_world(frames, val), c))
-            sets.append(DataSet("validation", val, stages))
+            sets.append(DataSet("validation", val, [_scored(label, cm, val, c, calib.frames, register_val)
+                                                    for label, c in (("uncalibrated", None), ("calibrated", fit.c))]))
     rows = []
     for c in result["candidates"]:
         cv = f"{c['cv_rms_mm']:.4f}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"

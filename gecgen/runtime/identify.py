@@ -528,17 +528,17 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         notes.append(f"{len(flagged)} of {len(e)} {what} are outliers: more than glitches usually make; the model "
                      f"may lack an effect (run diagnose) or the data mixes set-ups")
     inliers = e <= limit
-    left = float(np.sqrt(np.mean(pos[inliers] ** 2))) if inliers.any() else float("inf")
-    if not left <= ABSURD_TRANSLATION_M:
-        failures.append(f"the fit leaves {left:.3g} m rms at the measured points (limit {ABSURD_TRANSLATION_M:g} m): "
-                        f"the robot file does not describe the measured robot, or its targets, or the data is "
-                        f"not this robot's")
+    train_inliers = summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot)
+    if not train_inliers["rms_mm"] <= 1e3 * ABSURD_TRANSLATION_M:
+        failures.append(f"the fit leaves {train_inliers['rms_mm'] / 1e3:.3g} m rms at the measured points (limit "
+                        f"{ABSURD_TRANSLATION_M:g} m): the robot file does not describe the measured robot, or its "
+                        f"targets, or the data is not this robot's")
     return Fit(c=c, std=std, cov=cov, redundancy=red, registration=frames[min(frames)], registrations=frames,
                sigma_m=sigma,
                condition_number=cond, observability_index=obs, iterations=it, converged=converged,
                before=before, train=summary(pos, rot), warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
-               train_inliers=summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot),
+               train_inliers=train_inliers,
                ranges=_ranges(cm, data), measured_dof=m_eff)
 
 

@@ -140,14 +140,14 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     placed = {n: tuple(float(v) for v in xyz) for n, xyz in zip(names, m)}
     moved = {n: None if n in robot.estimated else float(1e3 * np.linalg.norm(np.subtract(placed[n], robot.targets[n])))
              for n in names}
-    frames = [Rotation.from_rotvec(sol.x[6 * s:6 * s + 3]).as_matrix() for s in range(len(stations))]
-    turns = _measured_frames(T, data, index, sidx, frames, names)
+    rotations = [Rotation.from_rotvec(sol.x[6 * s:6 * s + 3]).as_matrix() for s in range(len(stations))]
+    turns = _measured_frames(T, data, index, sidx, rotations, names)
     turned = {n: float(1e3 * (Rotation.from_rotvec(x) * Rotation.from_rotvec(robot.target_frames.get(n, (0.0,) * 3)).inv())
                        .magnitude()) for n, x in turns.items()}
     return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved, turns, turned)
 
 
-def _measured_frames(T, data: Measurements, index, sidx, frames, names) -> dict[str, tuple[float, float, float]]:
+def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> dict[str, tuple[float, float, float]]:
     """Pose data: the rotation X_k of each target's measured frame in the tool frame, from every
     measured orientation R = R_s R_i X_k (R_s the station's tracker rotation, R_i the nominal tool
     rotation): X_k is the rotation nearest to sum R_i^T R_s^T R (SVD), as a rotation vector (rad)."""
@@ -155,7 +155,7 @@ def _measured_frames(T, data: Measurements, index, sidx, frames, names) -> dict[
         return {}
     out = {}
     oriented = ~np.isnan(data.orientation[:, 0, 0])
-    Rs = np.stack(frames)[sidx]
+    Rs = np.stack(rotations)[sidx]
     for k, name in enumerate(names):
         rows = oriented & (index == k)
         if rows.any():
