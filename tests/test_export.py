@@ -18,7 +18,7 @@ from gecgen.model.kinematics import error_transform, frames, target_positions
 from gecgen.model.urdf import folded_copy
 from gecgen.runtime import calibration
 from gecgen.runtime.compiled import compiler
-from gecgen.runtime.export import MDEG_PER_RAD, constant_errors, zero_offset_error
+from gecgen.runtime.export import MDEG_PER_RAD, constant_errors
 
 pin = pytest.importorskip("pinocchio")
 
@@ -205,14 +205,14 @@ def test_zero_offset_error_is_the_joint_reading_off(name, tmp_path, rng):
     robot = load_robot(ROBOTS / "industrial6r.yaml" if name == "industrial6r" else ur10_file(tmp_path))
     q = random_q(robot, rng, 5)
     for i in range(1, robot.n + 1):
-        index, sign = zero_offset_error(robot, i)
+        index, sign = robot.zero_offset_error(i)
         eps = np.zeros(robot.n_errors)
         eps[index] = 1e-3
         moved = q.copy()
         moved[:, i - 1] += sign * 1e-3
         np.testing.assert_allclose(target_positions(robot, q, eps), target_positions(robot, moved), atol=1e-15)
     if name == "industrial6r":  # DH: er of frame i-1
-        assert [zero_offset_error(robot, i)[0] for i in range(1, 7)] == [6 * (i - 1) + 4 for i in range(1, 7)]
+        assert [robot.zero_offset_error(i)[0] for i in range(1, 7)] == [6 * (i - 1) + 4 for i in range(1, 7)]
 
 
 @pytest.mark.parametrize("name", ["industrial6r", "ur10"])

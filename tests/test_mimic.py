@@ -89,7 +89,7 @@ def test_frames_and_joint_variables_are_counted_apart(telescope):
     assert r.joint_names == ("slew", "lift", "boom", "stick") and r.n == 4
     assert [j.name for j in r.chain] == list(CHAIN) and r.n_frames == 7 and r.n_errors == 48
     assert r.error_names()[-1] == "7.ep"
-    assert [(k, float(m), float(o)) for k, m, o in r.drives()] == list(CHAIN.values())
+    assert [(k, float(m), float(o)) for ((k, m),), o in r.drives()] == list(CHAIN.values())
     assert r.driven(1) == [(2, 1), (3, 1), (7, 2)] and r.frame_of(2) == 4
     # a mimic joint's limits narrow the joint it follows: lift2 <= 0.9 m, tilt = 0.2 - stick >= -0.1 rad
     assert [(j.lower, j.upper) for j in r.joints] == [(-3, 3), (0, 0.9), (-1.2, 1.2), (-2, pytest.approx(0.3))]
@@ -291,7 +291,7 @@ def test_a_mimic_of_a_mimic_composes(tmp_path, telescope, rng):
                     'offset="0.05"/>', replaced('<mimic joint="lift" multiplier="2" offset="-0.1"/>',
                                                 '<mimic joint="lift2" multiplier="2" offset="-0.1"/>'))
     robot = load_robot(variant(tmp_path, text))
-    assert [(k, float(m), float(o)) for k, m, o in robot.drives()][6] == (1, 2.0, 0.0)
+    assert [(k, float(m), float(o)) for ((k, m),), o in robot.drives()][6] == (1, 2.0, 0.0)
     assert (robot.joints[1].lower, robot.joints[1].upper) == (0.0, 0.85)
 
 
@@ -340,7 +340,7 @@ def test_tiago_mimic_joints_are_off_its_chain():
     from gecgen.model.urdf import load_mass_tree
 
     tiago = load_robot(ROBOTS / "tiago.yaml")
-    assert tiago.n == tiago.n_frames == 8 and not any(j.mimic for j in tiago.chain)
+    assert tiago.n == tiago.n_frames == 8 and not any(j.coupling for j in tiago.chain)
     tree = load_mass_tree(tiago.urdf, tiago.base_link)
     mimics = {j.name: j.mimic.root for j in tree.joint.values() if j.mimic}
     assert mimics == {"gripper_right_finger_joint": "gripper_finger_joint"}

@@ -38,7 +38,10 @@ def _gravity(text: str) -> tuple[float, float, float]:
 def run(args) -> dict:
     robot = load_robot(args.robot)
     joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
-    mimics = {m.name: m.mimic.name for m in robot.chain if m.mimic}
+    declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
+    require(not declared, f"{args.robot}: couplings: gecgen gravity walks the URDF's own joints, not the robot file's "
+                          f"couplings of {', '.join(declared)}; use the error terms gravity_torque(J), which follow them")
+    mimics = {m.name: m.coupling.terms[0][0] for m in robot.chain if m.coupling and not m.coupling.own}
     for j in joints:
         followed = mimics.get(j)
         require(j not in mimics, f"--joints: '{j}' mimics '{followed}', whose tau_{followed} includes its load times "

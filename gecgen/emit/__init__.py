@@ -21,7 +21,7 @@ from gecgen.emit.printing import straight_line
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
-from gecgen.model.robot import Mimic, Robot
+from gecgen.model.robot import Robot
 from gecgen.symbolic.functions import all_functions
 from gecgen.symbolic.program import Function
 
@@ -74,7 +74,7 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
     return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
-                mimics=any(j.mimic for j in robot.chain), frame_names=frame_names(robot),
+                mimics=any(j.coupling for j in robot.chain), frame_names=frame_names(robot),
                 nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
@@ -86,11 +86,8 @@ def context(robot: Robot, model: ErrorModel) -> dict:
 
 
 def frame_names(robot: Robot) -> list[str]:
-    """Each moving frame's joint, a mimic joint with the value it takes ("jaw2 = -1.0*q3 - 0.01")."""
-    def value(m: Mimic) -> str:
-        o = float(m.offset)
-        return f"{float(m.multiplier)!r}*q{m.joint + 1} {'-' if o < 0 else '+'} {abs(o)!r}"
-    return [j.name if j.mimic is None else f"{j.name} = {value(j.mimic)}" for j in robot.chain]
+    """Each moving frame's joint, a coupled joint with the value it takes ("jaw2 = -1.0*q3 - 0.01")."""
+    return [j.name if j.coupling is None else f"{j.name} = {j.coupling.text(robot)}" for j in robot.chain]
 
 
 def _printed(fn: Function, printer, element, signature: bool) -> dict:

@@ -199,11 +199,12 @@ class _TermParser:
         if isinstance(node, ast.Name):
             if node.id == "pi":
                 return sp.pi
-            mimic = next((j.mimic for j in self.loads.robot.chain if j.name == node.id and j.mimic), None)
-            if mimic is not None and node.id not in self.symbols:
-                k = mimic.joint + 1
+            robot = self.loads.robot
+            passive = next((j.coupling for j in robot.chain if j.name == node.id and not j.reads), None)
+            if passive is not None and node.id not in self.symbols:
+                readings = ", ".join(f"q{robot.joint_names.index(n) + 1}" for n, _ in passive.terms)
                 self.fail(text, f"'{node.id}' is a mimic joint, with no variable of its own; write its value "
-                                f"{float(mimic.multiplier)!r}*q{k} + {float(mimic.offset)!r} in q{k}")
+                                f"{passive.text(robot)} in {readings}")
             if node.id not in self.symbols:
                 self.fail(text, f"unknown variable '{node.id}'; known: {', '.join(self.symbols)} "
                                 f"(declare a data column under 'aux:')")
@@ -342,6 +343,10 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
         for err, items in block.items():
             require(err in ERROR_NAMES, f"{fw}: unknown error {excerpt(str(err))}; use one of {', '.join(ERROR_NAMES)}")
             terms[6 * key + ERROR_NAMES.index(err)] = parse_list(items, f"{fw}.{err}")
+    for error, ratios in robot.ratio_terms().items():
+        if any(t.text == "1" for t in terms[error]):  # its coupling's offset is modelled: so are its ratios
+            have = {t.text for t in terms[error]}
+            terms[error] = terms[error] + tuple(Term(r, symbols[r], r) for r in ratios if r not in have)
     used = set()
     for ts in terms:
         for t in ts:

@@ -63,10 +63,11 @@ def joint_motion(axis, kind: str, q: np.ndarray) -> np.ndarray:
 
 
 def joint_values(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """The value of every frame's joint (N, m) at joint variables q (N, n): a mimic joint's is
-    multiplier * q_J + offset."""
-    return np.column_stack([q[:, k] if joint.mimic is None else float(m) * q[:, k] + float(o)
-                            for joint, (k, m, o) in zip(robot.chain, robot.drives())])
+    """The value of every frame's joint (N, m) at the readings q (N, n): a coupled joint's is the
+    sum of multiplier * q_k plus its offset."""
+    return np.column_stack([q[:, terms[0][0]] if joint.coupling is None else
+                            sum(float(m) * q[:, k] for k, m in terms) + float(o)
+                            for joint, (terms, o) in zip(robot.chain, robot.drives())])
 
 
 def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:

@@ -6,12 +6,15 @@ A robot is a serial chain of frames 0..m. Frame 0 is the base; frame i sits afte
 
 `M_i` is the joint motion (rotation about, or translation along, the unit `axis`), `pre_i` and
 `post_i` are constant transforms and `E_i` the six generalized errors of frame i. The joint
-variables q1..qn are the chain's independent joints in chain order; the value v_i of frame i's
-joint is its own variable, or for a joint that mimics another (URDF `<mimic>`) the multiplier
-times the followed joint's variable plus the offset. Frames and variables are counted apart:
-`Robot.chain` holds the m moving joints (the frames 1..m of the error model), `Robot.joints` the
-n independent ones (the columns q1..qn of every file and of the generated code); without mimic
-joints they are the same. A DH row
+variables q1..qn are the controller's joint readings, one per joint that has one, in chain order;
+the value v_i of frame i's joint is its own reading, or for a coupled joint an affine map of
+readings: v_i = sum_k a_ik q_k + b_i (`Coupling`). A coupling comes from the robot file's
+`couplings` (a FANUC J3 that reads the forearm's angle to the horizontal: the chain's joint 3 is
+J2 + J3; a parallelogram; gears between wrist axes; a passive joint tied to others) or from a URDF
+`<mimic>` (one followed joint, no reading of its own). Frames and readings are counted apart:
+`Robot.chain` holds the m moving joints (the frames 1..m of the error model), `Robot.joints` the n
+that have a reading (the columns q1..qn of every file and of the generated code); without
+couplings they are the same. A DH row
 `Rz(theta+q) Tz(d+q) Tx(a) Rx(alpha)` becomes `pre = I`, `axis = z`,
 `post = Rz(theta) Tz(d) Tx(a) Rx(alpha)`; a URDF joint becomes `pre = origin`, `post = I`.
 
@@ -20,10 +23,12 @@ chain prunes exact zeros; `model.kinematics` evaluates them in floating point.
 """
 from __future__ import annotations
 
+import ast
 import hashlib
 import math
 import re
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import sympy as sp
@@ -44,14 +49,27 @@ RESERVED = {"pi", "sqrt", "sin", "cos", "sign", "abs", "poly", "fourier", "wrenc
 
 
 @dataclass(frozen=True)
-class Mimic:
-    """A joint that follows an independent one: its value is multiplier * q[joint] + offset, in its
-    own unit (m or rad) per the followed joint's unit, as the URDF's `<mimic>` says."""
+class Coupling:
+    """A joint whose value is an affine map of the controller's readings: the sum over `terms` of
+    multiplier * reading, plus `offset`, in its own unit (m or rad) per the reading's unit.
 
-    joint: int  # the followed joint variable, 0-based (q<joint+1>)
-    name: str  # the followed joint's name
-    multiplier: sp.Expr  # exact number, nonzero
+    `own`: the joint has a reading of its own (then one of the terms; the FANUC J3), else it is
+    passive (a URDF `<mimic>`, a humanoid torso joint that is -(q2 + q3)). `declared`: the robot
+    file's `couplings` states it, and its multipliers are calibration parameters (`ratio_terms`);
+    a URDF `<mimic>` read as it is keeps the model it has always had."""
+
+    terms: tuple[tuple[str, sp.Expr], ...]  # (reading joint's name, exact nonzero multiplier), chain order
     offset: sp.Expr  # exact number, m or rad
+    own: bool = False
+    declared: bool = False
+
+    def text(self, robot: "Robot") -> str:
+        """The value in the readings q<k> ("1.0*q2 + 1.0*q3 + 0.0"), as the generated header shows it."""
+        parts = [(float(m), f"*q{robot.joint_names.index(name) + 1}") for name, m in self.terms]
+        text = f"{parts[0][0]!r}{parts[0][1]}"
+        for value, tail in parts[1:] + [(float(self.offset), "")]:
+            text += f" {'-' if value < 0 else '+'} {abs(value)!r}{tail}"
+        return text
 
 
 @dataclass(frozen=True)
@@ -64,9 +82,14 @@ class Joint:
     axis: tuple  # unit vector (exact sympy numbers) in the frame after `pre`
     pre: tuple[Elementary, ...]
     post: tuple[Elementary, ...]
-    lower: float  # joint limits, m or rad
+    lower: float  # joint limits, m or rad (of its reading; a passive joint's are not checked)
     upper: float
-    mimic: Mimic | None = None
+    coupling: Coupling | None = None
+
+    @property
+    def reads(self) -> bool:
+        """The controller reports this joint (it has a variable q<k>)."""
+        return self.coupling is None or self.coupling.own
 
 
 @dataclass(frozen=True)
@@ -74,7 +97,7 @@ class Robot:
     """Nominal kinematics of one robot plus its measurement targets (tool-frame xyz, m)."""
 
     name: str
-    chain: tuple[Joint, ...]  # the moving joints, frames 1..m in order (mimic joints included)
+    chain: tuple[Joint, ...]  # the moving joints, frames 1..m in order (passive joints included)
     base: tuple[Elementary, ...]
     tool: tuple[Elementary, ...]
     targets: dict[str, tuple[float, float, float]]
@@ -100,8 +123,8 @@ class Robot:
 
     @property
     def joints(self) -> tuple[Joint, ...]:
-        """The independent joints: joint variable k is q<k+1>."""
-        return tuple(j for j in self.chain if j.mimic is None)
+        """The joints with a reading: joint variable k is q<k+1>."""
+        return tuple(j for j in self.chain if j.reads)
 
     @property
     def n(self) -> int:
@@ -110,33 +133,70 @@ class Robot:
 
     @property
     def n_frames(self) -> int:
-        """Number of moving frames m (the last frame's number); n plus the mimic joints."""
+        """Number of moving frames m (the last frame's number); n plus the passive joints."""
         return len(self.chain)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
 
-    def drives(self) -> list[tuple[int, sp.Expr, sp.Expr]]:
-        """Per frame 1..m: (variable k 0-based, multiplier, offset); its joint's value is
-        multiplier * q[k] + offset (1 and 0 for an independent joint)."""
-        out, k = [], 0
+    def drives(self) -> list[tuple[tuple[tuple[int, sp.Expr], ...], sp.Expr]]:
+        """Per frame 1..m: ((variable k 0-based, multiplier), ...), offset); its joint's value is the
+        sum of multiplier * q[k] plus the offset (((own k, 1),), 0 for a joint that is its reading)."""
+        index = {name: k for k, name in enumerate(self.joint_names)}
+        out = []
         for j in self.chain:
-            if j.mimic is None:
-                out.append((k, sp.Integer(1), sp.Integer(0)))
-                k += 1
+            if j.coupling is None:
+                out.append((((index[j.name], sp.Integer(1)),), sp.Integer(0)))
             else:
-                out.append((j.mimic.joint, j.mimic.multiplier, j.mimic.offset))
+                out.append((tuple((index[name], m) for name, m in j.coupling.terms), j.coupling.offset))
         return out
 
     def driven(self, k: int) -> list[tuple[int, sp.Expr]]:
-        """The frames (1-based, ascending) whose joint variable k (0-based) moves, with multipliers:
-        its own frame and those of its mimic joints."""
-        return [(i, m) for i, (v, m, _) in enumerate(self.drives(), start=1) if v == k]
+        """The frames (1-based, ascending) whose joint variable k (0-based) moves, with multipliers
+        (dv_i/dq_k): its own frame and those of the joints coupled to it."""
+        return [(i, m) for i, (terms, _) in enumerate(self.drives(), start=1) for v, m in terms if v == k]
 
     def frame_of(self, k: int) -> int:
-        """The frame (1-based) of independent joint k (0-based)."""
-        return [i for i, j in enumerate(self.chain, start=1) if j.mimic is None][k]
+        """The frame (1-based) of the joint whose reading is q<k+1> (k 0-based)."""
+        return [i for i, j in enumerate(self.chain, start=1) if j.reads][k]
+
+    def zero_offset_error(self, i: int) -> tuple[int, float] | None:
+        """(eps index, sign) of the generalized error that is the zero offset of frame i's joint (i
+        from 1), or None when its axis is not along an axis of the adjacent frame or constant
+        transforms sit on both sides of its motion.
+
+        The error adjacent to the motion that turns about (revolute) or moves along (prismatic) its
+        axis: for a URDF joint (no constant transform after the motion) that of frame i, right after
+        it; for a DH joint (none before it) that of frame i-1, right before it: `er` of frame i-1 for
+        a revolute joint i (`ez` for a prismatic one), or with a URDF axis along -x, -y or -z the
+        matching error with its sign turned. Alone, that error equals the joint value off by its
+        value: M_i(v) Rot(u, d) = M_i(v + d) and Rz(d) Rz(v) = Rz(v + d)."""
+        joint = self.chain[i - 1]
+        u = [float(a) for a in joint.axis]
+        frame = i if not joint.post else i - 1 if not joint.pre else None
+        k = max(range(3), key=lambda a: abs(u[a]))
+        if frame is None or abs(abs(u[k]) - 1) > 1e-12:
+            return None
+        name = ("ex", "ey", "ez")[k] if joint.kind == "P" else ("ep", "es", "er")[k]
+        return 6 * frame + ERROR_NAMES.index(name), math.copysign(1.0, u[k])
+
+    def ratio_terms(self) -> dict[int, list[str]]:
+        """The coupling ratios that are calibration parameters: eps index -> terms ["q<k>", ...].
+
+        A declared coupling's joint value moves with reading k by its multiplier; an error d in that
+        multiplier turns the joint by d q_k, which is term q_k on the joint's zero-offset error
+        (exactly: Rz(d q_k) Rz(v) = Rz(v + d q_k)), its coefficient d times the error's sign. Its own
+        reading's multiplier is the joint's scale, left out as for every uncoupled joint; a joint
+        with no single zero-offset error carries none (`load_robot` warns)."""
+        out: dict[int, list[str]] = {}
+        for i, (j, (terms, _)) in enumerate(zip(self.chain, self.drives()), start=1):
+            found = self.zero_offset_error(i) if j.coupling is not None and j.coupling.declared else None
+            own = self.joint_names.index(j.name) if j.reads else None
+            for k, _ in terms if found else ():
+                if k != own:
+                    out.setdefault(found[0], []).append(f"q{k + 1}")
+        return out
 
     @property
     def target_names(self) -> tuple[str, ...]:
@@ -250,6 +310,84 @@ def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], t
     return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
 
 
+def _affine(text, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.Expr]:
+    """A coupling's value `text` ("J2 + J3", "-(t2 + t3)", "0.5*j4 + j5 - 10") as multipliers by
+    joint name and an offset, exact; only numbers, joint names, + - * / and parentheses."""
+    require(isinstance(text, str) and text.strip(), f"{where}: expected the joint's value in the readings as a "
+                                                    f"text such as \"J2 + J3\", got {excerpt(text)}")
+    symbols = {n: sp.Symbol(f"_{n}") for n in names}
+
+    def walk(node):
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            require(_finite(node.value), f"{where}: {excerpt(text)} holds a number beyond floating point")
+            return sp.Rational(repr(node.value)) if isinstance(node.value, float) else sp.Integer(node.value)
+        if isinstance(node, ast.Name):
+            require(node.id in symbols, f"{where}: {excerpt(text)}: '{node.id}' is not a joint of this robot; "
+                                        f"use the joint names ({', '.join(names)})")
+            return symbols[node.id]
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            return -walk(node.operand) if isinstance(node.op, ast.USub) else walk(node.operand)
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+            a, b = walk(node.left), walk(node.right)
+            if isinstance(node.op, ast.Div):
+                require(b.is_number and b != 0, f"{where}: {excerpt(text)}: divide only by a nonzero number")
+                return a / b
+            return a + b if isinstance(node.op, ast.Add) else a - b if isinstance(node.op, ast.Sub) else a * b
+        raise ModelError(f"{where}: {excerpt(text)} is not an affine map of the readings; write a sum of "
+                         f"number * joint name plus a number, such as \"J2 + J3\" or \"-0.5*j4 + 0.1\"")
+
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        raise ModelError(f"{where}: {excerpt(text)} is not an expression; write e.g. \"J2 + J3\"") from None
+    value = sp.expand(walk(tree.body))
+    poly = sp.Poly(value, *symbols.values())
+    require(poly.total_degree() <= 1, f"{where}: {excerpt(text)} is not affine in the readings (a product or power "
+                                      f"of joints); a coupling is a sum of number * joint plus a number")
+    multipliers = {n: value.coeff(x) for n, x in symbols.items() if value.coeff(x) != 0}
+    require(multipliers, f"{where}: {excerpt(text)} depends on no joint; a joint that never moves is a fixed transform")
+    return multipliers, value.subs({x: 0 for x in symbols.values()})
+
+
+def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tuple[Joint, ...]:
+    """The chain with the robot file's `couplings` (joint name -> its value in the readings) set.
+
+    A coupled joint whose value names itself keeps its reading (the FANUC J3: `J3: J2 + J3`); one
+    that does not is passive, with no reading. Numbers are in the file's units (deg or rad, m): a
+    multiplier from a revolute reading onto a prismatic joint is m per deg in a deg file. A coupling
+    replaces what a URDF `<mimic>` says of that joint."""
+    if spec is None:
+        return chain
+    require(isinstance(spec, dict) and spec, f"{where}: expected a mapping from joint names to their values in the "
+                                             f"readings, such as {{J3: \"J2 + J3\"}}")
+    names = [j.name for j in chain]
+    values = {}
+    for name, text in spec.items():
+        require(name in names, f"{where}: {excerpt(name)} is not a joint on the chain; couple one of {', '.join(names)}")
+        values[name] = _affine(text, names, f"{where}.{name}")
+    kinds = {j.name: j.kind for j in chain}
+
+    def scale(kind: str) -> sp.Expr:  # rad (or m) per unit of the file
+        return sp.pi / 180 if deg and kind == "R" else sp.Integer(1)
+
+    out = []
+    for j in chain:
+        if j.name not in values:
+            out.append(j)
+            continue
+        multipliers, offset = values[j.name]
+        terms = tuple((n, multipliers[n] * scale(j.kind) / scale(kinds[n])) for n in names if n in multipliers)
+        out.append(replace(j, coupling=Coupling(terms, offset * scale(j.kind), own=j.name in multipliers,
+                                                declared=True)))
+    readings = {j.name for j in out if j.reads}
+    for j in out:
+        for n, _ in j.coupling.terms if j.coupling else ():
+            require(n in readings, f"{where}: joint {excerpt(j.name)} follows {excerpt(n)}, which has no reading of its "
+                                   f"own (it is coupled without naming itself); write {excerpt(j.name)}'s value in "
+                                   f"the joints the controller reads")
+    return tuple(out)
+
+
 def _check_joint_names(joints, place):
     """Joint names are aliases of q1..qn in error terms, so a name that means something else there
     would silently change what a term measures. `place(k)` says where joint k's name is written."""
@@ -285,7 +423,7 @@ def load_robot(path: str | Path) -> Robot:
                                   f"(the unit of every angle in the file)")
     require_keys(spec, where, required={"name", "targets", "angle_unit"},
                  optional={"description", "base", "tool", "joints", "urdf", "base_link",
-                           "tip_link", "wrench_frame", "points", "gravity"})
+                           "tip_link", "wrench_frame", "points", "gravity", "couplings"})
     unit = spec["angle_unit"]
     require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
     deg = unit == "deg"
@@ -315,8 +453,11 @@ def load_robot(path: str | Path) -> Robot:
         require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
         joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
         tool = _transform(spec.get("tool"), f"{where}: tool", deg)
-    _check_joint_names([j for j in joints if j.mimic is None], (lambda k: f"{urdf_path}: joint") if urdf_path else
-                       (lambda k: f"{where}: joints[{k}].name:"))
+    joints = with_couplings(tuple(joints), spec.get("couplings"), f"{where}: couplings", deg)
+    rows = {j.name: k for k, j in enumerate(joints)}
+    readers = [j for j in joints if j.reads]
+    _check_joint_names(readers, (lambda k: f"{urdf_path}: joint") if urdf_path else
+                       (lambda k: f"{where}: joints[{rows[readers[k].name]}].name:"))
     wrench_frame = spec.get("wrench_frame", "tool")
     require(wrench_frame == "tool" or (type(wrench_frame) is int and 0 <= wrench_frame <= len(joints)),
             f"{where}: wrench_frame: {excerpt(wrench_frame)}; use 'tool' or a frame number 0..{len(joints)}")
@@ -324,9 +465,16 @@ def load_robot(path: str | Path) -> Robot:
     require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
     points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
     targets, estimated = _targets(spec["targets"], f"{where}: targets")
-    return Robot(name=name, chain=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
-                 wrench_frame=wrench_frame,
-                 points=points, source=str(path), source_hashes=hashes,
-                 urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
-                 tip_link=str(spec["tip_link"]) if urdf_path else "",
-                 gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))
+    robot = Robot(name=name, chain=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
+                  wrench_frame=wrench_frame,
+                  points=points, source=str(path), source_hashes=hashes,
+                  urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
+                  tip_link=str(spec["tip_link"]) if urdf_path else "",
+                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))
+    for i, j in enumerate(robot.chain, start=1):
+        if j.coupling and j.coupling.declared and len(j.coupling.terms) > j.coupling.own \
+                and robot.zero_offset_error(i) is None:
+            warnings.warn(f"{where}: couplings.{j.name}: the joint's axis is not along an axis of the frame next to "
+                          f"its motion, so its coupling ratios are not calibrated (only its frames' errors are)",
+                          stacklevel=2)
+    return robot

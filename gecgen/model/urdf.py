@@ -24,7 +24,7 @@ import numpy as np
 import sympy as sp
 
 from gecgen.model.kinematics import constant, joint_motion
-from gecgen.model.robot import Elementary, Joint, Mimic
+from gecgen.model.robot import Coupling, Elementary, Joint
 from gecgen.model.validation import ModelError, excerpt, read_text, require
 
 MOVING = {"revolute": "R", "continuous": "R", "prismatic": "P"}
@@ -193,7 +193,7 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
     """(base ops, joints, tool ops) of the path base_link -> tip_link in a URDF file.
 
     Lengths in m, angles in rad; joints are `Joint(pre=origin, post=())` with their URDF names, a
-    mimic joint's `mimic` naming the independent joint it follows.
+    mimic joint's `coupling` naming the independent joint it follows.
     """
     where = str(path)
     root = _parse(path)
@@ -228,7 +228,7 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
 
 def _with_mimics(joints: list[Joint], follows: list[Follow], base_link: str, tip_link: str,
                  where: str) -> tuple[Joint, ...]:
-    """The chain's joints with each mimic joint's `mimic` set and its limits mapped onto the joint
+    """The chain's joints with each mimic joint's `coupling` set and its limits mapped onto the joint
     it follows, which keeps the values both sets of limits allow."""
     variable = {j.name: k for k, j in enumerate(j for j, f in zip(joints, follows) if f.root == j.name)}
     limits = {j.name: (j.lower, j.upper) for j in joints if j.name in variable}
@@ -240,7 +240,7 @@ def _with_mimics(joints: list[Joint], follows: list[Follow], base_link: str, tip
                                     f"{excerpt(f.root)}, which is not on the chain from {excerpt(base_link)} to "
                                     f"{excerpt(tip_link)}; choose links whose chain holds {excerpt(f.root)}, or make "
                                     f"{excerpt(joint.name)} fixed")
-        mimics[joint.name] = Mimic(variable[f.root], f.root, _exact(f.multiplier), _exact(f.offset))
+        mimics[joint.name] = Coupling(((f.root, _exact(f.multiplier)),), _exact(f.offset))
         if math.isfinite(joint.lower):
             ends = sorted(((joint.lower - f.offset) / f.multiplier, (joint.upper - f.offset) / f.multiplier))
             lo, hi = max(limits[f.root][0], ends[0]), min(limits[f.root][1], ends[1])
@@ -251,7 +251,7 @@ def _with_mimics(joints: list[Joint], follows: list[Follow], base_link: str, tip
     out = []
     for j in joints:
         lo, hi = limits.get(j.name, (j.lower, j.upper))
-        out.append(replace(j, mimic=mimics.get(j.name), lower=lo, upper=hi))
+        out.append(replace(j, coupling=mimics.get(j.name), lower=lo, upper=hi))
     return tuple(out)
 
 

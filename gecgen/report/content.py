@@ -166,7 +166,7 @@ def glossary(robot: Robot) -> Section:
     """What ex..ep mean and which frame is which, with the robot's joint names."""
     frames = ["frame 0: the base (after `base`, before the first joint)"]
     for i, j in enumerate(robot.chain, start=1):
-        mimic = f", a mimic of {j.mimic.name}" if j.mimic else ""
+        mimic = f", {j.name} = {j.coupling.text(robot)}" if j.coupling else ""
         tool = "; it also carries the tool" if i == robot.n_frames else ""
         frames.append(f"frame {i}: after joint {i}, `{j.name}` ({'revolute' if j.kind == 'R' else 'prismatic'}"
                       f"{mimic}){tool}")

@@ -3,11 +3,7 @@ URDF whose joint origins carry the constant errors, and a table of joint zero of
 errors. Units: m and rad inside; the table and the effects reported in mm, mrad and mdeg.
 
 Joint zero offsets. Joint i's zero offset is the generalized error adjacent to its motion that
-turns about (revolute) or moves along (prismatic) its axis: for a URDF joint (no constant transform
-after the motion) that of frame i, right after the motion; for a DH joint (none before it) that of
-frame i-1, right before it: `er` of frame i-1 for a revolute joint i (`ez` for a prismatic one), or
-with a URDF axis along -x, -y or -z the matching error with its sign turned. Alone, that error
-equals the joint reading off by its value: M_i(q) Rot(u, d) = M_i(q + d) and Rz(d) Rz(q) = Rz(q + d).
+turns about or moves along its axis (`Robot.zero_offset_error`).
 Identification usually eliminates it (it acts like the joint and the next frame), and the next
 frames' errors carry it; the table re-expresses the calibration with every zero offset kept,
 each exchanged for the kept constant coefficient it merges into most (a rotation for a revolute
@@ -163,20 +159,6 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
 
 
 # -- the table ---------------------------------------------------------------------------------------
-def zero_offset_error(robot: Robot, i: int) -> tuple[int, float] | None:
-    """(eps index, sign) of the zero offset of the joint of frame i (i from 1; see the module's
-    docstring), or None when its axis is not along an axis of the adjacent frame or constant
-    transforms sit on both sides of its motion."""
-    joint = robot.chain[i - 1]
-    u = np.array([float(a) for a in joint.axis])
-    frame = i if not joint.post else i - 1 if not joint.pre else None
-    k = int(np.argmax(np.abs(u)))
-    if frame is None or abs(abs(u[k]) - 1) > 1e-12:
-        return None
-    name = ("ex", "ey", "ez")[k] if joint.kind == "P" else ("ep", "es", "er")[k]
-    return 6 * frame + ERROR_NAMES.index(name), float(np.sign(u[k]))
-
-
 def table(calib: Calibration, cm: CompiledModel) -> dict:
     """Joint zero offsets (mdeg, mm for a prismatic joint) and the other constant errors per frame
     (mm, mrad), with standard deviations, in the calibration re-expressed with every zero offset
@@ -189,9 +171,9 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
     pos = {k: a for a, k in enumerate(kept)}
     eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
 
-    zero, why = {}, {}  # by frame: the independent joints' frames (a mimic joint's offset is its frame's error)
+    zero, why = {}, {}  # by frame: the frames of joints with a reading (a passive joint's offset is its frame's error)
     for i in map(robot.frame_of, range(robot.n)):
-        found = zero_offset_error(robot, i)
+        found = robot.zero_offset_error(i)
         k = index.get((found[0], "1")) if found else None
         if k is None:
             why[i] = ("its axis is not along an axis of the frame next to its motion" if not found

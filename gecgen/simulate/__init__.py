@@ -39,6 +39,7 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     orientation turned by a random rotation vector of truth.orientation rad per axis)."""
     N = design.n_poses
     aux = thermal_profile(truth, N)
+    robot = truth.robot or robot  # the robot as built: its couplings may differ from the file's
     q_true, eps = true_state(robot, truth, design.q, design.payload_kg, design.payload_at, aux,
                              approach_directions(design.q))
     wrench = sensor_wrench(robot, q_true, design.payload_kg, design.payload_at, truth.gravity, eps)

@@ -24,19 +24,21 @@ A truth file (YAML) looks like
       - {type: backlash, joint: 2, width: 2.0e-4}    # half the width, on the side of the last motion
       - {type: play, joint: 6, width: 1.0e-3}        # free play: half the width, on the side the load pushes
       - {type: thermal, error: "1.ez", per_kelvin: 3.6e-5, reference: 20, start: 20, end: 26}
+    couplings: {J3: "1.003*J2 + J3"}        # the robot as built: coupled joints' true values in the
+                                            # readings (the robot file's syntax and units)
     noise: {repeatability: 5.0e-5, tracker: 4.0e-5, orientation: 2.0e-4}
                                             # orientation (rad): per measured frame and axis, when
                                             # simulated measurements give orientations
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from gecgen.model.gravity import robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
-from gecgen.model.robot import Robot
+from gecgen.model.robot import Robot, with_couplings
 from gecgen.model.validation import require, require_keys
 
 
@@ -59,6 +61,8 @@ class Truth:
     tracker: float  # m, per measured point and coordinate
     spec: dict = field(default_factory=dict)
     orientation: float = 0.0  # rad, per measured frame and axis (a small rotation in the measuring frame)
+    #: the kinematics as built: the robot file's, with the truth's `couplings`; None for the nominal's
+    robot: Robot | None = None
 
     @property
     def aux_names(self) -> tuple[str, ...]:
@@ -94,7 +98,7 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     """Validate a truth spec (the parsed YAML) for `robot`; random parts are drawn from `seed`."""
     require(isinstance(spec, dict), f"{where}: expected a mapping")
     require_keys(spec, where, optional={"seed", "gravity", "constant", "joint_offsets", "masses", "sources", "noise",
-                                        "description"})
+                                        "description", "couplings", "angle_unit"})
     rng = np.random.default_rng(spec.get("seed", 0))
     ne = robot.n_errors
     const = np.zeros(ne)
@@ -152,12 +156,25 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     for k, m in enumerate(() if masses == "urdf" else masses):
         require(isinstance(m, dict), f"{where}: masses[{k}]: expected {{frame, mass, at}}")
         require_keys(m, f"{where}: masses[{k}]", required={"frame", "mass"}, optional={"at"})
+    built = None
+    if spec.get("couplings") is not None:
+        unit = spec.get("angle_unit", "rad")
+        require(unit in ("deg", "rad"), f"{where}: angle_unit: {unit!r}; use deg or rad (of the couplings' numbers)")
+        built = replace(robot, chain=with_couplings(robot.chain, spec["couplings"], f"{where}: couplings", unit == "deg"))
+        require(built.joint_names == robot.joint_names, f"{where}: couplings: the robot as built must read the same "
+                                                        f"joints as {robot.source or 'the robot file'} "
+                                                        f"({', '.join(robot.joint_names)}); keep each joint's own name "
+                                                        f"in its value exactly where the robot file does")
+    declared = [j.name for j in (built or robot).chain if j.coupling and j.coupling.declared]
+    require(masses != "urdf" or not declared, f"{where}: masses: urdf walks the URDF's own joints, not the couplings "
+                                              f"of {', '.join(declared)}; give the masses as a list of "
+                                              f"{{frame, mass, at}}")
     resolved = dict(spec)
     resolved["constant"] = {"values": {n: float(v) for n, v in zip(robot.error_names(), const)}}
     resolved["joint_offsets"] = {"values": offsets.tolist()}
     return Truth(const, offsets, tuple(sources), np.array(spec.get("gravity", [0.0, 0.0, -9.81]), float), masses,
                  float(noise.get("repeatability", 0.0)), float(noise.get("tracker", 0.0)), resolved,
-                 float(noise.get("orientation", 0.0)))
+                 float(noise.get("orientation", 0.0)), built)
 
 
 def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
@@ -177,7 +194,8 @@ def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_a
 def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray,
                     payload_at: np.ndarray) -> np.ndarray:
     """Static torque on every revolute joint variable (N, n), N m, from the link masses beyond it and
-    the payload, on the nominal chain: about its axis, plus its mimic joints' times their multipliers."""
+    the payload, on the nominal chain: by virtual work, the sum over the frames it moves of each
+    frame's load times dv_i/dq_k (its own frame's, and its coupled joints' times their multipliers)."""
     F = frames(robot, q)
     N = len(q)
     points = []  # (mass (N,), world position (N, 3), first frame it rides on)
@@ -191,16 +209,17 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
         points.append((np.full(N, float(m["mass"])), W[:, :3, :3] @ at + W[:, :3, 3], m["frame"]))
     tool = F[-1]
     points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n_frames + 1))
-    for i, (joint, (k, mult, _)) in enumerate(zip(robot.chain, robot.drives())):
-        if robot.joints[k].kind != "R":
-            continue
+    for i, (joint, (terms, _)) in enumerate(zip(robot.chain, robot.drives())):
         J = F[i] @ constant(joint.pre)  # the frame the joint axis is expressed in
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
         for mass, pos, frame in points:
-            if frame >= i + 1:  # a prismatic mimic joint's force along its axis, times m/rad
-                load = mass[:, None] * truth.gravity
-                moment = np.cross(pos - J[:, :3, 3], load) if joint.kind == "R" else load
-                tau[:, k] += float(mult) * np.einsum("ni,ni->n", moment, axis)
+            if frame < i + 1:
+                continue
+            load = mass[:, None] * truth.gravity  # a prismatic coupled joint's force along its axis, times m/rad
+            moment = np.einsum("ni,ni->n", np.cross(pos - J[:, :3, 3], load) if joint.kind == "R" else load, axis)
+            for k, mult in terms:
+                if robot.joints[k].kind == "R":
+                    tau[:, k] += float(mult) * moment
     return tau
 
 

@@ -9,9 +9,9 @@ world pose of frame j before its error and o_j the origin after the error transl
 
 (the rotation axes of Trans * RotY * RotZ * RotX in the world). This is the exact derivative at
 any error values, so identification can iterate. One forward pass gives every column; the
-`Builder` shares all intermediates. A mimic joint's frame is a frame like any other (its value
-m q_J + o only enters its motion), so J_e needs nothing more; in the joint Jacobian its column
-adds to joint J's times m (the chain rule).
+`Builder` shares all intermediates. A coupled joint's frame is a frame like any other (its value
+sum_k m_k q_k + o only enters its motion), so J_e needs nothing more; in the joint Jacobian its
+column adds to each reading k's times m_k (the chain rule).
 """
 from __future__ import annotations
 
@@ -117,9 +117,10 @@ class Chain:
 
 
 def joint_values(b: Builder, robot: Robot, q) -> list:
-    """Every frame's joint value: its variable, or multiplier * q_J + offset for a mimic joint."""
-    return [q[k] if joint.mimic is None else b.let(m * q[k] + o)
-            for joint, (k, m, o) in zip(robot.chain, robot.drives())]
+    """Every frame's joint value: its reading, or for a coupled joint the sum of multiplier * q_k
+    plus its offset."""
+    return [q[terms[0][0]] if joint.coupling is None else b.let(sum(m * q[k] for k, m in terms) + o)
+            for joint, (terms, o) in zip(robot.chain, robot.drives())]
 
 
 def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
@@ -197,14 +198,15 @@ def tool_jacobian_function(robot: Robot) -> Function:
     chain = build_chain(b, robot, q, eps)
     T = chain.tool
     Jq = [[0] * robot.n for _ in range(6)]
-    for joint, F, (i, mult, _) in zip(robot.chain, chain.joint_frames, robot.drives()):
+    for joint, F, (terms, _) in zip(robot.chain, chain.joint_frames, robot.drives()):
         a = apply(b, F, joint.axis, point=False)
         if joint.kind == "P":
             v, w = a, (0, 0, 0)
         else:
             v, w = cross(b, a, tuple(b.let(T.p[m] - F.p[m]) for m in range(3))), a
-        for r, x in enumerate((*v, *w)):
-            Jq[r][i] = x if joint.mimic is None and Jq[r][i] == 0 else b.let(Jq[r][i] + mult * x)
+        for i, mult in terms:
+            for r, x in enumerate((*v, *w)):
+                Jq[r][i] = x if joint.coupling is None and Jq[r][i] == 0 else b.let(Jq[r][i] + mult * x)
     out = [e for i in range(3) for e in (*T.R[i], T.p[i])] + [0, 0, 0, 1]
     return b.function("tool_jacobian", "Tool pose T (4x4 row-major) with errors eps and its geometric "
                       "Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},
