@@ -23,6 +23,8 @@ from gecgen.simulate import load_truth, random_design, simulate
 from gecgen.simulate.truth import Truth, gravity_torques, true_state
 from gecgen.symbolic.chain import tool_jacobian_function
 
+MDEG = 180e3 / np.pi
+MDEG = 180e3 / np.pi
 RATIO_ERROR = 0.003  # robots/fanuc.truth.yaml: J3 = 1.003 J2 + J3 as built
 
 
@@ -226,7 +228,7 @@ def test_passive_coupled_joints_have_no_reading_and_carry_their_loads_by_virtual
 
 
 def test_a_term_naming_a_passive_joint_says_how_to_write_it(torso):
-    with pytest.raises(ModelError, match=r"'t4' is a mimic joint, with no variable of its own; write its value "
+    with pytest.raises(ModelError, match=r"'t4' is a passive coupled joint, with no variable of its own; write its value "
                                          r"-1.0\*q2 - 1.0\*q3 \+ 0.0 in q2, q3"):
         error_model_from_dict({"frames": {3: {"er": ["1", "t4"]}}}, torso, "m.yaml")
 
@@ -242,3 +244,39 @@ def test_simulate_identify_and_compensate_through_the_cli(tmp_path):
     assert main(["compensate", str(out / "c.json"), str(out / "cmd.csv"), "-o", str(out / "fixed.csv")]) == 0
     fixed = np.loadtxt(out / "fixed.csv", delimiter=",", skiprows=1, usecols=range(6))
     assert 1e-5 < np.abs(fixed - [0.1, 0.3, -0.2, 0.4, 0.5, -0.3]).max() < 0.02
+
+
+def test_the_table_gives_the_readings_zero_offsets_through_the_couplings(fanuc):
+    """An offset of reading J2 turns joints 2 and 3 (J3 = J2 + J3): the table's J2 holds it and J3
+    stays zero, as the controller needs them."""
+    from gecgen.runtime.export import table
+
+    spec = {"seed": 1, "joint_offsets": {"values": [0.0, 1e-3, 0.0, -5e-4, 0.0, 0.0]},
+            "noise": {"repeatability": 1e-6, "tracker": 1e-6}}
+    truth = load_truth(spec, fanuc)
+    rng = np.random.default_rng(5)
+    data = simulate(fanuc, truth, random_design(fanuc, 80, rng), rng)
+    cal = gecgen.Calibrator(errors=load_error_model(None, fanuc)).fit(fanuc, data)
+    rows = {r["joint"]: r for r in table(cal.calibration_, cal._model())["zero_offsets"]}
+    assert rows["J3"]["through_couplings"] == {"1.er:1": -1.0, "2.er:1": 1.0}  # dq3 = dv3 - dv2
+    for name, truth_mdeg in (("J2", 1e-3 * MDEG), ("J3", 0.0), ("J4", -5e-4 * MDEG)):
+        if rows[name]["value"] is not None:
+            assert abs(rows[name]["value"] - truth_mdeg) < max(5 * rows[name]["std"], 0.05), rows[name]
+    assert rows["J2"]["value"] is not None and rows["J3"]["value"] is not None
+
+
+def test_unnamed_dh_rows_and_restated_urdf_mimics_are_refused_with_the_fix(tmp_path):
+    import yaml
+
+    spec = yaml.safe_load((ROBOTS / "fanuc.yaml").read_text())
+    for row in spec["joints"]:
+        row.pop("name")
+    spec["couplings"] = {"q4": "-(q2 + q3)"}
+    (tmp_path / "r.yaml").write_text(yaml.safe_dump(spec))
+    with pytest.raises(ModelError, match=r"joints\[0\]: give every DH row a name when couplings make a joint passive"):
+        load_robot(tmp_path / "r.yaml")
+    telescope = (ROBOTS.parent / "tests" / "data" / "mimic" / "telescope.yaml").read_text()
+    (tmp_path / "telescope.urdf").write_text((ROBOTS.parent / "tests" / "data" / "mimic" / "telescope.urdf").read_text())
+    (tmp_path / "t.yaml").write_text(telescope + "\ncouplings: {lift2: lift}\n")
+    with pytest.raises(ModelError, match=r"couplings: 'lift2' is a <mimic> joint of the URDF.*change its <mimic>"):
+        load_robot(tmp_path / "t.yaml")

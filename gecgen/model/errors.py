@@ -203,7 +203,8 @@ class _TermParser:
             passive = next((j.coupling for j in robot.chain if j.name == node.id and not j.reads), None)
             if passive is not None and node.id not in self.symbols:
                 readings = ", ".join(f"q{robot.joint_names.index(n) + 1}" for n, _ in passive.terms)
-                self.fail(text, f"'{node.id}' is a mimic joint, with no variable of its own; write its value "
+                kind = "a passive coupled joint" if passive.declared else "a mimic joint"
+                self.fail(text, f"'{node.id}' is {kind}, with no variable of its own; write its value "
                                 f"{passive.text(robot)} in {readings}")
             if node.id not in self.symbols:
                 self.fail(text, f"unknown variable '{node.id}'; known: {', '.join(self.symbols)} "

@@ -229,7 +229,7 @@ def frame_params(robot: Robot) -> tuple[tuple[float, ...], ...]:
         if i is not None:
             link_of_frame[i] = link
         anchor[link] = anchor[tree.parent[link]] if i is None else i
-        moves = i is None and j.mimic is not None and j.mimic.root in robot.joint_names
+        moves = i is None and j.mimic is not None and j.mimic.root in frame_of_joint
         swung[link] = (j.name, j.mimic.root) if moves else None if i is not None else swung[tree.parent[link]]
     params = np.zeros((robot.n_frames + 1, 4))
     for link, m in tree.mass.items():

@@ -21,7 +21,8 @@ import numpy as np
 from gecgen import __version__
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel, error_model_from_dict
-from gecgen.model.robot import WRENCH, Robot, load_robot
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.robot_file import load_robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.identify import Fit
 from gecgen.runtime.placement import with_targets

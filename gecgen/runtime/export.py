@@ -142,6 +142,10 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     require(robot.urdf, f"{where}: robot '{robot.name}' ({robot.source}) is a DH robot file with no URDF to copy, "
                         f"and six errors per frame do not fit DH's four parameters; use --c for the controller "
                         f"or --table for the errors per frame")
+    declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
+    if declared:
+        warnings.warn(f"the URDF keeps its own joints: the robot file's couplings of {', '.join(declared)} are not in "
+                      f"it (a URDF cannot state a joint from several others); the controller applies them")
     eps = constant_errors(calib)
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
@@ -159,6 +163,24 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
 
 
 # -- the table ---------------------------------------------------------------------------------------
+def _through_couplings(robot: Robot, readings: list[int]) -> list[dict[int, float]] | None:
+    """Per reading, the frames whose joint zero offsets give its offset, with factors: dq = D^-1 dv,
+    D[a, b] = dv_(frame of reading a) / dq_b. None when every reading is its own joint's value (D = I).
+    A reading coupled into other joints (the FANUC J2 also turns joint 3) moves them all: its offset
+    is not its own frame's error alone."""
+    D = np.zeros((robot.n, robot.n))
+    for a, i in enumerate(readings):
+        for b, m in robot.drives()[i - 1][0]:
+            D[a, b] = float(m)
+    if np.array_equal(D, np.eye(robot.n)):
+        return None
+    require(abs(np.linalg.det(D)) > 1e-12, f"{robot.source}: couplings: the readings cannot be told from the coupled "
+                                           f"joints' values (their map is singular); fix the couplings")
+    Dinv = np.linalg.inv(D)
+    return [{readings[b]: float(Dinv[a, b]) for b in range(robot.n) if abs(Dinv[a, b]) > 1e-15}
+            for a in range(robot.n)]
+
+
 def table(calib: Calibration, cm: CompiledModel) -> dict:
     """Joint zero offsets (mdeg, mm for a prismatic joint) and the other constant errors per frame
     (mm, mrad), with standard deviations, in the calibration re-expressed with every zero offset
@@ -233,16 +255,31 @@ def table(calib: Calibration, cm: CompiledModel) -> dict:
     change = np.linalg.norm(cm.model_targets(q, w, aux, c2) - cm.model_targets(q, w, aux, calib.c), axis=-1).max()
 
     exchanged = dict(zip([i for i, _ in swap], [names[kept[p]] for p in pivots]))
+    readings = [robot.frame_of(k) for k in range(robot.n)]
+    through = _through_couplings(robot, readings)
+    cov2 = A @ calib.cov @ A.T if through else None
     offsets = []
-    for i, joint in ((robot.frame_of(k), joint) for k, joint in enumerate(robot.joints)):
+    for a, (i, joint) in enumerate(zip(readings, robot.joints)):
         scale = MDEG_PER_RAD if joint.kind == "R" else 1e3
         entry = {"joint": joint.name, "unit": "mdeg" if joint.kind == "R" else "mm"}
-        if i in zero:
-            k, sign = zero[i]
-            entry |= {"coefficient": names[k], "value": float(sign * scale * c2[k]),
-                      "std": float(scale * std2[k]), "exchanged_for": exchanged.get(i)}
+        needed = through[a] if through else {i: 1.0}
+        if all(b in zero for b in needed):
+            k, sign = zero[i] if i in zero else (None, 1.0)
+            if through:  # the reading's offset from the chain joints' offsets it sets: dq = D^-1 dv
+                g = np.zeros(len(coefs))
+                for b, f in needed.items():
+                    g[zero[b][0]] += f * zero[b][1]
+                value, std = g @ c2, np.sqrt(max(g @ cov2 @ g, 0.0))
+                entry["through_couplings"] = {names[zero[b][0]]: f * zero[b][1] for b, f in needed.items()}
+            else:
+                value, std = sign * c2[k], std2[k]
+            entry |= {"coefficient": names[k] if k is not None else None, "value": float(scale * value),
+                      "std": float(scale * std), "exchanged_for": exchanged.get(i)}
         else:
-            entry |= {"coefficient": None, "value": None, "std": None, "why": why[i]}
+            missing = next(b for b in needed if b not in zero)
+            reason = why[missing] if missing == i else (f"its reading also sets joint {robot.chain[missing - 1].name} "
+                                                        f"(couplings), whose zero offset is not known: {why[missing]}")
+            entry |= {"coefficient": None, "value": None, "std": None, "why": reason}
         offsets.append(entry)
     frames = []
     for f in range(robot.n_frames + 1):

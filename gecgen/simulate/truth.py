@@ -38,7 +38,8 @@ import numpy as np
 
 from gecgen.model.gravity import robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
-from gecgen.model.robot import Robot, with_couplings
+from gecgen.model.robot import Robot
+from gecgen.model.robot_file import with_couplings
 from gecgen.model.validation import require, require_keys
 
 

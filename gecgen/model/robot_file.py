@@ -1,0 +1,289 @@
+"""Robot files (CONTRACTS.md section 1): read and validate a robot file into a `model.robot.Robot`.
+
+DH rows or a URDF path (`model.urdf`), base and tool transforms, targets, and the `couplings` that
+state coupled joints' values in the controller's readings; every problem names the file, the key
+and the fix.
+"""
+from __future__ import annotations
+
+import ast
+import hashlib
+import math
+import re
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import sympy as sp
+
+from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Coupling, Elementary, Joint, Robot
+from gecgen.model.urdf import urdf_chain
+from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
+
+
+def exact(value, where: str, unit_deg: bool = False) -> sp.Expr:
+    """A YAML number as an exact sympy number; degrees become exact multiples of pi."""
+    require(isinstance(value, (int, float)) and not isinstance(value, bool),
+            f"{where}: expected a number, got {excerpt(value)}")
+    require(_finite(value), f"{where}: {excerpt(value)} is not a finite number; write the value")
+    v = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
+    return v * sp.pi / 180 if unit_deg else v
+
+
+def _finite(value) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer beyond any float
+        return False
+
+
+def _vector(value, where: str, length: int = 3) -> tuple:
+    require(isinstance(value, list) and len(value) == length,
+            f"{where}: expected a list of {length} numbers, got {excerpt(value)}")
+    return tuple(exact(v, f"{where}[{k}]") for k, v in enumerate(value))
+
+
+def _transform(spec, where: str, deg: bool) -> tuple[Elementary, ...]:
+    """A fixed transform from `{origin: [x,y,z], rotation: 3x3 rows}` or `{origin, rpy}`."""
+    if spec is None:
+        return ()
+    require(isinstance(spec, dict), f"{where}: expected a mapping with origin and rotation or rpy")
+    require_keys(spec, where, optional={"origin", "rotation", "rpy"})
+    require(not ("rotation" in spec and "rpy" in spec), f"{where}: give either rotation or rpy, not both")
+    origin = _vector(spec.get("origin", [0, 0, 0]), f"{where}.origin")
+    ops: list[Elementary] = []
+    if "rotation" in spec:
+        rows = spec["rotation"]
+        require(isinstance(rows, list) and len(rows) == 3,
+                f"{where}.rotation: expected 3 rows of 3 numbers (columns are the child axes)")
+        R = sp.Matrix([_vector(r, f"{where}.rotation[{k}]") for k, r in enumerate(rows)])
+        err = (R.T * R - sp.eye(3)).applyfunc(lambda x: abs(float(x)))
+        require(max(err) < 1e-9 and float(R.det()) > 0,
+                f"{where}.rotation: not a proper rotation matrix (R^T R != I or det != 1); fix the rows")
+        H = sp.eye(4)
+        H[:3, :3] = R
+        H[:3, 3] = sp.Matrix(origin)
+        return (("H", tuple(tuple(H.row(k)) for k in range(4))),)
+    ops += [("Tx", origin[0]), ("Ty", origin[1]), ("Tz", origin[2])]
+    if "rpy" in spec:
+        rpy = spec["rpy"]
+        require(isinstance(rpy, list) and len(rpy) == 3, f"{where}.rpy: expected [roll, pitch, yaw]")
+        r, p, y = (exact(v, f"{where}.rpy[{k}]", deg) for k, v in enumerate(rpy))
+        ops += [("Rz", y), ("Ry", p), ("Rx", r)]  # URDF convention: R = Rz(y) Ry(p) Rx(r)
+    return tuple(op for op in ops if not (op[0] != "H" and op[1] == 0))
+
+
+def _limits(value, where: str, kind: str, deg: bool) -> tuple[float, float]:
+    require(isinstance(value, list) and len(value) == 2, f"{where}: expected [lower, upper]")
+    lo, hi = (float(exact(v, f"{where}[{k}]", deg and kind == "R")) for k, v in enumerate(value))
+    require(lo < hi, f"{where}: lower limit {excerpt(value[0])} must be below upper limit {excerpt(value[1])}")
+    return lo, hi
+
+
+def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
+    where = f"{where}: joints[{k}]"
+    require(isinstance(row, dict), f"{where}: expected a mapping with type, theta, d, a, alpha, limits")
+    require_keys(row, where, required={"type", "a", "alpha", "limits"},
+                 optional={"name", "theta", "d"})
+    kind = row["type"]
+    require(kind in ("R", "P"), f"{where}.type: unknown joint type {excerpt(kind)}; use R (revolute) or P (prismatic)")
+    name = row.get("name", f"q{k + 1}")
+    require(isinstance(name, str) and name.isidentifier(), f"{where}.name: {excerpt(name)} is not a valid identifier")
+    theta = exact(row.get("theta", 0), f"{where}.theta", deg)
+    post = (("Rz", theta), ("Tz", exact(row.get("d", 0), f"{where}.d")),
+            ("Tx", exact(row["a"], f"{where}.a")), ("Rx", exact(row["alpha"], f"{where}.alpha", deg)))
+    lo, hi = _limits(row["limits"], f"{where}.limits", kind, deg)
+    return Joint(name, kind, (sp.Integer(0), sp.Integer(0), sp.Integer(1)), (),
+                 tuple(op for op in post if op[1] != 0), lo, hi)
+
+
+#: the value of a target whose position on the tool the data is to give
+ESTIMATE = "estimate"
+
+
+def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], tuple[str, ...]]:
+    """Targets (name -> tool-frame xyz, m) and the names of those left to estimate (at the origin)."""
+    require(isinstance(spec, dict) and spec, f"{where}: targets must map names to [x, y, z] in the tool frame, "
+                                             f"or to '{ESTIMATE}'")
+    out = {}
+    for name, xyz in spec.items():
+        require(isinstance(name, str) and name.isidentifier(),
+                f"{where}: {excerpt(name)}: target names must be identifiers")
+        out[name] = (0.0, 0.0, 0.0) if xyz == ESTIMATE else tuple(float(v) for v in _vector(xyz, f"{where}.{name}"))
+    return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
+
+
+def _affine(text, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.Expr]:
+    """A coupling's value `text` ("J2 + J3", "-(t2 + t3)", "0.5*j4 + j5 - 10") as multipliers by
+    joint name and an offset, exact; only numbers, joint names, + - * / and parentheses."""
+    require(isinstance(text, str) and text.strip(), f"{where}: expected the joint's value in the readings as a "
+                                                    f"text such as \"J2 + J3\", got {excerpt(text)}")
+    symbols = {n: sp.Symbol(f"_{n}") for n in names}
+
+    def walk(node):
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            require(_finite(node.value), f"{where}: {excerpt(text)} holds a number beyond floating point")
+            return sp.Rational(repr(node.value)) if isinstance(node.value, float) else sp.Integer(node.value)
+        if isinstance(node, ast.Name):
+            require(node.id in symbols, f"{where}: {excerpt(text)}: '{node.id}' is not a joint of this robot; "
+                                        f"use the joint names ({', '.join(names)})")
+            return symbols[node.id]
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            return -walk(node.operand) if isinstance(node.op, ast.USub) else walk(node.operand)
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+            a, b = walk(node.left), walk(node.right)
+            if isinstance(node.op, ast.Div):
+                require(b.is_number and b != 0, f"{where}: {excerpt(text)}: divide only by a nonzero number")
+                return a / b
+            return a + b if isinstance(node.op, ast.Add) else a - b if isinstance(node.op, ast.Sub) else a * b
+        raise ModelError(f"{where}: {excerpt(text)} is not an affine map of the readings; write a sum of "
+                         f"number * joint name plus a number, such as \"J2 + J3\" or \"-0.5*j4 + 0.1\"")
+
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        raise ModelError(f"{where}: {excerpt(text)} is not an expression; write e.g. \"J2 + J3\"") from None
+    value = sp.expand(walk(tree.body))
+    poly = sp.Poly(value, *symbols.values())
+    require(poly.total_degree() <= 1, f"{where}: {excerpt(text)} is not affine in the readings (a product or power "
+                                      f"of joints); a coupling is a sum of number * joint plus a number")
+    multipliers = {n: value.coeff(x) for n, x in symbols.items() if value.coeff(x) != 0}
+    require(multipliers, f"{where}: {excerpt(text)} depends on no joint; a joint that never moves is a fixed transform")
+    return multipliers, value.subs({x: 0 for x in symbols.values()})
+
+
+def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tuple[Joint, ...]:
+    """The chain with the robot file's `couplings` (joint name -> its value in the readings) set.
+
+    A coupled joint whose value names itself keeps its reading (the FANUC J3: `J3: J2 + J3`); one
+    that does not is passive, with no reading. Numbers are in the file's units (deg or rad, m): a
+    multiplier from a revolute reading onto a prismatic joint is m per deg in a deg file. A coupling
+    may not restate a URDF `<mimic>` joint (its limits have narrowed the joint it follows)."""
+    if spec is None:
+        return chain
+    require(isinstance(spec, dict) and spec, f"{where}: expected a mapping from joint names to their values in the "
+                                             f"readings, such as {{J3: \"J2 + J3\"}}")
+    names = [j.name for j in chain]
+    values = {}
+    mimics = {j.name for j in chain if j.coupling is not None and not j.coupling.declared}
+    for name, text in spec.items():
+        require(name in names, f"{where}: {excerpt(name)} is not a joint on the chain; couple one of {', '.join(names)}")
+        require(name not in mimics, f"{where}: {excerpt(name)} is a <mimic> joint of the URDF, whose limits already "
+                                    f"narrowed the joint it follows; change its <mimic> in the URDF instead")
+        values[name] = _affine(text, names, f"{where}.{name}")
+    kinds = {j.name: j.kind for j in chain}
+
+    def scale(kind: str) -> sp.Expr:  # rad (or m) per unit of the file
+        return sp.pi / 180 if deg and kind == "R" else sp.Integer(1)
+
+    out = []
+    for j in chain:
+        if j.name not in values:
+            out.append(j)
+            continue
+        multipliers, offset = values[j.name]
+        terms = tuple((n, multipliers[n] * scale(j.kind) / scale(kinds[n])) for n in names if n in multipliers)
+        out.append(replace(j, coupling=Coupling(terms, offset * scale(j.kind), own=j.name in multipliers,
+                                                declared=True)))
+    readings = {j.name for j in out if j.reads}
+    for j in out:
+        for n, _ in j.coupling.terms if j.coupling else ():
+            require(n in readings, f"{where}: joint {excerpt(j.name)} follows {excerpt(n)}, which has no reading of its "
+                                   f"own (it is coupled without naming itself); write {excerpt(j.name)}'s value in "
+                                   f"the joints the controller reads")
+    return tuple(out)
+
+
+def _check_joint_names(joints, place):
+    """Joint names are aliases of q1..qn in error terms, so a name that means something else there
+    would silently change what a term measures. `place(k)` says where joint k's name is written."""
+    seen: dict[str, int] = {}
+    for k, joint in enumerate(joints):
+        name = joint.name
+        if re.fullmatch(r"q\d+", name) and name != f"q{k + 1}":
+            why = f"is spelled like a joint variable but names joint {k + 1} (its own is q{k + 1})"
+        elif name in WRENCH:
+            why = "is a wrench component (fx fy fz mx my mz)"
+        elif name in RESERVED:
+            why = "is reserved by the error terms and the generated code"
+        elif name in seen:
+            why = f"is also the name of joint {seen[name] + 1} (q{seen[name] + 1})"
+        else:
+            seen[name] = k
+            continue
+        raise ModelError(f"{place(k)} {excerpt(name)} {why}; rename the joint")
+
+
+def file_hash(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Read and validate a robot file (YAML); every problem names the file, the key and the fix."""
+    path = Path(path)
+    where = str(path)
+    spec = read_yaml(path, "robot")
+    require(isinstance(spec, dict), f"{where}: expected a mapping at the top level")
+    # no default: a file written in degrees and read as radians turns 90 deg into 90 rad
+    require("angle_unit" in spec, f"{where}: missing key 'angle_unit'; add 'angle_unit: deg' or 'angle_unit: rad' "
+                                  f"(the unit of every angle in the file)")
+    require_keys(spec, where, required={"name", "targets", "angle_unit"},
+                 optional={"description", "base", "tool", "joints", "urdf", "base_link",
+                           "tip_link", "wrench_frame", "points", "gravity", "couplings"})
+    unit = spec["angle_unit"]
+    require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
+    deg = unit == "deg"
+    name = spec["name"]
+    require(isinstance(name, str) and name.isidentifier(),
+            f"{where}: name: {excerpt(name)} must be an identifier (it names C functions)")
+    hashes = {path.name: file_hash(path)}
+    base = _transform(spec.get("base"), f"{where}: base", deg)
+    urdf_path = None
+    if "urdf" in spec:
+        require("joints" not in spec, f"{where}: give either joints (DH) or urdf, not both")
+        for key in ("base_link", "tip_link"):
+            require(key in spec, f"{where}: missing key '{key}' (needed with urdf)")
+            require(isinstance(spec[key], str), f"{where}: {key}: expected the name of a URDF link")
+        require(isinstance(spec["urdf"], str), f"{where}: urdf: expected the path of a URDF file")
+        urdf_path = path.parent / spec["urdf"]
+        require(urdf_path.is_file(), f"{where}: urdf: no such file {excerpt(str(urdf_path))}")
+        hashes[urdf_path.name] = file_hash(urdf_path)
+        lead, joints, trail = urdf_chain(urdf_path, spec["base_link"], spec["tip_link"])
+        base = base + lead
+        tool = trail + _transform(spec.get("tool"), f"{where}: tool", deg)
+    else:
+        require("joints" in spec, f"{where}: missing key 'joints' (a list of DH rows) or 'urdf'")
+        rows = spec["joints"]
+        require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
+        joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
+        tool = _transform(spec.get("tool"), f"{where}: tool", deg)
+    joints = with_couplings(tuple(joints), spec.get("couplings"), f"{where}: couplings", deg)
+    unnamed = [k for k, row in enumerate(spec.get("joints") or []) if isinstance(row, dict) and "name" not in row]
+    require(all(j.reads for j in joints) or not unnamed,
+            f"{where}: joints[{unnamed[0] if unnamed else 0}]: give every DH row a name when couplings make a joint "
+            f"passive (the readings q1..qn skip it, so the row's default name q{(unnamed[0] if unnamed else 0) + 1} "
+            f"would be another joint's reading)")
+    rows = {j.name: k for k, j in enumerate(joints)}
+    readers = [j for j in joints if j.reads]
+    _check_joint_names(readers, (lambda k: f"{urdf_path}: joint") if urdf_path else
+                       (lambda k: f"{where}: joints[{rows[readers[k].name]}].name:"))
+    wrench_frame = spec.get("wrench_frame", "tool")
+    require(wrench_frame == "tool" or (type(wrench_frame) is int and 0 <= wrench_frame <= len(joints)),
+            f"{where}: wrench_frame: {excerpt(wrench_frame)}; use 'tool' or a frame number 0..{len(joints)}")
+    points = spec.get("points") or {}
+    require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
+    points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
+    targets, estimated = _targets(spec["targets"], f"{where}: targets")
+    robot = Robot(name=name, chain=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
+                  wrench_frame=wrench_frame,
+                  points=points, source=str(path), source_hashes=hashes,
+                  urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
+                  tip_link=str(spec["tip_link"]) if urdf_path else "",
+                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))
+    for i, j in enumerate(robot.chain, start=1):
+        if j.coupling and j.coupling.declared and len(j.coupling.terms) > j.coupling.own \
+                and robot.zero_offset_error(i) is None:
+            warnings.warn(f"{where}: couplings.{j.name}: the joint's axis is not along an axis of the frame next to "
+                          f"its motion, so its coupling ratios are not calibrated (only its frames' errors are)",
+                          stacklevel=2)
+    return robot
