@@ -37,17 +37,19 @@ def _range(v: np.ndarray) -> float:
 
 
 def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[int, ...]]:
-    """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow)."""
+    """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow); on a
+    tree, consecutive along one branch (a joint and its parent's)."""
     lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
     hi = np.array([min(j.upper, np.pi) for j in robot.joints])
     q = rng.uniform(lo, hi, (16, robot.n))
     W = frames(robot, q)
-    axes = [W[robot.frame_of(i) - 1][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
+    axes = [W[robot.parent(robot.frame_of(i))][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
             for i, j in enumerate(robot.joints)]
     groups, run = [], [0]
     for i in range(1, robot.n):
         both_r = robot.joints[i].kind == robot.joints[run[-1]].kind == "R"
-        if both_r and np.allclose(np.cross(axes[run[-1]], axes[i]), 0, atol=1e-9):
+        chained = robot.parent(robot.frame_of(i)) == robot.frame_of(run[-1])
+        if both_r and chained and np.allclose(np.cross(axes[run[-1]], axes[i]), 0, atol=1e-9):
             run.append(i)
         else:
             if len(run) > 1:
@@ -153,9 +155,9 @@ def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
     out = {}
     for i, joint in enumerate(robot.joints):
         frame = robot.frame_of(i)
-        J = F[frame - 1] @ constant(joint.pre)
+        J = F[robot.parent(frame)] @ constant(joint.pre)
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
-        for f in (frame, frame - 1):
+        for f in (frame, robot.parent(frame)):
             W = F[f]
             # column k of a frame is the axis of translation e{x,y,z}[k] and of rotation (ep, es, er)[k]
             for k in range(3):

@@ -71,28 +71,34 @@ def joint_values(robot: Robot, q: np.ndarray) -> np.ndarray:
 
 
 def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
-    """World transforms W_0..W_m (after each frame's errors) and the tool, each (N, 4, 4)."""
+    """World transforms W_0..W_m (after each frame's errors) and the tool of each branch (one on a
+    serial chain), each (N, 4, 4)."""
     q = np.atleast_2d(np.asarray(q, float))
     N = q.shape[0]
     eps = np.zeros((N, robot.n_errors)) if eps is None else np.broadcast_to(eps, (N, robot.n_errors))
-    W = constant(robot.base) @ error_transform(eps[:, 0:6])
-    out = [W]
+    out = [constant(robot.base) @ error_transform(eps[:, 0:6])]
     v = joint_values(robot, q)
     for i, joint in enumerate(robot.chain):
         A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ constant(joint.post)
-        W = W @ A @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)])
-        out.append(W)
-    out.append(W @ constant(robot.tool))
-    return out
+        out.append(out[robot.parent(i + 1)] @ A @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)]))
+    return out + [out[tip] @ constant(tool) for tip, tool in robot.tips()]
+
+
+def tool_poses(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
+    """World pose of each branch's tool frame (one on a serial chain), each (N, 4, 4)."""
+    return frames(robot, q, eps)[robot.n_frames + 1:]
 
 
 def tool_pose(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
-    """World pose of the tool frame, (N, 4, 4)."""
-    return frames(robot, q, eps)[-1]
+    """World pose of the tool frame (on a tree, the first branch's), (N, 4, 4)."""
+    return tool_poses(robot, q, eps)[0]
 
 
 def target_positions(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
     """World positions of every target, (N, n_targets, 3) in target-file order."""
-    T = tool_pose(robot, q, eps)
+    tools = tool_poses(robot, q, eps)
     t = np.array(list(robot.targets.values()))  # (nt, 3)
-    return np.einsum("nij,kj->nki", T[:, :3, :3], t) + T[:, None, :3, 3]
+    if len(tools) == 1:
+        return np.einsum("nij,kj->nki", tools[0][:, :3, :3], t) + tools[0][:, None, :3, 3]
+    T = np.stack([tools[robot.branch_of(name)] for name in robot.targets], axis=1)  # (N, nt, 4, 4)
+    return np.einsum("nkij,kj->nki", T[..., :3, :3], t) + T[..., :3, 3]

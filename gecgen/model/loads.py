@@ -92,15 +92,19 @@ def regressor_columns(let, kind: str, a, o, carried, g) -> list:
 def joint_columns(let, robot: Robot, J: int, axes, origins, carried, g, numeric: bool = False) -> list:
     """Candidate gravity-regressor columns of joint variable J (1-based): per carried frame from the
     first frame J moves to the last, the sum over the frames k it moves of multiplier times frame
-    k's `regressor_columns` (zero for frames before k). axes, origins: world axis and a point on it
+    k's `regressor_columns` (zero for frames k does not carry: those before it, and on a tree those
+    on other branches). axes, origins: world axis and a point on it
     of every frame's joint (1..m); carried: (R, p) of frames 0..m; let, g as for regressor_columns,
     `numeric` with numpy arrays (the multipliers then as floats)."""
     moved = [(k, float(m) if numeric else m) for k, m in robot.driven(J - 1)]
     first = moved[0][0]
     total: list = []
     for k, mult in moved:
-        cols = [0] * (4 * (k - first)) + regressor_columns(let, robot.chain[k - 1].kind, axes[k - 1], origins[k - 1],
-                                                           carried[k:], g)
+        subtree = set(robot.subtree(k))  # what frame k's joint carries (frames k..m on a chain)
+        own = iter(regressor_columns(let, robot.chain[k - 1].kind, axes[k - 1], origins[k - 1],
+                                     [carried[i] for i in sorted(subtree)], g))
+        cols = [c for i in range(first, robot.n_frames + 1) for c in ([next(own) for _ in range(4)]
+                                                                       if i in subtree else [0] * 4)]
         cols = cols if mult == 1 else [let(mult * c) for c in cols]
         total = [let(a + c) for a, c in zip(total, cols)] if total else cols
     return total
@@ -170,7 +174,7 @@ _CATALOGS: dict[tuple, LoadCatalog] = {}
 def catalog(robot: Robot) -> LoadCatalog:
     """The robot's load signals; computed once per robot content (kinematics, gravity, files)."""
     key = (robot.chain, robot.base, robot.tool, robot.gravity, robot.wrench_frame, robot.urdf,
-           robot.base_link, tuple(sorted(robot.source_hashes.items())))
+           robot.base_link, tuple(sorted(robot.source_hashes.items())), robot.parents, robot.branches)
     if key not in _CATALOGS:
         _CATALOGS[key] = _build_catalog(robot)
     return _CATALOGS[key]
@@ -189,7 +193,7 @@ def _numeric_columns(robot: Robot, q: np.ndarray) -> list[np.ndarray]:
     g = np.array([float(v) for v in robot.gravity])
     poses = [(tuple(tuple(T[:, r, c] for c in range(3)) for r in range(3)), tuple(T[:, r, 3] for r in range(3)))
              for T in W]
-    F = [W[k] @ constant(joint.pre) for k, joint in enumerate(robot.chain)]
+    F = [W[robot.parent(k)] @ constant(joint.pre) for k, joint in enumerate(robot.chain, start=1)]
     axes = [(Fk[:, :3, :3] @ np.array([float(v) for v in joint.axis])).T for Fk, joint in zip(F, robot.chain)]
     origins = [Fk[:, :3, 3].T for Fk in F]
     return [np.column_stack([np.broadcast_to(c, len(q)) for c in joint_columns(lambda x: x, robot, J, axes, origins,
@@ -246,9 +250,9 @@ def frame_params(robot: Robot) -> tuple[tuple[float, ...], ...]:
 
 def _build_catalog(robot: Robot) -> LoadCatalog:
     n = robot.n
-    sensor = robot.n_frames if robot.wrench_frame == "tool" else robot.wrench_frame
-    first = [robot.driven(k)[0][0] for k in range(n)]  # the first frame each joint variable moves
-    carrying = [J for J in range(1, n + 1) if first[J - 1] <= sensor]
+    sensor = robot.sensor_frame()
+    moving = set(robot.path(sensor))
+    carrying = [J for J in range(1, n + 1) if any(k in moving for k, _ in robot.driven(J - 1))]
     signals = [Signal(f"wrench_torque(q{J})", "wrench_torque", J) for J in carrying]
     use = (f"wrench_torque(q1) .. wrench_torque(q{len(carrying)})" if carrying == list(range(1, len(carrying) + 1))
            else ", ".join(f"wrench_torque(q{J})" for J in carrying))
@@ -280,7 +284,7 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
         for J in range(1, n + 1):
             if f"gravity_torque(q{J})" in why_not:
                 continue
-            carried = np.concatenate(params[first[J - 1]:])
+            carried = np.concatenate(params[robot.driven(J - 1)[0][0]:])  # from the first frame J moves
             if np.linalg.norm(Y[J - 1] @ carried) <= RANK_TOL * np.linalg.norm(Y[J - 1]) * np.linalg.norm(carried):
                 why_not[f"gravity_torque(q{J})"] = (f"the URDF's masses put no gravity torque on joint q{J} "
                                                     f"({robot.joints[J - 1].name}); drop the term")

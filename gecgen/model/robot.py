@@ -89,8 +89,23 @@ class Joint:
 
 
 @dataclass(frozen=True)
+class Branch:
+    """One tip of a tree: the frame its tool hangs from and the tool transform; its targets sit in
+    that tool frame (a two-armed robot has a branch per hand)."""
+
+    name: str
+    tip: int  # frame 1..m
+    tool: tuple[Elementary, ...]
+    tip_link: str = ""  # with urdf: the link the tool hangs from
+
+
+@dataclass(frozen=True)
 class Robot:
-    """Nominal kinematics of one robot plus its measurement targets (tool-frame xyz, m)."""
+    """Nominal kinematics of one robot plus its measurement targets (tool-frame xyz, m).
+
+    A serial chain, or a tree: frame i hangs from frame `parent(i)` (i - 1 on a chain), and each
+    branch (`branches`) has its own tip, tool and targets. On a tree, `tool` and `tip_link` are the
+    first branch's; frames are numbered so that a parent comes before its children."""
 
     name: str
     chain: tuple[Joint, ...]  # the moving joints, frames 1..m in order (passive joints included)
@@ -116,6 +131,40 @@ class Robot:
     #: rotation vector (rad) of the measured frame in the tool frame; estimated by
     #: `runtime.placement` from the measured orientations, none in a robot file
     target_frames: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    #: trees: the parent frame of frames 1..m, the branches and each target's branch (index); all
+    #: empty on a serial chain (one branch: the tool after frame m)
+    parents: tuple[int, ...] = ()
+    branches: tuple[Branch, ...] = ()
+    target_branch: dict[str, int] = field(default_factory=dict)
+
+    def parent(self, i: int) -> int:
+        """The frame that frame i (1..m) hangs from."""
+        return self.parents[i - 1] if self.parents else i - 1
+
+    def tips(self) -> list[tuple[int, tuple[Elementary, ...]]]:
+        """(tip frame, tool transform) per branch; one on a serial chain."""
+        return [(b.tip, b.tool) for b in self.branches] or [(self.n_frames, self.tool)]
+
+    def branch_of(self, target: str) -> int:
+        """The branch whose tool frame holds `target` (a measured frame's vertices: its target's)."""
+        if target in self.vertex_of:
+            target = self.vertex_of[target][0]
+        return self.target_branch.get(target, 0)
+
+    def sensor_frame(self) -> int:
+        """The frame the wrench sensor rides on: `wrench_frame`, or the tool's (the first branch's tip)."""
+        return self.tips()[0][0] if self.wrench_frame == "tool" else self.wrench_frame
+
+    def path(self, i: int) -> list[int]:
+        """The frames from the base to frame i, both included, in order."""
+        out = [i]
+        while out[-1] > 0:
+            out.append(self.parent(out[-1]))
+        return out[::-1]
+
+    def subtree(self, i: int) -> list[int]:
+        """Frame i and every frame that hangs from it, ascending: what joint i carries."""
+        return [f for f in range(i, self.n_frames + 1) if i in self.path(f)]
 
     @property
     def joints(self) -> tuple[Joint, ...]:

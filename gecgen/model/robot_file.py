@@ -16,7 +16,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Coupling, Elementary, Joint, Robot
+from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
 from gecgen.model.urdf import urdf_chain
 from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
 
@@ -84,7 +84,7 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
     where = f"{where}: joints[{k}]"
     require(isinstance(row, dict), f"{where}: expected a mapping with type, theta, d, a, alpha, limits")
     require_keys(row, where, required={"type", "a", "alpha", "limits"},
-                 optional={"name", "theta", "d"})
+                 optional={"name", "theta", "d", "parent"})
     kind = row["type"]
     require(kind in ("R", "P"), f"{where}.type: unknown joint type {excerpt(kind)}; use R (revolute) or P (prismatic)")
     name = row.get("name", f"q{k + 1}")
@@ -218,6 +218,88 @@ def file_hash(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def _branch_specs(spec: dict, where: str, urdf: bool) -> list[tuple[str, dict, str]]:
+    """(name, spec, where) per branch: the file's `branches` (a tree), or the serial robot's one
+    branch from its top-level `tool`, `targets` and, with urdf, `tip_link`."""
+    tip = "tip_link" if urdf else "tip"
+    if "branches" not in spec:
+        if urdf:
+            require("tip_link" in spec, f"{where}: missing key 'tip_link' (needed with urdf)")
+            require(isinstance(spec["tip_link"], str), f"{where}: tip_link: expected the name of a URDF link")
+        return [("", {k: spec[k] for k in ("tool", "targets", "tip_link") if k in spec}, where)]
+    for key in ("tool", "targets", "tip_link"):
+        require(key not in spec, f"{where}: {key}: a robot with branches gives each branch its own {key}; move it "
+                                 f"under its branch")
+    branches = spec["branches"]
+    require(isinstance(branches, dict) and branches, f"{where}: branches: expected a mapping from branch names to "
+                                                     f"{{{tip}, tool, targets}}")
+    out = []
+    for name, b in branches.items():
+        bwhere = f"{where}: branches.{excerpt(str(name))}"
+        require(isinstance(name, str) and name.isidentifier(), f"{bwhere}: branch names must be identifiers")
+        require(isinstance(b, dict), f"{bwhere}: expected a mapping with {tip}, tool and targets")
+        require_keys(b, bwhere, required={tip, "targets"}, optional={"tool"})
+        require(isinstance(b[tip], str), f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}")
+        out.append((name, b, bwhere))
+    return out
+
+
+def _urdf_tree(path: Path, base_link: str, branches):
+    """(base ops, joints, parent frame of each, (tip frame, tool ops) per branch) of the URDF paths
+    from base_link to every branch's tip_link, shared joints once (frames numbered along the first
+    branch, then each further branch's own joints)."""
+    paths = [urdf_chain(path, base_link, b["tip_link"]) for _, b, _ in branches]
+    shared_start = len({js[0].name for _, js, _ in paths}) == 1
+    joints: list[Joint] = []
+    parents, tips, frame = [], [], {}
+    for lead, js, trail in paths:
+        prev = 0
+        for k, j in enumerate(js):
+            if j.name in frame:  # a joint shared with an earlier branch: the trunk
+                i = frame[j.name]
+                joints[i - 1] = replace(joints[i - 1], lower=max(joints[i - 1].lower, j.lower),
+                                        upper=min(joints[i - 1].upper, j.upper))
+            else:
+                # branches that part before any joint start from the base link, each with its own lead
+                joints.append(j if k or shared_start else replace(j, pre=lead + j.pre))
+                parents.append(prev)
+                frame[j.name] = i = len(joints)
+            prev = i
+        tips.append((prev, trail))
+    return (paths[0][0] if shared_start else ()), tuple(joints), parents, tips
+
+
+def _path_of(i: int, parents: list[int]) -> list[int]:
+    """Frames from i down to the base along `parents` (parent of frame f is parents[f - 1])."""
+    out = [i]
+    while out[-1] > 0:
+        out.append(parents[out[-1] - 1])
+    return out
+
+
+def _dh_tree(rows: list, joints: tuple[Joint, ...], branches, where: str):
+    """(parent frame of each DH row, (tip frame, ()) per branch): a row hangs from its `parent` (a
+    joint name of an earlier row, or `base`), else from the row before it."""
+    frame = {j.name: i for i, j in enumerate(joints, start=1)}
+    parents = []
+    for k, row in enumerate(rows):
+        parent = row.get("parent")
+        if parent is None:
+            parents.append(k)
+            continue
+        require(branches[0][0], f"{where}: joints[{k}].parent: only a robot with branches may have one; add "
+                                f"'branches' with each tip")
+        require(parent == "base" or frame.get(parent, k + 1) <= k,
+                f"{where}: joints[{k}].parent: {excerpt(parent)} is not an earlier row's joint name or 'base'")
+        parents.append(0 if parent == "base" else frame[parent])
+    tips = []
+    for _, b, bwhere in branches:
+        require(not b.get("tip") or b["tip"] in frame, f"{bwhere}: tip: {excerpt(b.get('tip'))} is not a joint name "
+                                                       f"of the rows")
+        tips.append((frame[b["tip"]] if b.get("tip") else len(joints), ()))
+    return parents, tips
+
+
 def load_robot(path: str | Path) -> Robot:
     """Read and validate a robot file (YAML); every problem names the file, the key and the fix."""
     path = Path(path)
@@ -227,9 +309,9 @@ def load_robot(path: str | Path) -> Robot:
     # no default: a file written in degrees and read as radians turns 90 deg into 90 rad
     require("angle_unit" in spec, f"{where}: missing key 'angle_unit'; add 'angle_unit: deg' or 'angle_unit: rad' "
                                   f"(the unit of every angle in the file)")
-    require_keys(spec, where, required={"name", "targets", "angle_unit"},
-                 optional={"description", "base", "tool", "joints", "urdf", "base_link",
-                           "tip_link", "wrench_frame", "points", "gravity", "couplings"})
+    require_keys(spec, where, required={"name", "angle_unit"} | (set() if "branches" in spec else {"targets"}),
+                 optional={"description", "base", "tool", "joints", "urdf", "base_link", "targets",
+                           "tip_link", "wrench_frame", "points", "gravity", "couplings", "branches"})
     unit = spec["angle_unit"]
     require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
     deg = unit == "deg"
@@ -239,24 +321,24 @@ def load_robot(path: str | Path) -> Robot:
     hashes = {path.name: file_hash(path)}
     base = _transform(spec.get("base"), f"{where}: base", deg)
     urdf_path = None
+    branches = _branch_specs(spec, where, "urdf" in spec)
     if "urdf" in spec:
         require("joints" not in spec, f"{where}: give either joints (DH) or urdf, not both")
-        for key in ("base_link", "tip_link"):
-            require(key in spec, f"{where}: missing key '{key}' (needed with urdf)")
-            require(isinstance(spec[key], str), f"{where}: {key}: expected the name of a URDF link")
+        require("base_link" in spec, f"{where}: missing key 'base_link' (needed with urdf)")
+        require(isinstance(spec["base_link"], str), f"{where}: base_link: expected the name of a URDF link")
         require(isinstance(spec["urdf"], str), f"{where}: urdf: expected the path of a URDF file")
         urdf_path = path.parent / spec["urdf"]
         require(urdf_path.is_file(), f"{where}: urdf: no such file {excerpt(str(urdf_path))}")
         hashes[urdf_path.name] = file_hash(urdf_path)
-        lead, joints, trail = urdf_chain(urdf_path, spec["base_link"], spec["tip_link"])
+        lead, joints, parents, tips = _urdf_tree(urdf_path, spec["base_link"], branches)
         base = base + lead
-        tool = trail + _transform(spec.get("tool"), f"{where}: tool", deg)
     else:
         require("joints" in spec, f"{where}: missing key 'joints' (a list of DH rows) or 'urdf'")
         rows = spec["joints"]
         require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
         joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
-        tool = _transform(spec.get("tool"), f"{where}: tool", deg)
+        parents, tips = _dh_tree(rows, joints, branches, where)
+    tools = [trail + _transform(b.get("tool"), f"{bwhere}: tool", deg) for (_, b, bwhere), (_, trail) in zip(branches, tips)]
     joints = with_couplings(tuple(joints), spec.get("couplings"), f"{where}: couplings", deg)
     unnamed = [k for k, row in enumerate(spec.get("joints") or []) if isinstance(row, dict) and "name" not in row]
     require(all(j.reads for j in joints) or not unnamed,
@@ -273,13 +355,30 @@ def load_robot(path: str | Path) -> Robot:
     points = spec.get("points") or {}
     require(isinstance(points, dict), f"{where}: points: expected a mapping from names to [x, y, z] in the world")
     points = {k: tuple(float(v) for v in _vector(p, f"{where}: points.{excerpt(str(k))}")) for k, p in points.items()}
-    targets, estimated = _targets(spec["targets"], f"{where}: targets")
-    robot = Robot(name=name, chain=tuple(joints), base=base, tool=tool, targets=targets, estimated=estimated,
+    targets, estimated, target_branch = {}, (), {}
+    for k, (_, b, bwhere) in enumerate(branches):
+        more, left = _targets(b.get("targets"), f"{bwhere}: targets")
+        twice = sorted(set(more) & set(targets))
+        require(not twice, f"{bwhere}: targets: {excerpt(twice[0]) if twice else ''} is a target of another branch "
+                           f"too; give every target its own name")
+        targets, estimated = targets | more, estimated + left
+        target_branch |= {t: k for t in more}
+    tree = bool(spec.get("branches"))
+    if tree:
+        carried = {f for tip, _ in tips for f in _path_of(tip, parents)}
+        idle = [j.name for i, j in enumerate(joints, start=1) if i not in carried]
+        require(not idle, f"{where}: joint {excerpt(idle[0]) if idle else ''} carries no branch's tool; make it a "
+                          f"branch's tip or drop it")
+    robot = Robot(name=name, chain=tuple(joints), base=base, tool=tools[0], targets=targets, estimated=estimated,
                   wrench_frame=wrench_frame,
                   points=points, source=str(path), source_hashes=hashes,
                   urdf=str(urdf_path or ""), base_link=str(spec["base_link"]) if urdf_path else "",
-                  tip_link=str(spec["tip_link"]) if urdf_path else "",
-                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"))
+                  tip_link=str(branches[0][1].get("tip_link", "")) if urdf_path else "",
+                  gravity=_vector(spec.get("gravity", list(GRAVITY)), f"{where}: gravity"),
+                  parents=tuple(parents) if tree else (),
+                  branches=tuple(Branch(n, tip, tool, str(b.get("tip_link", "")))
+                                 for (n, b, _), (tip, _), tool in zip(branches, tips, tools)) if tree else (),
+                  target_branch=target_branch if tree else {})
     for i, j in enumerate(robot.chain, start=1):
         if j.coupling and j.coupling.declared and len(j.coupling.terms) > j.coupling.own \
                 and robot.zero_offset_error(i) is None:

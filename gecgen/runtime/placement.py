@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from gecgen.model.kinematics import tool_pose
+from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError
@@ -75,9 +75,10 @@ class Placement:
 
 
 def _closed_form(T: np.ndarray, data: Measurements, rows: np.ndarray, k_targets: int):
-    """The lifted linear solve on the given rows (one stationing): (R, t, m (k_targets, 3))."""
-    pose, target = data.pose[rows], data.target[rows]
-    Ri, pi = T[pose, :3, :3].reshape(-1, 9), T[pose, :3, 3]
+    """The lifted linear solve on the given rows (one stationing): (R, t, m (k_targets, 3)); T (rows of
+    data, 4, 4) the nominal tool pose each row's target rides on."""
+    target = data.target[rows]
+    Ri, pi = T[rows, :3, :3].reshape(-1, 9), T[rows, :3, 3]
     A = np.zeros((len(rows), 9 * k_targets + 4))
     for k in range(k_targets):
         on = target == k
@@ -98,7 +99,8 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     stationing of the data gets its own tracker frame. Raises ModelError when the poses do not
     turn the tool enough to place them."""
     robust.check_loss(loss)
-    T = tool_pose(robot, data.q)
+    tools = np.stack(tool_poses(robot, data.q))  # (branches, N, 4, 4)
+    T = tools[[robot.branch_of(n) for n in robot.target_names]][data.target, data.pose]  # each row's tool
     measured = np.unique(data.target)
     index = np.searchsorted(measured, data.target)  # targets renumbered 0..K-1 over those measured
     stations = np.unique(data.station)
@@ -108,10 +110,10 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     largest = np.argmax(np.bincount(sidx))
     R0, t0, m0 = _closed_form(T, local, np.nonzero(sidx == largest)[0], k)
     # the other stationings start from a Kabsch fit of their points to the first estimate
-    p0 = np.einsum("nij,nj->ni", T[data.pose, :3, :3], m0[index]) + T[data.pose, :3, 3]
+    p0 = np.einsum("nij,nj->ni", T[:, :3, :3], m0[index]) + T[:, :3, 3]
     frames = [(R0, t0) if s == largest else kabsch(p0[sidx == s], data.xyz[sidx == s]) for s in range(len(stations))]
     x0 = np.concatenate([np.concatenate([Rotation.from_matrix(R).as_rotvec(), t]) for R, t in frames] + [m0.ravel()])
-    Rp, pp = T[data.pose, :3, :3], T[data.pose, :3, 3]
+    Rp, pp = T[:, :3, :3], T[:, :3, 3]
 
     def residual(x):
         m = x[6 * len(stations):].reshape(k, 3)
@@ -159,7 +161,7 @@ def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> di
     for k, name in enumerate(names):
         rows = oriented & (index == k)
         if rows.any():
-            S = np.einsum("nji,nkj,nkl->il", T[data.pose[rows], :3, :3], Rs[rows], data.orientation[rows])
+            S = np.einsum("nji,nkj,nkl->il", T[rows, :3, :3], Rs[rows], data.orientation[rows])
             U, _, Vt = np.linalg.svd(S)
             X = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
             out[name] = tuple(float(v) for v in Rotation.from_matrix(X).as_rotvec())

@@ -95,21 +95,23 @@ class Redundancy:
 def rule_candidates(robot: Robot, n_targets_measured: int) -> dict[int, str]:
     """Generalized errors (eps index) the analytic rules eliminate, with the rule in words."""
     out: dict[int, str] = {}
+    children = [robot.parent(i) for i in range(1, robot.n_frames + 1)]
     for i, joint in enumerate(robot.chain, start=1):
-        axis = constant(joint.pre)[:3, :3] @ np.array([float(a) for a in joint.axis])  # in frame i-1
+        p = robot.parent(i)
+        axis = constant(joint.pre)[:3, :3] @ np.array([float(a) for a in joint.axis])  # in frame p
         k = int(np.argmax(np.abs(axis)))
-        if abs(abs(axis[k]) - 1) > 1e-9:
-            continue  # axis not along a frame axis: no single-parameter rule, the rank test decides
+        if abs(abs(axis[k]) - 1) > 1e-9 or children.count(p) > 1:
+            continue  # axis not along a frame axis, or frame p carries other branches too: the rank test decides
         rot = {0: "ep", 1: "es", 2: "er"}[k]
         if joint.kind == "R":
             errs = [f"e{'xyz'[k]}", rot]
-            why = f"revolute joint {i} ({joint.name}): translation along and rotation about its axis at frame {i - 1} act like the joint and frame {i}"
+            why = f"revolute joint {i} ({joint.name}): translation along and rotation about its axis at frame {p} act like the joint and frame {i}"
         else:
             errs = ["ex", "ey", "ez", rot]
-            why = f"prismatic joint {i} ({joint.name}): translations of frame {i - 1} and rotation about its axis act like frame {i}"
+            why = f"prismatic joint {i} ({joint.name}): translations of frame {p} and rotation about its axis act like frame {i}"
         for e in errs:
-            out[6 * (i - 1) + ERROR_NAMES.index(e)] = why
-    if n_targets_measured == 1:
+            out[6 * p + ERROR_NAMES.index(e)] = why
+    if n_targets_measured == 1 and not robot.branches:
         for e in ("es", "er", "ep"):
             last = robot.n_frames
             out.setdefault(6 * last + ERROR_NAMES.index(e),

@@ -181,10 +181,11 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
 def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
                   gravity: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
     """What a force/torque sensor in robot.wrench_frame reads for a payload (N, 6): [F; r x F] in the
-    sensor frame, r the payload point (tool frame, m) relative to the sensor."""
+    sensor frame, r the payload point (tool frame, m) relative to the sensor. On a tree the payload
+    hangs from the first branch's tool."""
     F = frames(robot, q, eps)
-    S = F[-1] if robot.wrench_frame == "tool" else F[robot.wrench_frame]
-    tool = F[-1]
+    tool = F[robot.n_frames + 1]
+    S = tool if robot.wrench_frame == "tool" else F[robot.wrench_frame]
     force_world = payload_kg[:, None] * gravity
     force = np.einsum("nji,nj->ni", S[:, :3, :3], force_world)
     point_world = np.einsum("nij,j->ni", tool[:, :3, :3], payload_at) + tool[:, :3, 3]
@@ -199,7 +200,7 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
     frame's load times dv_i/dq_k (its own frame's, and its coupled joints' times their multipliers)."""
     F = frames(robot, q)
     N = len(q)
-    points = []  # (mass (N,), world position (N, 3), first frame it rides on)
+    points = []  # (mass (N,), world position (N, 3), the frame it is rigid with)
     tau = np.zeros((N, robot.n))
     if truth.masses == "urdf":
         revolute = [i for i, j in enumerate(robot.joints) if j.kind == "R"]
@@ -208,13 +209,15 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
         at = np.array(m.get("at", [0, 0, 0]), float)
         W = F[m["frame"]]
         points.append((np.full(N, float(m["mass"])), W[:, :3, :3] @ at + W[:, :3, 3], m["frame"]))
-    tool = F[-1]
-    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], robot.n_frames + 1))
+    tip, _ = robot.tips()[0]  # the payload hangs from the first branch's tool
+    tool = F[robot.n_frames + 1]
+    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], tip))
     for i, (joint, (terms, _)) in enumerate(zip(robot.chain, robot.drives())):
-        J = F[i] @ constant(joint.pre)  # the frame the joint axis is expressed in
+        J = F[robot.parent(i + 1)] @ constant(joint.pre)  # the frame the joint axis is expressed in
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
+        carried = set(robot.subtree(i + 1))
         for mass, pos, frame in points:
-            if frame < i + 1:
+            if frame not in carried:
                 continue
             load = mass[:, None] * truth.gravity  # a prismatic coupled joint's force along its axis, times m/rad
             moment = np.einsum("ni,ni->n", np.cross(pos - J[:, :3, 3], load) if joint.kind == "R" else load, axis)

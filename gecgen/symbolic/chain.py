@@ -107,13 +107,19 @@ def error_pose(b: Builder, e: tuple) -> tuple[Pose, tuple]:
 
 @dataclass
 class Chain:
-    """World poses along the chain: frame j before (pre) and after (post) its error, joint axes."""
+    """World poses along the chain (or tree): frame j before (pre) and after (post) its error, joint
+    axes, and the tool of each branch."""
 
     pre: list[Pose]
     post: list[Pose]
     er_axis: list[tuple]  # R(W_j') Ry(es_j) z
     joint_frames: list[Pose]  # world pose in which joint i's motion axis is expressed
-    tool: Pose
+    tools: list[Pose]
+
+    @property
+    def tool(self) -> Pose:
+        """The tool (on a tree, the first branch's)."""
+        return self.tools[0]
 
 
 def joint_values(b: Builder, robot: Robot, q) -> list:
@@ -130,7 +136,7 @@ def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
     v = joint_values(b, robot, q)
     for j in range(robot.n_frames + 1):
         if j > 0:
-            joint = robot.chain[j - 1]
+            joint, W = robot.chain[j - 1], post[robot.parent(j)]
             F = compose(b, W, constant_pose(joint.pre)) if joint.pre else W
             joint_frames.append(F)
             W = compose(b, compose(b, F, motion(b, joint.axis, joint.kind, v[j - 1])), constant_pose(joint.post)) \
@@ -141,8 +147,8 @@ def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
             er_axis.append(apply(b, W, z_er, point=False))
             W = compose(b, W, E)
         post.append(W)
-    tool = compose(b, W, constant_pose(robot.tool)) if robot.tool else W
-    return Chain(pre, post, er_axis, joint_frames, tool)
+    tools = [compose(b, post[tip], constant_pose(tool)) if tool else post[tip] for tip, tool in robot.tips()]
+    return Chain(pre, post, er_axis, joint_frames, tools)
 
 
 def error_symbols(robot: Robot) -> tuple[sp.Symbol, ...]:
@@ -150,7 +156,7 @@ def error_symbols(robot: Robot) -> tuple[sp.Symbol, ...]:
 
 
 def _targets(b: Builder, robot: Robot, chain: Chain) -> list[tuple]:
-    return [apply(b, chain.tool, t) for t in robot.targets.values()]
+    return [apply(b, chain.tools[robot.branch_of(name)], t) for name, t in robot.targets.items()]
 
 
 def fk_function(robot: Robot) -> Function:
@@ -174,10 +180,14 @@ def jacobian_function(robot: Robot) -> Function:
     P = _targets(b, robot, chain)
     ne = robot.n_errors
     J = [[0] * ne for _ in range(3 * len(P))]
+    paths = [set(robot.path(tip)) for tip, _ in robot.tips()]
+    on_path = [paths[robot.branch_of(name)] for name in robot.targets]  # the frames that move each target
     for j in range(robot.n_frames + 1):
         Wp, Wq = chain.pre[j], chain.post[j]
         axes = (Wp.col(1), chain.er_axis[j], Wq.col(0))
         for k, Pk in enumerate(P):
+            if j not in on_path[k]:
+                continue
             d = tuple(b.let(Pk[i] - Wq.p[i]) for i in range(3))
             cols = [Wp.col(0), Wp.col(1), Wp.col(2)] + [cross(b, a, d) for a in axes]
             for c, col in enumerate(cols):
@@ -198,7 +208,10 @@ def tool_jacobian_function(robot: Robot) -> Function:
     chain = build_chain(b, robot, q, eps)
     T = chain.tool
     Jq = [[0] * robot.n for _ in range(6)]
-    for joint, F, (terms, _) in zip(robot.chain, chain.joint_frames, robot.drives()):
+    moving = set(robot.path(robot.tips()[0][0]))  # on a tree, the frames that move the first branch's tool
+    for i, (joint, F, (terms, _)) in enumerate(zip(robot.chain, chain.joint_frames, robot.drives()), start=1):
+        if i not in moving:
+            continue
         a = apply(b, F, joint.axis, point=False)
         if joint.kind == "P":
             v, w = a, (0, 0, 0)

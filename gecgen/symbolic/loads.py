@@ -38,16 +38,16 @@ def load_values(b: Builder, robot: Robot, q, w, names) -> dict[sp.Symbol, sp.Exp
             columns[J] = joint_columns(b.let, robot, J, axes, origins, carried, robot.gravity)
         return columns[J]
 
-    last = robot.n_frames if robot.wrench_frame == "tool" else robot.wrench_frame
+    moving = set(robot.path(robot.sensor_frame()))  # the frames that move the sensor
     sensor = chain.tool if robot.wrench_frame == "tool" else chain.post[robot.wrench_frame]
     force, moment = apply(b, sensor, w[:3], point=False), apply(b, sensor, w[3:], point=False)
     out = {}
     for name in names:
         s = cat.by_name(name)
         moved = robot.driven(s.joint - 1)
-        if s.kind == "wrench_torque":  # frames after the sensor's do not move it
+        if s.kind == "wrench_torque":  # frames after the sensor's (or on other branches) do not move it
             value = sum(mult * frame_wrench_torque(b.let, robot.chain[k - 1].kind, axes[k - 1], origins[k - 1],
-                                                   sensor.p, force, moment) for k, mult in moved if k <= last)
+                                                   sensor.p, force, moment) for k, mult in moved if k in moving)
         elif s.kind == "gravity":
             value = columns_of(s.joint)[s.column]
         else:
