@@ -209,6 +209,18 @@ class Compensation:
     extrapolation: dict
 
 
+def branch_index(robot: Robot, branch: str | None) -> int:
+    """The index of the named branch; None on a serial robot."""
+    names = [b.name for b in robot.branches]
+    if not names:
+        require(branch is None, f"branch={excerpt(branch)}: robot {robot.name} is a serial chain with one tool; "
+                                f"leave branch out")
+        return 0
+    require(branch in names, f"branch={excerpt(branch)}: robot {robot.name} has branches {', '.join(names)}; name "
+                             f"the one whose tool to place")
+    return names.index(branch)
+
+
 # -- the calibrator --------------------------------------------------------------------------
 
 class Calibrator:
@@ -345,12 +357,15 @@ class Calibrator:
         self._extrapolation(q, w, aux)
         return cm.model_targets(q, w, aux, self.calibration_.c)
 
-    def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50) -> Compensation:
+    def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50, branch: str | None = None) -> Compensation:
         """Corrected joint commands: the joint values that put the calibrated robot where the nominal
         one goes at q_cmd. q_cmd: (N, n) m/rad, or a CSV path or DataFrame of commands (q1..qn and
         optional fx..mz and aux columns; w and aux are then read from it). Raises RuntimeError when a
-        row does not converge (near a singularity) or overflows, naming the row."""
+        row does not converge (near a singularity) or overflows, naming the row. On a robot with
+        branches, `branch` names the one whose tool is placed: its own joints are corrected, every
+        other reading (the trunk's, the other branches') is held at its command."""
         calib = self._fitted()
+        index = branch_index(calib.robot, branch)
         require(isinstance(max_iter, int) and max_iter >= 0,
                 f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
         if isinstance(q_cmd, Commands):
@@ -362,7 +377,7 @@ class Calibrator:
             q, w, aux = self._inputs(q_cmd, w, aux, "q_cmd")
             cmds, row = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd"), (lambda k: f"q_cmd: row {k} (0-based)")
         cm = checked(calib.model, calib.robot, cmds)
-        q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter)
+        q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter, branch=index)
         failed = np.nonzero(np.isin(status, FAILED))[0]
         if len(failed):
             k = failed[0]

@@ -136,3 +136,145 @@ def test_bad_branches_are_refused_by_name(tmp_path, text, message):
     (tmp_path / "r.yaml").write_text(f"name: t\nangle_unit: rad\nurdf: talos_reduced.urdf\nbase_link: base_link\n{text}\n")
     with pytest.raises(ModelError, match=message):
         load_robot(tmp_path / "r.yaml")
+
+
+def part(m, tree, robot, cols):
+    """The rows of `m` (measured on the tree) that measure `robot`'s targets, with its joint columns."""
+    from gecgen.model.measurements import Measurements
+
+    names = [tree.target_names[t] for t in m.target]
+    keep = np.array([n in robot.targets for n in names])
+    return Measurements(q=m.q[:, cols], w=m.w, aux=m.aux, aux_names=m.aux_names, pose_ids=m.pose_ids,
+                        pose=m.pose[keep], target=np.array([robot.target_names.index(n) for n in np.array(names)[keep]]),
+                        xyz=m.xyz[keep], source=m.source)
+
+
+@pytest.mark.filterwarnings("ignore:extrapolation")
+def test_one_fit_of_the_tree_reaches_the_noise_floor_and_beats_two_serial_fits(talos):
+    """A torso bent by both arms: the tree's diagnose, from constant errors, traces it to the torso's
+    gravity load from both arms; torso + one arm as serial robots cannot (the other arm's weight is a
+    rigid mass at its zero pose to them). docs/trees.md has the figures over seeds."""
+    import gecgen
+    from gecgen.model.validation import read_yaml
+    from gecgen.simulate import load_truth, random_design, simulate
+
+    truth = load_truth(read_yaml(DATA / "talos.truth.yaml", "truth"), talos)
+    floor = 1e3 * np.sqrt(3 * (truth.tracker ** 2 + truth.repeatability ** 2))
+    rng = np.random.default_rng(1)
+    train, val = (simulate(talos, truth, random_design(talos, n, rng), rng) for n in (300, 150))
+    constant = ROOT / "robots" / "constant.errors.yaml"
+    tree = gecgen.Diagnoser(errors=constant).fit(talos, train, val=val).diagnosis_
+    assert tree.after["val_rms_mm"] < 1.3 * floor, (tree.after, floor)
+    assert any(e.error == "2.es" and "q2" in e.terms[0] for e in tree.effects)  # torso_2 under its load
+    squares, points = 0.0, 0
+    for side, cols in (("left", [0, 1, *range(2, 9)]), ("right", [0, 1, *range(9, 16)])):
+        robot = load_robot(DATA / f"talos_{side}.yaml")
+        serial = gecgen.Diagnoser(errors=constant).fit(robot, part(train, talos, robot, cols),
+                                                      val=part(val, talos, robot, cols)).diagnosis_
+        n = len(robot.targets) * val.n_poses
+        squares, points = squares + n * serial.after["val_rms_mm"] ** 2, points + n
+    assert np.sqrt(squares / points) > 1.5 * tree.after["val_rms_mm"], (np.sqrt(squares / points), tree.after)
+
+
+def test_a_dh_tree_is_its_branches_chains(tmp_path, rng):
+    """DH rows with a parent: each branch's targets where the serial robot of its rows puts them."""
+    rows = {"t1": "{name: t1, type: R, d: 0.3, a: 0.0, alpha: 90, limits: [-90, 90]}",
+            "t2": "{name: t2, type: R, a: 0.4, alpha: 0, limits: [-60, 60]}",
+            "r1": "{name: r1, type: R, a: 0.3, alpha: 90, limits: [-90, 90]}",
+            "r2": "{name: r2, type: R, a: 0.25, alpha: 0, limits: [-90, 90]}",
+            "l1": "{name: l1, type: R, a: 0.3, alpha: -90, limits: [-90, 90]}",
+            "l2": "{name: l2, type: R, d: 0.1, a: 0.2, alpha: 0, limits: [-90, 90]}"}
+    (tmp_path / "tree.yaml").write_text(
+        "name: dhtree\nangle_unit: deg\njoints:\n" + "".join(f"  - {rows[n]}\n" for n in ("t1", "t2", "r1", "r2"))
+        + "  - {name: l1, parent: t2, type: R, a: 0.3, alpha: -90, limits: [-90, 90]}\n"
+        + f"  - {rows['l2']}\nbranches:\n  right: {{tip: r2, targets: {{a: [0.1, 0, 0]}}}}\n"
+        + "  left: {tip: l2, tool: {origin: [0, 0, 0.05]}, targets: {b: [0, 0.1, 0]}}\n")
+    tree = load_robot(tmp_path / "tree.yaml")
+    assert tree.parents == (0, 1, 2, 3, 2, 5) and tree.joint_names == ("t1", "t2", "r1", "r2", "l1", "l2")
+    q = random_q(tree, rng, 10)
+    P = target_positions(tree, q)
+    for name, chain, cols, tool, target in (("r", ("t1", "t2", "r1", "r2"), [0, 1, 2, 3], "", "a: [0.1, 0, 0]"),
+                                            ("l", ("t1", "t2", "l1", "l2"), [0, 1, 4, 5],
+                                             "tool: {origin: [0, 0, 0.05]}\n", "b: [0, 0.1, 0]")):
+        (tmp_path / f"{name}.yaml").write_text(f"name: {name}\nangle_unit: deg\njoints:\n"
+                                               + "".join(f"  - {rows[n]}\n" for n in chain)
+                                               + f"{tool}targets: {{{target}}}\n")
+        serial = load_robot(tmp_path / f"{name}.yaml")
+        k = tree.target_names.index(serial.target_names[0])
+        np.testing.assert_allclose(P[:, k], target_positions(serial, q[:, cols])[:, 0], atol=1e-14)
+
+
+def dexterity(robot, q, branch: int, h=1e-6) -> float:
+    """The smallest singular value of the branch tool's 6 x 7 Jacobian in its own joints (finite
+    differences of the exact tree): away from singular arm postures when it is not small."""
+    from gecgen.model.kinematics import tool_poses
+
+    own = range(2, 9) if branch == 0 else range(9, 16)
+    cols = []
+    for j in own:
+        dq = np.eye(robot.n)[j] * h
+        Tp, Tm = (tool_poses(robot, (q + s * dq)[None])[branch][0] for s in (1, -1))
+        W = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) @ Tp[:3, :3].T
+        cols.append([*(Tp[:3, 3] - Tm[:3, 3]) / (2 * h), W[2, 1], W[0, 2], W[1, 0]])
+    return np.linalg.svd(np.array(cols).T, compute_uv=False)[-1]
+
+
+@pytest.mark.filterwarnings("ignore:extrapolation")
+def test_a_branch_is_compensated_by_its_own_joints(talos, tmp_path):
+    """Each hand's command corrected with the other readings held: the tree as built (without the
+    noise) puts that hand where the nominal model puts it; the trunk and the other arm keep their
+    commands. The generated C of the tree passes -Wall -Wextra -Werror."""
+    import gecgen
+    from gecgen.model.validation import read_yaml
+    from gecgen.simulate import load_truth, random_design, simulate
+    from gecgen.simulate.truth import true_state
+
+    spec = read_yaml(DATA / "talos.truth.yaml", "truth")
+    spec["sources"] = []  # geometric errors only: the constant model is then exact
+    truth = load_truth(spec, talos)
+    rng = np.random.default_rng(2)
+    cal = gecgen.Calibrator(errors=load_error_model(None, talos)).fit(
+        talos, simulate(talos, truth, random_design(talos, 200, rng), rng))
+    q_cmd = random_design(talos, 40, rng).q * 0.5
+    q_cmd = q_cmd[[min(dexterity(talos, q, 0), dexterity(talos, q, 1)) > 0.05 for q in q_cmd]][:10]
+    with pytest.raises(ModelError, match=r"branch=None: robot talos has branches left, right; name the one"):
+        cal.compensate(q_cmd)
+    wanted = target_positions(talos, q_cmd)
+    for branch, k, own in (("left", 0, range(2, 9)), ("right", 1, range(9, 16))):
+        fixed = cal.compensate(q_cmd, branch=branch).q
+        held = [j for j in range(talos.n) if j not in own]
+        assert np.array_equal(fixed[:, held], q_cmd[:, held])
+        q_true, eps = true_state(talos, truth, fixed, np.zeros(len(fixed)), np.zeros(3), {}, np.ones_like(fixed))
+        after = 1e3 * np.linalg.norm(target_positions(talos, q_true, eps)[:, k] - wanted[:, k], axis=1)
+        q_true, eps = true_state(talos, truth, q_cmd, np.zeros(len(fixed)), np.zeros(3), {}, np.ones_like(fixed))
+        before = 1e3 * np.linalg.norm(target_positions(talos, q_true, eps)[:, k] - wanted[:, k], axis=1)
+        assert before.max() > 1.0 and after.max() < 0.1, (branch, before.max(), after.max())
+
+
+def test_export_of_a_tree(talos, tmp_path):
+    """--c: the example program compensates the first branch and builds with -Werror; --table lists every
+    joint; --urdf (one chain's folding) is refused by name."""
+    import json
+    import subprocess
+
+    from gecgen.cli import main
+    from gecgen.runtime.compiled import compiler
+
+    data = tmp_path / "t.csv"
+    assert main(["simulate", str(DATA / "talos.yaml"), "--truth", str(DATA / "talos.truth.yaml"), "--poses", "120",
+                 "--seed", "3", "-o", str(data)]) == 0
+    assert main(["identify", str(DATA / "talos.yaml"), str(data), "--errors", str(ROOT / "robots" / "constant.errors.yaml"),
+                 "-o", str(tmp_path / "c.json")]) == 0
+    out = tmp_path / "ex.json"
+    code = subprocess.run(["gecgen", "export", str(tmp_path / "c.json"), "--c", str(tmp_path / "ctrl"), "--table",
+                           "--json"], capture_output=True, text=True)
+    assert code.returncode == 0, code.stderr
+    out.write_text(code.stdout)
+    assert [r["joint"] for r in json.loads(out.read_text())["table"]["zero_offsets"]] == list(talos.joint_names)
+    ctrl = tmp_path / "ctrl"
+    subprocess.run([compiler(), "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(ctrl / "ex"),
+                    str(ctrl / "talos_example.c"), str(ctrl / "talos.c"), "-lm"], check=True)
+    assert subprocess.run([str(ctrl / "ex")], capture_output=True, text=True).returncode == 0
+    code = subprocess.run(["gecgen", "export", str(tmp_path / "c.json"), "--urdf", str(tmp_path / "x.urdf")],
+                          capture_output=True, text=True)
+    assert code.returncode != 0 and "--urdf folds the errors along one chain" in code.stderr

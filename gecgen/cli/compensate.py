@@ -15,6 +15,8 @@ def add_parser(command):
     p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
     p.add_argument("-o", "--output", required=True, help="CSV to write: the same rows and columns, q1..qn corrected")
     p.add_argument("--max-iter", type=int, default=50, help="Newton steps at most per command (default %(default)s)")
+    p.add_argument("--branch", help="on a robot with branches: the branch whose tool to place (its own joints are "
+                                    "corrected, every other reading held)")
 
 
 def run(args) -> dict:
@@ -25,7 +27,7 @@ def run(args) -> dict:
         raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
     cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
     cmds = read_commands(args.poses, cal.robot_, cal.calibration_.model.aux)
-    done = cal.compensate(cmds, max_iter=args.max_iter)
+    done = cal.compensate(cmds, max_iter=args.max_iter, branch=args.branch)
     write_commands(args.output, cal.robot_, cmds, done.q)
     outside = [k + 2 for k in done.outside_limits]
     if outside:

@@ -74,7 +74,8 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
     return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
-                mimics=any(j.coupling for j in robot.chain), frame_names=frame_names(robot),
+                mimics=any(j.coupling for j in robot.chain) or bool(robot.branches),
+                frame_names=frame_names(robot), branch_suffixes=branch_suffixes(robot),
                 nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
@@ -85,9 +86,15 @@ def context(robot: Robot, model: ErrorModel) -> dict:
                 coef_term=_rows(coef_term), coef_error_flat=coef_error, coef_term_flat=coef_term, terms=terms)
 
 
+def branch_suffixes(robot: Robot) -> list[str]:
+    """The name suffix of each branch's fk, tool_jacobian and compensate: none on a serial chain."""
+    return [f"_{b.name}" for b in robot.branches] or [""]
+
+
 def frame_names(robot: Robot) -> list[str]:
     """Each moving frame's joint, a coupled joint with the value it takes ("jaw2 = -1.0*q3 - 0.01")."""
-    return [j.name if j.coupling is None else f"{j.name} = {j.coupling.text(robot)}" for j in robot.chain]
+    names = [j.name if j.coupling is None else f"{j.name} = {j.coupling.text(robot)}" for j in robot.chain]
+    return [f"{n} (on frame {robot.parent(i)})" if robot.branches else n for i, n in enumerate(names, start=1)]
 
 
 def _printed(fn: Function, printer, element, signature: bool) -> dict:

@@ -254,20 +254,22 @@ class CompiledModel:
             f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(out[i]))
         return out
 
-    def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11):
+    def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0):
         """Corrected joint commands (N, nq) and status codes (N,) for nominal commands q_cmd (N, nq)
         (m or rad), residual tolerance tol (m; 1 rad counts as 1 m). The codes, per row:
         OK (0) converged inside the joint limits; NOT_CONVERGED (1) the last iterate;
         SINGULAR (2) the joint Jacobian is singular at the returned iterate; OUTSIDE_LIMITS (3)
         converged, outside the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0,
-        max_iter < 0 or the computation overflowed, and the row holds q_cmd unchanged."""
+        max_iter < 0 or the computation overflowed, and the row holds q_cmd unchanged. On a tree, the
+        tool of `branch` (index) is placed by its own joints, every other reading held."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
         if self.backend == "casadi":
             raise RuntimeError("compensation runs in the generated C; install a C compiler (or set CC)")
         out, status = np.empty_like(q), np.empty(N, dtype=np.intc)
-        self._fn("compensate_batch").restype = ctypes.c_int
-        self._fn("compensate_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), ctypes.c_int(max_iter),
+        name = "compensate_batch" + (f"_{self.robot.branches[branch].name}" if self.robot.branches else "")
+        self._fn(name).restype = ctypes.c_int
+        self._fn(name)(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), ctypes.c_int(max_iter),
                                      ctypes.c_double(tol), _ptr(out),
                                      status.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
         return out, status

@@ -142,6 +142,9 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     require(robot.urdf, f"{where}: robot '{robot.name}' ({robot.source}) is a DH robot file with no URDF to copy, "
                         f"and six errors per frame do not fit DH's four parameters; use --c for the controller "
                         f"or --table for the errors per frame")
+    require(not robot.branches, f"{where}: --urdf folds the errors along one chain, and robot '{robot.name}' has "
+                                f"branches ({', '.join(b.name for b in robot.branches)}); use --c for the controller or "
+                                f"--table for the errors per frame")
     declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
     if declared:
         warnings.warn(f"the URDF keeps its own joints: the robot file's couplings of {', '.join(declared)} are not in "

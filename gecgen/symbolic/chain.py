@@ -159,11 +159,17 @@ def _targets(b: Builder, robot: Robot, chain: Chain) -> list[tuple]:
     return [apply(b, chain.tools[robot.branch_of(name)], t) for name, t in robot.targets.items()]
 
 
-def fk_function(robot: Robot) -> Function:
+def _suffix(robot: Robot, branch: int) -> str:
+    return f"_{robot.branches[branch].name}" if robot.branches else ""
+
+
+def fk_function(robot: Robot, branch: int = 0) -> Function:
+    """Nominal tool pose of a branch (the tool on a serial chain)."""
     b, q = Builder(), joint_symbols(robot)
-    T = build_chain(b, robot, q, None).tool
+    T = build_chain(b, robot, q, None).tools[branch]
     out = [e for i in range(3) for e in (*T.R[i], T.p[i])] + [0, 0, 0, 1]
-    return b.function("fk", "Nominal tool pose T (4x4 row-major) at joints q (m/rad).", {"q": q}, {"T": out})
+    return b.function("fk" + _suffix(robot, branch), "Nominal tool pose T (4x4 row-major) at joints q (m/rad).",
+                      {"q": q}, {"T": out})
 
 
 def targets_function(robot: Robot) -> Function:
@@ -198,17 +204,21 @@ def jacobian_function(robot: Robot) -> Function:
                       {"q": q, "eps": eps}, {"p": [x for t in P for x in t], "J": [x for row in J for x in row]})
 
 
-def tool_jacobian_function(robot: Robot) -> Function:
-    """Tool pose with errors and its geometric Jacobian in q ([v; w], 6 x n) for compensation.
+def tool_jacobian_function(robot: Robot, branch: int = 0) -> Function:
+    """Tool pose with errors and its geometric Jacobian in q ([v; w], 6 x n) for compensation; on a
+    tree, a branch's tool and the columns of its own joints only (the trunk and the other branches
+    hold their commands: moving the trunk would move every other branch too).
 
     The q-dependence of eps through the basis terms is left out: it changes the step, not
     the fixed point, and the errors are small, so Newton still converges.
     """
     b, q, eps = Builder(), joint_symbols(robot), error_symbols(robot)
     chain = build_chain(b, robot, q, eps)
-    T = chain.tool
+    T = chain.tools[branch]
     Jq = [[0] * robot.n for _ in range(6)]
-    moving = set(robot.path(robot.tips()[0][0]))  # on a tree, the frames that move the first branch's tool
+    tips = [tip for tip, _ in robot.tips()]
+    shared = {f for k, tip in enumerate(tips) if k != branch for f in robot.path(tip)}
+    moving = set(robot.path(tips[branch])) - shared
     for i, (joint, F, (terms, _)) in enumerate(zip(robot.chain, chain.joint_frames, robot.drives()), start=1):
         if i not in moving:
             continue
@@ -221,6 +231,6 @@ def tool_jacobian_function(robot: Robot) -> Function:
             for r, x in enumerate((*v, *w)):
                 Jq[r][i] = x if joint.coupling is None and Jq[r][i] == 0 else b.let(Jq[r][i] + mult * x)
     out = [e for i in range(3) for e in (*T.R[i], T.p[i])] + [0, 0, 0, 1]
-    return b.function("tool_jacobian", "Tool pose T (4x4 row-major) with errors eps and its geometric "
+    return b.function("tool_jacobian" + _suffix(robot, branch), "Tool pose T (4x4 row-major) with errors eps and its geometric "
                       "Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},
                       {"T": out, "Jq": [x for row in Jq for x in row]})

@@ -37,5 +37,8 @@ def basis_function(robot: Robot, model: ErrorModel, loads_given: bool = False) -
 
 
 def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
-    return [fk_function(robot), targets_function(robot), jacobian_function(robot), tool_jacobian_function(robot),
-            basis_function(robot, model), loads_function(robot), basis_function(robot, model, loads_given=True)]
+    """On a tree, fk and tool_jacobian once per branch (`fk_left`, ...)."""
+    branches = range(len(robot.tips()))
+    return [*(fk_function(robot, b) for b in branches), targets_function(robot), jacobian_function(robot),
+            *(tool_jacobian_function(robot, b) for b in branches), basis_function(robot, model),
+            loads_function(robot), basis_function(robot, model, loads_given=True)]
