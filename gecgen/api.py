@@ -178,7 +178,8 @@ class Score:
     n_poses, n_points (a measured frame is one point) and n_orientations (rows that measure a frame)
     of the data; extrapolation the number of poses outside the training span per input
     ({"q2": 3}, only inputs with any); registrations, with register=True, each station's tracker
-    frame fitted on the data and its distance from the calibration's (angle_deg, distance_mm)."""
+    frame fitted on the data and its distance from the calibration's (angle_deg, distance_mm); on a
+    tree, branches the same before and after per branch."""
 
     before: Errors
     after: Errors
@@ -193,6 +194,8 @@ class Score:
     data: Measurements | None = field(default=None, repr=False, compare=False)
     y_before: np.ndarray | None = field(default=None, repr=False, compare=False)
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: on a tree, per branch the data measures: {"before": {rms_mm, max_mm}, "after": {...}}
+    branches: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -282,6 +285,11 @@ class Calibrator:
             raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {fit.failures[0]}")
         calib = _calibration.from_fit(robot, model, fit)
         calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
+        if robot.branches:
+            from gecgen.runtime.identify import to_world
+
+            calib.report["branches"] = by_branch(cm, data, to_world(fit.registrations, data),
+                                                 {"before": None, "train": fit.c})
         if fitted.vertex_of:
             calib.report["orientation_length_m"] = fitted.pose_length
         self._set(calib, fit)
@@ -415,9 +423,11 @@ class Calibrator:
             y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: score it with register=True "
                                                         "(gecgen evaluate or calibrate --register)")
         counts = measured_counts(robot, data)
+        before, after = by_branch(cm, data, y_before, {"before": None}), by_branch(cm, data, y, {"after": calib.c})
+        branches = {name: before[name] | after[name] for name in after}
         return Score(Errors.of(_summary(cm, data, y_before, None)), Errors.of(_summary(cm, data, y, calib.c)),
                      counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,
-                     cm, data, y_before, y)
+                     cm, data, y_before, y, branches)
 
     def save(self, path: str | Path) -> Path:
         """Write the calibration JSON (CONTRACTS.md; read back by `load_calibration`, `gecgen
@@ -430,6 +440,17 @@ def _summary(cm, data, y, c) -> dict:
     from gecgen.runtime.identify import row_errors, summary
 
     return summary(*row_errors(cm, data, y, c)[:2])
+
+
+def by_branch(cm, data, y, stages: dict) -> dict:
+    """On a tree, per branch that the data measures: {stage: {rms_mm, max_mm}} for each of `stages`
+    (name -> coefficients, None for the nominal model) over that branch's points; {} on a chain."""
+    robot = cm.robot
+    if not robot.branches:
+        return {}
+    side = np.array([robot.branch_of(robot.target_names[t]) for t in data.target])
+    return {b.name: {stage: _summary(cm, data.rows_of(side == k), y[side == k], c) for stage, c in stages.items()}
+            for k, b in enumerate(robot.branches) if (side == k).any()}
 
 
 def load_calibration(path: str | Path, orientation_length: float | None = None) -> Calibrator:

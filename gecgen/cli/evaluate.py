@@ -34,7 +34,8 @@ def run(args) -> dict:
                                     f"{first['distance_mm']:.1f} mm from the calibration's")
     else:
         result.update(before_registration="the calibration's", tracker_frame="the calibration's")
-    result.update(before=score.before.to_dict(), after=score.after.to_dict(), extrapolation=score.extrapolation)
+    result.update(before=score.before.to_dict(), after=score.after.to_dict(), extrapolation=score.extrapolation,
+                  **({"branches": score.branches} if score.branches else {}))
     if args.report:
         from gecgen import report
 

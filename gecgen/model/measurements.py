@@ -93,6 +93,12 @@ class Measurements:
                             self.file_rows[keep], self.station[keep],
                             None if self.orientation is None else self.orientation[keep])
 
+    def rows_of(self, keep: np.ndarray) -> "Measurements":
+        """The measured rows where `keep` (R,) holds, every pose kept (a branch's points of a tree)."""
+        return Measurements(self.q, self.w, self.aux, self.aux_names, self.pose_ids, self.pose[keep],
+                            self.target[keep], self.xyz[keep], self.source, self.file_rows[keep], self.station[keep],
+                            None if self.orientation is None else self.orientation[keep])
+
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
         missing = [a for a in names if a not in self.aux_names]

@@ -112,8 +112,9 @@ def frame_label(robot: Robot, i: int) -> str:
 
 # -- sections every report shares ---------------------------------------------------------------
 
-def headline(sets: list[DataSet]) -> Section:
-    """Per stage, RMS and max point error on each data set (and orientation error when measured)."""
+def headline(sets: list[DataSet], robot: Robot | None = None) -> Section:
+    """Per stage, RMS and max point error on each data set (and orientation error when measured); on
+    a tree, also per branch."""
     header, cols = ["model"], []
     for ds in sets:
         s = ds.stages[0].summary()
@@ -132,8 +133,24 @@ def headline(sets: list[DataSet]) -> Section:
         rows.append(tuple(row))
     counts = "; ".join(f"{ds.name}: {ds.data.n_poses} poses, {len(ds.stages[0].pose)} measured rows "
                        f"(`{ds.data.source or 'in memory'}`)" for ds in sets)
-    return Section("Summary", [Table(tuple(header), rows),
-                               f"Point error: the distance between measured and modelled point. {counts}."])
+    blocks = [Table(tuple(header), rows), f"Point error: the distance between measured and modelled point. {counts}."]
+    return Section("Summary", blocks + ([branch_table(robot, sets)] if robot is not None and robot.branches else []))
+
+
+def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:
+    """RMS point error per branch of a tree, per data set and stage (a hand's accuracy is its own)."""
+    header, rows = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)], []
+    if any(len(ds.stages[0].pose) != len(ds.data.target) for ds in sets):
+        return "Per branch: not shown for measured frames (rows are frames, not points)."
+    for k, st in enumerate(sets[0].stages):
+        row = [st.stage]
+        for ds in sets:
+            side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
+            d = np.linalg.norm(ds.stages[k].position_mm, axis=1)
+            row += [f"{np.sqrt(np.mean(d[side == b] ** 2)):.4f}" if (side == b).any() else "-"
+                    for b in range(len(robot.branches))]
+        rows.append(tuple(row))
+    return Table(tuple(header), rows)
 
 
 def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> list[Section]:
@@ -281,7 +298,7 @@ def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, 
     return Report(f"gecgen identify: {robot.name}",
                   [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses). "
                    "Training data only: score it on new data with `gecgen evaluate --report`."],
-                  [headline([train]), *residual_sections(robot, [train]), *coefficient_section(robot, calib),
+                  [headline([train], robot), *residual_sections(robot, [train]), *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, None, None)])
 
 
@@ -293,7 +310,7 @@ def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray,
     return Report(f"gecgen evaluate: {robot.name}",
                   [f"Calibration `{calib_path}` scored on `{data.source}` ({data.n_poses} poses), data it was not "
                    "fitted on."],
-                  [headline([val]), *residual_sections(robot, [val]), *coefficient_section(robot, calib),
+                  [headline([val], robot), *residual_sections(robot, [val]), *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
 
 
@@ -343,7 +360,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                   [f"Training data `{data.source}` ({data.n_poses} poses); validation "
                    f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
                    f"terms. New error model: `{errors_out}`."],
-                  [headline(sets), Section("What diagnose found", found),
+                  [headline(sets, robot), Section("What diagnose found", found),
                    *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit.c,
                                     diag.final.fit.to_world(data), sets[0].stages[2], data),
                    *residual_sections(robot, sets), *coefficient_section(robot, calib), glossary(robot),
@@ -393,6 +410,6 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     return Report(f"gecgen calibrate: {robot.name}",
                   [f"Training data `{result['train_data']}` ({data.n_poses} poses)"
                    + (f"; validation {result['validation']}, scored after the choice." if val is not None else ".")],
-                  [headline(sets), choose, *effects, *residual_sections(robot, sets),
+                  [headline(sets, robot), choose, *effects, *residual_sections(robot, sets),
                    *coefficient_section(robot, calib), glossary(robot), extrapolation_section(robot, calib, None, None),
                    files])

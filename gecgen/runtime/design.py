@@ -38,7 +38,7 @@ from typing import Callable
 
 import numpy as np
 
-from gecgen.model.kinematics import tool_pose
+from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_commands
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
@@ -137,15 +137,16 @@ def constraint_mask(robot: Robot, cands: Candidates, targets: np.ndarray, min_z:
     target (indices into robot.targets) at world z >= min_z (m); and, with a tracker position (3,)
     in the world (m), the line of sight from each measured target to the tracker within
     max_incidence_deg of the tool z axis (a reflector facing along tool z)."""
-    T = tool_pose(robot, cands.q)
+    tools = np.stack(tool_poses(robot, cands.q))  # (branches, K, 4, 4)
+    T = tools[[robot.branch_of(robot.target_names[t]) for t in targets]]  # (nt, K, 4, 4): each target's tool
     local = np.array(list(robot.targets.values()))[targets]  # (nt, 3) tool frame
-    p = np.einsum("kij,tj->kti", T[:, :3, :3], local) + T[:, None, :3, 3]
+    p = np.einsum("tkij,tj->kti", T[..., :3, :3], local) + T[..., :3, 3].transpose(1, 0, 2)
     ok = np.ones(len(cands), bool)
     if min_z is not None:
         ok &= (p[..., 2] >= min_z).all(axis=1)
     if tracker is not None:
         sight = np.asarray(tracker, float) - p
-        cos = np.einsum("kti,ki->kt", sight, T[:, :3, 2]) / np.maximum(np.linalg.norm(sight, axis=2), 1e-12)
+        cos = np.einsum("kti,tki->kt", sight, T[..., :3, 2]) / np.maximum(np.linalg.norm(sight, axis=2), 1e-12)
         ok &= (cos >= np.cos(np.radians(max_incidence_deg))).all(axis=1)
     return ok
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.model.kinematics import target_positions, tool_pose
+from gecgen.model.kinematics import target_positions, tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.simulate.designs import Design, one_at_a_time, paper_pps, paper_split, random_design
@@ -50,7 +50,8 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     pose = np.repeat(np.arange(N), len(targets))
     measured = None
     if orientation:
-        R = tool_pose(robot, q_true, eps)[pose, :3, :3]
+        tools = np.stack(tool_poses(robot, q_true, eps))  # (branches, N, 4, 4): each row's target's tool
+        R = tools[[robot.branch_of(names[t]) for t in np.tile(targets, N)], pose, :3, :3]
         measured = Rotation.from_rotvec(rng.normal(0.0, truth.orientation, (len(pose), 3))).as_matrix() @ R
     aux_names = tuple(aux)
     return Measurements(q=design.q, w=wrench, aux=np.column_stack([aux[a] for a in aux_names]) if aux_names
