@@ -548,6 +548,8 @@ class Selection:
     #: the training and validation data as fitted and scored (a measured frame as its vertices)
     data: Measurements | None = field(default=None, repr=False, compare=False)
     val_data: Measurements | None = field(default=None, repr=False, compare=False)
+    #: on a tree, the validation data's errors per branch ({name: {before, after}}, as `Score.branches`)
+    val_branches: dict = field(default_factory=dict)
 
 
 def model_names(names, label: str = "models") -> tuple[str, ...]:
@@ -598,4 +600,4 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
-                     data, scored.data)
+                     data, scored.data, scored.branches)

@@ -307,3 +307,22 @@ def test_pose_measurements_of_a_tree(talos):
         before, train = cal.report_["branches"][hand]["before"], cal.report_["branches"][hand]["train"]
         assert before["rot_rms_mrad"] > 4 * noise and train["rot_rms_mrad"] < 1.2 * noise, (hand, before, train)
         assert train["rms_mm"] < 0.12 < 1.0 < before["rms_mm"]
+
+
+@pytest.mark.filterwarnings("ignore:extrapolation")
+def test_calibrate_chooses_for_the_whole_tree_and_scores_each_hand(talos):
+    """calibrate's elastic candidate carries the URDF's masses of both arms onto the torso: chosen over
+    the geometric one, its held-out error near the noise floor on each hand."""
+    import gecgen
+    from gecgen.model.validation import read_yaml
+    from gecgen.simulate import load_truth, random_design, simulate
+
+    truth = load_truth(read_yaml(DATA / "talos.truth.yaml", "truth"), talos)
+    floor = 1e3 * np.sqrt(3 * (truth.tracker ** 2 + truth.repeatability ** 2))
+    rng = np.random.default_rng(4)
+    train, val = (simulate(talos, truth, random_design(talos, n, rng), rng) for n in (200, 100))
+    sel = gecgen.calibrate(talos, train, val=val, models=("geometric", "elastic"))
+    assert sel.model == "elastic", sel.table
+    assert set(sel.val_branches) == {"left", "right"}
+    for hand in sel.val_branches.values():
+        assert hand["after"]["rms_mm"] < 1.3 * floor < 5 * floor < hand["before"]["rms_mm"], (hand, floor)

@@ -74,6 +74,8 @@ def run(args) -> dict:
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
         result["val_registered"] = args.register
+        if sel.val_branches:
+            result["val_branches"] = sel.val_branches
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
     files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), out))
