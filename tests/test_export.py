@@ -158,8 +158,8 @@ def test_folding_into_fixed_joints_branches_and_missing_origins(tmp_path, rng):
     robot = load_robot(write_robot(tmp_path, text))
     eps = rng.normal(0, 1e-2, robot.n_errors)
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n + 1)]
-    copy, tip, changed = folded_copy(robot.urdf, "world", "tool", E, "test")
-    assert tip == "tool" and changed == ["flange", "j1", "j3", "j4", "side_joint", "tool_mount"]
+    copy, tips, changed = folded_copy(robot.urdf, "world", ["tool"], E, "test")
+    assert tips == ["tool"] and changed == ["flange", "j1", "j3", "j4", "side_joint", "tool_mount"]
     (tmp_path / "cal.urdf").write_text(copy)
     model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
     data = model.createData()

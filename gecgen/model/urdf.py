@@ -394,24 +394,29 @@ def _origin_tag(T: np.ndarray, close: str = "/>") -> str:
     return f'<origin xyz="{xyz}" rpy="{" ".join(repr(v) for v in rpy(T[:3, :3]))}"{close}'
 
 
-def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np.ndarray],
-                note: str) -> tuple[str, str, list[str]]:
+def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: list[np.ndarray],
+                note: str) -> tuple[str, list[str], list[str]]:
     """The URDF's text with constant error transforms folded into joint origins.
 
-    errors[i] (4x4, one per frame 0..n of the chain base_link -> tip_link) sits right after frame
-    i's nominal transform: E_0 goes into the first moving joint's origin (after it: frame 0 is that
-    joint's frame at zero), E_i (i >= 1) before the origin of every joint below the i-th moving
-    joint's child link, on the chain or off it, so everything that link carries moves with it. When
-    that link is the tip (E_n has nowhere on the chain to go) a fixed joint and a new link
-    `<tip>_calibrated` below it carry E_n, and the new link is the calibrated chain's tip. Only
-    those origins change, byte for byte; `note` becomes a comment after the root's start tag.
-    Returns (text, the tip link of the calibrated chain, the names of the joints added or changed)."""
+    errors[i] (4x4, one per frame 0..n) sits right after frame i's nominal transform; the frames are
+    the moving joints of the paths base_link -> each of tip_links (one on a chain; on a tree every
+    branch's, shared joints once, numbered as `urdf_chain` and the robot file number them). E_0 goes
+    into the first moving joint's origin (after it: frame 0 is that joint's frame at zero), or when
+    the branches part before any joint, before the origin of every joint below base_link. E_i (i >= 1)
+    goes before the origin of every joint below the i-th moving joint's child link, on the chain or
+    off it, so everything that link carries moves with it. When that link is a tip (E_i has nowhere on
+    the chain to go) a fixed joint and a new link `<tip>_calibrated` below it carry E_i, and the new
+    link is the calibrated branch's tip. Only those origins change, byte for byte; `note` becomes a
+    comment after the root's start tag. Returns (text, the tip link of each calibrated branch, the
+    names of the joints added or changed)."""
     where = str(path)
     text = read_text(Path(path), "URDF file")
     links, above = _tree(_parse(path), where)
-    chain = [uj for uj in _path(above, base_link, tip_link, where) if uj.type != "fixed"]
-    require(len(chain) + 1 == len(errors), f"{where}: {len(chain)} moving joints from {base_link} to {tip_link}, "
-                                           f"but {len(errors) - 1} frames of errors; the URDF changed")
+    paths = [[uj for uj in _path(above, base_link, tip, where) if uj.type != "fixed"] for tip in tip_links]
+    chain = list({uj.name: uj for p in paths for uj in p}.values())  # first seen first: the frames' order
+    require(len(chain) + 1 == len(errors), f"{where}: {len(chain)} moving joints from {base_link} to "
+                                           f"{', '.join(tip_links)}, but {len(errors) - 1} frames of errors; the "
+                                           f"URDF changed")
     below: dict[str, list[UrdfJoint]] = {}
     for uj in above.values():
         below.setdefault(uj.parent, []).append(uj)
@@ -420,7 +425,11 @@ def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np
         return constant(_origin(uj.element, f"{where}: joint {excerpt(uj.name)}"))
 
     identity = [np.array_equal(E, np.eye(4)) for E in errors]
-    changed = {} if identity[0] else {chain[0].name: origin(chain[0]) @ errors[0]}
+    changed = {}
+    if not identity[0] and len({p[0].name for p in paths}) == 1:
+        changed[chain[0].name] = origin(chain[0]) @ errors[0]
+    elif not identity[0]:
+        changed.update({child.name: errors[0] @ origin(child) for child in below.get(base_link, [])})
     for uj, E, unit in zip(chain, errors[1:], identity[1:]):
         for child in [] if unit else below.get(uj.child, []):
             changed[child.name] = E @ origin(child)
@@ -435,16 +444,22 @@ def folded_copy(path: str | Path, base_link: str, tip_link: str, errors: list[np
             indent = text[text.rfind("\n", 0, a) + 1:a]
             edits.append((b, b, f"\n{indent}  {_origin_tag(T)}"))
     names = sorted(changed)
-    tip = tip_link
-    if chain[-1].child == tip_link and not identity[-1]:
+    tips, taken = [], set(links) | {uj.name for uj in above.values()}
+    for tip_link, p in zip(tip_links, paths):
+        frame = chain.index(p[-1]) + 1
+        if p[-1].child != tip_link or identity[frame]:
+            tips.append(tip_link)
+            continue
         tip = f"{tip_link}_calibrated"
-        while tip in links or f"{tip}_joint" in {uj.name for uj in above.values()}:
+        while tip in taken or f"{tip}_joint" in taken:
             tip += "_"
+        taken |= {tip, f"{tip}_joint"}
+        tips.append(tip)
         names.append(f"{tip}_joint")
         end = text.rindex("</" + text[root_start + 1:root_end].split()[0].rstrip("/>"))  # the root's end tag
         edits.append((end, end, f'  <joint name={quoteattr(tip + "_joint")} type="fixed">\n'
                                 f'    <parent link={quoteattr(tip_link)}/>\n    <child link={quoteattr(tip)}/>\n'
-                                f'    {_origin_tag(errors[-1])}\n  </joint>\n  <link name={quoteattr(tip)}/>\n'))
+                                f'    {_origin_tag(errors[frame])}\n  </joint>\n  <link name={quoteattr(tip)}/>\n'))
     for a, b, new in sorted(edits, reverse=True):
         text = text[:a] + new + text[b:]
-    return text, tip, names
+    return text, tips, names

@@ -142,9 +142,6 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     require(robot.urdf, f"{where}: robot '{robot.name}' ({robot.source}) is a DH robot file with no URDF to copy, "
                         f"and six errors per frame do not fit DH's four parameters; use --c for the controller "
                         f"or --table for the errors per frame")
-    require(not robot.branches, f"{where}: --urdf folds the errors along one chain, and robot '{robot.name}' has "
-                                f"branches ({', '.join(b.name for b in robot.branches)}); use --c for the controller or "
-                                f"--table for the errors per frame")
     declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
     if declared:
         warnings.warn(f"the URDF keeps its own joints: the robot file's couplings of {', '.join(declared)} are not in "
@@ -153,7 +150,8 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
             f"into the joint origins; the tracker registration is not applied")
-    text, tip, changed = folded_copy(robot.urdf, robot.base_link, robot.tip_link, E, note)
+    tip_links = [b.tip_link for b in robot.branches] or [robot.tip_link]
+    text, tips, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note)
     left = not_carried(calib, cm, where)
     if left:
         top = left[0]
@@ -161,7 +159,8 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
                       f"out (largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the "
                       f"training ranges); see not_carried")
     reg = calib.registration.to_dict()
-    return text, {"tip_link": tip, "changed_joints": changed, "not_carried": left, "registration_applied": False,
+    branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
+    return text, {"tip_link": tips[0], **branch_tips, "changed_joints": changed, "not_carried": left, "registration_applied": False,
                   "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
 
 
