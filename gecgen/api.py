@@ -212,6 +212,14 @@ class Compensation:
     extrapolation: dict
 
 
+def _floats(values, what: str, wanted: str) -> np.ndarray:
+    """values as a float array, or a one-line refusal naming `what` and what it should hold."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what}: {excerpt(values)} is not an array of numbers; give {wanted}") from None
+
+
 def branch_index(robot: Robot, branch: str | None) -> int:
     """The index of the named branch; None on a serial robot."""
     names = [b.name for b in robot.branches]
@@ -316,12 +324,12 @@ class Calibrator:
         """q (N, n), w (N, 6) and aux (N, naux) as float arrays, checked against the robot."""
         calib = self._fitted()
         n, names = calib.robot.n, calib.model.aux
-        q = np.asarray(q, dtype=float)
+        q = _floats(q, what, f"(N, {n}) joint values in m or rad")
         q = q[None] if q.ndim == 1 else q
         require(q.ndim == 2 and q.shape[1] == n, f"{what}: shape {np.shape(q)}; give (N, {n}) joint values in m or "
                                                  f"rad (robot {calib.robot.name} has {n} joints)")
         N = len(q)
-        w = np.zeros((N, 6)) if w is None else np.asarray(w, dtype=float)
+        w = np.zeros((N, 6)) if w is None else _floats(w, "w", "the wrench fx..mz (N and N m) as (N, 6) or (6,)")
         w = w[None] if w.ndim == 1 else w
         require(w.shape in ((N, 6), (1, 6)),
                 f"w: shape {w.shape}; give the wrench fx..mz (N and N m) as (N, 6) or (6,)")
@@ -333,7 +341,7 @@ class Calibrator:
         require(not names or aux is not None, f"aux: the error model uses auxiliary signals {', '.join(names)}; "
                                               f"pass aux as (N, {len(names)}) values in that order, or a dict by name")
         if names:
-            aux = np.asarray(aux, dtype=float)
+            aux = _floats(aux, "aux", f"(N, {len(names)}) values of {', '.join(names)}")
             aux = aux[None] if aux.ndim == 1 else aux
             require(aux.shape in ((N, len(names)), (1, len(names))),
                     f"aux: shape {aux.shape}; give (N, {len(names)}) values of {', '.join(names)}")

@@ -19,7 +19,8 @@ def write_atomically(path: str | Path, data: bytes | str) -> Path:
     never sees a half-written file, only the old one or the new one. Returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    part = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    # named apart from the target: a target name of the longest length a folder allows still fits
+    part = path.with_name(f".gecgen-{os.getpid()}-{secrets.token_hex(4)}.part")
     try:
         # os.open with mode 0o666 leaves the permissions to the umask, as a plain open() would
         fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
@@ -29,6 +30,9 @@ def write_atomically(path: str | Path, data: bytes | str) -> Path:
     except OSError as exc:
         part.unlink(missing_ok=True)
         raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the target, not the temporary
+    except BaseException:  # Ctrl-C while writing: no temporary left behind
+        part.unlink(missing_ok=True)
+        raise
     return path
 
 
@@ -53,10 +57,24 @@ def check_output_file(path: str | Path, what: str) -> Path:
     """Refuse, before any work, an output file (`what`: "calibration", ...) that names a folder or
     lies where nothing can be written: a one-line ModelError naming the path and the fix."""
     path = Path(path)
+    size = len(os.fsencode(path.name))
+    if size > 255:  # before anything asks the file system, which refuses such a name
+        raise ModelError(f"{path.parent / (path.name[:12] + '...' + path.name[-12:])}: the file name is longer than "
+                         f"255 bytes ({size}); give a shorter name for the {what}")
     if path.is_dir():
         raise ModelError(f"{path}: is a folder; give a file name for the {what}")
+    if path.exists() and not path.is_file():  # a device node or a pipe would be replaced by a file
+        raise ModelError(f"{path}: is not a regular file (a device, pipe or socket); give a file name for the {what}")
     _require_writable_folder(path.parent, path, what)
     return path
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two existing paths are one file (the same inode: links and relative spellings too)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def check_output_dir(path: str | Path, what: str) -> Path:

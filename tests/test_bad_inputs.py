@@ -164,6 +164,83 @@ CASES = {
 }
 
 
+def edited(tmp, change):
+    """A calibration of pps (constant model) with one edit to its JSON."""
+    import json
+
+    path = calibrated(tmp, '["1"]')
+    d = json.loads(path.read_text())
+    change(d)
+    path.write_text(json.dumps(d))
+    return path
+
+
+# issue 20: nothing destroyed, nothing silently read another way, no traceback from an option; run in
+# this process (the command line's own entry point, main), as the cases above run in a subprocess
+IN_PROCESS = {
+    "an output naming the robot file": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "-o", t / "robot.yaml"],
+                                        "robot.yaml", "is the robot this command reads; writing the calibration there"),
+    "an output naming the data": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "-o", t / "data.csv"],
+                                  "data.csv", "is the data this command reads; writing the calibration there"),
+    "two outputs naming one file": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / "s.csv", "--val-out",
+                                               t / "s.csv"], "s.csv", "--val-out names the same file as --output"),
+    "an output onto a device": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", "/dev/null"],
+                                "/dev/null", "is not a regular file (a device, pipe or socket)"),
+    "an output name over 255 bytes": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / ("x" * 252 + ".csv")],
+                                      "xxxx.csv", "the file name is longer than 255 bytes"),
+    "a key twice in a robot file": (lambda t: ["redundancy", pps(t, PPS + "angle_unit: rad\n")],
+                                    "robot.yaml", "key 'angle_unit' appears twice in one mapping; keep one"),
+    "a full-width joint name": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pitch,", "name: \uff51\uff15,"))],
+                                "robot.yaml", "is not an ASCII identifier"),
+    "--seed -1": (lambda t: ["simulate", pps(t), "--seed", "-1", "-o", t / "s.csv"], "--seed", "is outside 0.."),
+    "--poses 0": (lambda t: ["design", pps(t), "--poses", "0", "-o", t / "d.csv"], "--poses", "0 is outside 1.."),
+    "--payload-kg abc": (lambda t: ["simulate", pps(t), "--payload-kg", "abc", "-o", t / "s.csv"], "--payload-kg",
+                         "'abc' is not a number"),
+    "--payload-kg nan": (lambda t: ["simulate", pps(t), "--payload-kg", "0,nan", "-o", t / "s.csv"], "--payload-kg",
+                         "'nan': give a finite number at least 0"),
+    "--step 1e-9": (lambda t: ["simulate", pps(t), "--design", "one-at-a-time", "--step", "1e-9", "-o", t / "s.csv"],
+                    "--step", "poses (at most 10,000,000); give a larger step"),
+    "--max-rounds 0": (lambda t: ["diagnose", pps(t), write(t, "data.csv", table()), "--max-rounds", "0"],
+                       "--max-rounds", "0 is outside 1.."),
+    "--holdout 1.5": (lambda t: ["calibrate", pps(t), write(t, "data.csv", table()), "--holdout", "1.5", "-o", t / "c"],
+                      "--holdout", "give a finite number above 0 and at most 1"),
+    "an unknown option value": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "--loss", "L2"],
+                                "--loss", "invalid choice: 'L2'"),
+    "calibration: error_model a string": (lambda t: ["evaluate", edited(t, lambda d: d.update(error_model="x")),
+                                                     write(t, "data.csv", table())],
+                                          "calib.json", "error_model: expected an object with default and frames"),
+    "calibration: a negative std": (lambda t: ["evaluate", edited(t, lambda d: d["coefficients"][0].update(std=-1.0)),
+                                               write(t, "data.csv", table())],
+                                    "calib.json", "std -1.0 is negative"),
+    "calibration: applied \"false\"": (
+        lambda t: ["evaluate", edited(t, lambda d: d["registration"].update(applied="false")), write(t, "data.csv", table())],
+        "calib.json", 'registration.applied: "false" is not true or false'),
+    "calibration: a training range of one number": (
+        lambda t: ["evaluate", edited(t, lambda d: d.update(training_ranges={"q1": [1]})), write(t, "data.csv", table())],
+        "calib.json", "training_ranges: expected each input's [lowest, highest] value as two finite numbers"),
+}
+
+
+@pytest.mark.parametrize("case", IN_PROCESS)
+def test_bad_input_is_refused_in_one_line_in_process(tmp_path, case, monkeypatch):
+    import contextlib
+    import io
+
+    from gecgen.cli import main
+
+    make_args, filename, phrase = IN_PROCESS[case]
+    monkeypatch.chdir(tmp_path)
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        try:
+            code = main([str(a) for a in make_args(tmp_path)] + ["--json"])
+        except SystemExit as exc:  # argparse's refusal of an option's value
+            code = exc.code
+    lines = err.getvalue().splitlines()
+    assert code != 0 and out.getvalue() == "" and len(lines) == 1, err.getvalue()[-2000:]
+    assert filename in lines[0] and phrase in lines[0] and len(lines[0]) < 300, lines[0]
+
+
 @pytest.mark.parametrize("case", CASES)
 def test_bad_input_is_refused_in_one_short_line(tmp_path, case):
     make_args, filename, phrase = CASES[case]
@@ -201,3 +278,21 @@ def test_quoted_cells_and_windows_line_ends_read_as_the_plain_file(tmp_path):
         data = read_measurements(write(tmp_path, name, text.encode()), robot)
         for key in ("q", "pose_ids", "target", "xyz"):
             assert getattr(data, key).tolist() == getattr(plain, key).tolist(), (name, key)
+
+
+def test_what_the_first_audit_broke_now_works(tmp_path):
+    """A legal 255-byte output name is written (the temporary file is named apart from it); revolute
+    limits wholly past half a turn (190..300 deg) sample poses within them; 5e-2 in YAML is a number."""
+    from gecgen.cli import main
+
+    name = tmp_path / ("x" * 251 + ".csv")
+    assert main(["simulate", str(ROBOTS / "puma560.yaml"), "--poses", "3", "-o", str(name)]) == 0 and name.is_file()
+    assert not list(tmp_path.glob(".*.part"))
+    robot = pps(tmp_path, edit(edit(PPS, "limits: [-90, 90]", "limits: [190, 300]"), "[-0.20, 0.01, -0.20]",
+                                "[-2e-1, 1e-2, -2E-1]"))
+    assert load_robot(robot).targets["t1"] == (-0.2, 0.01, -0.2)
+    out = tmp_path / "s.csv"
+    assert main(["simulate", str(robot), "--poses", "20", "-o", str(out), "--json"]) == 0
+    q4 = read_measurements(out, load_robot(robot)).q[:, 3]
+    assert np.radians(190) <= q4.min() and q4.max() <= np.radians(300)
+    assert main(["redundancy", str(robot), "--json"]) == 0

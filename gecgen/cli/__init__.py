@@ -8,12 +8,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import sys
 import warnings
 
 from gecgen import __version__
 from gecgen.cli.human import print_human
-from gecgen.files import check_output_dir, check_output_file
+from gecgen.files import check_output_dir, check_output_file, same_file
 from gecgen.model import ModelError
 
 #: the command modules, in the order `gecgen --help` lists them
@@ -37,8 +38,15 @@ OUTPUTS = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """A bad option is one line naming it and the fix, not the usage block argparse prints."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message.splitlines()[0]}; see {self.prog} --help\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
                                    "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
                                    "README has a walk-through and the file formats.")
@@ -58,15 +66,32 @@ def build_parser() -> argparse.ArgumentParser:
 
 def check_outputs(args):
     """One-line refusal of an output that names a folder where a file is meant, a file where a
-    folder is meant, or a place that cannot be written: before the work, not after it."""
-    for option, (what, folder) in OUTPUTS.get(args.command, {}).items():
+    folder is meant, a place that cannot be written, one of the command's inputs (any other argument
+    naming an existing file) or another of its outputs: before the work, not after it."""
+    outputs = OUTPUTS.get(args.command, {})
+    inputs = {name: value for name, value in vars(args).items()
+              if name not in outputs and isinstance(value, str) and os.path.isfile(value)}
+    written = {}
+    for option, (what, folder) in outputs.items():
         path = getattr(args, option, None)
         if path is None:
             continue  # not written, or a default in the working folder
+        if not str(path).strip():
+            raise ModelError(f"--{option.replace('_', '-')}: an empty name; give the {what}'s "
+                             f"{'folder' if folder else 'file name'}")
         if folder:
             check_output_dir(path, what)
-        else:
-            check_output_file(path, what)
+            continue
+        check_output_file(path, what)
+        for name, value in inputs.items():
+            if same_file(path, value):
+                raise ModelError(f"{path}: is the {name.replace('_', ' ')} this command reads; writing the {what} "
+                                 f"there would destroy it: give another file name")
+        for other, value in written.items():
+            if os.path.abspath(path) == os.path.abspath(value) or same_file(path, value):
+                raise ModelError(f"{path}: --{option.replace('_', '-')} names the same file as "
+                                 f"--{other.replace('_', '-')}; give each output its own file")
+        written[option] = path
 
 
 def _os_reason(exc: OSError) -> str:
@@ -81,7 +106,12 @@ def main(argv: list[str] | None = None) -> int:
     # failure's reason is then the one line on stderr
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        code, result = _run(args)
+        try:
+            code, result = _run(args)
+        except KeyboardInterrupt:  # Ctrl-C: what was being written is cleaned up (files.write_atomically)
+            print(f"gecgen {args.command}: interrupted; nothing was written for this command's unfinished step",
+                  file=sys.stderr)
+            return 130
     if code:
         return code
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):

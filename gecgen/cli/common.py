@@ -1,6 +1,7 @@
 """What several commands share: the robot and its error model, fit options, progress."""
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import time
@@ -55,13 +56,57 @@ class _LogLines:
             print(f"{time.strftime('%H:%M:%S')} gecgen: {text}", file=sys.stderr, flush=True)
 
 
+#: the most poses a command draws or designs: far beyond any measurement campaign, far below memory
+MAX_POSES = 10_000_000
+#: numpy's generators take seeds up to 2**128; gecgen's files and reports print them as 64-bit integers
+MAX_SEED = 2 ** 63 - 1
+
+
+def whole(low: int, high: int):
+    """An argparse type: an integer in low..high; anything else is the option's one-line refusal."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number; give one in {low}..{high}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is outside {low}..{high}")
+        return value
+    return parse
+
+
+def number(low: float = -math.inf, high: float = math.inf, above: bool = False):
+    """An argparse type: a finite number in [low, high] (`above`: strictly above low)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        inside = (value > low if above else value >= low) and value <= high
+        if not (math.isfinite(value) and inside):
+            bound = f"{'above' if above else 'at least'} {low:g}" + (f" and at most {high:g}" if high < math.inf else "")
+            raise argparse.ArgumentTypeError(f"{text!r}: give a finite number {bound}" if low > -math.inf
+                                             else f"{text!r}: give a finite number")
+        return value
+    return parse
+
+
+def numbers(low: float = -math.inf):
+    """An argparse type: comma-separated finite numbers, each at least `low`."""
+    one = number(low)
+
+    def parse(text: str) -> list[float]:
+        return [one(part.strip()) for part in str(text).split(",")]
+    return parse
+
+
 def add_orientation_length(p, calibration_first: bool = False):
     """The option that weighs measured orientations against positions (README "Pose measurements");
     `calibration_first`: unset, it is the length the calibration was fitted with."""
     from gecgen.model.pose_targets import LENGTH_M
 
     default = f"the calibration's, else {LENGTH_M:g}" if calibration_first else f"{LENGTH_M:g}"
-    p.add_argument("--orientation-length", type=float, metavar="L",
+    p.add_argument("--orientation-length", type=number(0, above=True), metavar="L",
                    help=f"for data with orientation columns: an orientation error of 1 mrad counts as L * 1 mrad of "
                         f"position error (m; default {default}); set L = position noise / orientation noise")
 

@@ -1,11 +1,10 @@
 """`gecgen compensate CALIB POSES.csv -o OUT.csv`: corrected joint commands for nominal commands."""
 from __future__ import annotations
 
-from gecgen.cli.common import CALIBRATION_HELP
+from gecgen.cli.common import CALIBRATION_HELP, whole
 
 import sys
 
-from gecgen.model import ModelError
 
 
 def add_parser(command):
@@ -14,7 +13,7 @@ def add_parser(command):
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
     p.add_argument("-o", "--output", required=True, help="CSV to write: the same rows and columns, q1..qn corrected")
-    p.add_argument("--max-iter", type=int, default=50, help="Newton steps at most per command (default %(default)s)")
+    p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50, help="Newton steps at most per command (default %(default)s)")
     p.add_argument("--branch", help="on a robot with branches: the branch whose tool to place (its own joints are "
                                     "corrected, every other reading held)")
 
@@ -23,8 +22,6 @@ def run(args) -> dict:
     from gecgen.api import load_calibration
     from gecgen.model.measurements import read_commands, write_commands
 
-    if args.max_iter < 0:
-        raise ModelError(f"--max-iter {args.max_iter}: give a non-negative number of Newton steps")
     cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
     cmds = read_commands(args.poses, cal.robot_, cal.calibration_.model.aux)
     done = cal.compensate(cmds, max_iter=args.max_iter, branch=args.branch)

@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from gecgen.cli.common import ROBOT_HELP, robot_and_model
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, robot_and_model, whole
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
@@ -28,13 +28,13 @@ def add_parser(command):
     p = command("design", run, "choose the poses to measure (optimal experiment design)")
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
-    p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
+    p.add_argument("--poses", type=whole(1, MAX_POSES), required=True, help="number of poses to choose")
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
-    p.add_argument("--candidates", type=int, help=f"uniform samples within the joint limits to choose from "
+    p.add_argument("--candidates", type=whole(1, MAX_POSES), help=f"uniform samples within the joint limits to choose from "
                                                   f"(default {DEFAULT_CANDIDATES})")
     p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
                                                     "aux columns) instead of uniform samples")
-    p.add_argument("--seed", type=int, default=0, help="seed of the samples, the random comparison and the "
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the samples, the random comparison and the "
                                                        "validation poses")
     p.add_argument("--targets", help="comma-separated targets measured at every pose (default: those of --given, "
                                      "else every target of the robot)")
@@ -42,16 +42,16 @@ def add_parser(command):
                                         "wrench the sensor reads of their weight is part of each pose")
     p.add_argument("--gravity", default="0,0,-9.81", help="gravity in the world frame for the payload wrench, m/s^2 "
                                                           "(default: %(default)s)")
-    p.add_argument("--min-z", type=float, help="every measured target at world z >= this (m)")
+    p.add_argument("--min-z", type=number(), help="every measured target at world z >= this (m)")
     p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
-    p.add_argument("--max-incidence-deg", type=float, help="largest angle between the line of sight to the tracker "
+    p.add_argument("--max-incidence-deg", type=number(0, 180, above=True), help="largest angle between the line of sight to the tracker "
                                                            "and the tool z axis (the reflector's acceptance, deg)")
     p.add_argument("--given", help="measurement CSV already measured: the design adds poses to its information")
     p.add_argument("--criterion", choices=list(D.CRITERIA), default=D.DEFAULT_CRITERION,
                    help="D: maximise log det of the information (the coefficients' joint confidence region); I: "
                         "minimise the mean predicted variance of the measured positions over the candidates "
                         "(default %(default)s)")
-    p.add_argument("--noise-mm", type=float, default=1e3 * D.NOISE_M,
+    p.add_argument("--noise-mm", type=number(0, above=True), default=1e3 * D.NOISE_M,
                    help="measurement noise per coordinate (mm) for the predicted uncertainty (default %(default)s)")
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import DATA_HELP, ROBOT_HELP, add_orientation_length, progress_status
+from gecgen.cli.common import MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, number, progress_status, whole
 from gecgen.model import ModelError
 
 
@@ -15,9 +15,9 @@ def add_parser(command):
     p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
     held = p.add_mutually_exclusive_group()
     held.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
-    held.add_argument("--holdout", type=float, help="share of DATA's poses to hold out for the report instead, split "
+    held.add_argument("--holdout", type=number(0, 1, above=True), help="share of DATA's poses to hold out for the report instead, split "
                                                     "by pose (seeded by --seed); default without --val: 0.2")
-    p.add_argument("--seed", type=int, default=0, help="seed of the hold-out split and of the cross-validation folds "
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the hold-out split and of the cross-validation folds "
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
@@ -27,9 +27,9 @@ def add_parser(command):
                    help="registration of DATA onto the nominal model: auto (default; when far apart), always or never; "
                         "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
                         "the --val file, measured from another stationing, before scoring it")
-    p.add_argument("--max-rounds", type=int, default=50,
+    p.add_argument("--max-rounds", type=whole(1, 10_000), default=50,
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
-    p.add_argument("--noise-mm", type=float, help="measurement noise per coordinate (mm), to say whether what "
+    p.add_argument("--noise-mm", type=number(0, above=True), help="measurement noise per coordinate (mm), to say whether what "
                                                    "remains is only noise (default: from repeated poses, if any)")
     add_orientation_length(p)
 

@@ -1,7 +1,7 @@
 """`gecgen simulate`: measurements of a truth robot, as a tracker would record them."""
 from __future__ import annotations
 
-from gecgen.cli.common import ROBOT_HELP
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
 
 from pathlib import Path
 
@@ -23,17 +23,17 @@ def add_parser(command):
     p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
-    p.add_argument("--poses", type=int, default=200, help="poses of the random design (default %(default)s)")
-    p.add_argument("--step", type=float, default=0.05,
+    p.add_argument("--poses", type=whole(1, MAX_POSES), default=200, help="poses of the random design (default %(default)s)")
+    p.add_argument("--step", type=number(0, above=True), default=0.05,
                    help="step (m or rad) of the one-at-a-time design (default %(default)s)")
-    p.add_argument("--payload-kg", default="0",
+    p.add_argument("--payload-kg", type=numbers(0), default=[0.0],
                    help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the poses, the truth's draws and the noise "
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the poses, the truth's draws and the noise "
                                                        "(default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="validation CSV: with --design paper the validation half of set a; with "
                                       "--design random --val-poses new random poses of the same truth")
-    p.add_argument("--val-poses", type=int, help="poses of --val-out with --design random (default: --poses)")
+    p.add_argument("--val-poses", type=whole(1, MAX_POSES), help="poses of --val-out with --design random (default: --poses)")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
     p.add_argument("--orientation", action="store_true",
                    help="also write each row's measured orientation (quat_w..quat_z, README \"Pose measurements\"), "
@@ -46,13 +46,17 @@ def run(args) -> dict:
     spec = read_yaml(truth_path, "truth") if (args.truth or truth_path.is_file()) else {}
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
-    payloads = [float(x) for x in str(args.payload_kg).split(",")]
+    payloads = args.payload_kg
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
     if args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
-        design = paper_pps(robot, payloads_kg=payloads if args.payload_kg != "0" else (0.0, 70.0))
+        design = paper_pps(robot, payloads_kg=payloads if payloads != [0.0] else (0.0, 70.0))
     elif args.design == "one-at-a-time":
+        lo, hi = robot.sampling_box()
+        count = len(payloads) * sum(int((b - a) / args.step) + 1 for a, b in zip(lo, hi))
+        require(count <= MAX_POSES, f"--step {args.step:g}: the one-at-a-time design would have {count:.3g} poses (at "
+                                    f"most {MAX_POSES:,}); give a larger step")
         design = one_at_a_time(robot, {j + 1: args.step for j in range(robot.n)}, payloads)
     else:
         design = random_design(robot, args.poses, rng, payloads)

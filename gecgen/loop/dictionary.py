@@ -39,8 +39,7 @@ def _range(v: np.ndarray) -> float:
 def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[int, ...]]:
     """Runs of consecutive revolute joints whose axes stay parallel (e.g. shoulder and elbow); on a
     tree, consecutive along one branch (a joint and its parent's)."""
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    lo, hi = map(np.array, robot.sampling_box())
     q = rng.uniform(lo, hi, (16, robot.n))
     W = frames(robot, q)
     axes = [W[robot.parent(robot.frame_of(i))][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
@@ -149,8 +148,7 @@ def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
     does: a rotation about (revolute) or translation along (prismatic) the joint's axis, through a
     point on it, at the frame after the joint or, failing that, the frame before it. Decided at
     generic poses on the nominal chain; a joint with neither has no entry."""
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    lo, hi = map(np.array, robot.sampling_box())
     F = frames(robot, rng.uniform(lo, hi, (8, robot.n)))
     out = {}
     for i, joint in enumerate(robot.joints):

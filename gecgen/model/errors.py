@@ -19,7 +19,7 @@ import sympy as sp
 from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
 from gecgen.model.orientation import PREFIXES as ORIENTATION_PREFIXES
 from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
-from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
+from gecgen.model.validation import ModelError, excerpt, is_name, read_yaml, require, require_keys
 
 MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
@@ -274,7 +274,7 @@ def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
 def is_aux_name(name: str) -> bool:
     """Auxiliary columns become C and Python identifiers next to the generated temporaries; the
     prefixes of orientation columns are not theirs."""
-    return (name.isidentifier() and not name.startswith(("_", *ORIENTATION_PREFIXES)) and name not in RESERVED
+    return (is_name(name) and not name.startswith(("_", *ORIENTATION_PREFIXES)) and name not in RESERVED
             and not re.fullmatch(r"[tq]\d+", name))
 
 
@@ -306,7 +306,7 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
     require(isinstance(spec, dict), f"{where}: expected a mapping with 'default' and/or 'frames'")
     require_keys(spec, where, optional={"default", "frames", "aux", "description"})
     declared = spec.get("aux", [])
-    require(isinstance(declared, list) and all(isinstance(a, str) and a.isidentifier() for a in declared),
+    require(isinstance(declared, list) and all(is_name(a) for a in declared),
             f"{where}: aux: expected a list of data column names")
     symbols = variables(robot, ())
     clash = [a for a in declared if a in symbols or not is_aux_name(a)]

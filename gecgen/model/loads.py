@@ -182,8 +182,7 @@ def catalog(robot: Robot) -> LoadCatalog:
 
 def generic_poses(robot: Robot) -> np.ndarray:
     """(P, n) joint values for the rank test: deterministic, away from special postures."""
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    lo, hi = map(np.array, robot.sampling_box())
     return np.random.default_rng(SEED).uniform(lo, hi, (max(MIN_POSES, 8 * robot.n + 8), robot.n))
 
 

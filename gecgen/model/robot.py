@@ -243,6 +243,19 @@ class Robot:
                     out.setdefault(found[0], []).append(f"q{k + 1}")
         return out
 
+    def sampling_box(self) -> tuple[list[float], list[float]]:
+        """Per reading, the range generic and random poses are drawn from (m or rad): the limits within
+        one turn about zero (a continuous joint: -pi..pi), or for limits wholly outside it (190..300
+        deg) the limits, at most one turn from the lower."""
+        lo, hi = [], []
+        for j in self.joints:
+            a, b = max(j.lower, -math.pi), min(j.upper, math.pi)
+            if a >= b:
+                a, b = j.lower, min(j.upper, j.lower + 2 * math.pi)
+            lo.append(a)
+            hi.append(b)
+        return lo, hi
+
     @property
     def target_names(self) -> tuple[str, ...]:
         return tuple(self.targets)

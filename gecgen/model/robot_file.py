@@ -18,7 +18,7 @@ import sympy as sp
 
 from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
 from gecgen.model.urdf import urdf_chain
-from gecgen.model.validation import ModelError, excerpt, read_yaml, require, require_keys
+from gecgen.model.validation import ModelError, excerpt, is_name, read_yaml, require, require_keys
 
 
 def exact(value, where: str, unit_deg: bool = False) -> sp.Expr:
@@ -88,7 +88,7 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
     kind = row["type"]
     require(kind in ("R", "P"), f"{where}.type: unknown joint type {excerpt(kind)}; use R (revolute) or P (prismatic)")
     name = row.get("name", f"q{k + 1}")
-    require(isinstance(name, str) and name.isidentifier(), f"{where}.name: {excerpt(name)} is not a valid identifier")
+    require(is_name(name), f"{where}.name: {excerpt(name)} is not an ASCII identifier; rename the joint")
     theta = exact(row.get("theta", 0), f"{where}.theta", deg)
     post = (("Rz", theta), ("Tz", exact(row.get("d", 0), f"{where}.d")),
             ("Tx", exact(row["a"], f"{where}.a")), ("Rx", exact(row["alpha"], f"{where}.alpha", deg)))
@@ -107,7 +107,7 @@ def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], t
                                              f"or to '{ESTIMATE}'")
     out = {}
     for name, xyz in spec.items():
-        require(isinstance(name, str) and name.isidentifier(),
+        require(is_name(name),
                 f"{where}: {excerpt(name)}: target names must be identifiers")
         out[name] = (0.0, 0.0, 0.0) if xyz == ESTIMATE else tuple(float(v) for v in _vector(xyz, f"{where}.{name}"))
     return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
@@ -200,7 +200,9 @@ def _check_joint_names(joints, place):
     seen: dict[str, int] = {}
     for k, joint in enumerate(joints):
         name = joint.name
-        if re.fullmatch(r"q\d+", name) and name != f"q{k + 1}":
+        if not is_name(name):
+            why = "is not an ASCII identifier (terms and the generated code name joints by it)"
+        elif re.fullmatch(r"q\d+", name) and name != f"q{k + 1}":
             why = f"is spelled like a joint variable but names joint {k + 1} (its own is q{k + 1})"
         elif name in WRENCH:
             why = "is a wrench component (fx fy fz mx my mz)"
@@ -236,7 +238,7 @@ def _branch_specs(spec: dict, where: str, urdf: bool) -> list[tuple[str, dict, s
     out = []
     for name, b in branches.items():
         bwhere = f"{where}: branches.{excerpt(str(name))}"
-        require(isinstance(name, str) and name.isidentifier(), f"{bwhere}: branch names must be identifiers")
+        require(is_name(name), f"{bwhere}: branch names must be identifiers")
         require(isinstance(b, dict), f"{bwhere}: expected a mapping with {tip}, tool and targets")
         require_keys(b, bwhere, required={tip, "targets"}, optional={"tool"})
         require(isinstance(b[tip], str), f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}")
@@ -316,7 +318,7 @@ def load_robot(path: str | Path) -> Robot:
     require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
     deg = unit == "deg"
     name = spec["name"]
-    require(isinstance(name, str) and name.isidentifier(),
+    require(is_name(name),
             f"{where}: name: {excerpt(name)} must be an identifier (it names C functions)")
     hashes = {path.name: file_hash(path)}
     base = _transform(spec.get("base"), f"{where}: base", deg)

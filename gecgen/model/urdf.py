@@ -79,7 +79,7 @@ def _axis(joint: ET.Element, where: str) -> tuple:
     """The unit joint axis; components that are exactly 0 or +-1 stay exact so the chain prunes them."""
     el = joint.find("axis")
     axis = _triple(None if el is None else el.get("xyz"), "1 0 0", f"{where} axis xyz")
-    norm = math.sqrt(sum(a * a for a in axis))
+    norm = math.hypot(*axis)  # no overflow: an axis of 1e200 1e200 0 is a direction like any other
     require(norm > 0, f"{where}: axis must not be zero; give the direction of motion")
     unit = [a / norm for a in axis]
     return tuple(sp.Integer(int(u)) if u in (-1.0, 0.0, 1.0) else sp.Float(u, 17) for u in unit)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import codecs
+import re
 import reprlib
 from pathlib import Path
 
@@ -17,6 +18,12 @@ EXCERPT = 60
 
 class ModelError(ValueError):
     """Bad input: the message is one line naming the file, key or row, and the fix."""
+
+
+def is_name(value) -> bool:
+    """An ASCII identifier: a name in a file that becomes a variable of the terms and of the generated
+    code. Python reads a full-width `ｑ3` as `q3` (NFKC), so a non-ASCII name could alias another."""
+    return isinstance(value, str) and value.isascii() and value.isidentifier()
 
 
 def require(condition, message: str):
@@ -92,6 +99,26 @@ class _Loader(yaml.SafeLoader):
                     [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) else [])
         self.sizes[id(node)] = 1 + sum(self.sizes[id(c)] for c in children)
         return node
+
+    def construct_mapping(self, node, deep=False):
+        """A mapping whose keys are unique: YAML would keep the last of two `angle_unit`s, silently."""
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                if isinstance(key, (str, int, float, bool)) or key is None:
+                    require(key not in seen, f"{self.where}: line {key_node.start_mark.line + 1}: key {excerpt(key)} "
+                                             f"appears twice in one mapping; keep one")
+                    seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+# YAML 1.1 reads 5e-2 (no decimal point) as a string; numbers are numbers however they are written
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+                              list("-+0123456789."))
 
 
 def read_yaml(path: Path, what: str):

@@ -199,7 +199,9 @@ def _registration(d, where: str) -> Registration:
             f"{where}: registration.rotation is not a proper rotation (3 x 3 finite numbers with R^T R = I within "
             f"{ROTATION_TOL:g} and det +1); {fix}")
     require(t is not None, f"{where}: registration.translation: expected three finite numbers (m); {fix}")
-    return Registration(R, t, bool(d["applied"]))
+    require(isinstance(d["applied"], bool), f"{where}: registration.applied: {json.dumps(d['applied'])} is not true "
+                                            f"or false; {fix}")
+    return Registration(R, t, d["applied"])
 
 
 def load(path: str | Path) -> Calibration:
@@ -216,8 +218,12 @@ def load(path: str | Path) -> Calibration:
     for key in REQUIRED:
         require(key in d, f"{where}: missing key '{key}'; not a gecgen calibration file")
     robot = _targets(_robot(d, path), d.get("targets"), where, d.get("target_frames"))
-    spec = dict(d["error_model"])
-    spec["frames"] = {int(k): v for k, v in spec.get("frames", {}).items()}  # JSON keys are strings
+    spec = d["error_model"]
+    require(isinstance(spec, dict) and isinstance(spec.get("frames", {}), dict)
+            and all(str(k).isdigit() for k in spec.get("frames", {})),
+            f"{where}: error_model: expected an object with default and frames (frame number -> terms); the file was "
+            f"edited: identify again")
+    spec = {**spec, "frames": {int(k): v for k, v in spec.get("frames", {}).items()}}  # JSON keys are strings
     model = error_model_from_dict(spec, robot, f"{where}: error_model")
     names = model.coefficient_names(robot)
     entries = d["coefficients"]
@@ -230,6 +236,8 @@ def load(path: str | Path) -> Calibration:
                                      f"a finite number; {fix}")
         require(x["std"] is None or _finite(x["std"]), f"{where}: coefficient '{x['name']}': std "
                                                        f"{json.dumps(x['std'])} is neither a finite number nor null; {fix}")
+        require(x["std"] is None or x["std"] >= 0, f"{where}: coefficient '{x['name']}': std {json.dumps(x['std'])} is "
+                                                   f"negative; {fix}")
     kept = d["kept"]
     require(isinstance(kept, list) and all(isinstance(k, int) and 0 <= k < len(names) for k in kept)
             and len(set(kept)) == len(kept), f"{where}: kept: expected distinct coefficient indices; {fix}")
@@ -238,6 +246,10 @@ def load(path: str | Path) -> Calibration:
                              f"coefficients) of finite numbers; {fix}")
     c = np.array([x["value"] for x in entries], dtype=float)
     std = np.array([np.nan if x["std"] is None else x["std"] for x in entries], dtype=float)
+    ranges = d.get("training_ranges") or {}
+    require(isinstance(ranges, dict) and all(_finite_array(v, (2,)) is not None and v[0] <= v[1]
+                                             for v in ranges.values()),
+            f"{where}: training_ranges: expected each input's [lowest, highest] value as two finite numbers; {fix}")
     report = {k: v for k, v in d.items() if k not in NOT_REPORT}
     return Calibration(robot, model, c, std, tuple(kept), cov, _registration(d["registration"], where), report,
                        _registrations(d.get("registrations"), where))

@@ -200,8 +200,7 @@ def merged_into(A: np.ndarray, kept: list[int], dependent: list[int], names) -> 
 
 def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Generator):
     """Random poses within the limits (continuous joints within +-pi), wrench and aux values."""
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    lo, hi = map(np.array, robot.sampling_box())
     q = rng.uniform(lo, hi, (n_poses, robot.n))
     w = np.column_stack([rng.normal(0, 100, (n_poses, 3)), rng.normal(0, 20, (n_poses, 3))])
     return q, w, rng.normal(0, 1, (n_poses, n_aux))

@@ -29,8 +29,7 @@ class Design:
 
 
 def _limits(robot: Robot):
-    lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
-    hi = np.array([min(j.upper, np.pi) for j in robot.joints])
+    lo, hi = map(np.array, robot.sampling_box())
     return lo, hi
 
 
