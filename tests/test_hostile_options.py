@@ -6,7 +6,6 @@ import argparse
 import contextlib
 import io
 
-import numpy as np
 import pytest
 from conftest import ROBOTS, ROOT
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, add_orientation_length, number, progress_status, whole
+from gecgen.cli.common import MAX_SEED, add_orientation_length, progress_status, whole
 from gecgen.loop.calibrate import NAMES
 
 
@@ -18,7 +18,7 @@ def add_parser(command):
     p.add_argument("train", help="training measurement CSV: the model is chosen and fitted on it alone")
     held = p.add_mutually_exclusive_group()
     held.add_argument("--val", help="validation measurement CSV, scored after the choice (never used to choose)")
-    held.add_argument("--holdout", type=number(0, 1, above=True), help="share of TRAIN's poses to hold out for validation instead "
+    held.add_argument("--holdout", type=float, help="share of TRAIN's poses to hold out for validation instead "
                                                     "(split by pose, seeded by --seed), e.g. 0.2")
     p.add_argument("--register", action="store_true",
                    help="--val was measured from another tracker stationing: fit its frame (the calibration's "

@@ -8,6 +8,7 @@ columns once `target x y z` are filled in.
 """
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -28,7 +29,7 @@ def add_parser(command):
     p = command("design", run, "choose the poses to measure (optimal experiment design)")
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
-    p.add_argument("--poses", type=whole(1, MAX_POSES), required=True, help="number of poses to choose")
+    p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
     p.add_argument("--candidates", type=whole(1, MAX_POSES), help=f"uniform samples within the joint limits to choose from "
                                                   f"(default {DEFAULT_CANDIDATES})")
@@ -51,7 +52,7 @@ def add_parser(command):
                    help="D: maximise log det of the information (the coefficients' joint confidence region); I: "
                         "minimise the mean predicted variance of the measured positions over the candidates "
                         "(default %(default)s)")
-    p.add_argument("--noise-mm", type=number(0, above=True), default=1e3 * D.NOISE_M,
+    p.add_argument("--noise-mm", type=float, default=1e3 * D.NOISE_M,
                    help="measurement noise per coordinate (mm) for the predicted uncertainty (default %(default)s)")
 
 
@@ -93,8 +94,9 @@ def _targets(args, robot, given) -> np.ndarray:
 def run(args) -> dict:
     from gecgen.runtime.compiled import CompiledModel
 
-    require(args.poses >= 1, f"--poses {args.poses}: give at least 1 pose to design")
-    require(args.noise_mm > 0, f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
+    require(1 <= args.poses <= MAX_POSES, f"--poses {args.poses}: give at least 1 pose to design (at most {MAX_POSES:,})")
+    require(math.isfinite(args.noise_mm) and args.noise_mm > 0,
+            f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
     require((args.tracker is None) == (args.max_incidence_deg is None),
             "--tracker and --max-incidence-deg go together: give the tracker position x,y,z (m) and the "
             "reflector's largest incidence angle (deg)")

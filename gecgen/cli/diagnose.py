@@ -15,7 +15,7 @@ def add_parser(command):
     p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")
     held = p.add_mutually_exclusive_group()
     held.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
-    held.add_argument("--holdout", type=number(0, 1, above=True), help="share of DATA's poses to hold out for the report instead, split "
+    held.add_argument("--holdout", type=float, help="share of DATA's poses to hold out for the report instead, split "
                                                     "by pose (seeded by --seed); default without --val: 0.2")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the hold-out split and of the cross-validation folds "
                                                        "(default %(default)s)")

@@ -200,8 +200,8 @@ def _check_joint_names(joints, place):
     seen: dict[str, int] = {}
     for k, joint in enumerate(joints):
         name = joint.name
-        if not is_name(name):
-            why = "is not an ASCII identifier (terms and the generated code name joints by it)"
+        if name.isidentifier() and not name.isascii():
+            why = "is not ASCII: the terms read a full-width or accented name as another (NFKC: 'ｑ3' is 'q3')"
         elif re.fullmatch(r"q\d+", name) and name != f"q{k + 1}":
             why = f"is spelled like a joint variable but names joint {k + 1} (its own is q{k + 1})"
         elif name in WRENCH:
