@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <string.h>
 
 #define NQ INDUSTRIAL6R_NQ
@@ -1574,12 +1575,22 @@ static int newton_step(const double *Jq, const double *r, double *dq)
     return 1;
 }
 
+/* 1 when x is neither infinite nor NaN, read from its bits (IEEE 754: the exponent not all ones):
+ * under -ffast-math (-ffinite-math-only) a compiler may assume isfinite() true and drop it, and a
+ * NaN joint would be reported GECGEN_OK. */
+static int finite_bits(double x)
+{
+    uint64_t u;
+    memcpy(&u, &x, sizeof u);
+    return ((u >> 52) & 0x7ff) != 0x7ff;
+}
+
 /* 1 when all n entries of a are finite (a may be NULL when n is 0). */
 static int all_finite(const double *a, int n)
 {
     int k;
     for (k = 0; k < n; ++k)
-        if (!isfinite(a[k])) return 0;
+        if (!finite_bits(a[k])) return 0;
     return 1;
 }
 
@@ -1599,7 +1610,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
     if (!all_finite(q_cmd, NQ) || !all_finite(w, 6) || !all_finite(aux, NAUX) || !all_finite(c, NC)
-        || !isfinite(tol) || !(tol > 0.0) || max_iter < 0)
+        || !finite_bits(tol) || !(tol > 0.0) || max_iter < 0)
         return nonfinite(q_cmd, q_out, iterations, 0);
     industrial6r_fk(q_cmd, Tn);
     /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
@@ -1607,7 +1618,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
     industrial6r_loads(q_cmd, w, L);
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
     norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
-    for (it = 0; isfinite(norm) && norm > tol; ++it) {
+    for (it = 0; finite_bits(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
         if (it == max_iter) {
             if (iterations) *iterations = it;
@@ -1625,7 +1636,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
         }
         if (!(norm_try < norm)) {
             /* even the shortest trial overflowed (a step of NaN or inf): no convergence problem */
-            if (!isfinite(norm_try)) return nonfinite(q_cmd, q_out, iterations, it);
+            if (!finite_bits(norm_try)) return nonfinite(q_cmd, q_out, iterations, it);
             if (iterations) *iterations = it;
             return GECGEN_NOT_CONVERGED;
         }
@@ -1634,7 +1645,7 @@ int industrial6r_compensate(const double *q_cmd, const double *w, const double *
         memcpy(Jq, J_try, sizeof(J_try));
         norm = norm_try;
     }
-    if (!isfinite(norm) || !all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, iterations, it);
+    if (!finite_bits(norm) || !all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, iterations, it);
     if (iterations) *iterations = it;
     for (j = 0; j < NQ; ++j)
         if (q_out[j] < industrial6r_q_min[j] || q_out[j] > industrial6r_q_max[j]) return GECGEN_OUTSIDE_LIMITS;
