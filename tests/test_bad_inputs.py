@@ -322,3 +322,22 @@ def test_a_tracker_frame_is_not_fitted_to_points_that_cannot_fix_it(tmp_path, ca
         assert "too little to fix a tracker frame" in err, err
         assert main(["identify", robot, str(tmp_path / name), "--register", "always", "-o", str(tmp_path / "d.json")]) == 2
         assert "registration needs measured points spread at least 10 mm" in capsys.readouterr().err
+
+
+def test_orientations_in_the_wrong_unit_fail_the_fit(tmp_path, capsys):
+    """figaroh's UR10 poses imported with their angles called degrees (they are radians): the fit
+    left 8.42 mm where the nominal model left 3.50 mm, and exited 0; now it is not a calibration."""
+    from gecgen.cli import main
+
+    data = ROBOTS.parent / "tests" / "data" / "ur10"
+    write(tmp_path, "ur10_robot.urdf", (data / "ur10_robot.urdf").read_text())
+    robot = write(tmp_path, "ur10.yaml", "name: ur10\nangle_unit: rad\nurdf: ur10_robot.urdf\nbase_link: base_link\n"
+                                         "tip_link: wrist_3_link\ntool: {origin: [0.0, -0.12, 0.0], rpy: [-0.5, 0, 0]}\n"
+                                         "targets:\n  probe: estimate\n")
+    mapping = write(tmp_path, "map.yaml", edit((data / "calibration.mapping.yaml").read_text(), "unit: rad", "unit: deg"))
+    assert main(["import", str(robot), str(data / "calibration.csv"), "--mapping", str(mapping),
+                 "-o", str(tmp_path / "poses.csv")]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(robot), str(tmp_path / "poses.csv"), "-o", str(tmp_path / "c.json")]) == 1
+    err = capsys.readouterr().err
+    assert "the fit leaves more position error than the nominal model" in err and not (tmp_path / "c.json").exists()

@@ -529,6 +529,15 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                      f"may lack an effect (run diagnose) or the data mixes set-ups")
     inliers = e <= limit
     train_inliers = summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot)
+    train = summary(pos, rot)
+    if train["rms_mm"] > before["rms_mm"]:
+        failures.append(f"the fit leaves more position error than the nominal model ({train['rms_mm']:.4g} mm rms "
+                        f"against {before['rms_mm']:.4g} mm): the data is not what the model describes (an "
+                        f"orientation unit or convention, the wrong robot file or targets)")
+    if train.get("rot_rms_mrad", 0.0) > 1e3 * ABSURD_ROTATION_RAD:
+        failures.append(f"the fit leaves {train['rot_rms_mrad']:.4g} mrad rms of orientation error (limit "
+                        f"{1e3 * ABSURD_ROTATION_RAD:g}): no instrument is that far off; check the orientation "
+                        f"columns' unit and convention (README, \"Pose measurements\")")
     if not train_inliers["rms_mm"] <= 1e3 * ABSURD_TRANSLATION_M:
         failures.append(f"the fit leaves {train_inliers['rms_mm'] / 1e3:.3g} m rms at the measured points (limit "
                         f"{ABSURD_TRANSLATION_M:g} m): the robot file does not describe the measured robot, or its "
@@ -536,7 +545,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     return Fit(c=c, std=std, cov=cov, redundancy=red, registration=frames[min(frames)], registrations=frames,
                sigma_m=sigma,
                condition_number=cond, observability_index=obs, iterations=it, converged=converged,
-               before=before, train=summary(pos, rot), warnings=tuple(notes), failures=tuple(failures),
+               before=before, train=train, warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
                train_inliers=train_inliers,
                ranges=_ranges(cm, data), measured_dof=m_eff)
