@@ -133,11 +133,21 @@ def kinematic_candidates(robot: Robot, model: ErrorModel, data: Measurements,
         add("payload", ["payload"], [magnitude], [force])
         for i in moving:
             add("payload x joint", ["payload", f"q{i + 1}"], [f"{magnitude}*q{i + 1}"], [force * data.q[:, i]])
+    constant = tuple(e for e, ts in enumerate(model.terms) if any(t.text == "1" for t in ts))
     for k, a in enumerate(data.aux_names):
         v = data.aux[:, k]
-        if _range(v) > 1e-12 * max(1.0, np.abs(v).max()):
-            add("auxiliary", [a], [a], [v])
-            add("auxiliary", [a], [f"{a}**2"], [v ** 2])
+        span = _range(v)
+        if not span > 1e-12 * max(1.0, np.abs(v).max()):
+            continue
+        if abs(np.mean(v)) > 10 * span:
+            # far from zero (time in Unix seconds) a signal's variation drowns in its offset, and the
+            # screen would find it inside the constant term: screened about its mean, which with the
+            # error's constant term spans what the signal itself does; its square is not offered (it
+            # differs from the centred one by more than a constant)
+            out.append(Candidate("auxiliary", (a,), (a,), (v - np.mean(v))[:, None], constant))
+            continue
+        add("auxiliary", [a], [a], [v])
+        add("auxiliary", [a], [f"{a}**2"], [v ** 2])
     return out
 
 

@@ -131,13 +131,17 @@ def preference_order(robot: Robot, model: ErrorModel, candidates: dict[int, str]
 
 
 def zero_columns(A: np.ndarray) -> np.ndarray:
-    """(nc,) True where a column of A is zero up to rounding: below ZERO_COLUMN times the largest.
+    """(nc,) True where a column of A is zero up to rounding: below ZERO_COLUMN times the median
+    of the nonzero columns.
 
     This must be decided before columns are normalised: a point on the last joint's axis cannot
     see a rotation about that axis, so that column is 1e-16 (rounding noise), and scaled to unit
-    length the noise looks like an independent direction (a coefficient of 1e11 rad follows)."""
+    length the noise looks like an independent direction (a coefficient of 1e11 rad follows). The
+    median, not the largest: one term with a huge constant (1e12*q1, time in Unix seconds squared)
+    would otherwise make every other column look like rounding."""
     norms = np.linalg.norm(A, axis=0)
-    return norms <= ZERO_COLUMN * max(float(norms.max(initial=0.0)), np.finfo(float).tiny)
+    nonzero = norms[norms > 0]
+    return norms <= ZERO_COLUMN * max(float(np.median(nonzero)) if len(nonzero) else 0.0, np.finfo(float).tiny)
 
 
 def select_independent(A: np.ndarray, order: np.ndarray, tol: float = RANK_TOL,
