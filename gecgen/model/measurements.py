@@ -32,12 +32,14 @@ MAX_AUX = 1e12
 MAX_POSE_ID = 2 ** 53
 
 
-def pose_id_column(table: Table, col: str) -> np.ndarray:
-    """A column of integer pose ids (R,); beyond 2**53 distinct ids would merge silently."""
+def pose_id_column(table: Table, col: str, what: str = "pose id",
+                   fix: str = "number the poses 0, 1, 2, ...") -> np.ndarray:
+    """A column of integer ids (R,) (pose ids; station ids with `what` and `fix`); beyond 2**53
+    distinct ids would merge silently."""
     ids = table.numbers(col)
     bad = np.nonzero((ids != np.round(ids)) | (np.abs(ids) >= MAX_POSE_ID))[0]
-    require(not len(bad), f"{at(table.where, bad[0] + 2 if len(bad) else 0, col)}: not an integer pose id within "
-                          f"+-2**53 ({excerpt(table.cells(col)[bad[0]]) if len(bad) else ''}); number the poses 0, 1, 2, ...")
+    require(not len(bad), f"{at(table.where, bad[0] + 2 if len(bad) else 0, col)}: not an integer {what} within "
+                          f"+-2**53 ({excerpt(table.cells(col)[bad[0]]) if len(bad) else ''}); {fix}")
     return ids.astype(np.int64)
 
 
@@ -163,7 +165,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
                          f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
     require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
-                         f"{xyz[mm[0]].tolist() if len(mm) else ''} look like millimetres; positions are in metres, divide by 1000")
+                         f"{xyz[mm[0]].tolist() if len(mm) else ''} are over {MM_SUSPECT:g} m from the robot: positions "
+                         f"are in metres; divide millimetres by 1000, centimetres by 100")
     pose_ids, first, pose = np.unique(ids, return_index=True, return_inverse=True)
     differs = np.argwhere(state != state[first[pose]])
     if len(differs):
@@ -172,12 +175,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
                          f"{first[pose[r]] + 2}; rows of one pose must share joints, wrench and aux")
     station = np.zeros(len(xyz), np.int64)
     if STATION in header:
-        station = table.numbers(STATION, "give the integer id of the tracker stationing")
-        bad = np.nonzero(station != np.round(station))[0]
-        require(not len(bad), f"{where}: row {bad[0] + 2 if len(bad) else 0}, column '{STATION}': "
-                              f"{table.cells(STATION)[bad[0]] if len(bad) else ''!r} is not an integer station id; "
-                              f"give every row of one tracker stationing the same integer")
-        station = station.astype(np.int64)
+        station = pose_id_column(table, STATION, "station id",
+                                 "give every row of one tracker stationing the same integer")
     ps = state[first]
     w = np.zeros((len(pose_ids), 6))
     for k, c in enumerate(wcols):

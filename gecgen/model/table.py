@@ -14,6 +14,8 @@ the fast reader does shows in a result or a message, only in the time taken.
 """
 from __future__ import annotations
 
+import collections
+
 import csv
 import io
 import math
@@ -85,7 +87,8 @@ def _check_separator(header: list[str], where: str, sep: str):
 
 
 def _check_names(header: list[str], where: str):
-    twice = [h for h in dict.fromkeys(header) if header.count(h) > 1]
+    counts = collections.Counter(header)  # linear: a header of 100,000 columns took 26 s by counting each
+    twice = [h for h in counts if counts[h] > 1]
     require(not twice, f"{where}: row 1: column {excerpt(twice[0]) if twice else ''} appears twice in the header; "
                        f"rename or remove one")
 
