@@ -208,3 +208,17 @@ def test_a_calibration_that_overflows_fails_compensate_naming_the_row(checkout, 
     assert run.returncode != 0 and run.stdout == "" and len(lines) == 1, run.stderr
     assert "cmd.csv: row 2: the correction is not finite" in lines[0]
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_library_built_for_another_machine_or_compiler_is_never_reused(puma, monkeypatch):
+    """The cache key names the toolchain: a cache copied from another architecture, or kept across a
+    compiler upgrade, builds anew instead of loading (or failing to load) the other's library."""
+    from gecgen.runtime import compiled
+
+    robot, model = puma
+    here = model_key(robot, model)
+    for other in (("aarch64", "Linux", "/usr/bin/cc", "cc 12"), ("x86_64", "Linux", "/usr/bin/cc", "cc 99")):
+        monkeypatch.setattr(compiled, "toolchain", lambda: other)
+        assert model_key(robot, model) != here
+    monkeypatch.undo()
+    assert model_key(robot, model) == here

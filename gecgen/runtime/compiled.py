@@ -16,6 +16,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -73,18 +74,32 @@ def _emitter_hash() -> str:
     """Hash of the code that decides what is generated: a change to it invalidates the cache."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    model = [root / "model" / f for f in ("errors.py", "robot.py", "urdf.py", "loads.py", "kinematics.py")]
+    model = [root / "model" / f for f in ("errors.py", "robot.py", "robot_file.py", "urdf.py", "loads.py",
+                                          "kinematics.py")]
     for path in sorted([*root.glob("symbolic/*.py"), *root.glob("emit/**/*.py"), *root.glob("emit/**/*.j2"), *model]):
         h.update(path.read_bytes())
     return h.hexdigest()
 
 
+@functools.lru_cache(maxsize=None)
+def toolchain() -> tuple[str, ...]:
+    """What a compiled library is for: the machine, the system and the compiler (its path and the
+    first line of its --version). A cache shared between machines, or kept across a compiler
+    upgrade, then never hands over a library built for another."""
+    cc = compiler() or ""
+    try:
+        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.SubprocessError):
+        version = ""
+    return platform.machine(), platform.system(), cc, (version.splitlines() or [""])[0]
+
+
 def model_key(robot: Robot, model: ErrorModel) -> str:
-    """Cache key of the generated code for a robot and error model (content, not file names). The
-    targets are content beyond the files: a derived robot (the virtual targets of pose
-    measurements) has the files of the robot it derives from."""
-    spec = json.dumps([robot.source_hashes, robot.targets, model.to_yaml_dict(robot), CFLAGS, _emitter_hash()],
-                      sort_keys=True)
+    """Cache key of the generated code for a robot and error model (content, not file names) on this
+    toolchain. The targets are content beyond the files: a derived robot (the virtual targets of
+    pose measurements) has the files of the robot it derives from."""
+    spec = json.dumps([robot.source_hashes, robot.targets, model.to_yaml_dict(robot), CFLAGS, _emitter_hash(),
+                       toolchain()], sort_keys=True)
     return hashlib.sha256(spec.encode()).hexdigest()[:24]
 
 
