@@ -370,8 +370,19 @@ class Calibrator:
         cm = self._model()
         model = self.calibration_.model
         check_terms_finite(model, cm.robot, Commands(q, w, aux, model.aux, [], [], "q"), cm.load_signals)
+        self._sound(cm, q, w, aux)
         self._extrapolation(q, w, aux)
         return cm.model_targets(q, w, aux, self.calibration_.c)
+
+    def _sound(self, cm, q, w, aux):
+        """Refuse (RuntimeError) to apply generalized errors no real robot has at these poses: an edited
+        file (a coefficient of 1e300) or a calibration of another robot."""
+        from gecgen.runtime.identify import absurd_error
+
+        absurd = absurd_error(cm, q, w, aux, self.calibration_.c)
+        if absurd:
+            raise RuntimeError(f"the calibration's {absurd} at these poses: no real robot is that far from its model; "
+                               f"the file was edited or belongs to another robot: identify again")
 
     def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50, branch: str | None = None) -> Compensation:
         """Corrected joint commands: the joint values that put the calibrated robot where the nominal
@@ -393,6 +404,7 @@ class Calibrator:
             q, w, aux = self._inputs(q_cmd, w, aux, "q_cmd")
             cmds, row = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd"), (lambda k: f"q_cmd: row {k} (0-based)")
         cm = checked(calib.model, calib.robot, cmds)
+        self._sound(cm, cmds.q, cmds.w, cmds.aux)
         q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter, branch=index)
         failed = np.nonzero(np.isin(status, FAILED))[0]
         if len(failed):
@@ -420,6 +432,7 @@ class Calibrator:
             length = calib.report.get("orientation_length_m")
         robot, data = on_points(calib.robot, _length(length), data)
         cm = checked(calib.model, robot, data)
+        self._sound(cm, data.q, data.w, data.aux_columns(calib.model.aux))
         outside = self._extrapolation(data.q, data.w, data.aux_columns(calib.model.aux))
         moved = None
         if register:

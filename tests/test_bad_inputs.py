@@ -216,6 +216,9 @@ IN_PROCESS = {
         lambda t: ["identify", pps(t), write(t, "data.csv", ",".join([*HEADER.split(","), *(f"a{k}" for k in range(99_988)),
                                                                       "a7"]) + "\n")],
         "data.csv", "column 'a7' appears twice in the header"),
+    "calibration: a coefficient of 1e300": (
+        lambda t: ["evaluate", edited(t, lambda d: d["coefficients"][0].update(value=1e300)), write(t, "data.csv", table())],
+        "reaches 1e+300 m", "the file was edited or belongs to another robot"),
     "calibration: error_model a string": (lambda t: ["evaluate", edited(t, lambda d: d.update(error_model="x")),
                                                      write(t, "data.csv", table())],
                                           "calib.json", "error_model: expected an object with default and frames"),

@@ -347,15 +347,24 @@ def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.
         out.append(f"coefficient {names[bad[0]]} has no finite uncertainty ({len(bad)} such); the data cannot "
                    f"determine it: check the redundancy analysis, measure poses that move it or drop its term")
         return out
-    eps = np.abs(cm.eps(data.q, data.w, data.aux_columns(cm.model.aux), c)).max(axis=0)
-    limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n_frames + 1)
-    if np.any(eps > limit):
-        e = int(np.argmax(eps / limit))
-        unit = "m" if e % 6 < 3 else "rad"
-        out.append(f"generalized error {cm.robot.error_names()[e]} reaches {eps[e]:.3g} {unit} at a measured pose "
-                   f"(limit {limit[e]:g} {unit}): no real robot is that far from its model; the data cannot hold "
+    absurd = absurd_error(cm, data.q, data.w, data.aux_columns(cm.model.aux), c)
+    if absurd:
+        out.append(f"{absurd} at a measured pose: no real robot is that far from its model; the data cannot hold "
                    f"its coefficients (see their std) or the robot file does not describe this robot")
     return out
+
+
+def absurd_error(cm: CompiledModel, q: np.ndarray, w: np.ndarray, aux: np.ndarray, c: np.ndarray) -> str | None:
+    """The largest generalized error at poses q (P, n), w, aux beyond ABSURD_TRANSLATION_M or
+    ABSURD_ROTATION_RAD ("generalized error 3.ey reaches 2.1 m (limit 0.5 m)"), or None."""
+    eps = np.abs(cm.eps(q, w, aux, c))
+    eps = np.where(np.isfinite(eps), eps, np.inf).max(axis=0)
+    limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n_frames + 1)
+    if not np.any(eps > limit):
+        return None
+    e = int(np.argmax(eps / limit))
+    unit = "m" if e % 6 < 3 else "rad"
+    return f"generalized error {cm.robot.error_names()[e]} reaches {eps[e]:.3g} {unit} (limit {limit[e]:g} {unit})"
 
 
 def _ranges(cm: CompiledModel, data: Measurements) -> dict[str, list[float]]:
