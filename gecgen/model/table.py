@@ -240,6 +240,21 @@ _BLANK_END = re.compile(rb"(?:\r?\n[ \t\r]*)+\Z")
 SMALL_BYTES = 1_000_000
 
 
+def _check_line_lengths(data: bytes, where: str, sep: str):
+    """Refuse, before any parsing, a line longer than a valid row can be (every field of the header's
+    count at MAX_CELL characters): a 700 MB cell once took 7 GB to refuse."""
+    raw = np.frombuffer(data, np.uint8)
+    ends = np.flatnonzero(raw == ord("\n"))
+    if not len(ends):
+        return
+    lengths = np.diff(np.append(ends, len(raw)), prepend=-1) - 1
+    fields = data[:ends[0]].count(sep.encode()) + 1
+    longest = (MAX_CELL + 1) * fields * 4  # a character is at most 4 bytes of UTF-8
+    over = np.flatnonzero(lengths > longest)
+    require(not len(over), f"{where}: row {over[0] + 1 if len(over) else 0}: {lengths[over[0]] if len(over) else 0} bytes, "
+                           f"more than {fields} cells of at most {MAX_CELL} characters can hold: fix the file")
+
+
 def read_table(path, what: str, expect: str, text: Collection[str] = (), verbatim: bool = False,
                sep: str = ",", decimal: str = ".") -> Table:
     """Read a CSV, given by its path or as a pandas DataFrame with the file's columns (`_source`).
@@ -256,6 +271,7 @@ def read_table(path, what: str, expect: str, text: Collection[str] = (), verbati
     # blank lines after the last row end the file (spreadsheets and tracker software write them);
     # a blank line between rows is refused below
     data = _BLANK_END.sub(b"\n", data)
+    _check_line_lengths(data, where, sep)
     # below SMALL_BYTES the csv module is done before pandas would even be imported (0.25 s): the
     # two readers give the same arrays and messages, so the choice is speed alone
     small = len(data) < SMALL_BYTES and "pandas" not in sys.modules
