@@ -1,8 +1,11 @@
-"""Robot files: kinematics, targets and wrench frame of one robot (CONTRACTS.md section 1).
+"""The robot: kinematics, targets and wrench frame of one robot (CONTRACTS.md section 1).
 
-A robot is a serial chain of frames 0..m. Frame 0 is the base; frame i sits after link i:
+A robot is a chain, or a tree, of frames 0..m. Frame 0 is the base; frame i sits after link i and
+hangs from frame p(i) (i - 1 on a chain; on a tree the frame its branch leaves from):
 
-    W_0 = base * E_0,      W_i = W_{i-1} * pre_i * M_i(v_i) * post_i * E_i,      tool = W_m * T_tool
+    W_0 = base * E_0,    W_i = W_p(i) * pre_i * M_i(v_i) * post_i * E_i,    tool_b = W_tip(b) * T_tool(b)
+
+(one tool, after frame m, on a chain; one per branch b on a tree).
 
 `M_i` is the joint motion (rotation about, or translation along, the unit `axis`), `pre_i` and
 `post_i` are constant transforms and `E_i` the six generalized errors of frame i. The joint
