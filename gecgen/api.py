@@ -375,8 +375,9 @@ class Calibrator:
         return cm.model_targets(q, w, aux, self.calibration_.c)
 
     def _sound(self, cm, q, w, aux):
-        """Refuse (RuntimeError) to apply generalized errors no real robot has at these poses: an edited
-        file (a coefficient of 1e300) or a calibration of another robot."""
+        """Refuse (RuntimeError) to score or predict with generalized errors no real robot has at these
+        poses: an edited file (a coefficient of 1e300) or a calibration of another robot. (compensate
+        names the rows whose correction overflows or fails instead.)"""
         from gecgen.runtime.identify import absurd_error
 
         absurd = absurd_error(cm, q, w, aux, self.calibration_.c)
@@ -404,7 +405,6 @@ class Calibrator:
             q, w, aux = self._inputs(q_cmd, w, aux, "q_cmd")
             cmds, row = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd"), (lambda k: f"q_cmd: row {k} (0-based)")
         cm = checked(calib.model, calib.robot, cmds)
-        self._sound(cm, cmds.q, cmds.w, cmds.aux)
         q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter, branch=index)
         failed = np.nonzero(np.isin(status, FAILED))[0]
         if len(failed):
