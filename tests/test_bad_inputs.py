@@ -3,7 +3,6 @@ hang, nothing dropped or guessed. Every case is a shipped file (robots/pps.yaml,
 its URDF, robots/tiago.import.yaml) or a small valid table with one defect, run through the command line."""
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -258,14 +257,12 @@ def test_bad_input_is_refused_in_one_line_in_process(tmp_path, case, monkeypatch
 def test_bad_input_is_refused_in_one_short_line(tmp_path, case):
     make_args, filename, phrase = CASES[case]
     args = [str(a) for a in make_args(tmp_path)]
-    start = time.perf_counter()
+    # a hang (an alias bomb expanding, a quadratic check) ends in the timeout; speed lives in benchmarks/
     run = subprocess.run([sys.executable, "-m", "gecgen.cli", *args, "--json"], capture_output=True, text=True,
                          cwd=tmp_path, timeout=60)
-    seconds = time.perf_counter() - start
     lines = run.stderr.splitlines()
     assert run.returncode != 0 and run.stdout == "" and len(lines) == 1, run.stderr[-2000:]
     assert filename in lines[0] and phrase in lines[0] and len(lines[0]) < 300, lines[0]
-    assert seconds < 10, f"{seconds:.1f} s"
 
 
 def test_a_byte_order_mark_and_modest_aliases_are_accepted(tmp_path):
