@@ -261,7 +261,7 @@ def test_a_branch_is_compensated_by_its_own_joints(talos, tmp_path):
         assert before.max() > 1.0 and after.max() < 0.1, (branch, before.max(), after.max())
 
 
-def test_export_of_a_tree(talos, tmp_path):
+def test_export_of_a_tree(talos, tmp_path, capsys):
     """--c: the example program compensates the first branch and builds with -Werror; --table lists every
     joint; --urdf (one chain's folding) is refused by name."""
     import json
@@ -276,20 +276,17 @@ def test_export_of_a_tree(talos, tmp_path):
     assert main(["identify", str(DATA / "talos.yaml"), str(data), "--errors", str(ROOT / "robots" / "constant.errors.yaml"),
                  "-o", str(tmp_path / "c.json")]) == 0
     out = tmp_path / "ex.json"
-    code = subprocess.run(["gecgen", "export", str(tmp_path / "c.json"), "--c", str(tmp_path / "ctrl"), "--table",
-                           "--json"], capture_output=True, text=True)
-    assert code.returncode == 0, code.stderr
-    out.write_text(code.stdout)
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "c.json"), "--c", str(tmp_path / "ctrl"), "--table", "--json"]) == 0
+    out.write_text(capsys.readouterr().out)
     assert [r["joint"] for r in json.loads(out.read_text())["table"]["zero_offsets"]] == list(talos.joint_names)
     ctrl = tmp_path / "ctrl"
     subprocess.run([compiler(), "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(ctrl / "ex"),
                     str(ctrl / "talos_example.c"), str(ctrl / "talos.c"), "-lm"], check=True)
     assert subprocess.run([str(ctrl / "ex")], capture_output=True, text=True).returncode == 0
     # --urdf folds every branch's errors: pinocchio on the copy puts each hand's tool where the calibration does
-    code = subprocess.run(["gecgen", "export", str(tmp_path / "c.json"), "--urdf", str(tmp_path / "x.urdf"), "--json"],
-                          capture_output=True, text=True)
-    assert code.returncode == 0, code.stderr
-    tips = json.loads(code.stdout)["urdf"]["tip_links"]
+    assert main(["export", str(tmp_path / "c.json"), "--urdf", str(tmp_path / "x.urdf"), "--json"]) == 0
+    tips = json.loads(capsys.readouterr().out)["urdf"]["tip_links"]
     assert tips == {"left": "arm_left_7_link_calibrated", "right": "arm_right_7_link_calibrated"}
     from gecgen.runtime.calibration import load as load_calibration
     from gecgen.runtime.export import constant_errors
@@ -304,9 +301,8 @@ def test_export_of_a_tree(talos, tmp_path):
         for k, tip in enumerate(tips.values()):
             np.testing.assert_allclose(pdata.oMf[model.getFrameId(tip)].homogeneous, tools[k][0], atol=1e-12)
     # evaluate scores each hand apart; the points of both make the whole (1 left, 2 right per pose)
-    code = subprocess.run(["gecgen", "evaluate", str(tmp_path / "c.json"), str(data), "--json"], capture_output=True,
-                          text=True)
-    result = json.loads(code.stdout)
+    assert main(["evaluate", str(tmp_path / "c.json"), str(data), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
     hands = result["branches"]
     assert set(hands) == {"left", "right"} and hands["left"]["after"]["rms_mm"] < hands["left"]["before"]["rms_mm"]
     whole = np.sqrt((hands["left"]["after"]["rms_mm"] ** 2 + 2 * hands["right"]["after"]["rms_mm"] ** 2) / 3)
