@@ -221,7 +221,7 @@ def _floats(values, what: str, wanted: str) -> np.ndarray:
 
 
 def branch_index(robot: Robot, branch: str | None) -> int:
-    """The index of the named branch; None on a serial robot."""
+    """The index of the named branch: 0 on a serial robot, whose `branch` must be None."""
     names = [b.name for b in robot.branches]
     if not names:
         require(branch is None, f"branch={excerpt(branch)}: robot {robot.name} is a serial chain with one tool; "

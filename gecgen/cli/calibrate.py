@@ -28,8 +28,8 @@ def add_parser(command):
     p.add_argument("--models", default=",".join(NAMES),
                    help="comma-separated candidates to choose among (default: %(default)s; those that do not apply "
                         "to the robot and data are skipped)")
-    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the cross-validation folds and of --holdout "
-                                                       "(default %(default)s)")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
+                   help="seed of the cross-validation folds and of --holdout (default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="folder for calibration.json, errors.yaml, report.md, "
                                                          "report.html and generated/ (the C and CasADi code, "
                                                          "NAME_calibration.h with the coefficients, NAME_example.c)")

@@ -84,9 +84,9 @@ def number(low: float = -math.inf, high: float = math.inf, above: bool = False):
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
         inside = (value > low if above else value >= low) and value <= high
         if not (math.isfinite(value) and inside):
-            bound = f"{'above' if above else 'at least'} {low:g}" + (f" and at most {high:g}" if high < math.inf else "")
-            raise argparse.ArgumentTypeError(f"{text!r}: give a finite number {bound}" if low > -math.inf
-                                             else f"{text!r}: give a finite number")
+            wanted = [f"{'above' if above else 'at least'} {low:g}"] if low > -math.inf else []
+            wanted += [f"at most {high:g}"] if high < math.inf else []
+            raise argparse.ArgumentTypeError(" ".join([f"{text!r}: give a finite number", " and ".join(wanted)]).strip())
         return value
     return parse
 

@@ -13,7 +13,8 @@ def add_parser(command):
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
     p.add_argument("-o", "--output", required=True, help="CSV to write: the same rows and columns, q1..qn corrected")
-    p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50, help="Newton steps at most per command (default %(default)s)")
+    p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50,
+                   help="Newton steps at most per command (default %(default)s)")
     p.add_argument("--branch", help="on a robot with branches: the branch whose tool to place (its own joints are "
                                     "corrected, every other reading held)")
 

@@ -31,12 +31,12 @@ def add_parser(command):
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
-    p.add_argument("--candidates", type=whole(1, MAX_POSES), help=f"uniform samples within the joint limits to choose from "
-                                                  f"(default {DEFAULT_CANDIDATES})")
+    p.add_argument("--candidates", type=whole(1, MAX_POSES),
+                   help=f"uniform samples within the joint limits to choose from (default {DEFAULT_CANDIDATES})")
     p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
                                                     "aux columns) instead of uniform samples")
-    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the samples, the random comparison and the "
-                                                       "validation poses")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
+                   help="seed of the samples, the random comparison and the validation poses")
     p.add_argument("--targets", help="comma-separated targets measured at every pose (default: those of --given, "
                                      "else every target of the robot)")
     p.add_argument("--payload-kg", help="comma-separated payloads (kg) at the tool origin, as gecgen simulate: the "
@@ -45,8 +45,9 @@ def add_parser(command):
                                                           "(default: %(default)s)")
     p.add_argument("--min-z", type=number(), help="every measured target at world z >= this (m)")
     p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
-    p.add_argument("--max-incidence-deg", type=number(0, 180, above=True), help="largest angle between the line of sight to the tracker "
-                                                           "and the tool z axis (the reflector's acceptance, deg)")
+    p.add_argument("--max-incidence-deg", type=number(0, 180, above=True),
+                   help="largest angle between the line of sight to the tracker and the tool z axis (the "
+                        "reflector's acceptance, deg)")
     p.add_argument("--given", help="measurement CSV already measured: the design adds poses to its information")
     p.add_argument("--criterion", choices=list(D.CRITERIA), default=D.DEFAULT_CRITERION,
                    help="D: maximise log det of the information (the coefficients' joint confidence region); I: "
@@ -94,7 +95,8 @@ def _targets(args, robot, given) -> np.ndarray:
 def run(args) -> dict:
     from gecgen.runtime.compiled import CompiledModel
 
-    require(1 <= args.poses <= MAX_POSES, f"--poses {args.poses}: give at least 1 pose to design (at most {MAX_POSES:,})")
+    require(1 <= args.poses <= MAX_POSES,
+            f"--poses {args.poses}: give at least 1 pose to design (at most {MAX_POSES:,})")
     require(math.isfinite(args.noise_mm) and args.noise_mm > 0,
             f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
     require((args.tracker is None) == (args.max_incidence_deg is None),

@@ -17,8 +17,8 @@ def add_parser(command):
     held.add_argument("--val", help="held-out measurement CSV, for reporting only (never used to choose terms)")
     held.add_argument("--holdout", type=float, help="share of DATA's poses to hold out for the report instead, split "
                                                     "by pose (seeded by --seed); default without --val: 0.2")
-    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the hold-out split and of the cross-validation folds "
-                                                       "(default %(default)s)")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
+                   help="seed of the hold-out split and of the cross-validation folds (default %(default)s)")
     p.add_argument("-o", "--output", help="new error-model file (default: NAME.diagnosed.errors.yaml)")
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", metavar="DIR",
@@ -29,8 +29,9 @@ def add_parser(command):
                         "the --val file, measured from another stationing, before scoring it")
     p.add_argument("--max-rounds", type=whole(1, 10_000), default=50,
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
-    p.add_argument("--noise-mm", type=number(0, above=True), help="measurement noise per coordinate (mm), to say whether what "
-                                                   "remains is only noise (default: from repeated poses, if any)")
+    p.add_argument("--noise-mm", type=number(0, above=True),
+                   help="measurement noise per coordinate (mm), to say whether what remains is only noise (default: "
+                        "from repeated poses, if any)")
     add_orientation_length(p)
 
 

@@ -40,7 +40,8 @@ def run(args) -> dict:
     joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
     declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
     require(not declared, f"{args.robot}: couplings: gecgen gravity walks the URDF's own joints, not the robot file's "
-                          f"couplings of {', '.join(declared)}; use the error terms gravity_torque(J), which follow them")
+                          f"couplings of {', '.join(declared)}; use the error terms gravity_torque(J), which follow "
+                          f"them")
     mimics = {m.name: m.coupling.terms[0][0] for m in robot.chain if m.coupling and not m.coupling.own}
     for j in joints:
         followed = mimics.get(j)

@@ -23,17 +23,19 @@ def add_parser(command):
     p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
-    p.add_argument("--poses", type=whole(1, MAX_POSES), default=200, help="poses of the random design (default %(default)s)")
+    p.add_argument("--poses", type=whole(1, MAX_POSES), default=200,
+                   help="poses of the random design (default %(default)s)")
     p.add_argument("--step", type=number(0, above=True), default=0.05,
                    help="step (m or rad) of the one-at-a-time design (default %(default)s)")
     p.add_argument("--payload-kg", type=numbers(0), default=[0.0],
                    help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
-    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the poses, the truth's draws and the noise "
-                                                       "(default %(default)s)")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
+                   help="seed of the poses, the truth's draws and the noise (default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="validation CSV: with --design paper the validation half of set a; with "
                                       "--design random --val-poses new random poses of the same truth")
-    p.add_argument("--val-poses", type=whole(1, MAX_POSES), help="poses of --val-out with --design random (default: --poses)")
+    p.add_argument("--val-poses", type=whole(1, MAX_POSES),
+                   help="poses of --val-out with --design random (default: --poses)")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
     p.add_argument("--orientation", action="store_true",
                    help="also write each row's measured orientation (quat_w..quat_z, README \"Pose measurements\"), "

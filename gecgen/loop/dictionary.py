@@ -42,8 +42,8 @@ def parallel_joint_groups(robot: Robot, rng: np.random.Generator) -> list[tuple[
     lo, hi = map(np.array, robot.sampling_box())
     q = rng.uniform(lo, hi, (16, robot.n))
     W = frames(robot, q)
-    axes = [W[robot.parent(robot.frame_of(i))][:, :3, :3] @ constant(j.pre)[:3, :3] @ np.array([float(a) for a in j.axis])
-            for i, j in enumerate(robot.joints)]
+    axes = [W[robot.parent(robot.frame_of(i))][:, :3, :3] @ constant(j.pre)[:3, :3]
+            @ np.array([float(a) for a in j.axis]) for i, j in enumerate(robot.joints)]
     groups, run = [], [0]
     for i in range(1, robot.n):
         both_r = robot.joints[i].kind == robot.joints[run[-1]].kind == "R"

@@ -165,8 +165,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
                          f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
     require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
-                         f"{xyz[mm[0]].tolist() if len(mm) else ''} are over {MM_SUSPECT:g} m from the robot: positions "
-                         f"are in metres; divide millimetres by 1000, centimetres by 100")
+                         f"{xyz[mm[0]].tolist() if len(mm) else ''} are over {MM_SUSPECT:g} m from the robot: "
+                         f"positions are in metres; divide millimetres by 1000, centimetres by 100")
     pose_ids, first, pose = np.unique(ids, return_index=True, return_inverse=True)
     differs = np.argwhere(state != state[first[pose]])
     if len(differs):

@@ -167,7 +167,8 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
     values = {}
     mimics = {j.name for j in chain if j.coupling is not None and not j.coupling.declared}
     for name, text in spec.items():
-        require(name in names, f"{where}: {excerpt(name)} is not a joint on the chain; couple one of {', '.join(names)}")
+        require(name in names, f"{where}: {excerpt(name)} is not a joint on the chain; couple one of "
+                               f"{', '.join(names)}")
         require(name not in mimics, f"{where}: {excerpt(name)} is a <mimic> joint of the URDF, whose limits already "
                                     f"narrowed the joint it follows; change its <mimic> in the URDF instead")
         values[name] = _affine(text, names, f"{where}.{name}")
@@ -188,9 +189,9 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
     readings = {j.name for j in out if j.reads}
     for j in out:
         for n, _ in j.coupling.terms if j.coupling else ():
-            require(n in readings, f"{where}: joint {excerpt(j.name)} follows {excerpt(n)}, which has no reading of its "
-                                   f"own (it is coupled without naming itself); write {excerpt(j.name)}'s value in "
-                                   f"the joints the controller reads")
+            require(n in readings, f"{where}: joint {excerpt(j.name)} follows {excerpt(n)}, which has no reading "
+                                   f"of its own (it is coupled without naming itself); write {excerpt(j.name)}'s "
+                                   f"value in the joints the controller reads")
     return tuple(out)
 
 
@@ -340,7 +341,8 @@ def load_robot(path: str | Path) -> Robot:
         require(isinstance(rows, list) and rows, f"{where}: joints must be a non-empty list of DH rows")
         joints = tuple(_dh_joint(row, k, where, deg) for k, row in enumerate(rows))
         parents, tips = _dh_tree(rows, joints, branches, where)
-    tools = [trail + _transform(b.get("tool"), f"{bwhere}: tool", deg) for (_, b, bwhere), (_, trail) in zip(branches, tips)]
+    tools = [trail + _transform(b.get("tool"), f"{bwhere}: tool", deg)
+             for (_, b, bwhere), (_, trail) in zip(branches, tips)]
     joints = with_couplings(tuple(joints), spec.get("couplings"), f"{where}: couplings", deg)
     unnamed = [k for k, row in enumerate(spec.get("joints") or []) if isinstance(row, dict) and "name" not in row]
     require(all(j.reads for j in joints) or not unnamed,

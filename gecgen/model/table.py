@@ -251,8 +251,9 @@ def _check_line_lengths(data: bytes, where: str, sep: str):
     fields = data[:ends[0]].count(sep.encode()) + 1
     longest = (MAX_CELL + 1) * fields * 4  # a character is at most 4 bytes of UTF-8
     over = np.flatnonzero(lengths > longest)
-    require(not len(over), f"{where}: row {over[0] + 1 if len(over) else 0}: {lengths[over[0]] if len(over) else 0} bytes, "
-                           f"more than {fields} cells of at most {MAX_CELL} characters can hold: fix the file")
+    require(not len(over), f"{where}: row {over[0] + 1 if len(over) else 0}: "
+                           f"{lengths[over[0]] if len(over) else 0} bytes, more than {fields} cells of at most "
+                           f"{MAX_CELL} characters can hold: fix the file")
 
 
 def read_table(path, what: str, expect: str, text: Collection[str] = (), verbatim: bool = False,

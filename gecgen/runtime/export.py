@@ -160,8 +160,8 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
                       f"training ranges); see not_carried")
     reg = calib.registration.to_dict()
     branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
-    return text, {"tip_link": tips[0], **branch_tips, "changed_joints": changed, "not_carried": left, "registration_applied": False,
-                  "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
+    return text, {"tip_link": tips[0], **branch_tips, "changed_joints": changed, "not_carried": left,
+                  "registration_applied": False, "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
 
 
 # -- the table ---------------------------------------------------------------------------------------

@@ -161,7 +161,8 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     if spec.get("couplings") is not None:
         unit = spec.get("angle_unit", "rad")
         require(unit in ("deg", "rad"), f"{where}: angle_unit: {unit!r}; use deg or rad (of the couplings' numbers)")
-        built = replace(robot, chain=with_couplings(robot.chain, spec["couplings"], f"{where}: couplings", unit == "deg"))
+        built = replace(robot, chain=with_couplings(robot.chain, spec["couplings"], f"{where}: couplings",
+                                                    unit == "deg"))
         require(built.joint_names == robot.joint_names, f"{where}: couplings: the robot as built must read the same "
                                                         f"joints as {robot.source or 'the robot file'} "
                                                         f"({', '.join(robot.joint_names)}); keep each joint's own name "

@@ -231,6 +231,6 @@ def tool_jacobian_function(robot: Robot, branch: int = 0) -> Function:
             for r, x in enumerate((*v, *w)):
                 Jq[r][i] = x if joint.coupling is None and Jq[r][i] == 0 else b.let(Jq[r][i] + mult * x)
     out = [e for i in range(3) for e in (*T.R[i], T.p[i])] + [0, 0, 0, 1]
-    return b.function("tool_jacobian" + _suffix(robot, branch), "Tool pose T (4x4 row-major) with errors eps and its geometric "
-                      "Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},
+    return b.function("tool_jacobian" + _suffix(robot, branch), "Tool pose T (4x4 row-major) with errors eps and "
+                      "its geometric Jacobian Jq = [v; w] (6 x n row-major) in the joints.", {"q": q, "eps": eps},
                       {"T": out, "Jq": [x for row in Jq for x in row]})
