@@ -290,7 +290,7 @@ class Calibrator:
             options.update(chosen)
         fit = identify(cm, data, registration_mode=register, progress=progress, **options)
         if fit.failures:
-            raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {fit.failures[0]}")
+            raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {'; '.join(fit.failures)}")
         calib = _calibration.from_fit(robot, model, fit)
         calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
         if robot.branches:

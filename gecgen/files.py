@@ -6,6 +6,8 @@ nothing of gecgen but the error type.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import secrets
 from pathlib import Path
@@ -13,11 +15,33 @@ from pathlib import Path
 from gecgen.model.validation import ModelError
 
 
+#: the files the running command reads (`reading`): no output may replace one of them
+_INPUTS: contextvars.ContextVar[tuple[str, ...]] = contextvars.ContextVar("gecgen_inputs", default=())
+
+
+@contextlib.contextmanager
+def reading(paths):
+    """While the block runs, `write_atomically` refuses to replace any of the files `paths`: the
+    inputs of the running command. A named output file is checked before the work
+    (`check_output_file`); the files written into an output folder are known only as they are
+    written, and this catches one that would land on an input."""
+    token = _INPUTS.set(tuple(str(p) for p in paths))
+    try:
+        yield
+    finally:
+        _INPUTS.reset(token)
+
+
 def write_atomically(path: str | Path, data: bytes | str) -> Path:
     """Write `data` (text is UTF-8) to path through a uniquely named temporary file in the same
     folder and a rename, creating the folder if needed: a reader, a parallel process or a crash
-    never sees a half-written file, only the old one or the new one. Returns the path."""
+    never sees a half-written file, only the old one or the new one. Returns the path. A file the
+    running command reads (`reading`) is refused, not replaced."""
     path = Path(path)
+    for source in _INPUTS.get():
+        if same_file(path, source):
+            raise ModelError(f"{path}: is {source}, which this command reads; writing there would destroy it: "
+                             f"give the output another folder or name")
     path.parent.mkdir(parents=True, exist_ok=True)
     # named apart from the target: a target name of the longest length a folder allows still fits
     part = path.with_name(f".gecgen-{os.getpid()}-{secrets.token_hex(4)}.part")

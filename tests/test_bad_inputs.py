@@ -53,6 +53,13 @@ def tiago(tmp, urdf=URDF):
     return write(tmp, "tiago.yaml", TIAGO)
 
 
+def telescope(tmp):
+    """The mimic-joint robot and its URDF, copied into tmp: the robot file's path."""
+    for name in ("telescope.yaml", "telescope.urdf"):
+        write(tmp, name, (ROBOTS.parent / "tests" / "data" / "mimic" / name).read_text())
+    return tmp / "telescope.yaml"
+
+
 def pps(tmp, text=PPS):
     return write(tmp, "robot.yaml", text)
 
@@ -178,9 +185,13 @@ def edited(tmp, change):
 # this process (the command line's own entry point, main), as the cases above run in a subprocess
 IN_PROCESS = {
     "an output naming the robot file": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "-o", t / "robot.yaml"],
-                                        "robot.yaml", "is the robot this command reads; writing the calibration there"),
+                                        "robot.yaml", "is the robot, which this command reads; writing the calibration"),
     "an output naming the data": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "-o", t / "data.csv"],
-                                  "data.csv", "is the data this command reads; writing the calibration there"),
+                                  "data.csv", "is the data, which this command reads; writing the calibration there"),
+    "an output naming the URDF a robot file names": (
+        lambda t: ["identify", telescope(t), write(t, "data.csv", "pose,q1,q2,q3,q4,target,x,y,z\n"), "-o",
+                   t / "telescope.urdf"],
+        "telescope.urdf", "telescope.yaml names, which this command reads; writing the calibration there"),
     "two outputs naming one file": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / "s.csv", "--val-out",
                                                t / "s.csv"], "s.csv", "--val-out names the same file as --output"),
     "an output onto a device": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", "/dev/null"],
@@ -351,3 +362,18 @@ def test_orientations_in_the_wrong_unit_fail_the_fit(tmp_path, capsys):
     assert main(["identify", str(robot), str(tmp_path / "poses.csv"), "-o", str(tmp_path / "c.json")]) == 1
     err = capsys.readouterr().err
     assert "the fit leaves more position error than the nominal model" in err and not (tmp_path / "c.json").exists()
+
+
+def test_a_file_written_into_an_output_folder_never_replaces_an_input(tmp_path):
+    """Files an output folder receives are known only as they are written: one that would land on
+    a file the command reads is refused there, and the input is left as it was."""
+    from gecgen.files import reading, write_atomically
+    from gecgen.model import ModelError
+
+    source = write(tmp_path, "errors.yaml", "frames: {}\n")
+    with reading([str(source)]):
+        with pytest.raises(ModelError, match="errors.yaml: is .*errors.yaml, which this command reads"):
+            write_atomically(tmp_path / "." / "errors.yaml", "overwritten")
+        write_atomically(tmp_path / "other.yaml", "fine")
+    assert source.read_text() == "frames: {}\n" and not list(tmp_path.glob(".gecgen-*"))
+    write_atomically(source, "after the command")  # outside the command, the file is just a file

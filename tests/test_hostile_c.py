@@ -126,6 +126,20 @@ def test_a_nan_joint_is_never_ok(driver):
         assert status == NONFINITE, k
 
 
+def test_a_tool_turned_half_a_turn_is_never_ok(driver):
+    """A calibration that turns the tool 2.8 or 3.1 rad: sin(angle) alone is small there (0.33, 0.04),
+    and compensate returned GECGEN_OK at tol 1 with the tool still turned (found by the property below)."""
+    names = MANIFEST["coefficients"]
+    batch = []
+    for name in ("6.es:1", "6.er:1", "6.ep:1"):
+        for turn in (2.8, 3.1):
+            c = [0.0] * NC
+            c[names.index(name)] = turn
+            batch.append({"max_iter": 50, "tol": 1.0, "q": list((LO + HI) / 2), "w": [0.0] * 6, "c": c})
+    for case, (status, _, deviation) in zip(batch, run_cases(driver, batch)):
+        assert status != OK or deviation <= 1.5 * case["tol"], (deviation, case["c"])
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.lists(cases, min_size=1, max_size=12))
 def test_compensate_never_reports_success_it_did_not_achieve(driver, batch):

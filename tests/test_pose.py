@@ -6,6 +6,7 @@ import dataclasses
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import ROBOTS
 from hypothesis import HealthCheck, given, settings
@@ -276,7 +277,7 @@ def test_figaroh_s_ur10_tool_poses_import_and_calibrate(tmp_path, capsys):
     assert np.abs(data.orientation - expect).max() < 1e-12
     assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["n_identifiable"] == 30 and out["outliers"] == []
+    assert out["n_identifiable"] == 30 and out["outliers"] == [] and out["suspect_poses"] == []
     before, train = out["before"], out["train"]
     assert before["rms_mm"] > 6 and before["rot_rms_mrad"] > 18  # the rounded tool guess, registered
     assert abs(train["rms_mm"] - FIGAROH_MM[0]) < 0.01 and abs(train["max_mm"] - FIGAROH_MM[1]) < 0.01
@@ -286,6 +287,34 @@ def test_figaroh_s_ur10_tool_poses_import_and_calibrate(tmp_path, capsys):
     positions.write_text("\n".join(",".join(line.split(",")[:11]) for line in csv.read_text().splitlines()) + "\n")
     assert main(["redundancy", str(robot_file), str(positions), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["n_identifiable"] == 27
+
+
+@pytest.mark.parametrize("glitch_rad, fails", [(0.02, False), (0.1, True)])
+def test_a_joint_reading_glitch_in_one_real_pose_is_named(tmp_path, capsys, glitch_rad, fails):
+    """q2 of one of the 23 real UR10 poses read off by 0.02 rad: its residual (14 mm) stays under
+    the outlier limit, yet the pose is named with the reading that explains it; at 0.1 rad the fit
+    is refused, and the refusal names the pose (the refused fit is too far off for its joint
+    columns to say which reading)."""
+    robot_file = UR10 / "ur10_probe.yaml"
+    csv = tmp_path / "poses.csv"
+    assert main(["import", str(robot_file), str(UR10 / "calibration.csv"), "--mapping",
+                 str(UR10 / "calibration.mapping.yaml"), "-o", str(csv)]) == 0
+    table = pd.read_csv(csv)
+    table.loc[7, "q2"] += glitch_rad
+    table.to_csv(csv, index=False)
+    capsys.readouterr()
+    code = main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json"])
+    err = capsys.readouterr().err
+    assert "pose 7 (line 9) does not fit the others" in err
+    if fails:
+        assert code != 0 and "not trustworthy" in err
+        return
+    assert code == 0
+    fit = json.loads((tmp_path / "c.json").read_text())
+    assert fit["outliers"] == []  # the robust limit alone does not see it
+    [suspect] = fit["suspect_poses"]
+    assert suspect["pose"] == 7 and suspect["reading"] == "q2" and suspect["explained"] > 0.9
+    assert -1.5 * glitch_rad < suspect["change"] < -0.5 * glitch_rad  # the reading must come back down
 
 
 def test_a_measured_frame_turned_any_way_on_the_tool_is_placed_from_the_orientations(tmp_path, capsys):

@@ -17,6 +17,7 @@ from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, write_measurements
 from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime import influence
 from gecgen.runtime.identify import _fit_failures, identify, position_errors, redundancy
 from gecgen.runtime.registration import Registration
 from gecgen.simulate import load_truth, random_design, simulate
@@ -222,3 +223,33 @@ def test_registration_maps_back(arm):
     R = Registration(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([1.0, 2, 3]), True)
     fit = identify(cm, with_xyz(train, p @ R.R.T + R.t), loss="cauchy")
     assert np.allclose(fit.registration.R, R.R, atol=1e-12) and np.allclose(fit.registration.t, R.t, atol=1e-12)
+
+
+def test_deleted_residuals_are_those_of_the_fit_without_the_pose(rng):
+    """influence.deleted_residuals against refitting without each pose (plain least squares on a
+    random system of 12 poses with 6 rows each), streamed in two blocks of whole poses."""
+    P, k = 12, 9
+    A, b = rng.normal(size=(6 * P, k)), rng.normal(size=6 * P)
+    row_pose = np.repeat(np.arange(P), 6)
+    r = b - A @ np.linalg.lstsq(A, b, rcond=None)[0]
+    Rk = np.linalg.qr(A, mode="r")
+    drop, d = influence.deleted_residuals([(A[:36], r[:36]), (A[36:], r[36:])], row_pose, Rk, P)
+    for p in range(P):
+        out = row_pose != p
+        x = np.linalg.lstsq(A[out], b[out], rcond=None)[0]
+        assert np.allclose(d[~out], b[~out] - A[~out] @ x, atol=1e-10)
+        assert drop[p] == pytest.approx(r @ r - np.sum((b[out] - A[out] @ x) ** 2), rel=1e-9)
+
+
+def test_a_pose_that_stands_alone_is_a_suspect_and_misfit_is_not():
+    """A pose whose F is GAP times the next one's and significant is named; the same F among
+    others nearly as large (misfit everywhere) or without significance names none."""
+    dof = np.full(40, 6.0)
+    alone = np.full(40, 1e-6)
+    alone[7] = 60e-6
+    found, F = influence.suspects(alone, dof, rss=40 * 6e-6 + 54e-6, m=240, k=30)
+    assert list(found) == [7] and F[7] > influence.GAP * np.delete(F, 7).max()
+    crowd = alone.copy()
+    crowd[[3, 11, 20]] = 30e-6
+    assert len(influence.suspects(crowd, dof, rss=float(crowd.sum()), m=240, k=30)[0]) == 0
+    assert len(influence.suspects(alone, dof, rss=1.0, m=240, k=30)[0]) == 0  # drowned in noise

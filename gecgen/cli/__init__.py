@@ -11,11 +11,13 @@ import json
 import os
 import sys
 import warnings
+from pathlib import Path
 
 from gecgen import __version__
 from gecgen.cli.human import print_human
-from gecgen.files import check_output_dir, check_output_file, same_file
+from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
+from gecgen.model.validation import read_yaml
 
 #: the command modules, in the order `gecgen --help` lists them
 COMMANDS = ("generate", "identify", "evaluate", "compensate", "export", "redundancy", "simulate", "import_", "gravity",
@@ -64,13 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def check_outputs(args):
+def check_outputs(args) -> list[str]:
     """One-line refusal of an output that names a folder where a file is meant, a file where a
     folder is meant, a place that cannot be written, one of the command's inputs (any other argument
-    naming an existing file) or another of its outputs: before the work, not after it."""
+    naming an existing file, and the files those name: `read_through`) or another of its outputs:
+    before the work, not after it. Returns the inputs, for `files.reading`."""
     outputs = OUTPUTS.get(args.command, {})
-    inputs = {name: value for name, value in vars(args).items()
+    inputs = {f"the {name.replace('_', ' ')}": value for name, value in vars(args).items()
               if name not in outputs and isinstance(value, str) and os.path.isfile(value)}
+    for source in list(inputs.values()):
+        inputs.update({f"the file {source} names": path for path in read_through(source)})
     written = {}
     for option, (what, folder) in outputs.items():
         path = getattr(args, option, None)
@@ -85,13 +90,36 @@ def check_outputs(args):
         check_output_file(path, what)
         for name, value in inputs.items():
             if same_file(path, value):
-                raise ModelError(f"{path}: is the {name.replace('_', ' ')} this command reads; writing the {what} "
+                raise ModelError(f"{path}: is {name}, which this command reads; writing the {what} "
                                  f"there would destroy it: give another file name")
         for other, value in written.items():
             if os.path.abspath(path) == os.path.abspath(value) or same_file(path, value):
                 raise ModelError(f"{path}: --{option.replace('_', '-')} names the same file as "
                                  f"--{other.replace('_', '-')}; give each output its own file")
         written[option] = path
+    return list(inputs.values())
+
+
+def read_through(path: str) -> list[str]:
+    """The files a command also reads through the input file `path`: the URDF a robot file names;
+    the robot file a calibration file names, and that file's URDF. Only those that exist: a broken
+    input is reported by the command's own reading of it, with its fix."""
+    found = []
+    try:
+        if path.endswith((".yaml", ".yml")):
+            spec = read_yaml(Path(path), "robot")
+            if isinstance(spec, dict) and isinstance(spec.get("urdf"), str):
+                found.append(str(Path(path).parent / spec["urdf"]))
+        elif path.endswith(".json"):
+            spec = json.loads(Path(path).read_text())
+            if isinstance(spec, dict):
+                named = [spec.get("robot_file"), spec.get("robot_file_relative")]
+                robots = [str(Path(path).parent / r) for r in named if isinstance(r, str)]
+                found += [r for r in robots if os.path.isfile(r)]
+                found += [u for r in found[:] for u in read_through(r)]
+    except (ModelError, OSError, ValueError):
+        return []
+    return [f for f in dict.fromkeys(found) if os.path.isfile(f)]
 
 
 def _os_reason(exc: OSError) -> str:
@@ -126,8 +154,8 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> tuple[int, dict | None]:
     """Run a parsed command: (0, its result), or (exit code, None) after one line on stderr."""
     try:
-        check_outputs(args)
-        return 0, args.fn(args)
+        with reading(check_outputs(args)):
+            return 0, args.fn(args)
     except ModelError as exc:
         print(f"gecgen {args.command}: {exc}", file=sys.stderr)
         return 2, None

@@ -82,7 +82,8 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
               "condition_number": fit.condition_number, "observability_index": fit.observability_index,
               "iterations": fit.iterations, "converged": fit.converged, "warnings": list(fit.warnings),
               "loss": fit.loss, "outlier_limit_mm": 1e3 * fit.outlier_limit_m if np.isfinite(fit.outlier_limit_m) else None,
-              "outliers": [o.to_dict() for o in fit.outliers], "train_inliers": fit.train_inliers,
+              "outliers": [o.to_dict() for o in fit.outliers],
+              "suspect_poses": [p.to_dict() for p in fit.suspects], "train_inliers": fit.train_inliers,
               "training_ranges": fit.ranges}
     return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report,
                        fit.registrations)

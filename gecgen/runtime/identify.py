@@ -24,7 +24,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import Rows, measured_rows
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
-from gecgen.runtime import robust
+from gecgen.runtime import influence, robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
 from gecgen.runtime.redundancy import RANK_TOL, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
@@ -66,6 +66,38 @@ class Outlier:
 
 
 @dataclass(frozen=True)
+class Suspect:
+    """A pose the other poses do not predict (`runtime.influence`): the file line of its first row
+    (header = 1), its pose id, its residual under the fit to the other poses (mm per point: a
+    measured frame's orientation counted through the length scale), its F statistic and the next
+    largest pose's, and the reading whose change best explains it ("q2"), that change in `unit`
+    (rad or m) and the share of the residual it explains."""
+
+    row: int
+    pose: int
+    deleted_mm: float
+    F: float
+    next_F: float
+    reading: str
+    change: float
+    explained: float
+    unit: str
+
+    def to_dict(self) -> dict:
+        return {"row": self.row, "pose": self.pose, "deleted_mm": self.deleted_mm, "F": self.F,
+                "next_F": self.next_F, "reading": self.reading, "change": self.change, "unit": self.unit,
+                "explained": self.explained}
+
+    def __str__(self) -> str:
+        why = (f"{self.reading} off by {self.change:.3g} {self.unit} explains {100 * self.explained:.0f} % of it: "
+               f"a joint reading glitch?" if self.explained >= influence.EXPLAINED
+               else "no single joint reading explains it: a mis-measured pose?")
+        return (f"pose {self.pose} (line {self.row}) does not fit the others: without it the fit misses it by "
+                f"{self.deleted_mm:.3g} mm (F {self.F:.3g}, the next pose {self.next_F:.3g}); {why} Check the pose, "
+                f"or drop it and run again")
+
+
+@dataclass(frozen=True)
 class Fit:
     """Result of `identify`. c (nc,) all coefficients (eliminated ones 0); std (nc,) with NaN for
     eliminated; cov (k, k) over `redundancy.kept`; sigma_m the residual standard deviation per
@@ -77,7 +109,8 @@ class Fit:
     frame); outlier_limit_m the residual length beyond which a point is an outlier (inf for l2;
     a frame's limit is sqrt(2) times as long, for its six degrees of freedom); ranges the span of
     each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with `failures`
-    must not be used: each says why."""
+    must not be used: each says why. suspects: the poses the other poses do not predict, each
+    named in `warnings` (and in `failures`, when the fit has any)."""
 
     c: np.ndarray
     std: np.ndarray
@@ -101,6 +134,7 @@ class Fit:
     ranges: dict | None = None
     registrations: dict[int, Registration] | None = None  # per station id; `registration` is the first's
     measured_dof: float | None = None
+    suspects: tuple[Suspect, ...] = ()
 
     @property
     def trustworthy(self) -> bool:
@@ -515,6 +549,12 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             cov = np.full((k, k), np.inf)
         std[kept] = np.sqrt(np.abs(np.diag(cov)))
     failures = _fit_failures(cm, data, c, std, kept, converged, why_not)
+    if ridge > 0:  # the hat matrix of ridge regression: A (A^T A + ridge I)^-1 A^T
+        Rk = np.linalg.qr(np.vstack([Rk, np.sqrt(ridge) * np.eye(k)]), mode="r")
+    suspects = _suspects(cm, data, y, c, w, kept, scale, Rk, rss, m_eff, rows.dof)
+    notes.extend(map(str, suspects))
+    if failures:
+        failures.extend(map(str, suspects))
     if cond > SINGULAR:
         failures.append(f"H_e is numerically singular on this data (condition number {cond:.3g} of the scaled "
                         f"kept columns): some coefficients are not determined; see the redundancy analysis")
@@ -557,7 +597,40 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                before=before, train=train, warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
                train_inliers=train_inliers,
-               ranges=_ranges(cm, data), measured_dof=m_eff)
+               ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects)
+
+
+#: step (rad or m) of the central differences that give a pose's reading columns
+READING_STEP = 1e-6
+
+
+def _suspects(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, w: np.ndarray, kept: np.ndarray,
+              scale: np.ndarray, Rk: np.ndarray, rss: float, m: float, dof: np.ndarray) -> tuple[Suspect, ...]:
+    """The poses the other poses do not predict (`runtime.influence`) in the fit at coefficients c
+    (point weights w (R,), kept columns scaled by scale, R factor Rk, residual sum of squares rss
+    (m^2) over m degrees of freedom, dof (R,) per point), each with the reading that explains it."""
+    order = np.argsort(data.pose, kind="stable")  # the point order of rows_H_and_residual
+    row_pose = np.repeat(data.pose[order], 3)
+    blocks = ((H[:, kept] / scale, r) for H, r in rows_H_and_residual(cm, data, y, c, weights=w))
+    drop, d = influence.deleted_residuals(blocks, row_pose, Rk, data.n_poses)
+    pose_dof = np.bincount(data.pose, dof, data.n_poses)
+    found, F = influence.suspects(drop, pose_dof, rss, m, len(kept))
+    out = []
+    for p in found:
+        points = order[data.pose[order] == p]
+        step = READING_STEP * np.eye(cm.robot.n)
+        q = np.vstack([data.q[p] + step, data.q[p] - step])
+        n2 = len(q)
+        moved = cm.model_targets(q, np.repeat(data.w[p:p + 1], n2, 0),
+                                 np.repeat(data.aux_columns(cm.model.aux)[p:p + 1], n2, 0), c)[:, data.target[points]]
+        G = (moved[:cm.robot.n] - moved[cm.robot.n:]).reshape(cm.robot.n, -1).T / (2 * READING_STEP)
+        at = np.nonzero(row_pose == p)[0]
+        j, change, share = influence.joint_turn(G * np.repeat(np.sqrt(w[points]), 3)[:, None], d[at])
+        out.append(Suspect(int(data.file_rows[points].min()), int(data.pose_ids[p]),
+                           1e3 * float(np.sqrt(3 * (d[at] @ d[at]) / pose_dof[p])), float(F[p]),
+                           float(np.delete(F, found).max()), f"q{j + 1}", change, share,
+                           "rad" if cm.robot.joints[j].kind == "R" else "m"))
+    return tuple(out)
 
 
 def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarray:
@@ -570,5 +643,5 @@ def prediction_std(cm: CompiledModel, fit: Fit, q, w=None, aux=None) -> np.ndarr
     return np.sqrt(var.reshape(len(Hk), cm.dims.nt, 3).sum(-1))
 
 
-__all__ = ["Fit", "IDENTITY", "Outlier", "fit_frames", "identify", "position_errors", "prediction_std", "redundancy",
-           "row_errors", "squared_error", "summary", "to_world"]
+__all__ = ["Fit", "IDENTITY", "Outlier", "Suspect", "fit_frames", "identify", "position_errors", "prediction_std",
+           "redundancy", "row_errors", "squared_error", "summary", "to_world"]

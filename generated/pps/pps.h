@@ -106,7 +106,9 @@ void pps_loads_batch(int n, const double *q, const double *w, double *L);
  * max_iter steps until the pose residual is below tol (m). The load signals are held at their
  * values at q_cmd (so a term such as sign(gravity_torque(q6)) takes the command's sign). Returns a
  * GECGEN_ status code and the number of iterations used in *iterations (may be NULL). q_out is
- * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol. */
+ * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol
+ * (the residual: sqrt(|dp|^2 + a^2) in m, a the sine of the axes' angle up to 90 degrees and
+ * 2 minus it beyond, so no tol below 1 passes a tool turned more than 90 degrees). */
 int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations);
 

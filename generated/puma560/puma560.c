@@ -1864,12 +1864,14 @@ static int cholesky_solve(double A[NS][NS], double *b, int m)
 }
 
 /* Pose residual of the modelled robot at q, with the load signals L, against the wanted tool pose
- * Tn: r = [dp; rotation vector taking the axes of T onto those of Tn] (6), the joint Jacobian Jq
- * (6 x NQ); returns |r|. */
+ * Tn: r = [dp; rotation axis taking the axes of T onto those of Tn, times sin(angle)] (6), the joint
+ * Jacobian Jq (6 x NQ); returns sqrt(|dp|^2 + a^2), a = sin(angle) up to 90 degrees and
+ * 2 - sin(angle) beyond. sin alone falls again towards 180 degrees: a pose turned half a turn away
+ * would pass for converged, and a step towards it for progress. */
 static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
                             const double *Tn, double *r, double *Jq)
 {
-    double f[NF], eps[NE], T[16], norm = 0.0;
+    double f[NF], eps[NE], T[16], position = 0.0, turn = 0.0, trace = 0.0;
     int i, k;
     puma560_basis_at_loads(q, w, aux, L, f);
     combine(f, c, eps);
@@ -1878,10 +1880,16 @@ static double pose_residual(const double *q, const double *w, const double *aux,
         int u = (i + 1) % 3, v = (i + 2) % 3;
         r[i] = Tn[4 * i + 3] - T[4 * i + 3];
         r[3 + i] = 0.0;
-        for (k = 0; k < 3; ++k) r[3 + i] += 0.5 * (T[4 * u + k] * Tn[4 * v + k] - T[4 * v + k] * Tn[4 * u + k]);
+        for (k = 0; k < 3; ++k) {
+            r[3 + i] += 0.5 * (T[4 * u + k] * Tn[4 * v + k] - T[4 * v + k] * Tn[4 * u + k]);
+            trace += T[4 * i + k] * Tn[4 * i + k];  /* trace(R^T Rn) = 1 + 2 cos(angle) */
+        }
+        position += r[i] * r[i];
+        turn += r[3 + i] * r[3 + i];
     }
-    for (i = 0; i < 6; ++i) norm += r[i] * r[i];
-    return sqrt(norm);
+    turn = sqrt(turn);
+    if (trace < 1.0) turn = 2.0 - turn;  /* past 90 degrees */
+    return sqrt(position + turn * turn);
 }
 
 /* Least-squares (NQ < 6) or minimum-norm (NQ >= 6) Newton step dq for J dq = r; 0 if singular. */
