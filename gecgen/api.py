@@ -13,7 +13,7 @@ in N and N m. Shapes: N poses, n joints, nt targets.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from gecgen.model.measurements import Commands, Measurements, read_commands
 from gecgen.model.measurements import read_measurements as _read_measurements
 from gecgen.model.validation import excerpt, require
 from gecgen.runtime import calibration as _calibration
+from gecgen.runtime import significance
 from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
@@ -155,12 +156,15 @@ def _length(value):
 @dataclass(frozen=True)
 class Errors:
     """Errors of the measured points: RMS and largest distance (mm); with measured orientations,
-    RMS and largest orientation error (mrad) of the rows that measure one, else None."""
+    RMS and largest orientation error (mrad) of the rows that measure one, else None; for a
+    held-out score, the 95 % confidence interval of the RMS by pose."""
 
     rms_mm: float
     max_mm: float
     rot_rms_mrad: float | None = None
     rot_max_mrad: float | None = None
+    #: the 95 % confidence interval of rms_mm for poses drawn like these (`significance.rms_interval`)
+    rms_mm_ci95: tuple[float, float] | None = None
 
     @classmethod
     def of(cls, summary: dict) -> "Errors":
@@ -234,6 +238,28 @@ def branch_index(robot: Robot, branch: str | None) -> int:
 
 # -- the calibrator --------------------------------------------------------------------------
 
+def determined(cm: CompiledModel, data: Measurements, fit, keep: bool = False, **options):
+    """(the fit, the verdict on its coefficients `runtime.significance.judge`): unless keep, refitted
+    (`identify` with `options`) with the coefficients the data do not determine held at zero, and
+    a warning naming them. Raises RuntimeError when that refit cannot be trusted."""
+    from gecgen.runtime.identify import identify
+
+    verdict, hold = significance.judge(cm.model.coefficient_names(cm.robot), fit.c, fit.std, fit.redundancy.kept,
+                                       fit.cov, fit.sigma_m, fit.measured_dof)
+    verdict["insignificant_carried"] = bool(hold) and keep
+    if hold and not keep:
+        names = [h["param"] for h in verdict["held"]]
+        warnings.warn(f"{len(hold)} of {len(fit.redundancy.kept)} coefficients are not determined by the data (|value| "
+                      f"/ std < {significance.T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
+                      f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
+                      f"(--keep-insignificant carries them)", stacklevel=3)
+        fit = identify(cm, data, **options, hold=hold)
+        if fit.failures:
+            raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
+                               f"calibration made or written: {'; '.join(fit.failures)}")
+    return fit, verdict
+
+
 class Calibrator:
     """Identify a robot's error model from measured points, then score, predict and compensate.
 
@@ -245,7 +271,10 @@ class Calibrator:
     ones are held at zero (None: exact dependencies only; "auto"). register: "auto" (register the
     measurement frame onto the robot world when far apart), "always" or "never". orientation_length:
     for data with orientation columns, an orientation error of 1 mrad counts as L * 1 mrad of
-    position error (m; None: 0.1 when fitting, the calibration's when scoring).
+    position error (m; None: 0.1 when fitting, the calibration's when scoring). keep_insignificant:
+    carry every identifiable coefficient into the calibration; by default those the data do not
+    determine (|value| / std below 2 after backward elimination, `runtime.significance`) are held
+    at zero and the rest refitted, and the report lists them (`report_["significance"]`).
 
     Fitted attributes: calibration_ (runtime.calibration.Calibration, what `save` writes), fit_
     (runtime.identify.Fit), report_ (the report the calibration file holds: metrics in mm, outliers,
@@ -255,9 +284,10 @@ class Calibrator:
     """
 
     def __init__(self, errors=None, *, loss: str = "cauchy", ridge=0.0, rank_tol=None, register: str = "auto",
-                 orientation_length: float | None = None):
+                 orientation_length: float | None = None, keep_insignificant: bool = False):
         self.errors, self.loss, self.ridge, self.rank_tol = errors, loss, ridge, rank_tol
         self.register, self.orientation_length = register, orientation_length
+        self.keep_insignificant = keep_insignificant
 
     def __repr__(self) -> str:
         state = f"fitted on {self.calibration_.robot.name}" if hasattr(self, "calibration_") else "not fitted"
@@ -288,10 +318,18 @@ class Calibrator:
         if grids:
             chosen, cv = choose(cm, data, grids, **options)
             options.update(chosen)
-        fit = identify(cm, data, registration_mode=register, progress=progress, **options)
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            fit = identify(cm, data, registration_mode=register, progress=progress, **options)
         if fit.failures:
             raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {'; '.join(fit.failures)}")
+        full = fit
+        fit, verdict = determined(cm, data, fit, self.keep_insignificant, registration_mode=register, **options)
+        if fit is full:  # not refitted: the fit's own notes stand (a refit said its own)
+            for w in said:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         calib = _calibration.from_fit(robot, model, fit)
+        calib.report["significance"] = verdict
         calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
         if robot.branches:
             from gecgen.runtime.identify import to_world
@@ -446,7 +484,8 @@ class Calibrator:
         counts = measured_counts(robot, data)
         before, after = by_branch(cm, data, y_before, {"before": None}), by_branch(cm, data, y, {"after": calib.c})
         branches = {name: before[name] | after[name] for name in after}
-        return Score(Errors.of(_summary(cm, data, y_before, None)), Errors.of(_summary(cm, data, y, calib.c)),
+        return Score(Errors.of(_summary(cm, data, y_before, None, True)),
+                     Errors.of(_summary(cm, data, y, calib.c, True)),
                      counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,
                      cm, data, y_before, y, branches)
 
@@ -457,10 +496,18 @@ class Calibrator:
         return Path(path)
 
 
-def _summary(cm, data, y, c) -> dict:
+def _summary(cm, data, y, c, interval: bool = False) -> dict:
+    """`runtime.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
+    confidence interval by pose (mm) too."""
+    from gecgen.model.pose_targets import measured_rows
     from gecgen.runtime.identify import row_errors, summary
 
-    return summary(*row_errors(cm, data, y, c)[:2])
+    rows = measured_rows(cm.robot, data)
+    position, rotation, _ = row_errors(cm, data, y, c, rows)
+    out = summary(position, rotation)
+    if interval:
+        out["rms_mm_ci95"] = [1e3 * v for v in significance.rms_interval(position, data.pose[rows.first])]
+    return out
 
 
 def by_branch(cm, data, y, stages: dict) -> dict:
@@ -587,14 +634,14 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
-              register_val: bool = False, progress=None) -> Selection:
+              register_val: bool = False, progress=None, keep_insignificant: bool = False) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
-    per candidate."""
+    per candidate. keep_insignificant: as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
     names = model_names(NAMES if models is None else models)
@@ -608,12 +655,14 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     if default is not None:
         checked(default, fitted, data, val)
     choice = choose(fitted, data, default, seed, progress=progress, names=names)
+    fit, verdict = determined(choice.cm, data, choice.fit, keep_insignificant)
+    choice = replace(choice, fit=fit)
     calib = _calibration.from_fit(robot, choice.model, choice.fit)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
-                         "placement": placement.to_dict() if placement else None})
+                         "placement": placement.to_dict() if placement else None, "significance": verdict})
     if fitted.vertex_of:
         calib.report["orientation_length_m"] = fitted.pose_length
-    cal = Calibrator(choice.model, orientation_length=orientation_length)
+    cal = Calibrator(choice.model, orientation_length=orientation_length, keep_insignificant=keep_insignificant)
     cal._set(calib, choice.fit)
     cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(fitted, data)
     effects = choice.diagnosis.effects if choice.diagnosis else []

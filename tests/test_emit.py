@@ -30,6 +30,9 @@ def test_c_casadi_and_sympy_agree(shipped, rng):
     pa, Ha = ca_model.model_targets(q, w, None, coef, with_H=True)
     np.testing.assert_allclose(pc, pa, atol=1e-12)
     np.testing.assert_allclose(Hc, Ha, atol=1e-12)
+    np.testing.assert_allclose(c_model.eps(q, w, None, coef), ca_model.eps(q, w, None, coef), atol=1e-15)
+    np.testing.assert_allclose(c_model.basis(q, w, None), ca_model.basis(q, w, None), atol=1e-12)
+    np.testing.assert_allclose(c_model.nominal_targets(q), ca_model.nominal_targets(q), atol=1e-12)
     (names, Lc), (names_ca, La) = c_model.load_signals(q, w), ca_model.load_signals(q, w)
     assert names == names_ca and Lc.shape == (3, len(names)) and len(names) > robot.n
     np.testing.assert_allclose(Lc, La, atol=1e-12)

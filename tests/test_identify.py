@@ -153,7 +153,8 @@ def test_cli_identify_evaluate_compensate_and_refusal(tmp_path, rng, capsys):
     assert main(["identify", str(ROBOTS / "pps.yaml"), str(tmp_path / "train.csv"), "--errors", str(constant),
                  "-o", str(calib), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["n_params"] == 42 and out["n_identifiable"] == 24 and len(out["eliminated"]) == 18
+    assert out["n_params"] == 42 and out["n_identifiable"] == 24
+    assert len([e for e in out["eliminated"] if e["reason"] == "structural"]) == 18
     assert {"param", "reason"} <= set(out["eliminated"][0]) and out["train"]["rms_mm"] < 0.1 < out["before"]["rms_mm"]
     assert main(["evaluate", str(calib), str(tmp_path / "val.csv"), "--json"]) == 0
     ev = json.loads(capsys.readouterr().out)
@@ -267,17 +268,21 @@ def test_rank_tolerance_chosen_by_cross_validation_holds_weak_coefficients(tmp_p
     constant = tmp_path / "const.errors.yaml"
     constant.write_text('default: ["1"]\n')
     val_rms = {}
-    for option in ("1e-7", "auto"):
+    for option, keep in (("1e-7", True), ("auto", True), ("1e-7", False)):
         calib = tmp_path / f"{option}.json"
         assert main(["identify", str(ROBOTS / "puma560.yaml"), str(tmp_path / "train.csv"), "--errors", str(constant),
-                     "--rank-tol", option, "-o", str(calib), "--json"]) == 0
-        fit = json.loads(capsys.readouterr().out)
+                     "--rank-tol", option, "-o", str(calib), "--json"] + ["--keep-insignificant"] * keep) == 0
+        if option == "auto":
+            fit = json.loads(capsys.readouterr().out)
+        capsys.readouterr()
         assert main(["evaluate", str(calib), str(tmp_path / "val.csv"), "--json"]) == 0
-        val_rms[option] = json.loads(capsys.readouterr().out)["after"]["rms_mm"]
+        val_rms[option, keep] = json.loads(capsys.readouterr().out)["after"]["rms_mm"]
     weak = [e for e in fit["eliminated"] if e["reason"] == "weak"]
     assert fit["rank_tol"] > 1e-7 and len(weak) > 0 and all(e["merged_into"] for e in weak)
     assert fit["n_identifiable"] == 27 - len(weak) and len(fit["cv"]) == 7
-    assert val_rms["auto"] < 0.5 * val_rms["1e-7"]
+    assert val_rms["auto", True] < 0.5 * val_rms["1e-7", True]
+    # holding the insignificant coefficients at zero (the default) does what the weak ones' tolerance does
+    assert val_rms["1e-7", False] < 0.5 * val_rms["1e-7", True]
     for bad in ("1.5", "-0.1", "x"):
         assert main(["identify", str(ROBOTS / "puma560.yaml"), str(tmp_path / "train.csv"), "--rank-tol", bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()

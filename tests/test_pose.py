@@ -275,7 +275,9 @@ def test_figaroh_s_ur10_tool_poses_import_and_calibrate(tmp_path, capsys):
     raw = np.loadtxt(UR10 / "calibration.csv", delimiter=",", skiprows=1)
     expect = Rotation.from_euler("xyz", raw[:, 3:6]).as_matrix()  # R = Rz(phiz) Ry(phiy) Rx(phix)
     assert np.abs(data.orientation - expect).max() < 1e-12
-    assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+    # figaroh's is a full-parameter fit: every identifiable coefficient carried
+    assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json",
+                 "--keep-insignificant"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["n_identifiable"] == 30 and out["outliers"] == [] and out["suspect_poses"] == []
     before, train = out["before"], out["train"]
@@ -330,7 +332,8 @@ def test_a_measured_frame_turned_any_way_on_the_tool_is_placed_from_the_orientat
     for rpy, turned in (("[0.0, 0.0, 0.0]", 515), ("[1.0, 0.0, 1.5]", None)):
         robot_file = tmp_path / "probe.yaml"
         robot_file.write_text(text.replace("rpy: [-0.5, 0.0, 0.0]", f"rpy: {rpy}"))
-        assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+        assert main(["identify", str(robot_file), str(csv), "-o", str(tmp_path / "c.json"), "--json",
+                     "--keep-insignificant"]) == 0
         out, err = capsys.readouterr()
         fit = json.loads(out)
         assert "probe's measured frame turned" in err

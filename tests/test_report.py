@@ -94,9 +94,11 @@ def test_glossary_and_coefficients_name_frames_and_units(reports):
     md = open(reports["identify"]["report"]).read()
     assert "`ex`, `ey`, `ez`: translations along the frame's x, y, z (reported in mm)" in md
     assert "frame 0: the base" in md and "frame 2: after joint 2, `a2` (revolute)" in md
-    # constant errors: translations in mm, rotations in mrad, each with its std
-    assert re.search(r"\| 2 after a2 \| ex \| `1` \| -?[0-9.]+ \| [0-9.e-]+ \| mm \|", md)
-    assert re.search(r"\| 2 after a2 \| es \| `1` \| -?[0-9.]+ \| [0-9.e-]+ \| mrad \|", md)
+    # constant errors: translations in mm, rotations in mrad, each with its std and t
+    number = r"-?[0-9.]+(e[+-][0-9]+)?"
+    assert re.search(rf"\| 2 after a2 \| ex \| `1` \| {number} \| {number} \| [0-9.]+ \| mm \|", md)
+    assert re.search(rf"\| [0-9] [^|]+ \| e[spr] \| `1` \| {number} \| {number} \| [0-9.]+ \| mrad \|", md)
+    assert re.search(r"\| `[0-9]\.e[xyzspr]:1` \| insignificant \| t = [0-9.]+ < 2: the data do not determine it", md)
     assert "## Eliminated parameters" in md and "structural" in md
 
 

@@ -205,6 +205,6 @@ def test_calibrate_scores_a_validation_file_from_another_stationing(setup, calib
     assert stale["val"]["rms_mm"] > 100 * registered["val"]["rms_mm"]
     # the report scores the validation data as the JSON does, and a station the training lacks is no bar
     headline = (d / "cal_registered" / "report.md").read_text()
-    assert f"{registered['val']['rms_mm']:.3f}" in headline, headline[:1500]
+    assert f"{registered['val']['rms_mm']:.4f}" in headline, headline[:1500]
     other = run(capsys, *args[:-1], d / "day2_station5.csv", "-o", d / "cal_station5", "--register")
     assert other["val"] == registered["val"]

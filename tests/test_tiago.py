@@ -41,7 +41,8 @@ def files(tmp_path, capsys) -> dict:
 ])
 def test_reduced_models_reproduce_figaroh(files, tmp_path, capsys, model, n, train_rms, val_rms):
     calib = tmp_path / "c.json"
-    fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train"], "--errors", ROBOTS / model, "-o", calib)
+    fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train"], "--errors", ROBOTS / model, "-o", calib,
+              "--keep-insignificant")  # figaroh fits every parameter
     assert fit["registration"]["applied"] and fit["n_identifiable"] == n
     assert abs(fit["train"]["rms_mm"] - train_rms) < 0.006
     ev = run(capsys, "evaluate", calib, files["val"])
@@ -49,10 +50,18 @@ def test_reduced_models_reproduce_figaroh(files, tmp_path, capsys, model, n, tra
 
 
 def test_full_geometric_point_model_has_the_theoretical_count(files, tmp_path, capsys):
-    fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train"], "--errors", ROBOTS / "tiago.errors.yaml",
-              "-o", tmp_path / "c.json")
-    assert fit["n_identifiable"] == 4 * 7 + 2 * 1 + 3
-    assert fit["train"]["rms_mm"] < 1.68  # figaroh's 30-parameter model: 1.68 mm
+    """The full geometric model: every identifiable parameter carried, and by default (insignificant
+    ones held at zero, the rest refitted) fewer carried and the other day predicted better (measured:
+    4.172 -> 4.065 mm)."""
+    val = {}
+    for keep in (True, False):
+        fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train"], "--errors", ROBOTS / "tiago.errors.yaml",
+                  "-o", tmp_path / "c.json", *["--keep-insignificant"] * keep)
+        assert fit["n_identifiable"] == 4 * 7 + 2 * 1 + 3
+        assert fit["train"]["rms_mm"] < 1.68 or not keep  # figaroh's 30-parameter model: 1.68 mm
+        assert (fit["n_carried"] == fit["n_identifiable"]) == keep
+        val[keep] = run(capsys, "evaluate", tmp_path / "c.json", files["val"])["after"]["rms_mm"]
+    assert val[False] < val[True]
 
 
 def test_rank_tolerance_chosen_on_training_data(files, tmp_path, capsys):
@@ -62,9 +71,10 @@ def test_rank_tolerance_chosen_on_training_data(files, tmp_path, capsys):
     validation 4.90 mm, worse than the exact model's 4.17 and above figaroh's 3.22 (docs/real-data-tiago.md)."""
     calib = tmp_path / "c.json"
     fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train"], "--errors", ROBOTS / "tiago.errors.yaml",
-              "--rank-tol", "auto", "-o", calib)
+              "--rank-tol", "auto", "-o", calib, "--keep-insignificant")  # the rank tolerance alone
     weak = sorted((e for e in fit["eliminated"] if e["reason"] == "weak"), key=lambda e: e["share"])
-    assert [e["param"] for e in weak[:2]] == ["6.ep:1", "7.es:1"] and weak[0]["share"] < 0.02
+    # the two weakest, whichever comes first: their shares are close enough for rounding to order them
+    assert {e["param"] for e in weak[:2]} == {"6.ep:1", "7.es:1"} and weak[0]["share"] < 0.02
     assert fit["rank_tol"] == 0.1 and fit["n_identifiable"] == 33 - len(weak) == 22
     assert min(fit["cv"], key=lambda row: row["cv_rms_mm"])["rank_tol"] == 0.1
     ev = run(capsys, "evaluate", calib, files["val"])
@@ -99,7 +109,7 @@ def test_gravity_compliance_model_beats_figaroh_on_the_other_day(files, tmp_path
     uncertainty, and marker 1 of the validation day lands below figaroh's full geometric 3.22 mm."""
     calib = tmp_path / "c.json"
     fit = run(capsys, "identify", ROBOTS / "tiago.yaml", files["train_all"], "--errors",
-              ROBOTS / "tiago.elastic.errors.yaml", "-o", calib)
+              ROBOTS / "tiago.elastic.errors.yaml", "-o", calib, "--keep-insignificant")
     assert fit["n_identifiable"] == 4 * 7 + 2 * 1 + 6 + 6  # full pose: 36 geometric, and 6 compliances
     arm6 = next(c for c in json.loads(calib.read_text())["coefficients"] if c["name"] == "7.er:tau_arm_6_joint")
     assert arm6["value"] > 10 * arm6["std"] > 0

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, add_orientation_length, progress_status, whole
+from gecgen.cli.common import MAX_SEED, add_keep_insignificant, add_orientation_length, progress_status, whole
 from gecgen.loop.calibrate import NAMES
 
 
@@ -34,6 +34,7 @@ def add_parser(command):
                                                          "report.html and generated/ (the C and CasADi code, "
                                                          "NAME_calibration.h with the coefficients, NAME_example.c)")
     add_orientation_length(p)
+    add_keep_insignificant(p)
 
 
 def run(args) -> dict:
@@ -52,7 +53,7 @@ def run(args) -> dict:
 
         sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
                         seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
-                        progress=progress)
+                        progress=progress, keep_insignificant=args.keep_insignificant)
     out = Path(args.output)
     cal, choice = sel.calibrator, sel.choice
     cal.save(out / "calibration.json")

@@ -111,6 +111,13 @@ def add_orientation_length(p, calibration_first: bool = False):
                         f"position error (m; default {default}); set L = position noise / orientation noise")
 
 
+def add_keep_insignificant(p):
+    p.add_argument("--keep-insignificant", action="store_true",
+                   help="carry every identifiable coefficient into the calibration; by default those the data do not "
+                        "determine (|value| / std < 2 after backward elimination) are held at zero and the rest "
+                        "refitted")
+
+
 def fit_options(args) -> dict:
     """--ridge and --rank-tol as the API takes them (a number, auto or None), refused in one line
     naming the option."""

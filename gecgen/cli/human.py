@@ -3,7 +3,13 @@ from __future__ import annotations
 
 
 def scalar(value) -> str:
+    if isinstance(value, list):  # an interval: [low, high]
+        return "[" + ", ".join(map(scalar, value)) + "]"
     return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def _interval(value) -> bool:
+    return isinstance(value, list) and len(value) == 2 and all(isinstance(v, float) for v in value)
 
 
 #: list entries a person sees one per line before the rest is left to --json
@@ -37,7 +43,7 @@ def print_human(result: dict):
         elif isinstance(value, list) and value and isinstance(value[0], dict):
             print(f"{key}: {len(value)} (use --json for the list)")
         elif isinstance(value, dict):
-            scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list))}
+            scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list)) or _interval(v)}
             if not scalars:
                 print(f"{key}: {len(value)} (use --json for them)")
                 continue

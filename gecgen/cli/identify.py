@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 
-from gecgen.cli.common import ROBOT_HELP, add_orientation_length, fit_options, progress_status
+from gecgen.cli.common import ROBOT_HELP, add_keep_insignificant, add_orientation_length, fit_options, progress_status
 
 
 def add_parser(command):
@@ -25,6 +25,7 @@ def add_parser(command):
                         "outside the better-excited ones are held at zero; a number, or auto (5-fold cross-validation "
                         "on DATA); default: exact dependencies only (1e-7)")
     add_orientation_length(p)
+    add_keep_insignificant(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
 
@@ -33,7 +34,7 @@ def run(args) -> dict:
     from gecgen.api import Calibrator
 
     cal = Calibrator(args.errors, loss=args.loss, register=args.register, orientation_length=args.orientation_length,
-                     **fit_options(args))
+                     keep_insignificant=args.keep_insignificant, **fit_options(args))
     with progress_status(not args.json) as status:
         def progress(it, rms_mm):
             if status:

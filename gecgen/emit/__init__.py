@@ -146,16 +146,23 @@ def _g17(x: float) -> str:
 
 
 def render_calibration(robot: Robot, model: ErrorModel, c, std, command: dict, max_iter: int, tol: float,
-                       origin: str) -> dict[str, str]:
+                       origin: str, reasons: dict[str, str] | None = None) -> dict[str, str]:
     """NAME_calibration.h and NAME_example.c for coefficients c (nc,) with their std (nc,), NaN where
     eliminated. The header holds c as const data in NAME.h's coefficient order, each value with its
     name, and stops the build when NAME.h has another model hash; the example compensates one
     nominal command, `command` = {"q": (nq,), "w": (6,), "aux": (naux,)} (m, rad, N, N m), with
     NAME_compensate's max_iter and tol (m), and prints the corrected joints. `origin` names the
-    calibration in the comments."""
+    calibration in the comments; `reasons` ({coefficient name: why eliminated}: structural,
+    unexcited, weak, insignificant) says why each NaN-std coefficient is 0."""
     ctx = context(robot, model)
-    notes = ["eliminated" if math.isnan(s) else f"std {s:.2g}" for s in std]
-    coefficients = [(_g17(v), f"{n} ({note})") for v, n, note in zip(c, model.coefficient_names(robot), notes)]
+    names = model.coefficient_names(robot)
+    reasons = reasons or {}
+    notes = [f"eliminated: {reasons.get(n, 'not identifiable')}" if math.isnan(s) else f"std {s:.2g}"
+             for n, s in zip(names, std)]
+    coefficients = [(_g17(v), f"{n} ({note})") for v, n, note in zip(c, names, notes)]
+    held, fitted = sum(r == "insignificant" for r in reasons.values()), sum(not math.isnan(s) for s in std)
+    ctx["carried"] = f"{fitted} coefficients carry fitted values" + (
+        f"; {held} identifiable ones the data did not determine (|value| / std < 2) are held at 0" if held else "")
     env = _env("c")
     values = {k: [_g17(v) for v in command[k]] for k in ("q", "w", "aux")}
     return {

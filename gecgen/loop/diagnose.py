@@ -296,7 +296,7 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
                        for g, r in zip(top, rows.first[top])]}
     if noise is not None and noise["noise_mm"] > 0:
         ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
-        dof_fit = max(fit.measured_dof - fit.redundancy.n_identifiable, 1)
+        dof_fit = max(fit.measured_dof - len(fit.redundancy.kept), 1)
         p = float(stats.chi2.sf(ratio * dof_fit, dof_fit) if noise["dof"] is None
                   else stats.f.sf(ratio, dof_fit, noise["dof"]))
         out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))

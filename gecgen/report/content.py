@@ -209,20 +209,24 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
         unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
         term = coef.term.label
         unit = unit if term == "1" else f"{unit} per unit of {term}"
-        rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.4f}",
-                     f"{1e3 * calib.std[j]:.4g}", unit))
+        rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.3g}",
+                     f"{1e3 * calib.std[j]:.2g}", f"{abs(calib.c[j]) / calib.std[j]:.1f}", unit))
     out = [Section("Coefficients", [
         f"The {len(kept)} identified coefficients of {len(names)} (the others are eliminated: see below); std is "
-        "the standard deviation from the fit's covariance. A term `1` is a constant error (the frame's geometry); "
-        "any other term's coefficient is per unit of the term (rad or m for joints, N or N m for the wrench).",
-        Table(("frame", "error", "term", "value", "std", "unit"), rows)])]
+        "the standard deviation from the fit's covariance and t = |value| / std. A term `1` is a constant error (the "
+        "frame's geometry); any other term's coefficient is per unit of the term (rad or m for joints, N or N m for "
+        "the wrench).",
+        Table(("frame", "error", "term", "value", "std", "t", "unit"), rows)])]
     if eliminated:
-        rows = [(f"`{p}`", e["reason"], ", ".join(f"`{m['param']}` x {m['factor']:.4g}" for m in e["merged_into"])
+        rows = [(f"`{p}`", e["reason"], e["detail"] if e["reason"] == "insignificant" else
+                 ", ".join(f"`{m['param']}` x {m['factor']:.3g}" for m in e["merged_into"])
                  or "nothing (not seen by the data)") for p, e in eliminated.items()]
         out.append(Section("Eliminated parameters", [
-            "Held at zero: the data cannot tell them from others. Their effect is carried by the kept "
-            "coefficients they merge into (the coefficient gains the factor times the eliminated value).",
-            Table(("parameter", "reason", "merged into"), rows)]))
+            "Held at zero. Structural, unexcited and weak ones: the data cannot tell them from others, and their "
+            "effect is carried by the kept coefficients they merge into (the coefficient gains the factor times the "
+            "eliminated value). Insignificant ones: identifiable, but the data did not determine them (|value| / std "
+            "below 2 in backward elimination); the others were refitted without them.",
+            Table(("parameter", "reason", "merged into, or why"), rows)]))
     return out
 
 

@@ -77,6 +77,7 @@ class Calibration:
 
 def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
     report = {"n_params": fit.redundancy.n_params, "n_identifiable": fit.redundancy.n_identifiable,
+              "n_carried": len(fit.redundancy.kept),
               "eliminated": [e.to_dict() for e in fit.redundancy.eliminated],
               "before": fit.before, "train": fit.train, "sigma_mm": 1e3 * fit.sigma_m,
               "condition_number": fit.condition_number, "observability_index": fit.observability_index,
@@ -146,6 +147,8 @@ def _finite_array(value, shape: tuple[int, ...]) -> np.ndarray | None:
         a = np.array(value, dtype=object)
     except ValueError:  # ragged nesting
         return None
+    if a.size == 0 and 0 in shape:  # a 0 x 0 matrix is written as []
+        return np.zeros(shape)
     return a.astype(float) if a.shape == shape and all(_finite(x) for x in a.ravel()) else None
 
 

@@ -242,7 +242,12 @@ class CompiledModel:
 
     def nominal_targets(self, q):
         """Target positions (N, nt, 3) of the nominal model."""
-        return self.J_e(q, np.zeros(self.dims.ne))[0]
+        if self.backend == "casadi":
+            return self.J_e(q, np.zeros(self.dims.ne))[0]
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
+        p = np.empty((len(q), self.dims.nt, 3))
+        self._fn("nominal_batch")(ctypes.c_int(len(q)), _ptr(q), _ptr(p))
+        return p
 
     def eps(self, q, w, aux, c):
         """Generalized errors (N, ne) at each pose for coefficients c."""
@@ -251,9 +256,7 @@ class CompiledModel:
         if self.backend == "casadi":
             return self._casadi("eps", N, q, w, aux, c)[0].reshape(N, self.dims.ne)
         out = np.empty((N, self.dims.ne))
-        f = self._fn("eps")
-        for i in range(N):
-            f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(c), _ptr(out[i]))
+        self._fn("eps_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), _ptr(out))
         return out
 
     def basis(self, q, w, aux):
@@ -264,9 +267,7 @@ class CompiledModel:
         if self.backend == "casadi":
             return self._casadi("basis", N, q, w, aux)[0].reshape(N, nf)
         out = np.empty((N, nf))
-        f = self._fn("basis")
-        for i in range(N):
-            f(_ptr(q[i]), _ptr(w[i]), None if aux is None else _ptr(aux[i]), _ptr(out[i]))
+        self._fn("basis_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(out))
         return out
 
     def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0):

@@ -76,8 +76,9 @@ def c_files(calib: Calibration, cm: CompiledModel, where: str) -> tuple[dict[str
                                 source_hash=model_hash(calib.robot, calib.model))
     files = render(calib.robot, model)
     command = example_command(calib, cm, where)
+    reasons = {e["param"]: e["reason"] for e in calib.report.get("eliminated", [])}
     files.update(render_calibration(calib.robot, model, calib.c, calib.std, command, EXAMPLE_MAX_ITER, EXAMPLE_TOL,
-                                    Path(where).name))
+                                    Path(where).name, reasons))
     return files, command
 
 

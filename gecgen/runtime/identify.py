@@ -26,7 +26,7 @@ from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
 from gecgen.runtime import influence, robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
-from gecgen.runtime.redundancy import RANK_TOL, Redundancy, generic_design, structural, unexcited
+from gecgen.runtime.redundancy import RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
 from gecgen.runtime.threads import one_blas_thread
 
@@ -417,7 +417,7 @@ STATION_TOL_M = 1e-6  # a micrometre: a fiftieth of a good tracker's noise
 @one_blas_thread
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
              step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
-             loss: str = "cauchy") -> Fit:
+             loss: str = "cauchy", hold: dict[int, str] | None = None) -> Fit:
     """Fit the error model of `cm` to `data`.
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms) or
@@ -431,6 +431,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     the exact RANK_TOL holds the weakly excited coefficients at zero instead (see
     `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
     `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
+    `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
+    being insignificant (`runtime.significance`).
 
     Stations (`data.station`): each is registered onto the nominal model on its own. With more
     than one, what the nominal model leaves of each frame differs between stations, and frame 0's
@@ -442,7 +444,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     """
     robust.check_loss(loss)
     frames = fit_frames(cm, data, None, loss, registration_mode)
-    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss)
+    hold = hold or {}
+    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold)
     if len(frames) > 1 and registration_mode != "never":
         first = min(frames)
         for _ in range(STATION_ROUNDS):
@@ -451,7 +454,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             new = {**fit_frames(cm, data, fit.c, loss), first: frames[first]}
             moved = np.linalg.norm(to_world(new, data) - to_world(frames, data), axis=1).max()
             frames = new
-            fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss),
+            fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold),
                           before=fit.before)
             if moved <= STATION_TOL_M:
                 break
@@ -466,7 +469,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
 
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
-         progress, ridge: float, rank_tol: float, loss: str) -> Fit:
+         progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str]) -> Fit:
     """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted.
     The robust unit is the measured row (`model.pose_targets.Rows`): a point, or a frame whose
     residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
@@ -477,6 +480,13 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     rows = measured_rows(cm.robot, data)
     row_dof = rows.row_dof
     red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight)
+    if hold:
+        stay = [i for i, j in enumerate(red.kept) if j not in hold]
+        names = cm.model.coefficient_names(cm.robot)
+        red = replace(red, kept=tuple(red.kept[i] for i in stay),
+                      eliminated=(*red.eliminated, *(Eliminated(names[j], j, "insignificant", hold[j])
+                                                     for j in red.kept if j in hold)))
+        A0 = A0[:, [*stay, -1]]
     kept = np.array(red.kept, int)
     k = len(kept)
     m = float(row_dof.sum())
@@ -538,9 +548,9 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     Rk, rss = R[:k, :k], R[k, k] ** 2
     m_eff = float(row_dof @ wr)  # down-weighted rows count for their weight
     sigma = float(np.sqrt(rss / max(m_eff - k, 1)))
-    sv = np.linalg.svd(Rk, compute_uv=False)
+    sv = np.linalg.svd(Rk, compute_uv=False) if k else np.ones(1)  # k = 0: every coefficient held at zero
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
-    obs = float(np.exp(np.mean(np.log(np.maximum(sv, 1e-300)))) / np.sqrt(m))
+    obs = float(np.exp(np.mean(np.log(np.maximum(sv, 1e-300)))) / np.sqrt(m)) if k else 0.0
     std = np.full(nc, np.nan)
     with np.errstate(all="ignore"):  # a singular system gives inf/NaN here, which is reported below
         try:

@@ -50,11 +50,15 @@ def deleted_residuals(blocks, row_pose: np.ndarray, Rk: np.ndarray, n_poses: int
         U = solve_triangular(Rk, A.T, trans="T").T  # A Rk^-1: each pose's hat block is U_i U_i^T
         poses = row_pose[start:start + len(r)]
         di = np.empty_like(r)
-        for p in np.unique(poses):
-            at = np.nonzero(poses == p)[0]
-            Ui = U[at]
-            di[at] = np.linalg.solve(np.eye(len(at)) - Ui @ Ui.T, r[at])
-            drop[p] = r[at] @ di[at]
+        # poses with the same number of rows are solved together: a batch of small systems
+        bounds = np.flatnonzero(np.diff(poses, prepend=-1, append=-1))  # rows of a pose are contiguous
+        first, size = bounds[:-1], np.diff(bounds)
+        for n in np.unique(size):
+            rows = first[size == n][:, None] + np.arange(n)  # (poses, n)
+            Ui, ri = U[rows], r[rows]
+            I_L = np.eye(n) - Ui @ np.swapaxes(Ui, 1, 2)
+            di[rows] = np.linalg.solve(I_L, ri[..., None])[..., 0]
+            drop[poses[rows[:, 0]]] = np.einsum("pi,pi->p", ri, di[rows])
         d.append(di)
         start += len(r)
     return drop, np.concatenate(d)

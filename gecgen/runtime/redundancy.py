@@ -48,7 +48,7 @@ MERGE_REPORT_TOL = 1e-6
 class Eliminated:
     param: str
     index: int
-    reason: str  # "structural", "unexcited" or "weak"
+    reason: str  # "structural", "unexcited", "weak" or (identify's hold) "insignificant"
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
     share: float | None = None  # weak only: the part of its normalised column outside the kept ones
@@ -71,12 +71,17 @@ class Redundancy:
 
     @property
     def n_identifiable(self) -> int:
-        return len(self.kept)
+        """What the data can separate: the kept coefficients and those held at zero for being
+        insignificant (identifiable, but not determined)."""
+        return len(self.kept) + sum(e.reason == "insignificant" for e in self.eliminated)
 
     def to_dict(self) -> dict:
-        counts = {r: sum(e.reason == r for e in self.eliminated) for r in ("structural", "unexcited", "weak")}
+        counts = {r: sum(e.reason == r for e in self.eliminated)
+                  for r in ("structural", "unexcited", "weak", "insignificant")}
         return {"n_params": self.n_params, "n_identifiable": self.n_identifiable,
                 "n_structural": counts["structural"], "n_unexcited": counts["unexcited"], "n_weak": counts["weak"],
+                **({"n_insignificant": counts["insignificant"], "n_carried": len(self.kept)}
+                   if counts["insignificant"] else {}),
                 "identifiable": [self.names[k] for k in self.kept],
                 "eliminated": [e.to_dict() for e in self.eliminated]}
 

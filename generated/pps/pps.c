@@ -1969,6 +1969,28 @@ void pps_loads_batch(int n, const double *q, const double *w, double *L)
         pps_loads(row(q, i, NQ), row(w, i, 6), L + (size_t)i * NL);
 }
 
+void pps_nominal_batch(int n, const double *q, double *p)
+{
+    double eps[NE] = {0.0};
+    int i;
+    for (i = 0; i < n; ++i)
+        pps_targets(row(q, i, NQ), eps, p + (size_t)i * 3 * NT);
+}
+
+void pps_eps_batch(int n, const double *q, const double *w, const double *aux, const double *c, double *eps)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        pps_eps(row(q, i, NQ), row(w, i, 6), row(aux, i, NAUX), c, eps + (size_t)i * NE);
+}
+
+void pps_basis_batch(int n, const double *q, const double *w, const double *aux, double *f)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        pps_basis(row(q, i, NQ), row(w, i, 6), row(aux, i, NAUX), f + (size_t)i * NF);
+}
+
 /* Solve the symmetric positive definite m x m system A x = b in place (Cholesky); 0 if singular. */
 static int cholesky_solve(double A[NS][NS], double *b, int m)
 {

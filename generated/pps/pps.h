@@ -101,6 +101,13 @@ void pps_J_e_batch(int n, const double *q, const double *eps, double *p, double 
 /* n poses: load signals L (n x NL) at joints q (n x NQ) and wrenches w (n x 6). */
 void pps_loads_batch(int n, const double *q, const double *w, double *L);
 
+/* n poses: the nominal model's target positions p (n x 3 NT). */
+void pps_nominal_batch(int n, const double *q, double *p);
+
+/* n poses: generalized errors eps (n x NE) for coefficients c, and the basis terms f (n x NF). */
+void pps_eps_batch(int n, const double *q, const double *w, const double *aux, const double *c, double *eps);
+void pps_basis_batch(int n, const double *q, const double *w, const double *aux, double *f);
+
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
  * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
  * max_iter steps until the pose residual is below tol (m). The load signals are held at their

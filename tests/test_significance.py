@@ -1,0 +1,61 @@
+"""Significance: backward elimination on the fitted covariance equals refitting without each
+dropped coefficient (plain least squares, checked by brute force), and a calibration carries only
+what the data determine."""
+import numpy as np
+import pytest
+
+from gecgen.runtime import significance
+
+
+def brute_force(A, b):
+    """Backward elimination by refitting least squares without each dropped column."""
+    active, dropped = list(range(A.shape[1])), {}
+    while active:
+        x, *_ = np.linalg.lstsq(A[:, active], b, rcond=None)
+        s2 = np.sum((b - A[:, active] @ x) ** 2) / (len(b) - len(active))
+        t = np.abs(x) / np.sqrt(s2 * np.diag(np.linalg.inv(A[:, active].T @ A[:, active])))
+        j = int(np.argmin(t))
+        if t[j] >= significance.T_MIN:
+            break
+        dropped[active.pop(j)] = float(t[j])
+    return dropped
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_elimination_on_the_covariance_is_refitting_without_the_dropped(seed):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(60, 8))
+    A[:, 5] = A[:, 4] + 0.1 * rng.normal(size=60)  # two correlated columns: one survives for both
+    truth = np.array([1.0, 0.0, 0.5, 0.0, 0.3, 0.3, 0.0, 2.0])
+    b = A @ truth + 0.3 * rng.normal(size=60)
+    x, *_ = np.linalg.lstsq(A, b, rcond=None)
+    sigma = np.sqrt(np.sum((b - A @ x) ** 2) / (60 - 8))
+    cov = sigma ** 2 * np.linalg.inv(A.T @ A)
+    got = significance.backward_elimination(x, cov, sigma, 60 - 8)
+    want = brute_force(A, b)
+    assert list(got) == list(want)
+    assert np.allclose(list(got.values()), list(want.values()), rtol=1e-9)
+    assert got  # the zeros of the truth are found insignificant
+
+
+def test_the_verdict_names_what_is_held_and_counts_per_frame():
+    names = ["0.ex:1", "0.ey:1", "1.ez:1", "1.ez:q1"]
+    c = np.array([1e-3, 1e-6, 2e-3, 5e-7])
+    std = np.array([1e-5, 1e-5, 1e-5, 1e-5])
+    verdict, hold = significance.judge(names, c, std, [0, 1, 2, 3], np.diag(std ** 2), 1e-5, 100.0)
+    assert sorted(hold) == [1, 3] and "held at zero" in hold[1]
+    assert [h["param"] for h in verdict["held"]] == ["1.ez:q1", "0.ey:1"]  # least significant first
+    assert verdict["n_determined"] == 2
+    assert verdict["frames"] == {"0": {"determined": 1, "held": 1}, "1": {"determined": 1, "held": 1}}
+
+
+def test_the_held_out_interval_resamples_poses_and_covers_the_rms():
+    """By pose: four rows of one pose count as one draw, so the interval of 5 poses with 4 rows each
+    is that of the 5 poses' own RMS, and it brackets the RMS; one pose repeated gives no spread."""
+    rng = np.random.default_rng(1)
+    per_pose = rng.uniform(0.5, 3.0, 5) * 1e-3
+    errors, pose = np.repeat(per_pose, 4), np.repeat(np.arange(5), 4)
+    lo, hi = significance.rms_interval(errors, pose)
+    assert lo < np.sqrt(np.mean(errors ** 2)) < hi
+    assert (lo, hi) == significance.rms_interval(per_pose, np.arange(5))  # rows of a pose do not add draws
+    assert significance.rms_interval(np.full(4, 2e-3), np.zeros(4, int)) == pytest.approx((2e-3, 2e-3))
