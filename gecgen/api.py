@@ -23,7 +23,7 @@ from gecgen.model import load_robot as _load_robot
 from gecgen.model.checks import check_terms_finite
 from gecgen.model.measurements import Commands, Measurements, read_commands
 from gecgen.model.measurements import read_measurements as _read_measurements
-from gecgen.model.validation import excerpt, require
+from gecgen.model.validation import excerpt, nearest, require
 from gecgen.runtime import calibration as _calibration
 from gecgen.runtime import significance
 from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
@@ -139,7 +139,7 @@ def fit_option(value, name: str, label: str | None = None):
 
 
 def _choice(value, name: str, allowed: tuple):
-    require(value in allowed, f"{name}={excerpt(value)}: choose one of {', '.join(allowed)}")
+    require(value in allowed, f"{name}={excerpt(value)}: {nearest(value, allowed)}")
     return value
 
 
@@ -285,6 +285,9 @@ class Calibrator:
 
     def __init__(self, errors=None, *, loss: str = "cauchy", ridge=0.0, rank_tol=None, register: str = "auto",
                  orientation_length: float | None = None, keep_insignificant: bool = False):
+        # refused here, not at fit, so the line that made the mistake is the one named
+        _choice(loss, "loss", LOSSES), _choice(register, "register", REGISTER), _length(orientation_length)
+        fit_option(ridge, "ridge"), fit_option(rank_tol, "rank_tol")
         self.errors, self.loss, self.ridge, self.rank_tol = errors, loss, ridge, rank_tol
         self.register, self.orientation_length = register, orientation_length
         self.keep_insignificant = keep_insignificant

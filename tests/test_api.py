@@ -129,12 +129,12 @@ def test_boundary_checks_name_the_fix(fitted, files):
     with pytest.raises(gecgen.ModelError) as exc:
         gecgen.Calibrator().fit(ROBOTS / "panda.yaml", gecgen.read_measurements(files / "train.csv", ROBOT))
     assert "robot panda has 7 joints" in one_line(exc)
-    for options, text in (({"loss": "l1"}, "loss='l1': choose one of cauchy, huber, l2"),
+    for options, text in (({"loss": "L2"}, "loss='L2': did you mean 'l2'? the choices: cauchy, huber, l2"),
                           ({"ridge": -1}, "ridge -1: give a non-negative number, or auto"),
                           ({"rank_tol": 2}, "rank_tol 2: give a number from 0 to below 1, or auto"),
                           ({"orientation_length": 0}, "orientation_length=0: give a positive length")):
-        with pytest.raises(gecgen.ModelError) as exc:
-            gecgen.Calibrator(**options).fit(ROBOT, files / "train.csv")
+        with pytest.raises(gecgen.ModelError) as exc:  # at construction: the line that made the mistake
+            gecgen.Calibrator(**options)
         assert text in one_line(exc)
     with pytest.raises(gecgen.ModelError) as exc:
         gecgen.calibrate(ROBOT, files / "train.csv", models=("geometric", "bogus"))

@@ -192,6 +192,22 @@ IN_PROCESS = {
         lambda t: ["identify", telescope(t), write(t, "data.csv", "pose,q1,q2,q3,q4,target,x,y,z\n"), "-o",
                    t / "telescope.urdf"],
         "telescope.urdf", "telescope.yaml names, which this command reads; writing the calibration there"),
+    # issue 21: a near miss is named, YAML errors say where, paths say what they are relative to
+    "a mistyped command": (lambda t: ["simulat"], "simulat", "did you mean 'simulate'?"),
+    "YAML that does not parse": (lambda t: ["redundancy", write(t, "bad.yaml", "name: x\nangle_unit: rad\n  b: [1\n")],
+                                 "bad.yaml", "line 3, column 4: not valid YAML"),
+    "a tip_link the URDF lacks": (
+        lambda t: ["redundancy", write(t, "tel.yaml", telescope(t).read_text().replace("tip_link: tool_link",
+                                                                                     "tip_link: tool_lnk"))],
+        "telescope.urdf", "tip_link 'tool_lnk' is not a link of this URDF; did you mean 'tool_link'?"),
+    "a urdf path that does not exist": (
+        lambda t: ["redundancy", write(t, "tel.yaml", telescope(t).read_text().replace("urdf: telescope.urdf",
+                                                                                     "urdf: urdf/telescope.urdf"))],
+        "tel.yaml", "(the path is relative to the robot file's folder"),
+    "commands in degrees (compensate)": (
+        lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6\n0,0,0,90,0,0\n"),
+                   "-o", t / "out.csv"],
+        "cmds.csv", "row 2, column 'q4': 90 is outside the joint limits"),
     "two outputs naming one file": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / "s.csv", "--val-out",
                                                t / "s.csv"], "s.csv", "--val-out names the same file as --output"),
     "an output onto a device": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", "/dev/null"],
@@ -215,7 +231,7 @@ IN_PROCESS = {
     "--holdout 1.5": (lambda t: ["calibrate", pps(t), write(t, "data.csv", table()), "--holdout", "1.5", "-o", t / "c"],
                       "--holdout 1.5", "give the share of poses to hold out"),
     "an unknown option value": (lambda t: ["identify", pps(t), write(t, "data.csv", table()), "--loss", "L2"],
-                                "--loss", "invalid choice: 'L2'"),
+                                "--loss", "invalid choice 'L2'; did you mean 'l2'?"),
     "a station id beyond 2**53": (lambda t: ["identify", pps(t), write(t, "data.csv", table(header=HEADER + ",station",
                                                                                          extra=",1e20"))],
                                   "data.csv", "column 'station': not an integer station id within +-2**53"),
@@ -377,3 +393,12 @@ def test_a_file_written_into_an_output_folder_never_replaces_an_input(tmp_path):
         write_atomically(tmp_path / "other.yaml", "fine")
     assert source.read_text() == "frames: {}\n" and not list(tmp_path.glob(".gecgen-*"))
     write_atomically(source, "after the command")  # outside the command, the file is just a file
+
+
+def test_simulate_says_when_it_has_no_truth_to_simulate(tmp_path, capsys):
+    """Without a truth file the simulated robot is the nominal one: said, not silent."""
+    from gecgen.cli import main
+
+    assert main(["simulate", str(ROBOTS / "puma560.yaml"), "--poses", "3", "-o", str(tmp_path / "p.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: no truth file" in err and "the simulated robot is the nominal one" in err

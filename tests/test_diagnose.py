@@ -205,6 +205,12 @@ def test_noise_floor_from_repeated_poses(rng):
     assert floor["source"] == "repeated poses" and floor["dof"] == 3 * 150
     assert abs(floor["noise_mm"] - 1e3 * NOISE) < 0.1 * 1e3 * NOISE
     assert noise_floor(data.subset(np.arange(0, n, 2))) is None  # no repeats: unknown, not guessed
+    # the second of each pair with its wrist read a full turn away (-360 and +360 deg): the same pose
+    turned = q.copy()
+    turned[1::2, 5] += np.where(turned[1::2, 5] > 0, -2 * np.pi, 2 * np.pi)
+    data = Measurements(turned, data.w, data.aux, (), data.pose_ids, data.pose, data.target, xyz, "s")
+    assert noise_floor(data) is None  # without the robot, the joints differ
+    assert noise_floor(data, robot=robot)["dof"] == 3 * 150
 
 
 @pytest.mark.parametrize("start", [0.0, 1_764_000_000.0], ids=["from zero", "Unix time"])
@@ -223,3 +229,15 @@ def test_a_drift_in_time_is_found_whatever_the_clock_origin(start):
     diag = diagnose(robot, load_error_model(None, robot, ("time_s",)), train, val)
     assert [(e.error, e.terms) for e in diag.effects] == [("0.ex", ["time_s"])], [e.to_dict() for e in diag.effects]
     assert diag.after["val_rms_mm"] < 1.1 * 1e3 * np.sqrt(3 * 2 * 3e-5 ** 2)
+
+
+def test_a_period_longer_than_the_stroke_is_called_smooth():
+    """A Fourier pair shows less than a cycle when its period exceeds the range its joint covers."""
+    from gecgen.loop.dictionary import fourier_candidate, shown_family
+
+    q = np.zeros((50, 6))
+    q[:, 1] = np.linspace(0.0, 1.45, 50)  # a 1.45 m stroke
+    data = Measurements(q, np.zeros((50, 6)), np.zeros((50, 0)), (), np.arange(50), np.arange(50),
+                        np.zeros(50, int), np.zeros((50, 3)), "s")
+    assert shown_family(fourier_candidate("q2", q[:, 1], 3.28), data) == "smooth"
+    assert shown_family(fourier_candidate("q2", q[:, 1], 0.4), data) == "fourier"

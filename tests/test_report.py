@@ -117,3 +117,16 @@ def test_report_renders_in_a_browser(reports, command, tmp_path):
     assert pixels.shape == (3000, 1200)
     # not blank: text and plots make dark pixels in every third of the page's height
     assert all((band < 128).mean() > 0.005 for band in np.array_split(pixels, 3))
+
+
+def test_an_effect_shows_its_coefficients_as_finally_fitted(reports):
+    """The effect table holds the final fit's values (as the coefficient table does), with std and t."""
+    md = open(reports["diagnose"]["report"]).read()
+    effect = md[md.index("## Effect 1"):]
+    effect = effect[:effect.index("\n## ")]
+    assert "value as finally fitted" in effect and "| t |" in effect
+    name, value = re.search(r"\| `([^`]+)` \| (-?[0-9.e+-]+) \|", effect).groups()
+    frame, rest = name.split(".", 1)
+    error, term = rest.split(":", 1)
+    row = re.search(rf"\| {frame} [^|]* \| {error} \| `{re.escape(term)}` \| (-?[0-9.e+-]+) \|", md)
+    assert row and row.group(1) == value, (name, value)

@@ -9,6 +9,7 @@ import argparse
 import importlib
 import json
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -17,7 +18,7 @@ from gecgen import __version__
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
-from gecgen.model.validation import read_yaml
+from gecgen.model.validation import nearest, read_yaml
 
 #: the command modules, in the order `gecgen --help` lists them
 COMMANDS = ("generate", "identify", "evaluate", "compensate", "export", "redundancy", "simulate", "import_", "gravity",
@@ -44,7 +45,12 @@ class _Parser(argparse.ArgumentParser):
     """A bad option is one line naming it and the fix, not the usage block argparse prints."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: {message.splitlines()[0]}; see {self.prog} --help\n")
+        line = message.splitlines()[0]
+        wrong = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)$", line)
+        if wrong:  # argparse lists the choices; a near miss gets named
+            choices = re.findall(r"'([^']*)'", wrong.group(2))
+            line = line[:wrong.start()] + f"invalid choice {wrong.group(1)!r}; {nearest(wrong.group(1), choices)}"
+        self.exit(2, f"{self.prog}: {line}; see {self.prog} --help\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -68,7 +68,8 @@ def run(args) -> dict:
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
               "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table,
               "n_params": len(choice.model.coefficients),
-              "n_identifiable": choice.fit.redundancy.n_identifiable, "before": choice.fit.before,
+              "n_identifiable": choice.fit.redundancy.n_identifiable, "n_carried": len(choice.fit.redundancy.kept),
+              "significance": cal.report_["significance"], "before": choice.fit.before,
               "train": choice.fit.train, "outliers": [o.to_dict() for o in choice.fit.outliers],
               "effects": [e.to_dict() for e in sel.effects], "placement": cal.report_["placement"]}
     if sel.val is not None:

@@ -69,5 +69,6 @@ def run(args) -> dict:
                                           "auto" if register_val else args.register)
         result.update(report.write(content, args.report))
     # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
-    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {robot.name}.calib.json"
+    calib = Path(out).with_name(f"{robot.name}.calib.json")  # beside the error model, not in the working folder
+    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}"
     return result

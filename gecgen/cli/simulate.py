@@ -1,13 +1,13 @@
 """`gecgen simulate`: measurements of a truth robot, as a tracker would record them."""
 from __future__ import annotations
 
-from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
-
+import warnings
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
 from gecgen.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
@@ -19,7 +19,8 @@ from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, r
 def add_parser(command):
     p = command("simulate", run, "simulated measurements of a robot with physical error sources")
     p.add_argument("robot", help=ROBOT_HELP)
-    p.add_argument("--truth", help="truth file (default: robots/NAME.truth.yaml beside the robot, else geometric only)")
+    p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the nominal robot: no errors, "
+                        "no noise)")
     p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
@@ -46,6 +47,9 @@ def run(args) -> dict:
     robot = load_robot(args.robot)
     truth_path = Path(args.truth) if args.truth else Path(args.robot).with_name(f"{robot.name}.truth.yaml")
     spec = read_yaml(truth_path, "truth") if (args.truth or truth_path.is_file()) else {}
+    if not spec:
+        warnings.warn(f"no truth file ({truth_path} does not exist, and no --truth): the simulated robot is the "
+                      f"nominal one, without errors or noise; give --truth FILE to simulate a robot as built")
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
     payloads = args.payload_kg

@@ -32,7 +32,7 @@ import yaml
 from scipy import stats
 
 from gecgen.files import write_atomically
-from gecgen.loop.dictionary import candidates, refine_period
+from gecgen.loop.dictionary import candidates, refine_period, shown_family
 from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
@@ -229,7 +229,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             break
         rnd = refit
         coefs = _effect_coefficients(robot, rnd, e, len(c.terms))
-        effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), c.family,
+        effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), shown_family(c, data),
                               1e3 * (base_cv - cv), p, coefs, alternatives[:5]))
     before = _scores(first, val, register_val)
     after = _scores(rnd, val, register_val)
@@ -240,15 +240,25 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining)
 
 
+#: joint angles taken 2 pi apart are compared to this many decimals (rad) once wrapped: the wrap's
+#: rounding (1e-15) must not split a repeat, and nothing a robot repeats differs by 1e-9 rad
+ANGLE_DECIMALS = 9
+
+
 def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot | None = None) -> dict | None:
     """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
     given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
-    wrench and aux, measuring the same target), else None (unknown). With the robot the data is
+    wrench and aux, measuring the same target; with the robot, revolute joints 2 pi apart count as
+    identical), else None (unknown). With the robot the data is
     fitted on, a measured frame's vertices count with their weight and degrees of freedom
     (`model.pose_targets`), so the noise is per degree of freedom as the fit's sigma is."""
     if noise_mm is not None:
         return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
-    state = np.column_stack([data.q, data.w, data.aux])
+    q = data.q
+    if robot is not None:  # a revolute joint read 2 pi apart is in the same place (a wrist at -360 and +360 deg)
+        turns = np.array([j.kind == "R" for j in robot.joints])
+        q = np.where(turns, np.round(np.mod(q + np.pi, 2 * np.pi) - np.pi, ANGLE_DECIMALS), q)
+    state = np.column_stack([q, data.w, data.aux])
     _, group = np.unique(state, axis=0, return_inverse=True)
     key = group.ravel()[data.pose] * len(data.target) + data.target
     _, point_group, size = np.unique(key, return_inverse=True, return_counts=True)

@@ -67,6 +67,16 @@ def fourier_candidate(name: str, v: np.ndarray, period: float) -> Candidate:
                      np.column_stack([np.sin(a), np.cos(a)]))
 
 
+def shown_family(c: Candidate, data: Measurements) -> str:
+    """The family a person reads for candidate c: a Fourier pair whose period is longer than the
+    range its joint covers in the data shows less than one cycle there, a "smooth" bend rather
+    than a periodic error (a 3.28 m period over a 1.45 m stroke)."""
+    if c.family != "fourier":
+        return c.family
+    period = float(c.terms[0].split("/")[-1].rstrip(")"))
+    return "fourier" if period <= _range(data.q[:, int(c.variables[0][1:]) - 1]) else "smooth"
+
+
 def refine_period(best: Candidate, data: Measurements, screen_one) -> Candidate:
     """A fine scan of periods around a Fourier winner of the coarse scan (one grid step each way)."""
     name = best.variables[0]

@@ -109,6 +109,19 @@ class Measurements:
         return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
 
 
+def within_limits(q: np.ndarray, robot: Robot, where: str, limit_tolerance: float = LIMIT_TOLERANCE):
+    """Refuse the first joint value of q (rows, n; row r is file row r + 2) outside the robot's
+    limits by more than limit_tolerance (m or rad): a file in degrees read as radians, mostly."""
+    lo = np.array([j.lower for j in robot.joints]) - limit_tolerance
+    hi = np.array([j.upper for j in robot.joints]) + limit_tolerance
+    out = np.argwhere((q < lo) | (q > hi))
+    if len(out):
+        r, j = out[0]
+        raise ModelError(f"{at(where, r + 2, f'q{j + 1}')}: {q[r, j]:g} is outside the joint limits "
+                         f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units (degrees "
+                         f"read as radians?) or the robot file")
+
+
 def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERANCE) -> Measurements:
     """The measurements of a CSV file (its path), or of a pandas DataFrame with the file's columns
     (messages name it `DataFrame`, its rows numbered as in the CSV `to_csv(index=False)` writes)."""
@@ -155,14 +168,7 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     state_cols = [*qcols, *wcols, *aux_names]
     state = np.column_stack([column(c) for c in state_cols])
     xyz = np.column_stack([column(c) for c in ("x", "y", "z")])
-    q = state[:, :robot.n]
-    lo = np.array([j.lower for j in robot.joints]) - limit_tolerance
-    hi = np.array([j.upper for j in robot.joints]) + limit_tolerance
-    out = np.argwhere((q < lo) | (q > hi))
-    if len(out):
-        r, j = out[0]
-        raise ModelError(f"{at(where, r + 2, f'q{j + 1}')}: {q[r, j]:g} is outside the joint limits "
-                         f"[{robot.joints[j].lower:g}, {robot.joints[j].upper:g}] (m or rad); check units or the robot file")
+    within_limits(state[:, :robot.n], robot, where, limit_tolerance)
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
     require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
                          f"{xyz[mm[0]].tolist() if len(mm) else ''} are over {MM_SUSPECT:g} m from the robot: "
@@ -282,7 +288,9 @@ def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Comman
         if c in header:
             w[:, j] = table.numbers(c, limit=MAX_WRENCH)
     aux = np.column_stack([table.numbers(a, limit=MAX_AUX) for a in aux_names]) if aux_names else np.zeros((len(table), 0))
-    return Commands(np.column_stack([table.numbers(c) for c in qcols]), w, aux, aux_names, header, table.rows(), where)
+    q = np.column_stack([table.numbers(c) for c in qcols])
+    within_limits(q, robot, where)
+    return Commands(q, w, aux, aux_names, header, table.rows(), where)
 
 
 def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):

@@ -331,7 +331,8 @@ def load_robot(path: str | Path) -> Robot:
         require(isinstance(spec["base_link"], str), f"{where}: base_link: expected the name of a URDF link")
         require(isinstance(spec["urdf"], str), f"{where}: urdf: expected the path of a URDF file")
         urdf_path = path.parent / spec["urdf"]
-        require(urdf_path.is_file(), f"{where}: urdf: no such file {excerpt(str(urdf_path))}")
+        require(urdf_path.is_file(), f"{where}: urdf: no such file {excerpt(str(urdf_path))} (the path is relative to "
+                                     f"the robot file's folder, {path.parent.resolve()})")
         hashes[urdf_path.name] = file_hash(urdf_path)
         lead, joints, parents, tips = _urdf_tree(urdf_path, spec["base_link"], branches)
         base = base + lead

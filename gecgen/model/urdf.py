@@ -25,7 +25,7 @@ import sympy as sp
 
 from gecgen.model.kinematics import constant, joint_motion
 from gecgen.model.robot import Coupling, Elementary, Joint
-from gecgen.model.validation import ModelError, excerpt, read_text, require
+from gecgen.model.validation import ModelError, excerpt, nearest, read_text, require
 
 MOVING = {"revolute": "R", "continuous": "R", "prismatic": "P"}
 
@@ -199,7 +199,7 @@ def urdf_chain(path: Path, base_link: str, tip_link: str):
     root = _parse(path)
     links, above = _tree(root, where)
     for key, link in (("base_link", base_link), ("tip_link", tip_link)):
-        require(link in links, f"{where}: {key} {excerpt(link)} is not a link of this URDF")
+        require(link in links, f"{where}: {key} {excerpt(link)} is not a link of this URDF; {nearest(link, links)}")
     by_name = {uj.name: uj for uj in above.values()}
 
     pending: tuple[Elementary, ...] = ()  # fixed transforms not yet folded into a frame
@@ -303,7 +303,8 @@ def load_mass_tree(path: str | Path, base_link: str) -> MassTree:
     where = str(path)
     root = _parse(path)
     links, above = _tree(root, where)
-    require(base_link in links, f"{where}: base_link {excerpt(base_link)} is not a link of this URDF")
+    require(base_link in links, f"{where}: base_link {excerpt(base_link)} is not a link of this URDF; "
+                                f"{nearest(base_link, links)}")
     by_name = {uj.name: uj for uj in above.values()}
     below: dict[str, list[str]] = {}
     for child, uj in above.items():

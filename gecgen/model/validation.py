@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import codecs
+import difflib
 import re
 import reprlib
 from pathlib import Path
@@ -43,6 +44,21 @@ def excerpt(value) -> str:
     never walks more than a few elements of it."""
     text = repr(value[:EXCERPT + 1]) if isinstance(value, str) else _SHORT.repr(value)
     return text if len(text) <= EXCERPT else text[:EXCERPT] + "..."
+
+
+#: names a "did you mean" lists at most
+LISTED = 8
+
+
+def nearest(name, choices) -> str:
+    """What to say after an unknown `name`: the closest of `choices` ("did you mean 'x'? "), then
+    the choices (the first LISTED of them, and how many in all)."""
+    choices = [str(c) for c in choices]
+    lower = {c.lower(): c for c in choices}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=0.6) if isinstance(name, str) else []
+    close = [lower[c] for c in close]
+    listed = ", ".join(choices[:LISTED]) + (f", ... ({len(choices)} in all)" if len(choices) > LISTED else "")
+    return (f"did you mean '{close[0]}'? " if close else "") + f"the choices: {listed}"
 
 
 def require_keys(spec: dict, where: str, required: set = frozenset(), optional: set = frozenset()):
@@ -132,7 +148,11 @@ def read_yaml(path: Path, what: str):
     try:
         return loader.get_single_data()
     except yaml.YAMLError as exc:
-        raise ModelError(f"{path}: not valid YAML ({excerpt(str(exc).splitlines()[0])})") from None
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        where = f"{path}: line {mark.line + 1}, column {mark.column + 1}" if mark else str(path)
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ModelError(f"{where}: not valid YAML ({excerpt(problem)}); fix the file there (an indent, a missing "
+                         f"bracket, quote or colon)") from None
     except RecursionError:
         raise ModelError(f"{path}: not a {what} file: its lists or mappings are nested too deeply") from None
     finally:

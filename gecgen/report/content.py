@@ -257,15 +257,17 @@ def extrapolation_section(robot: Robot, calib, counts: dict[str, int] | None, n_
     return Section("Extrapolation", blocks)
 
 
-def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, after: Residuals,
+def effect_sections(robot: Robot, effects, cm, fit, y: np.ndarray, after: Residuals,
                     data: Measurements) -> list[Section]:
-    """One section per effect diagnose added to compiled model cm (coefficients c, training data
-    with measured world points y; `after` its residuals): its fitted error, and against each of its
-    variables the residual without it (its coefficients zeroed, all else held) and with it."""
+    """One section per effect diagnose added to compiled model cm (the final fit, training data
+    with measured world points y; `after` its residuals): its coefficients as finally fitted, and
+    against each of its variables the residual without it (its coefficients zeroed, all else held)
+    and with it."""
     from gecgen.report import plots
 
     names = cm.model.coefficient_names(robot)
     q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
+    c = fit.c
     out = []
     for k, eff in enumerate(effects, 1):
         idx = [names.index(co["name"]) for co in eff.coefficients]
@@ -274,15 +276,24 @@ def effect_sections(robot: Robot, effects, cm, c: np.ndarray, y: np.ndarray, aft
         without = residuals("without the effect", cm, data, y, zeroed)
         error = cm.model.coefficients[idx[0]].error
         size = 1e3 * (cm.eps(q, w, aux, c) - cm.eps(q, w, aux, zeroed))[:, error]
-        blocks = [f"Cross-validated gain {eff.gain_mm:.4f} mm, p = {eff.p_value:.2g}.",
-                  Table(("coefficient", "value (mm or mrad per unit of term)", "std"),
-                        [(f"`{co['name']}`", f"{1e3 * co['value']:.6g}",
-                          "eliminated" if co["std"] is None else f"{1e3 * co['std']:.2g}") for co in eff.coefficients])]
+        unit = "mm" if robot.error_names()[error].split(".")[1] in ("ex", "ey", "ez") else "mrad"
+        p = f"p = {eff.p_value:.2g}" if eff.p_value > 1e-300 else "p < 1e-300"
+        blocks = [f"Cross-validated gain {eff.gain_mm:.3g} mm when it was added, {p}.",
+                  Table(("coefficient", f"value as finally fitted ({unit} per unit of the term)", "std", "t"),
+                        [(f"`{names[j]}`", f"{1e3 * c[j]:.3g}", "eliminated" if np.isnan(fit.std[j]) else
+                          f"{1e3 * fit.std[j]:.2g}", "-" if np.isnan(fit.std[j]) else
+                          f"{abs(c[j]) / fit.std[j]:.1f}") for j in idx])]
         if eff.alternatives:
-            blocks += ["Indistinguishable on this data (the same fitted effect):",
-                       Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.4f})"
+            blocks += ["Indistinguishable on this data (the same fitted effect): which error carries it is not "
+                       "decided by the data, so the frame named above is one choice among these"
+                       + (" (similarity 1.000: exactly the same effect)"
+                          if max(a["similarity"] for a in eff.alternatives) > 0.9995 else "") + ":",
+                       Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.3f})"
                                 for alt in eff.alternatives])]
-        blocks += [plots.effect(robot, eff, size, v, without, after, data) for v in eff.variables]
+        still = [v for v in eff.variables if np.ptp(variable(data, v)) == 0]
+        blocks += [plots.effect(robot, eff, size, v, without, after, data) for v in eff.variables if v not in still]
+        if still:
+            blocks.append(f"Not plotted against {', '.join(still)}: constant over the training data.")
         out.append(Section(f"Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", blocks))
     return out
 
@@ -365,7 +376,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                    f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
                    f"terms. New error model: `{errors_out}`."],
                   [headline(sets, robot), Section("What diagnose found", found),
-                   *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit.c,
+                   *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit,
                                     diag.final.fit.to_world(data), sets[0].stages[2], data),
                    *residual_sections(robot, sets), *coefficient_section(robot, calib), glossary(robot),
                    extrapolation_section(robot, calib, None, None), Section("Rounds", [rounds])])
@@ -398,14 +409,17 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
         "cross-validated RMS wins, a tie within 1% going to the smaller model.",
         Table(("model", "coefficients", "training CV RMS (mm)"), rows),
         f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} "
-        "coefficients."])
+        f"coefficients, {result['n_carried']} of them determined by the data and carried (see \"Eliminated "
+        "parameters\")." + (" On the whole training data diagnose added no effect: the model is the geometric one, "
+                            "and its cross-validated score is that of the whole pipeline, whose folds may have added "
+                            "effects." if result["model"] == "diagnosed" and not result["effects"] else "")])
     if result["outliers"]:
         choose.blocks.append(f"{len(result['outliers'])} training points were outliers of the robust fit "
                              "(down-weighted; `calibration.json` lists them).")
     if result["placement"]:
         choose.blocks.append("Targets placed from the training data before the fit: " + ", ".join(
             f"{n} {[round(v, 4) for v in xyz]} m" for n, xyz in result["placement"]["targets_m"].items()))
-    effects = effect_sections(robot, diag.effects, cm, fit.c, fit.to_world(data), sets[0].stages[-1],
+    effects = effect_sections(robot, diag.effects, cm, fit, fit.to_world(data), sets[0].stages[-1],
                               data) if diag is not None else []
     files = Section("Files", ["`calibration.json` (for `gecgen evaluate` and `gecgen compensate`), `errors.yaml` (the "
                               "chosen error model), `generated/` (its C and CasADi code, `NAME_calibration.h` with the "

@@ -80,18 +80,19 @@ def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
 
 def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     """Signed residual per axis (rows: x, y, z in mm, then orientation about x, y, z in mrad when
-    measured) against each joint (columns), names and units on every axis."""
+    measured) against each joint the data moves (columns; one held still shows nothing), names and
+    units on every axis."""
     rows = [(f"{a} residual (mm)", st.position_mm[:, k]) for k, a in enumerate("xyz")]
     if st.rotation_mrad is not None:
         rows += [(f"rot. about {a} (mrad)", st.rotation_mrad[:, k]) for k, a in enumerate("xyz")]
-    n = robot.n
-    fig, axes = plt.subplots(len(rows), n, figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
+    moving = [k for k in range(robot.n) if np.ptp(ds.data.q[:, k]) > 0] or list(range(robot.n))
+    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
     colour = COLOURS[min(len(COLOURS) - 1, [s.stage for s in ds.stages].index(st.stage))]
     for r, (ylabel, values) in enumerate(rows):
         finite = values[np.isfinite(values)]
         limit = 1.08 * np.abs(finite).max() if len(finite) and np.abs(finite).max() > 0 else 1.0
-        for k in range(n):
-            ax = axes[r, k]
+        for col, k in enumerate(moving):
+            ax = axes[r, col]
             ax.plot(joint_values(robot, ds.data, k)[st.pose], values, ".", ms=3, alpha=0.7, color=colour)
             ax.axhline(0, color="0.5", lw=0.6)
             _binned_mean(ax, joint_values(robot, ds.data, k)[st.pose], values)
@@ -106,8 +107,10 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     height = fig.get_figheight()
     fig.subplots_adjust(left=0.05, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, wspace=0.42,
                         hspace=0.55)
+    still = [joint_label(robot, k) for k in range(robot.n) if k not in moving]
     return _figure(fig, f"residuals_{ds.name}_{_slug(st.stage)}",
-                   f"Signed residuals, {st.stage} model, {ds.name} data")
+                   f"Signed residuals, {st.stage} model, {ds.name} data"
+                   + (f" (not shown: {', '.join(still)}, constant over the data)" if still else ""))
 
 
 def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, after: Residuals, data) -> Figure:
