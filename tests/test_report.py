@@ -17,7 +17,7 @@ from gecgen.cli import main
 ROBOT = ROBOTS / "industrial6r.yaml"
 ERRORS = ROBOTS / "constant.errors.yaml"
 #: sections every report has, and those of one command only
-COMMON = ("Summary", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
+COMMON = ("Summary", "What was measured", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
           "Extrapolation")
 ONLY = {"identify": (), "evaluate": (), "diagnose": ("What diagnose found", "Rounds"),
         "calibrate": ("Model choice", "Files")}
@@ -130,3 +130,17 @@ def test_an_effect_shows_its_coefficients_as_finally_fitted(reports):
     error, term = rest.split(":", 1)
     row = re.search(rf"\| {frame} [^|]* \| {error} \| `{re.escape(term)}` \| (-?[0-9.e+-]+) \|", md)
     assert row and row.group(1) == value, (name, value)
+
+
+def test_what_was_measured_counts_the_data_and_scores_each_target(reports):
+    """The measurement context: 30 training poses of the one SMR, one stationing, no load, each
+    joint's measured span against its limits; the per-target errors are the summary's (one target)."""
+    md = open(reports["identify"]["report"]).read()
+    section = md[md.index("## What was measured"):md.index("## Distribution")]
+    assert "30 poses, 30 measured rows: target `smr` 30" in section and "1 tracker stationing" in section
+    assert "1 load case" in section and "positions only" in section
+    assert len(re.findall(r"\| q[1-6] [^|]+ \| -?[0-9.]+ to -?[0-9.]+ deg \| .* \| [0-9]+ % \|", section)) == 6
+    train = reports["identify"]["train"]
+    assert f"| target `smr` | {reports['identify']['before']['rms_mm']:.3g} / " in section
+    assert f" / {train['max_mm']:.3g} |" in section
+    assert "poses_training.png" in section

@@ -137,6 +137,62 @@ def headline(sets: list[DataSet], robot: Robot | None = None) -> Section:
     return Section("Summary", blocks + ([branch_table(robot, sets)] if robot is not None and robot.branches else []))
 
 
+def _rms_max(position_mm: np.ndarray) -> str:
+    e = np.linalg.norm(position_mm, axis=1)
+    return f"{np.sqrt(np.mean(e ** 2)):.3g} / {e.max():.3g}" if len(e) else "-"
+
+
+#: load cases are told apart by the measured force's size in steps of this (N: about 1 kg)
+LOAD_STEP_N = 10.0
+#: more distinct forces than this are a varying load, not load cases: no per-case errors
+MAX_LOAD_CASES = 8
+
+
+def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
+    """What was measured, per data set: poses and rows per target, orientations, tracker stations,
+    load cases, the instrument noise when repeated poses give it, and how much of each joint's
+    range the poses cover; then the point errors per target and per load case of every stage.
+    robot: the robot the data is on (a measured frame as its vertex targets, `cm.robot`)."""
+    from gecgen.loop.diagnose import noise_floor
+    from gecgen.report import plots
+
+    noise = noise_floor(sets[0].data, robot=robot)
+    blocks = []
+    for ds in sets:
+        data, rows = ds.data, measured_rows(robot, ds.data)
+        target = np.array([robot.vertex_of.get(n, (n,))[0] for n in robot.target_names])[data.target[rows.first]]
+        names, count = np.unique(target, return_counts=True)
+        # a load case is a payload: the force's size in LOAD_STEP_N bins (its direction turns with the sensor)
+        force = np.linalg.norm(data.w[data.pose[rows.first], :3], axis=1)
+        loads, case = np.unique(np.round(force / LOAD_STEP_N), return_inverse=True)
+        stations = np.unique(data.station)
+        facts = [f"{data.n_poses} poses, {len(rows.first)} measured rows: "
+                 + ", ".join(f"target `{n}` {c}" for n, c in zip(names, count)),
+                 f"{int(rows.oriented.sum())} rows measure the orientation too" if rows.oriented.any() else
+                 "positions only (no orientation measured)",
+                 f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}",
+                 f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
+        if noise is not None and ds is sets[0]:
+            facts.append(f"instrument noise from repeated poses: {noise['noise_mm']:.3g} mm per coordinate")
+        blocks += [f"**{ds.name.capitalize()} data** (`{data.source or 'in memory'}`):", Bullets(facts)]
+        coverage = []
+        for k, joint in enumerate(robot.joints):
+            v = joint_values(robot, data, k)
+            unit = "mm" if joint.kind == "P" else "deg"
+            scale = 1e3 if joint.kind == "P" else 180 / np.pi
+            share = np.ptp(data.q[:, k]) / max(joint.upper - joint.lower, 1e-12)
+            coverage.append((joint_label(robot, k), f"{v.min():.3g} to {v.max():.3g} {unit}",
+                             f"{scale * joint.lower:.3g} to {scale * joint.upper:.3g} {unit}", f"{100 * share:.0f} %"))
+        blocks.append(Table(("joint", "measured", "limits", "share of the range"), coverage))
+        by = [(f"target `{n}`", *(_rms_max(st.position_mm[target == n]) for st in ds.stages)) for n in names]
+        if 1 < len(loads) <= MAX_LOAD_CASES:
+            by += [(f"force about {LOAD_STEP_N * loads[c]:g} N", *(_rms_max(st.position_mm[case == c])
+                                                                   for st in ds.stages)) for c in range(len(loads))]
+        blocks.append(Table(("rows", *(f"{st.stage}: RMS / max (mm)" for st in ds.stages)), by))
+        blocks.append(plots.per_pose(robot, ds))
+    return Section("What was measured", blocks)
+
+
 def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:
     """RMS point error per branch of a tree, per data set and stage (a hand's accuracy is its own)."""
     header, rows = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)], []
@@ -313,7 +369,8 @@ def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, 
     return Report(f"gecgen identify: {robot.name}",
                   [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses). "
                    "Training data only: score it on new data with `gecgen evaluate --report`."],
-                  [headline([train], robot), *residual_sections(robot, [train]), *coefficient_section(robot, calib),
+                  [headline([train], robot), measured_section(cm.robot, [train]), *residual_sections(robot, [train]),
+                   *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, None, None)])
 
 
@@ -325,7 +382,8 @@ def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray,
     return Report(f"gecgen evaluate: {robot.name}",
                   [f"Calibration `{calib_path}` scored on `{data.source}` ({data.n_poses} poses), data it was not "
                    "fitted on."],
-                  [headline([val], robot), *residual_sections(robot, [val]), *coefficient_section(robot, calib),
+                  [headline([val], robot), measured_section(cm.robot, [val]), *residual_sections(robot, [val]),
+                   *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
 
 
@@ -375,7 +433,8 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                   [f"Training data `{data.source}` ({data.n_poses} poses); validation "
                    f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
                    f"terms. New error model: `{errors_out}`."],
-                  [headline(sets, robot), Section("What diagnose found", found),
+                  [headline(sets, robot), measured_section(diag.final.cm.robot, sets),
+                   Section("What diagnose found", found),
                    *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit,
                                     diag.final.fit.to_world(data), sets[0].stages[2], data),
                    *residual_sections(robot, sets), *coefficient_section(robot, calib), glossary(robot),
@@ -428,6 +487,7 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     return Report(f"gecgen calibrate: {robot.name}",
                   [f"Training data `{result['train_data']}` ({data.n_poses} poses)"
                    + (f"; validation {result['validation']}, scored after the choice." if val is not None else ".")],
-                  [headline(sets, robot), choose, *effects, *residual_sections(robot, sets),
+                  [headline(sets, robot), measured_section(cm.robot, sets), choose, *effects,
+                   *residual_sections(robot, sets),
                    *coefficient_section(robot, calib), glossary(robot), extrapolation_section(robot, calib, None, None),
                    files])

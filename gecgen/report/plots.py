@@ -67,6 +67,26 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
     return _figure(fig, name, f"{what.capitalize()}s on the {ds.name} data, each model")
 
 
+def per_pose(robot: Robot, ds: DataSet) -> Figure:
+    """Each pose's RMS point error (mm) of every stage against the pose's order in the file, the
+    five largest of the last stage labelled with their pose ids: a bad pose stands out."""
+    fig, ax = plt.subplots(figsize=(12, 3.0))
+    P = ds.data.n_poses
+    for s, colour in zip(ds.stages, COLOURS):
+        sq = np.bincount(s.pose, np.sum(s.position_mm ** 2, axis=1), P)
+        rms = np.sqrt(sq / np.maximum(np.bincount(s.pose, minlength=P), 1))
+        ax.plot(np.arange(P), rms, ".-", ms=3, lw=0.5, color=colour, label=s.stage)
+    for p in np.argsort(-rms)[:5]:
+        ax.annotate(f"pose {ds.data.pose_ids[p]}", (p, rms[p]), fontsize=7, xytext=(2, 2), textcoords="offset points")
+    ax.set_xlabel("pose, in the order of the file")
+    ax.set_ylabel("RMS point error (mm)")
+    ax.set_title(f"{robot.name}, {ds.name} data: error per pose")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _figure(fig, f"poses_{ds.name}", f"RMS point error of each pose, {ds.name} data, each model")
+
+
 def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
     """The mean of y in equal bins of x, as a line: a periodic or sloped pattern stands out of the scatter."""
     ok = np.isfinite(y)
