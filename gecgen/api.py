@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model import ErrorModel, ModelError, Robot, load_error_model
+from gecgen.model import ModelError, Robot
 from gecgen.model import load_robot as _load_robot
 from gecgen.model.checks import check_terms_finite
 from gecgen.model.measurements import Commands, Measurements, read_commands
@@ -27,6 +27,7 @@ from gecgen.model.validation import excerpt, nearest, require
 from gecgen.runtime import calibration as _calibration
 from gecgen.runtime import significance
 from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
+from gecgen.runtime.inputs import checked, error_model, measured_counts, on_points, placed
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
            "load_calibration", "load_robot", "read_measurements"]
@@ -60,67 +61,6 @@ def read_measurements(source, robot) -> Measurements:
                 f"and {len(robot.targets)} targets; read the data with this robot's file")
         return source
     return _read_measurements(source, robot)
-
-
-def error_model(errors, robot: Robot, aux: tuple[str, ...] = (), constant: bool = True) -> ErrorModel | None:
-    """The error model: an ErrorModel as given, a file's, or (None) robots/NAME.errors.yaml beside
-    the robot file when there is one, else six constant errors per frame (`constant`) or None.
-    `aux` are the data's auxiliary columns, usable as variables."""
-    if isinstance(errors, ErrorModel):
-        return errors
-    if errors is None and robot.source:
-        default = Path(robot.source).with_name(f"{robot.name}.errors.yaml")
-        errors = default if default.is_file() else None
-    return load_error_model(errors, robot, aux) if errors is not None or constant else None
-
-
-# -- what fitting shares with the command line ---------------------------------------------
-
-def placed(robot: Robot, data: Measurements):
-    """The robot with the targets the data must place placed (runtime.placement), and the placement
-    or None; a warning says which targets moved and how far."""
-    from gecgen.runtime.placement import FAR_M, FAR_RAD, place_targets
-
-    robot, placement = place_targets(robot, data)
-    if placement:
-        moves = ", ".join([f"{n} estimated" if d is None else f"{n} {d:.0f} mm from the robot file's"
-                           for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M]
-                          + [f"{n}'s measured frame turned {a:.0f} mrad from the tool frame"
-                             for n, a in placement.turned_mrad.items() if a > 1e3 * FAR_RAD])
-        warnings.warn(f"targets placed from the data before the fit: {moves} (nominal model residual "
-                      f"{placement.rms_mm:.2f} mm rms with them)")
-    return robot, placement
-
-
-def on_points(robot: Robot, length_m: float | None, *datasets):
-    """The robot and data a fit works on: when any data set measures orientations, the robot with
-    the virtual targets of pose measurements (length scale L, default `pose_targets.LENGTH_M`) and
-    every data set's oriented rows as their vertex points; otherwise all as given."""
-    from gecgen.model.pose_targets import LENGTH_M, as_points, with_pose_targets
-
-    if all(d is None or d.orientation is None for d in datasets):
-        return (robot, *datasets)
-    derived = with_pose_targets(robot, LENGTH_M if length_m is None else length_m)
-    return (derived, *(None if d is None else as_points(derived, d) for d in datasets))
-
-
-def measured_counts(robot: Robot, data: Measurements) -> dict:
-    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point), and
-    n_orientations, the rows that measure a frame, when there are any."""
-    from gecgen.model.pose_targets import measured_rows
-
-    rows = measured_rows(robot, data)
-    oriented = int(rows.oriented.sum())
-    return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {})}
-
-
-def checked(model: ErrorModel, robot: Robot, *datas) -> CompiledModel:
-    """The compiled model, after refusing (one line) a term that is not finite on any of `datas`
-    (measurements or commands; None entries skipped)."""
-    cm = CompiledModel(robot, model)
-    for data in filter(None, datas):
-        check_terms_finite(model, robot, data, cm.load_signals)
-    return cm
 
 
 def fit_option(value, name: str, label: str | None = None):
@@ -183,7 +123,8 @@ class Score:
     of the data; extrapolation the number of poses outside the training span per input
     ({"q2": 3}, only inputs with any); registrations, with register=True, each station's tracker
     frame fitted on the data and its distance from the calibration's (angle_deg, distance_mm); on a
-    tree, branches the same before and after per branch."""
+    tree, branches the same before and after per branch; after_inside, when some poses but not all
+    leave a training range, the calibrated errors of the poses inside them (the validated part)."""
 
     before: Errors
     after: Errors
@@ -200,6 +141,7 @@ class Score:
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
     #: on a tree, per branch the data measures: {"before": {rms_mm, max_mm}, "after": {...}}
     branches: dict = field(default_factory=dict)
+    after_inside: Errors | None = None
 
 
 @dataclass(frozen=True)
@@ -237,28 +179,6 @@ def branch_index(robot: Robot, branch: str | None) -> int:
 
 
 # -- the calibrator --------------------------------------------------------------------------
-
-def determined(cm: CompiledModel, data: Measurements, fit, keep: bool = False, **options):
-    """(the fit, the verdict on its coefficients `runtime.significance.judge`): unless keep, refitted
-    (`identify` with `options`) with the coefficients the data do not determine held at zero, and
-    a warning naming them. Raises RuntimeError when that refit cannot be trusted."""
-    from gecgen.runtime.identify import identify
-
-    verdict, hold = significance.judge(cm.model.coefficient_names(cm.robot), fit.c, fit.std, fit.redundancy.kept,
-                                       fit.cov, fit.sigma_m, fit.measured_dof)
-    verdict["insignificant_carried"] = bool(hold) and keep
-    if hold and not keep:
-        names = [h["param"] for h in verdict["held"]]
-        warnings.warn(f"{len(hold)} of {len(fit.redundancy.kept)} coefficients are not determined by the data (|value| "
-                      f"/ std < {significance.T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
-                      f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
-                      f"(--keep-insignificant carries them)", stacklevel=3)
-        fit = identify(cm, data, **options, hold=hold)
-        if fit.failures:
-            raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
-                               f"calibration made or written: {'; '.join(fit.failures)}")
-    return fit, verdict
-
 
 class Calibrator:
     """Identify a robot's error model from measured points, then score, predict and compensate.
@@ -327,7 +247,8 @@ class Calibrator:
         if fit.failures:
             raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {'; '.join(fit.failures)}")
         full = fit
-        fit, verdict = determined(cm, data, fit, self.keep_insignificant, registration_mode=register, **options)
+        fit, verdict = significance.determined(cm, data, fit, self.keep_insignificant, registration_mode=register,
+                                               **options)
         if fit is full:  # not refitted: the fit's own notes stand (a refit said its own)
             for w in said:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -487,10 +408,16 @@ class Calibrator:
         counts = measured_counts(robot, data)
         before, after = by_branch(cm, data, y_before, {"before": None}), by_branch(cm, data, y, {"after": calib.c})
         branches = {name: before[name] | after[name] for name in after}
+        inside = None
+        if outside:
+            within = ~np.any(list(_calibration.outside(calib, data.q, data.w, data.aux_columns(calib.model.aux))
+                                  .values()), axis=0)
+            if within.any():
+                inside = Errors.of(_summary(cm, data.subset(np.nonzero(within)[0]), y[within[data.pose]], calib.c, True))
         return Score(Errors.of(_summary(cm, data, y_before, None, True)),
                      Errors.of(_summary(cm, data, y, calib.c, True)),
                      counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,
-                     cm, data, y_before, y, branches)
+                     cm, data, y_before, y, branches, inside)
 
     def save(self, path: str | Path) -> Path:
         """Write the calibration JSON (CONTRACTS.md; read back by `load_calibration`, `gecgen
@@ -606,7 +533,7 @@ class Selection:
     Calibrator (score, predict, compensate, save); choice: loop.calibrate.Choice (its error model,
     fit and diagnosis); effects: what diagnose added, if the choice was diagnosed; counts: of the
     training data; val_before, val: the validation data's errors (nominal and calibrated), None
-    without validation data."""
+    without validation data; val_inside: as `Score.after_inside`."""
 
     model: str
     table: list[dict]
@@ -621,6 +548,7 @@ class Selection:
     val_data: Measurements | None = field(default=None, repr=False, compare=False)
     #: on a tree, the validation data's errors per branch ({name: {before, after}}, as `Score.branches`)
     val_branches: dict = field(default_factory=dict)
+    val_inside: Errors | None = None
 
 
 def model_names(names, label: str = "models") -> tuple[str, ...]:
@@ -658,7 +586,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     if default is not None:
         checked(default, fitted, data, val)
     choice = choose(fitted, data, default, seed, progress=progress, names=names)
-    fit, verdict = determined(choice.cm, data, choice.fit, keep_insignificant)
+    fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant)
     choice = replace(choice, fit=fit)
     calib = _calibration.from_fit(robot, choice.model, choice.fit)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
@@ -673,4 +601,4 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
-                     data, scored.data, scored.branches)
+                     data, scored.data, scored.branches, scored.after_inside)

@@ -49,6 +49,16 @@ def test_the_python_api_page_runs(files, monkeypatch, capsys):
     assert chosen.model in ("geometric", "default") and chosen.val.rms_mm > 0 and len(chosen.table) == 2
 
 
+def test_the_readme_python_snippet_runs(files, monkeypatch, capsys):
+    """The README's ```python block as written, in a folder with the files its comment makes."""
+    monkeypatch.chdir(files)
+    [block] = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    namespace = {}
+    exec(compile(block, "README.md", "exec"), namespace)
+    assert 0 < float(capsys.readouterr().out) < 1.0  # mm after calibration (3 mm before)
+    assert namespace["fixed"].status.tolist() == [0] and (files / "robot.calib.json").is_file()
+
+
 def test_api_and_cli_give_the_same_numbers(files, fitted, tmp_path, capsys):
     calib = tmp_path / "cli.calib.json"
     assert main(["identify", str(ROBOT), str(files / "train.csv"), "-o", str(calib), "--json"]) == 0

@@ -207,8 +207,13 @@ def test_evaluate_and_compensate_say_where_they_extrapolate(arm, tmp_path, capsy
     write_measurements(tmp_path / "outside.csv", robot, moved)
     assert main(["evaluate", str(calib), str(tmp_path / "outside.csv"), "--json"]) == 0
     captured = capsys.readouterr()
-    assert json.loads(captured.out)["extrapolation"] == {"q2": 3, "q3": 1}
+    scored = json.loads(captured.out)
+    assert scored["extrapolation"] == {"q2": 3, "q3": 1}
     assert "q2 (a2) 3, q3 (a3) 1 (of 20)" in captured.err
+    # the 17 poses inside every range are scored apart: as evaluating them alone
+    write_measurements(tmp_path / "within.csv", robot, moved.subset(np.arange(3, 20)))
+    assert main(["evaluate", str(calib), str(tmp_path / "within.csv"), "--json"]) == 0
+    assert scored["after_inside"] == json.loads(capsys.readouterr().out)["after"]
     (tmp_path / "cmds.csv").write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(map(repr, q[0].tolist())) + "\n")
     assert main(["compensate", str(calib), str(tmp_path / "cmds.csv"), "-o", str(tmp_path / "out.csv"),
                  "--json"]) == 0

@@ -57,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
                                    "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
-                                   "README has a walk-through and the file formats.")
+                                   "README has a walk-through, docs/guide.md the user guide and docs/reference.md the "
+                                   "file formats.")
     parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 

@@ -75,6 +75,8 @@ def run(args) -> dict:
     if sel.val is not None:
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
+        if sel.val_inside:  # the held-out poses inside every training range: where the model is validated
+            result["val_inside"] = sel.val_inside.to_dict()
         result["val_registered"] = args.register
         if sel.val_branches:
             result["val_branches"] = sel.val_branches

@@ -10,14 +10,15 @@ from gecgen.model import load_robot
 
 
 #: the positionals most commands share
-ROBOT_HELP = "robot file (robots/NAME.yaml: DH rows or a URDF, targets; README \"Files\")"
-DATA_HELP = "measurement CSV (pose, q1..qn, target, x y z[, wrench, station, orientation, aux]; README \"Files\")"
+ROBOT_HELP = "robot file (robots/NAME.yaml: DH rows or a URDF, targets; docs/reference.md, \"Files\")"
+DATA_HELP = ("measurement CSV (pose, q1..qn, target, x y z[, wrench, station, orientation, aux]; docs/reference.md, "
+             "\"Files\")")
 CALIBRATION_HELP = "calibration JSON written by gecgen identify or calibrate"
 
 
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
     """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
-    from gecgen.api import error_model
+    from gecgen.runtime.inputs import error_model
 
     robot = load_robot(robot_path)
     return robot, error_model(errors, robot, aux_columns)
@@ -101,7 +102,7 @@ def numbers(low: float = -math.inf):
 
 
 def add_orientation_length(p, calibration_first: bool = False):
-    """The option that weighs measured orientations against positions (README "Pose measurements");
+    """The option that weighs measured orientations against positions (docs/reference.md, "Pose measurements");
     `calibration_first`: unset, it is the length the calibration was fitted with."""
     from gecgen.model.pose_targets import LENGTH_M
 

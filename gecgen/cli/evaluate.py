@@ -35,6 +35,7 @@ def run(args) -> dict:
     else:
         result.update(before_registration="the calibration's", tracker_frame="the calibration's")
     result.update(before=score.before.to_dict(), after=score.after.to_dict(), extrapolation=score.extrapolation,
+                  **({"after_inside": score.after_inside.to_dict()} if score.after_inside else {}),
                   **({"branches": score.branches} if score.branches else {}))
     if args.report:
         from gecgen import report

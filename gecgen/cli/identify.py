@@ -9,8 +9,8 @@ def add_parser(command):
     """Register `identify` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("identify", run, "fit the error model to measured data and write a calibration")
     p.add_argument("robot", help=ROBOT_HELP)
-    p.add_argument("data", help="measurement CSV: pose, q1..qn, target, x, y, z (m) and optional columns (README, "
-                                              "\"Files\")")
+    p.add_argument("data", help="measurement CSV: pose, q1..qn, target, x, y, z (m) and optional columns "
+                                "(docs/reference.md, \"Files\")")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
     p.add_argument("--register", choices=["auto", "always", "never"], default="auto",

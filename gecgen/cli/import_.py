@@ -29,9 +29,9 @@ def add_parser(command):
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("table", help="CSV with one row per pose")
     p.add_argument("--mapping", required=True, help="column mapping YAML: which columns hold the joints, targets, "
-                                                    "orientations and wrench (README, \"Files\")")
+                                                    "orientations and wrench (docs/reference.md, \"Files\")")
     p.add_argument("--targets", help="comma-separated targets to keep (default: every mapped target)")
-    p.add_argument("-o", "--output", required=True, help="measurement CSV to write (README, \"Files\")")
+    p.add_argument("-o", "--output", required=True, help="measurement CSV to write (docs/reference.md, \"Files\")")
     p.add_argument("--sep", default=",", help="the table's column separator: ',' (default), ';', tab or '|'")
     p.add_argument("--decimal", default=".", choices=[".", ","],
                    help="the decimal mark of the table's numbers: '.' (default) or ',' (1,234 is 1.234)")

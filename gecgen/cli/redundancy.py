@@ -15,7 +15,7 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    from gecgen.api import checked, on_points, placed
+    from gecgen.runtime.inputs import checked, on_points, placed
     from gecgen.runtime.identify import redundancy
 
     data = None

@@ -19,8 +19,8 @@ from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, r
 def add_parser(command):
     p = command("simulate", run, "simulated measurements of a robot with physical error sources")
     p.add_argument("robot", help=ROBOT_HELP)
-    p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the nominal robot: no errors, "
-                        "no noise)")
+    p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the "
+                                   "nominal robot: no errors, no noise)")
     p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
@@ -39,8 +39,8 @@ def add_parser(command):
                    help="poses of --val-out with --design random (default: --poses)")
     p.add_argument("--truth-out", help="write the resolved truth (every random draw made explicit)")
     p.add_argument("--orientation", action="store_true",
-                   help="also write each row's measured orientation (quat_w..quat_z, README \"Pose measurements\"), "
-                        "with the truth file's noise.orientation (rad per axis, default 0)")
+                   help="also write each row's measured orientation (quat_w..quat_z; docs/reference.md, \"Pose "
+                        "measurements\"), with the truth file's noise.orientation (rad per axis, default 0)")
 
 
 def run(args) -> dict:

@@ -55,7 +55,7 @@ class Measurements:
     stationing each point was measured from (zeros when the file has no `station` column);
     orientation (R, 3, 3) the measured orientation of each row's target frame (parallel to the tool
     frame) in the measuring frame, NaN for a row that measures the position only; None when no
-    row has one (README "Pose measurements").
+    row has one (docs/reference.md, "Pose measurements").
     """
 
     q: np.ndarray

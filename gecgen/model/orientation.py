@@ -3,7 +3,7 @@ their rotation matrices (scipy.spatial.transform.Rotation).
 
 A measured orientation is that of a target's frame - parallel to the tool frame, at the target
 point - in the measuring system's frame: the columns of its matrix R are the tool frame's x, y, z
-axes there. The measurement file's columns (README "Pose measurements"), one set per file:
+axes there. The measurement file's columns (docs/reference.md, "Pose measurements"), one set per file:
 
 * `quat_w quat_x quat_y quat_z` - a unit quaternion, scalar first;
 * `rot_11 .. rot_33` - the matrix R, row i column j in `rot_ij`;
@@ -94,7 +94,7 @@ def file_convention(header: list[str], where: str) -> Convention | None:
         m = EULER.fullmatch(h)
         require(h in QUATERNION or h in MATRIX or m,
                 f"{where}: row 1: column {excerpt(h)} starts like an orientation column but is none; orientation "
-                f"columns are {' '.join(QUATERNION)}, rot_11..rot_33 or euler_<seq>_<deg|rad>_1..3 (README "
+                f"columns are {' '.join(QUATERNION)}, rot_11..rot_33 or euler_<seq>_<deg|rad>_1..3 (docs/reference.md, "
                 f"\"Pose measurements\"): rename it")
         conventions.append(Convention("quaternion") if h in QUATERNION else Convention("matrix") if h in MATRIX
                            else Convention("euler", m.group(1), m.group(2) == "deg"))

@@ -98,24 +98,26 @@ NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations",
 ROTATION_TOL = 1e-6
 
 
-def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, int]:
-    """How many poses take each input outside the span it was fitted over ({name: poses}, only
-    the names with any): q (P, n), w (P, 6), aux (P, len(calib.model.aux)). There the model
-    extrapolates, and a polynomial term can grow without bound. A span-relative margin of 1e-9
-    keeps the training poses themselves inside."""
+def outside(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, np.ndarray]:
+    """Per input, which poses take it outside the span it was fitted over ({name: (P,) bool}):
+    q (P, n), w (P, 6), aux (P, len(calib.model.aux)). There the model extrapolates, and a
+    polynomial term can grow without bound. A span-relative margin of 1e-9 keeps the training poses
+    themselves inside."""
     ranges = calib.report.get("training_ranges") or {}
     names = [f"q{i + 1}" for i in range(calib.robot.n)] + list(WRENCH) + list(calib.model.aux)
-    values = np.column_stack([q, w, aux])
     out = {}
-    for name, v in zip(names, values.T):
-        if name not in ranges:
-            continue
-        lo, hi = ranges[name]
-        margin = 1e-9 * max(hi - lo, abs(lo), abs(hi), 1e-300)
-        count = int(np.sum((v < lo - margin) | (v > hi + margin)))
-        if count:
-            out[name] = count
+    for name, v in zip(names, np.column_stack([q, w, aux]).T):
+        if name in ranges:
+            lo, hi = ranges[name]
+            margin = 1e-9 * max(hi - lo, abs(lo), abs(hi), 1e-300)
+            out[name] = (v < lo - margin) | (v > hi + margin)
     return out
+
+
+def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, int]:
+    """How many poses take each input outside the span it was fitted over ({name: poses}, only
+    the names with any; `outside`)."""
+    return {name: int(m.sum()) for name, m in outside(calib, q, w, aux).items() if m.any()}
 
 
 def extrapolation_note(counts: dict[str, int], n_poses: int, robot: Robot) -> str | None:

@@ -596,7 +596,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     if train.get("rot_rms_mrad", 0.0) > 1e3 * ABSURD_ROTATION_RAD:
         failures.append(f"the fit leaves {train['rot_rms_mrad']:.4g} mrad rms of orientation error (limit "
                         f"{1e3 * ABSURD_ROTATION_RAD:g}): no instrument is that far off; check the orientation "
-                        f"columns' unit and convention (README, \"Pose measurements\")")
+                        f"columns' unit and convention (docs/reference.md, \"Pose measurements\")")
     if not train_inliers["rms_mm"] <= 1e3 * ABSURD_TRANSLATION_M:
         failures.append(f"the fit leaves {train_inliers['rms_mm'] / 1e3:.3g} m rms at the measured points (limit "
                         f"{ABSURD_TRANSLATION_M:g} m): the robot file does not describe the measured robot, or its "

@@ -17,7 +17,11 @@ held at zero follows (`identify`'s hold).
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
+
+from gecgen.runtime.identify import identify
 
 #: a coefficient is determined by the data when |value| / std is at least this (about 95 % two-sided)
 T_MIN = 2.0
@@ -74,6 +78,26 @@ def judge(names: list[str], c: np.ndarray, std: np.ndarray, kept, cov: np.ndarra
     held = [{"param": names[kept[a]], "value": float(c[kept[a]]), "std": float(std[kept[a]]), "t": t}
             for a, t in dropped.items()]
     return {"t_min": T_MIN, "n_determined": len(kept) - len(hold), "held": held, "frames": frames}, hold
+
+
+def determined(cm, data, fit, keep: bool = False, **options):
+    """(the fit, the verdict on its coefficients `judge`): unless keep, refitted (`identify` with
+    `options`, on compiled model cm and data) with the coefficients the data do not determine held
+    at zero, and a warning naming them. Raises RuntimeError when that refit cannot be trusted."""
+    verdict, hold = judge(cm.model.coefficient_names(cm.robot), fit.c, fit.std, fit.redundancy.kept, fit.cov,
+                          fit.sigma_m, fit.measured_dof)
+    verdict["insignificant_carried"] = bool(hold) and keep
+    if hold and not keep:
+        names = [h["param"] for h in verdict["held"]]
+        warnings.warn(f"{len(hold)} of {len(fit.redundancy.kept)} coefficients are not determined by the data (|value| "
+                      f"/ std < {T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
+                      f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
+                      f"(--keep-insignificant carries them)", stacklevel=3)
+        fit = identify(cm, data, **options, hold=hold)
+        if fit.failures:
+            raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
+                               f"calibration made or written: {'; '.join(fit.failures)}")
+    return fit, verdict
 
 
 #: bootstrap draws and seed of `rms_interval` (fixed: the same data always gets the same interval)
