@@ -58,3 +58,17 @@ def test_every_argument_is_explained_with_its_default():
                    and (not a.help or (a.option_strings and a.default not in (None, False) and "default" not in a.help))]
     assert unexplained == []
     assert len(commands) == 12
+
+
+@pytest.mark.parametrize("args", [["--version"], ["--help"], ["simulat"]])
+def test_help_version_and_a_typo_load_no_numerical_library(args):
+    """The parser imports a command's module only for that command: `gecgen --version` and
+    `--help` load neither numpy nor sympy nor scipy (they took 1.2 s to import; speed itself is
+    measured in benchmarks/)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom gecgen.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('numpy', 'sympy', 'scipy', 'pandas') if m in sys.modules))")
+    run = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120)
+    assert run.stdout.strip().splitlines()[-1] == "[]", run.stdout + run.stderr

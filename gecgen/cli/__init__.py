@@ -20,9 +20,21 @@ from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
 
-#: the command modules, in the order `gecgen --help` lists them
-COMMANDS = ("generate", "identify", "evaluate", "compensate", "export", "redundancy", "simulate", "import_", "gravity",
-            "design", "diagnose", "calibrate")
+#: command -> (its module in this package, its line in `gecgen --help`), in the order listed there
+COMMANDS = {
+    "generate": ("generate", "write C, CasADi and a manifest for a robot and error model"),
+    "identify": ("identify", "fit the error model to measured data and write a calibration"),
+    "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
+    "compensate": ("compensate", "corrected joint commands for nominal commands"),
+    "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
+    "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
+    "simulate": ("simulate", "simulated measurements of a robot with physical error sources"),
+    "import": ("import_", "convert a wide table (points side by side) into a measurement CSV"),
+    "gravity": ("gravity", "append the static gravity torques of joints (URDF masses) as aux columns"),
+    "design": ("design", "choose the poses to measure (optimal experiment design)"),
+    "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
+    "calibrate": ("calibrate", "choose a model on the training data, fit it, write calibration, code and report"),
+}
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
 OUTPUTS = {
@@ -53,7 +65,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {line}; see {self.prog} --help\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command (argv None), or of the command argv names only: a command's
+    module imports what it computes with (numpy, sympy, scipy), and `gecgen --version`, `--help` or
+    one command need not pay for the others."""
     parser = _Parser(
         prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
                                    "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
@@ -62,14 +77,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    def command(name, fn, help_text):
-        p = sub.add_parser(name, help=help_text)
+    subparsers = {name: sub.add_parser(name, help=text) for name, (_, text) in COMMANDS.items()}
+
+    def command(name, fn):
+        p = subparsers[name]
         p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
         p.set_defaults(fn=fn)
         return p
 
-    for module in COMMANDS:
-        importlib.import_module(f"gecgen.cli.{module}").add_parser(command)
+    wanted = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    for name, (module, _) in COMMANDS.items():
+        if argv is None or name == wanted:
+            importlib.import_module(f"gecgen.cli.{module}").add_parser(command)
     return parser
 
 
@@ -136,7 +155,8 @@ def _os_reason(exc: OSError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the
     # failure's reason is then the one line on stderr
     with warnings.catch_warnings(record=True) as caught:

@@ -13,7 +13,7 @@ from gecgen.loop.calibrate import NAMES
 
 def add_parser(command):
     """Register `calibrate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("calibrate", run, "choose a model on the training data, fit it, write calibration, code and report")
+    p = command("calibrate", run)
     p.add_argument("robot", help="robot file (robots/NAME.yaml)")
     p.add_argument("train", help="training measurement CSV: the model is chosen and fitted on it alone")
     held = p.add_mutually_exclusive_group()

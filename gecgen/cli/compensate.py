@@ -9,7 +9,7 @@ import sys
 
 def add_parser(command):
     """Register `compensate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("compensate", run, "corrected joint commands for nominal commands")
+    p = command("compensate", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("poses", help="CSV with q1..qn (and optionally fx..mz and aux columns)")
     p.add_argument("-o", "--output", required=True, help="CSV to write: the same rows and columns, q1..qn corrected")

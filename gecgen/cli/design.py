@@ -26,7 +26,7 @@ DEFAULT_CANDIDATES = 5000
 
 def add_parser(command):
     """Register `design` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("design", run, "choose the poses to measure (optimal experiment design)")
+    p = command("design", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")

@@ -9,7 +9,7 @@ from gecgen.model import ModelError
 
 def add_parser(command):
     """Register `diagnose` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("diagnose", run, "trace the residual to missing effects, add them, refit, report")
+    p = command("diagnose", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("data", help=DATA_HELP)
     p.add_argument("--errors", help="declared error-model file (default: robots/NAME.errors.yaml)")

@@ -6,7 +6,7 @@ from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_lengt
 
 def add_parser(command):
     """Register `evaluate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("evaluate", run, "position errors of new data before and after the calibration")
+    p = command("evaluate", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("data", help=DATA_HELP)
     p.add_argument("--register", action="store_true",

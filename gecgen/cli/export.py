@@ -11,7 +11,7 @@ from gecgen.model import ModelError
 
 def add_parser(command):
     """Register `export` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("export", run, "a calibration as C with its coefficients, as a URDF, or as a table")
+    p = command("export", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("--c", metavar="DIR", help="write the generated C, NAME_calibration.h and NAME_example.c into DIR")
     p.add_argument("--urdf", metavar="OUT.urdf", help="write the robot's URDF with the constant errors in its joint "

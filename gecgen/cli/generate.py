@@ -8,7 +8,7 @@ from gecgen.cli.common import ROBOT_HELP, robot_and_model
 
 def add_parser(command):
     """Register `generate` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("generate", run, "write C, CasADi and a manifest for a robot and error model")
+    p = command("generate", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("-o", "--output", help="output folder (default: generated/NAME)")

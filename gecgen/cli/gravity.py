@@ -17,7 +17,7 @@ from gecgen.model.validation import ModelError, require
 
 def add_parser(command):
     """Register `gravity` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("gravity", run, "append the static gravity torques of joints (URDF masses) as aux columns")
+    p = command("gravity", run)
     p.add_argument("robot", help="robot file built from a URDF (its <inertial> masses are used)")
     p.add_argument("table", help="CSV with q1..qn: measurements or joint commands")
     p.add_argument("-o", "--output", required=True, help="the table with tau_<joint> columns appended")

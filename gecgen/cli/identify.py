@@ -7,7 +7,7 @@ from gecgen.cli.common import ROBOT_HELP, add_keep_insignificant, add_orientatio
 
 def add_parser(command):
     """Register `identify` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("identify", run, "fit the error model to measured data and write a calibration")
+    p = command("identify", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("data", help="measurement CSV: pose, q1..qn, target, x, y, z (m) and optional columns "
                                 "(docs/reference.md, \"Files\")")

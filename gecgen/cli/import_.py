@@ -25,7 +25,7 @@ from gecgen.model.wide import import_wide, load_mapping
 
 def add_parser(command):
     """Register `import` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("import", run, "convert a wide table (points side by side) into a measurement CSV")
+    p = command("import", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("table", help="CSV with one row per pose")
     p.add_argument("--mapping", required=True, help="column mapping YAML: which columns hold the joints, targets, "

@@ -7,7 +7,7 @@ from gecgen.model import load_robot
 
 def add_parser(command):
     """Register `redundancy` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
-    p = command("redundancy", run, "which coefficients are eliminated and what they merge into")
+    p = command("redundancy", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")

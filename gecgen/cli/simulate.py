@@ -17,7 +17,7 @@ from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, r
 
 
 def add_parser(command):
-    p = command("simulate", run, "simulated measurements of a robot with physical error sources")
+    p = command("simulate", run)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the "
                                    "nominal robot: no errors, no noise)")

@@ -1,8 +1,21 @@
-"""Model layer: parse and validate robot, error-model and measurement files."""
-from gecgen.model.errors import Coefficient, ErrorModel, Term, load_error_model
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Joint, Robot
-from gecgen.model.robot_file import load_robot
-from gecgen.model.validation import ModelError
+"""Model layer: parse and validate robot, error-model and measurement files.
 
-__all__ = ["Coefficient", "ERROR_NAMES", "ErrorModel", "Joint", "ModelError", "Robot", "Term", "WRENCH",
-           "load_error_model", "load_robot"]
+The names below are imported on first use: `from gecgen.model import ModelError` does not load
+sympy (the error-model parser) or scipy, so the command line answers --help and --version at once.
+"""
+import importlib
+
+_WHERE = {"Coefficient": "errors", "ErrorModel": "errors", "Term": "errors", "load_error_model": "errors",
+          "ERROR_NAMES": "robot", "WRENCH": "robot", "Joint": "robot", "Robot": "robot",
+          "load_robot": "robot_file", "ModelError": "validation"}
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"gecgen.model.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'gecgen.model' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_WHERE])
