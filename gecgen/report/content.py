@@ -181,8 +181,8 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
             unit = "mm" if joint.kind == "P" else "deg"
             scale = 1e3 if joint.kind == "P" else 180 / np.pi
             share = np.ptp(data.q[:, k]) / max(joint.upper - joint.lower, 1e-12)
-            coverage.append((joint_label(robot, k), f"{v.min():.3g} to {v.max():.3g} {unit}",
-                             f"{scale * joint.lower:.3g} to {scale * joint.upper:.3g} {unit}", f"{100 * share:.0f} %"))
+            coverage.append((joint_label(robot, k), f"{v.min():.4g} to {v.max():.4g} {unit}",
+                             f"{scale * joint.lower:.4g} to {scale * joint.upper:.4g} {unit}", f"{100 * share:.0f} %"))
         blocks.append(Table(("joint", "measured", "limits", "share of the range"), coverage))
         by = [(f"target `{n}`", *(_rms_max(st.position_mm[target == n]) for st in ds.stages)) for n in names]
         if 1 < len(loads) <= MAX_LOAD_CASES:
