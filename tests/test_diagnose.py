@@ -121,6 +121,9 @@ def test_paper_design_with_undeclared_waviness_and_bending_meets_the_specificati
     assert {"q1"} in traced, traced  # the waviness, on the axis that carries it
     assert any({"q3", "fy"} <= v for v in traced), traced  # bending: extension times the payload's weight
     assert diag.before["val_max_mm"] > 0.5 > diag.after["val_max_mm"]
+    for e in diag.effects:  # backward elimination: each effect kept has a coefficient the data determine
+        assert max(abs(c["value"]) / c["std"] for c in e.coefficients if c["std"]) >= 2, e.to_dict()
+    assert all(d["t"] < 2 for d in diag.remaining["dropped"])
 
 
 def test_diagnose_adds_nothing_on_the_paper_design_with_per_pose_repeatability():
@@ -241,3 +244,25 @@ def test_a_period_longer_than_the_stroke_is_called_smooth():
                         np.zeros(50, int), np.zeros((50, 3)), "s")
     assert shown_family(fourier_candidate("q2", q[:, 1], 3.28), data) == "smooth"
     assert shown_family(fourier_candidate("q2", q[:, 1], 0.4), data) == "fourier"
+
+
+def test_an_effect_that_ends_insignificant_is_dropped_and_the_model_refitted(rng):
+    """A term the truth lacks (q2**3 on frame 2's ey, on constant errors and noise) is what backward
+    elimination removes: the refit's model no longer has it."""
+    from gecgen.loop.diagnose import Effect, _drop_insignificant, _fit
+    from gecgen.model.errors import error_model_from_dict
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    truth = rng.normal(0, 5e-4, robot.n_errors)
+    q = random_q(robot, rng, 60)
+    n = len(q)
+    y = target_positions(robot, q, truth)[:, 0] + rng.normal(0, NOISE, (n, 3))
+    data = Measurements(q, np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n), np.arange(n), np.zeros(n, int), y, "s")
+    spec = {"default": ["1"], "frames": {2: {"ey": ["1", "q2**3"]}}}
+    rnd = _fit(robot, error_model_from_dict(spec, robot, "<test>", ()), data, "auto")
+    effect = Effect("2.ey", ["q2"], ["q2**3"], "polynomial", 0.0, 1.0, [{"name": "2.ey:q2**3"}])
+    j = rnd.model.coefficient_names(robot).index("2.ey:q2**3")
+    assert abs(rnd.fit.c[j]) < 2 * rnd.fit.std[j]  # not determined: the truth has no such term
+    final, kept, dropped = _drop_insignificant(robot, rnd, [effect], data, "auto")
+    assert kept == [] and [d["error"] for d in dropped] == ["2.ey"] and dropped[0]["t"] < 2
+    assert "2.ey:q2**3" not in final.model.coefficient_names(robot)

@@ -423,6 +423,11 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
              "training data.", verdict(diag.remaining)]
     if not diag.effects:
         found.insert(1, "diagnose added nothing to the declared model.")
+    if diag.remaining.get("dropped"):
+        found.append("Dropped at the end, no coefficient of theirs determined by the data once the others were in "
+                     "(backward elimination, |value| / std below 2): " + "; ".join(
+                         f"{d['error']}: {', '.join(d['terms'])} (t {d['t']:.2f})" for d in diag.remaining["dropped"])
+                     + ".")
     if diag.remaining["outliers"]:
         found.append(f"{diag.remaining['outliers']} training rows were outliers of the robust fit (down-weighted, "
                      "listed by `gecgen identify`); they neither chose nor hid an effect.")
