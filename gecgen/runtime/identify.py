@@ -625,10 +625,9 @@ def _suspects(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarra
     drop, d = influence.deleted_residuals(blocks, row_pose, Rk, data.n_poses)
     pose_dof = np.bincount(data.pose, dof, data.n_poses)
     found, F = influence.suspects(drop, pose_dof, rss, m, len(kept))
-    out = []
+    out, step = [], READING_STEP * np.eye(cm.robot.n)
     for p in found:
         points = order[data.pose[order] == p]
-        step = READING_STEP * np.eye(cm.robot.n)
         q = np.vstack([data.q[p] + step, data.q[p] - step])
         n2 = len(q)
         moved = cm.model_targets(q, np.repeat(data.w[p:p + 1], n2, 0),

@@ -16,7 +16,7 @@ under Gaussian noise.
 
 Misfit (an effect the model lacks) and noise that is not independent per coordinate (a robot's
 repeatability moves all targets of a pose together) raise F too, at many poses at once. Measured over
-120 fits of simulated robots (industrial6r, panda, fanuc, puma560 and pps; 30 to 150 poses; points
+121 fits of simulated robots (industrial6r, panda, fanuc, puma560 and pps; 30 to 150 poses; points
 and frames; default and constant models), the largest F reaches 24 and most data sets have a pose
 past any significance test, but the largest F was never more than 5.1 times the second largest. A
 glitch stands alone: 0.02 rad on q2 of one of figaroh's 23 UR10 poses gives F 29 against 2.3 (12.7
