@@ -105,6 +105,12 @@ class Errors:
     rot_max_mrad: float | None = None
     #: the 95 % confidence interval of rms_mm for poses drawn like these (`significance.rms_interval`)
     rms_mm_ci95: tuple[float, float] | None = None
+    #: with sockets and planes (`runtime.relative.measures`): the RMS distance of a socket's rows from
+    #: their mean, of a plane's from their plane, and the known distances' errors (mm)
+    consistency_mm: float | None = None
+    flatness_mm: float | None = None
+    distance_error_mm: float | None = None
+    distances: list | None = None
 
     @classmethod
     def of(cls, summary: dict) -> "Errors":
@@ -262,6 +268,8 @@ class Calibrator:
                                                  {"before": None, "train": fit.c})
         if fitted.vertex_of:
             calib.report["orientation_length_m"] = fitted.pose_length
+        if data.relative is not None:  # the errors "relative" in `eliminated` are those it cannot see
+            calib.report["relative"] = data.relative.summary()
         self._set(calib, fit)
         self.placement_, self.cv_, self.counts_ = placement, cv, measured_counts(fitted, data)
         self.cm_, self.data_ = cm, data  # the model fitted (a measured frame as its vertices) and its data
@@ -430,14 +438,14 @@ def _summary(cm, data, y, c, interval: bool = False) -> dict:
     """`runtime.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
     confidence interval by pose (mm) too."""
     from gecgen.model.pose_targets import measured_rows
-    from gecgen.runtime.identify import row_errors, summary
+    from gecgen.runtime.identify import fixture_measures, row_errors, summary
 
     rows = measured_rows(cm.robot, data)
     position, rotation, _ = row_errors(cm, data, y, c, rows)
     out = summary(position, rotation)
     if interval:
         out["rms_mm_ci95"] = [1e3 * v for v in significance.rms_interval(position, data.pose[rows.first])]
-    return out
+    return out if data.relative is None else {**out, **fixture_measures(cm, data, c)}
 
 
 def by_branch(cm, data, y, stages: dict) -> dict:

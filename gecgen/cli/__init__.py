@@ -29,7 +29,7 @@ COMMANDS = {
     "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
     "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
     "simulate": ("simulate", "simulated measurements of a robot with physical error sources"),
-    "import": ("import_", "convert a wide table (points side by side) into a measurement CSV"),
+    "import": ("import_", "convert a wide table (points side by side), or socket files, into a measurement CSV"),
     "gravity": ("gravity", "append the static gravity torques of joints (URDF masses) as aux columns"),
     "design": ("design", "choose the poses to measure (optimal experiment design)"),
     "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
@@ -98,8 +98,10 @@ def check_outputs(args) -> list[str]:
     naming an existing file, and the files those name: `read_through`) or another of its outputs:
     before the work, not after it. Returns the inputs, for `files.reading`."""
     outputs = OUTPUTS.get(args.command, {})
-    inputs = {f"the {name.replace('_', ' ')}": value for name, value in vars(args).items()
-              if name not in outputs and isinstance(value, str) and os.path.isfile(value)}
+    given = [(name, value) for name, value in vars(args).items() if name not in outputs]
+    given = [(name, v) for name, value in given for v in (value if isinstance(value, list) else [value])]
+    inputs = {f"the {name.replace('_', ' ')} {value}": value for name, value in given
+              if isinstance(value, str) and os.path.isfile(value)}
     for source in list(inputs.values()):
         inputs.update({f"the file {source} names": path for path in read_through(source)})
     written = {}

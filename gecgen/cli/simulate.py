@@ -14,6 +14,7 @@ from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import write_measurements
 from gecgen.model.validation import read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
+from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
 def add_parser(command):
@@ -41,6 +42,25 @@ def add_parser(command):
     p.add_argument("--orientation", action="store_true",
                    help="also write each row's measured orientation (quat_w..quat_z; docs/reference.md, \"Pose "
                         "measurements\"), with the truth file's noise.orientation (rad per axis, default 0)")
+    g = p.add_argument_group("without a tracker (docs/reference.md, \"Sockets, distances and planes\"): instead of "
+                             "--design, a ball seated in the sockets of plates and a probe touching planes")
+    g.add_argument("--plates", type=whole(0, 1000), default=0,
+                   help="placements of a plate with two sockets, anywhere in reach (default %(default)s)")
+    g.add_argument("--per-socket", type=whole(2, MAX_POSES), default=25,
+                   help="configurations per socket (default %(default)s)")
+    g.add_argument("--socket-distance", type=number(0, 10, above=True), default=0.05,
+                   help="distance between a plate's sockets, m (default %(default)s)")
+    g.add_argument("--distance-std", type=number(0, 1), default=0.0,
+                   help="stated uncertainty of that distance, m (default %(default)s: exact)")
+    g.add_argument("--planes", type=whole(0, 3), default=0,
+                   help="planes touched: a table, then up to two faces of a square on it (default %(default)s)")
+    g.add_argument("--touches", type=whole(4, MAX_POSES), default=30,
+                   help="configurations touching each plane (default %(default)s)")
+    g.add_argument("--target", help="the target that sits in the sockets or touches (default: the robot's first)")
+    g.add_argument("--seating-noise", type=number(0, 0.01), default=1e-5,
+                   help="m per coordinate of a ball's seat, and along the normal for a touch (default %(default)s)")
+    g.add_argument("--encoder-noise", type=number(0, 0.01), default=1e-5,
+                   help="rad (m for a prismatic joint) per recorded joint reading (default %(default)s)")
 
 
 def run(args) -> dict:
@@ -52,6 +72,8 @@ def run(args) -> dict:
                       f"nominal one, without errors or noise; give --truth FILE to simulate a robot as built")
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
+    if args.plates or args.planes:
+        return _fixtures(args, robot, truth, rng)
     payloads = args.payload_kg
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
@@ -92,3 +114,24 @@ def run(args) -> dict:
     return {"robot": robot.name, "design": args.design, "poses": data.n_poses, "rows": len(data.xyz),
             "uncompensated": {"rms_mm": float(1e3 * np.sqrt(np.mean(err ** 2))), "max_mm": float(1e3 * err.max())},
             "files": files}
+
+
+def _fixtures(args, robot, truth, rng) -> dict:
+    """Socket and plane data (`simulate.fixtures`); --val-out gets new placements of the same fixtures."""
+    require(args.design == "random" and not args.orientation and args.val_poses is None,
+            "--plates and --planes simulate sockets and planes, not a --design, --orientation or --val-poses")
+    fixtures = Fixtures(args.target or next(iter(robot.targets)), args.plates, args.per_socket, args.socket_distance,
+                        args.distance_std, args.planes, args.touches, args.seating_noise, args.encoder_noise)
+    data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+    write_measurements(args.output, robot, data, wrench=False)
+    out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),
+           **data.relative.summary(), "noise_floor": floor, "files": {"data": args.output}}
+    if args.val_out:
+        val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
+        write_measurements(args.val_out, robot, val, wrench=False)
+        out["files"]["val"] = args.val_out
+        out["val_noise_floor"] = val_floor
+    if args.truth_out:
+        write_atomically(args.truth_out, yaml.safe_dump(truth.spec, sort_keys=False))
+        out["files"]["truth"] = args.truth_out
+    return out

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.files import write_atomically
+from gecgen.model import relative as rel
 from gecgen.model.orientation import PREFIXES, QUATERNION, Convention, file_convention, quaternions, rotations
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import Table, at, numbers, read_table
@@ -55,7 +56,8 @@ class Measurements:
     stationing each point was measured from (zeros when the file has no `station` column);
     orientation (R, 3, 3) the measured orientation of each row's target frame (parallel to the tool
     frame) in the measuring frame, NaN for a row that measures the position only; None when no
-    row has one (docs/reference.md, "Pose measurements").
+    row has one (docs/reference.md, "Pose measurements"); relative the rows that say only which
+    point or plane their target sits at (`model.relative`; their xyz NaN), None when no row does.
     """
 
     q: np.ndarray
@@ -70,6 +72,7 @@ class Measurements:
     row: np.ndarray | None = None
     station: np.ndarray | None = None
     orientation: np.ndarray | None = None
+    relative: rel.Relative | None = None
 
     def __post_init__(self):
         if self.station is None:  # one stationing: every point in the same tracker frame
@@ -93,13 +96,15 @@ class Measurements:
         return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
                             remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
                             self.file_rows[keep], self.station[keep],
-                            None if self.orientation is None else self.orientation[keep])
+                            None if self.orientation is None else self.orientation[keep],
+                            None if self.relative is None else self.relative.take(keep))
 
     def rows_of(self, keep: np.ndarray) -> "Measurements":
         """The measured rows where `keep` (R,) holds, every pose kept (a branch's points of a tree)."""
         return Measurements(self.q, self.w, self.aux, self.aux_names, self.pose_ids, self.pose[keep],
                             self.target[keep], self.xyz[keep], self.source, self.file_rows[keep], self.station[keep],
-                            None if self.orientation is None else self.orientation[keep])
+                            None if self.orientation is None else self.orientation[keep],
+                            None if self.relative is None else self.relative.take(keep))
 
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""
@@ -127,7 +132,7 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     (messages name it `DataFrame`, its rows numbered as in the CSV `to_csv(index=False)` writes)."""
     qcols = [f"q{i + 1}" for i in range(robot.n)]
     required = ["pose", *qcols, "target", "x", "y", "z"]
-    table = read_table(path, "measurement file", ", ".join(required), text=("target",))
+    table = read_table(path, "measurement file", ", ".join(required), text=("target", *rel.COLUMNS))
     where = table.where
     header = table.header
     for col in required:
@@ -140,7 +145,7 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     # station names the tracker frame of a row and orientation columns its measured frame, not
     # signals the robot's errors may depend on
     aux_names = tuple(h for h in header if h not in required and h not in WRENCH and h != STATION
-                      and not h.startswith(PREFIXES))
+                      and h not in rel.COLUMNS and not h.startswith(PREFIXES))
 
     def column(col: str) -> np.ndarray:
         if col in required:
@@ -167,7 +172,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
                           f"measures target '{names[dup[0]].strip() if len(dup) else ''}' twice; keep one row")
     state_cols = [*qcols, *wcols, *aux_names]
     state = np.column_stack([column(c) for c in state_cols])
-    xyz = np.column_stack([column(c) for c in ("x", "y", "z")])
+    relative = rel.read_relative(table)
+    xyz = _positions(table, column, relative)
     within_limits(state[:, :robot.n], robot, where, limit_tolerance)
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]
     require(not len(mm), f"{where}: row {mm[0] + 2 if len(mm) else 0}, columns x y z: "
@@ -188,9 +194,29 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     for k, c in enumerate(wcols):
         w[:, WRENCH.index(c)] = ps[:, robot.n + k]
     orientation = None if convention is None else _orientations(table, convention)
+    if orientation is not None and relative is not None:
+        both = np.nonzero(relative.rows & ~np.isnan(orientation[:, 0, 0]))[0]
+        require(not len(both), f"{where}: row {both[0] + 2 if len(both) else 0}: a point or plane row with an "
+                               f"orientation; a socket or plane fixes the position only: leave the orientation empty")
     return Measurements(q=ps[:, :robot.n], w=w, aux=ps[:, robot.n + len(wcols):], aux_names=aux_names,
                         pose_ids=pose_ids, pose=pose, target=target, xyz=xyz, source=where,
-                        row=np.arange(len(xyz)) + 2, station=station, orientation=orientation)
+                        row=np.arange(len(xyz)) + 2, station=station, orientation=orientation, relative=relative)
+
+
+def _positions(table: Table, column, relative: rel.Relative | None) -> np.ndarray:
+    """(R, 3) the x y z of every row (m), NaN on a relative row, whose cells must be empty."""
+    if relative is None or not relative.rows.any():
+        return np.column_stack([column(c) for c in ("x", "y", "z")])
+    xyz = np.empty((len(table), 3))
+    for k, c in enumerate(("x", "y", "z")):
+        cells = np.char.strip(table.cells(c).astype(str))
+        given = np.nonzero(relative.rows & (cells != ""))[0]
+        require(not len(given), f"{at(table.where, given[0] + 2 if len(given) else 0, c)}: a point or plane row gives "
+                                f"a position; leave x y z empty on it, or remove its point or plane id")
+        # "0" on the relative rows so that a bad cell elsewhere is named by its own row
+        xyz[:, k] = numbers(np.where(relative.rows, "0", cells), c, table.where, decimal=table.decimal)
+    xyz[relative.rows] = np.nan
+    return xyz
 
 
 def _orientations(table: Table, convention: Convention) -> np.ndarray | None:
@@ -235,13 +261,20 @@ def write_measurements(path: str | Path, robot: Robot, data: Measurements, wrenc
         quat = [[""] * 4] * len(data.xyz)
         for r, qr in zip(np.nonzero(has)[0], quaternions(data.orientation[has])):
             quat[r] = list(map(repr, qr.tolist()))
+    relative = data.relative
     header = ["pose", *qcols, *(WRENCH if wrench else ()), *data.aux_names, *([STATION] if stations else ()),
-              "target", "x", "y", "z", *(QUATERNION if data.orientation is not None else ())]
+              "target", "x", "y", "z", *(QUATERNION if data.orientation is not None else ()),
+              *(rel.COLUMNS if relative is not None else ())]
     targets = list(robot.targets)
+
+    def position(r: int) -> list[str]:
+        return [""] * 3 if relative is not None and relative.group[r] >= 0 else list(map(repr, data.xyz[r].tolist()))
+
     write_csv(path, header, ([int(data.pose_ids[k]), *map(repr, data.q[k].tolist()),
                               *(map(repr, data.w[k].tolist()) if wrench else ()), *map(repr, data.aux[k].tolist()),
                               *([int(data.station[r])] if stations else ()),
-                              targets[data.target[r]], *map(repr, data.xyz[r].tolist()), *quat[r]]
+                              targets[data.target[r]], *position(r), *quat[r],
+                              *(rel.columns(relative, r) if relative is not None else ())]
                              for r, k in enumerate(data.pose)))
 
 

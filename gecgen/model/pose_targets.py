@@ -87,7 +87,8 @@ def as_points(robot: Robot, data: Measurements) -> Measurements:
     r = vertex_radius(robot.pose_length)
     xyz[vertex] += r * np.einsum("nij,nj->ni", data.orientation[src][vertex], VERTICES[k[vertex]])
     return replace(data, pose=data.pose[src], target=target, xyz=xyz, row=data.file_rows[src],
-                   station=data.station[src], orientation=None)
+                   station=data.station[src], orientation=None,
+                   relative=None if data.relative is None else data.relative.take(src))
 
 
 @dataclass(frozen=True)
@@ -164,5 +165,8 @@ def measured_rows(robot: Robot, data: Measurements) -> Rows:
     _, first, group = np.unique(data.pose.astype(np.int64) * len(names) + origin[data.target], return_index=True,
                                 return_inverse=True)
     vertex = number[data.target]
-    return Rows(group.ravel(), first, vertex, np.where(vertex >= 0, WEIGHT, 1.0), np.where(vertex >= 0, DOF, 3.0),
+    dof = np.where(vertex >= 0, DOF, 3.0)
+    if data.relative is not None:  # what a point's or plane's fitted unknowns leave of its rows
+        dof = np.where(data.relative.rows, data.relative.row_dof(), dof)
+    return Rows(group.ravel(), first, vertex, np.where(vertex >= 0, WEIGHT, 1.0), dof,
                 vertex_radius(robot.pose_length))

@@ -40,7 +40,7 @@ def at(where: str, row: int, col: str) -> str:
     return f"{where}: row {row}, column {excerpt(col)}"
 
 
-def _float(text: str, decimal: str) -> float:
+def parse_float(text: str, decimal: str) -> float:
     """float(text) with `decimal` as the decimal mark. Beside a decimal comma a point is refused,
     not guessed: '1.234' may group thousands."""
     if decimal != ".":
@@ -55,12 +55,12 @@ def numbers(cells: np.ndarray, col: str, where: str, fix: str = "fix the value",
     """One column of text cells (R,) as finite floats of magnitude at most `limit`; the first bad
     cell is refused with its row."""
     try:
-        values = cells.astype(float) if decimal == "." else np.array([_float(c, decimal) for c in cells], float)
+        values = cells.astype(float) if decimal == "." else np.array([parse_float(c, decimal) for c in cells], float)
     except ValueError:
         mark = "" if decimal == "." else f" with the decimal mark {decimal!r}"
         for r, text in enumerate(cells):
             try:
-                _float(text, decimal)
+                parse_float(text, decimal)
             except ValueError:
                 raise ModelError(f"{at(where, r + 2, col)}: {excerpt(text)} is not a number{mark}; {fix}") from None
     bad = np.nonzero(~np.isfinite(values))[0]

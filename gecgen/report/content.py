@@ -12,7 +12,7 @@ import numpy as np
 from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.runtime.identify import fit_frames, summary, to_world
+from gecgen.runtime.identify import filled, fit_frames, summary, to_world
 
 
 @dataclass(frozen=True)
@@ -77,8 +77,9 @@ class DataSet:
 def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> Residuals:
     """Residuals of compiled model cm at coefficients c (None: nominal) against measured world points y (R, 3) m."""
     rows = measured_rows(cm.robot, data)
-    p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), np.zeros(cm.dims.nc) if c is None else c)
-    d, rot = rows.signed(y, p[data.pose, data.target])
+    p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux),
+                         np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
+    d, rot = rows.signed(filled(data, y, p), p)  # a socket's rows against their own mean
     return Residuals(stage, data.pose[rows.first], 1e3 * d, 1e3 * rot if rows.oriented.any() else None)
 
 

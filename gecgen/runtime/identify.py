@@ -24,7 +24,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import Rows, measured_rows
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
-from gecgen.runtime import influence, robust
+from gecgen.runtime import influence, relative, robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
 from gecgen.runtime.redundancy import RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited
 from gecgen.runtime.registration import IDENTITY, Registration, register
@@ -150,7 +150,10 @@ def _poses_inputs(cm: CompiledModel, data: Measurements):
 
 
 def _blocks(data: Measurements, block: int):
-    """Row indices grouped by blocks of consecutive poses."""
+    """Row indices grouped by blocks of consecutive poses; one block for data with relative rows,
+    whose points and planes gather rows of any poses."""
+    if data.relative is not None:
+        block = max(data.n_poses, 1)
     order = np.argsort(data.pose, kind="stable")
     bounds = np.searchsorted(data.pose[order], np.arange(0, data.n_poses + block, block))
     for b in range(len(bounds) - 1):
@@ -159,20 +162,38 @@ def _blocks(data: Measurements, block: int):
 
 
 def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES,
-                        weights: np.ndarray | None = None):
+                        weights: np.ndarray | None = None, distances_sigma_m: float | None = None,
+                        projected: bool = True):
     """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c; with
-    point weights (R,), each point's three rows are scaled by the square root of its weight."""
+    point weights (R,), each point's three rows are scaled by the square root of its weight.
+    Relative rows (`runtime.relative`) have y NaN: their y is filled and, when `projected`, their
+    columns projected (else their residual is 0: the columns as absolute data would have them);
+    with distances_sigma_m (m) the known distances' rows follow the last block's."""
     q, w, aux = _poses_inputs(cm, data)
     nt = cm.dims.nt
     for start, stop, rows in _blocks(data, block):
         p, H = cm.model_targets(q[start:stop], w[start:stop], aux[start:stop], c, with_H=True)
         local = data.pose[rows] - start
         Hr = H.reshape(stop - start, nt, 3, -1)[local, data.target[rows]]
-        r = y[rows] - p[local, data.target[rows]]
+        pr = p[local, data.target[rows]]
+        r = y[rows] - pr
+        extra = None
+        if data.relative is not None:  # one block holds every row (_blocks)
+            rel = data.relative.take(rows)
+            wr = np.ones(len(rows)) if weights is None else weights[rows]
+            if not projected:
+                r = np.where(rel.rows[:, None], 0.0, r)
+            else:
+                r = relative.fill(rel, y[rows], pr, wr) - pr
+                if distances_sigma_m is not None and rel.distances:
+                    extra = relative.distance_rows(rel, Hr, pr, wr, distances_sigma_m)
+                Hr = relative.project(rel, Hr, pr, wr)
         if weights is not None:
             root = np.sqrt(weights[rows])[:, None]
             Hr, r = Hr * root[:, :, None], r * root
         yield Hr.reshape(-1, H.shape[-1]), r.ravel()
+        if extra is not None:
+            yield extra
 
 
 def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray | None = None):
@@ -241,18 +262,25 @@ def choose(cm: CompiledModel, data: Measurements, grids: dict[str, tuple], folds
 def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> np.ndarray:
     """|measured - modelled| per measured point (R,), m; c=None is the nominal model."""
     q, w, aux = _poses_inputs(cm, data)
-    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)
-    return np.linalg.norm(y - p[data.pose, data.target], axis=1)
+    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
+    return np.linalg.norm(filled(data, y, p) - p, axis=1)
+
+
+def filled(data: Measurements, y: np.ndarray, p: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Measured points y (R, 3) with the relative rows' filled in from the modelled points p (R, 3)
+    (`runtime.relative.fill`, point weights (R,)); y itself for data without relative rows."""
+    return y if data.relative is None else relative.fill(data.relative, y, p, weights)
 
 
 def row_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None,
-               rows: Rows | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               rows: Rows | None = None, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per measured row (`model.pose_targets.Rows`; one per point unless the data measures
     frames): position error (G,) m, orientation error (G,) rad (NaN for a position-only row) and
-    residual length (G,) m, at coefficients c (None: the nominal model) with measured points y."""
+    residual length (G,) m, at coefficients c (None: the nominal model) with measured points y (a
+    relative row's from its fitted point or plane, with point weights (R,), `filled`)."""
     q, w, aux = _poses_inputs(cm, data)
     p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
-    return (rows or measured_rows(cm.robot, data)).errors(y, p)
+    return (rows or measured_rows(cm.robot, data)).errors(filled(data, y, p, weights), p)
 
 
 def squared_error(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> tuple[float, float]:
@@ -273,6 +301,14 @@ def summary(errors_m: np.ndarray, rotation_rad: np.ndarray | None = None) -> dic
         rot = rotation_rad[~np.isnan(rotation_rad)]
         out.update(rot_rms_mrad=float(1e3 * np.sqrt(np.mean(rot ** 2))), rot_max_mrad=float(1e3 * rot.max()))
     return out
+
+
+def fixture_measures(cm: CompiledModel, data: Measurements, c: np.ndarray | None) -> dict:
+    """What the relative rows of `data` say of the model at coefficients c (None: nominal):
+    `runtime.relative.measures` (consistency, flatness, distance errors, mm)."""
+    q, w, aux = _poses_inputs(cm, data)
+    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
+    return relative.measures(data.relative, p)
 
 
 def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -313,17 +349,76 @@ def structural_analysis(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
 
 
 def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, rank_tol: float = RANK_TOL,
-                   weights: np.ndarray | None = None) -> tuple[Redundancy, np.ndarray, int]:
-    """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`);
-    A0 (s+1, k+1), [H | r] at c = 0 with rows scaled by the point weights (R,) over the
+                   weights: np.ndarray | None = None, at: np.ndarray | None = None) -> tuple[Redundancy, np.ndarray, int]:
+    """Redundancy for the targets the data measures (`rank_tol`: see `redundancy.unexcited`) at
+    coefficients `at` (default 0); A0 (s+1, k+1), [H | r] there with rows scaled by the point weights (R,) over the
     identifiable columns up to an orthogonal factor (s the structurally kept count); the number
     of measured coordinates."""
     targets = np.unique(data.target)
     struct = structural_analysis(cm, targets)
-    R0, m = qr_accumulate(rows_H_and_residual(cm, data, y, np.zeros(cm.dims.nc), weights=weights),
-                          np.array(struct.kept, int))
-    red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
+    c = np.zeros(cm.dims.nc) if at is None else at
+    columns = np.array(struct.kept, int)
+    # the distances' weight against the rows changes no rank: a typical noise stands for the fit's
+    blocks = list(rows_H_and_residual(cm, data, y, c, weights=weights, distances_sigma_m=TYPICAL_NOISE_M))
+    R0, m = qr_accumulate(blocks, columns)
+    if data.relative is None:
+        red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
+    else:
+        red = _relative_analysis(cm, data, y, c, weights, struct, blocks, R0, rank_tol)
     return red, R0[:, [*np.searchsorted(struct.kept, red.kept), -1]], m
+
+
+def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, weights: np.ndarray | None,
+                       struct: Redundancy, blocks: list, R0: np.ndarray, rank_tol: float) -> Redundancy:
+    """`unexcited` for data with relative rows (their blocks and R factor R0 at coefficients c over
+    the structurally kept columns): first what the same rows would excite as absolute measurements,
+    then, of that, the directions relative rows cannot see (`runtime.relative.unseen`) taken out, so
+    that a coefficient is eliminated for each, named as invisible to relative data."""
+    n_targets, columns = len(np.unique(data.target)), np.array(struct.kept, int)
+    R_abs, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=weights, projected=False), columns)
+    absolute = unexcited(struct, R_abs[:, :-1], cm.robot, cm.model, n_targets, rank_tol)
+    excited = np.searchsorted(struct.kept, absolute.kept)
+    distances = blocks[-1][0][:, columns] if data.relative.distances else np.zeros((0, len(columns)))
+    # what a motion of the whole set does, taken out: at c = 0 a socket's rows scatter by the model's
+    # whole error, and a turn of the set would seem to move them apart
+    q, w, aux = _poses_inputs(cm, data)
+    p = cm.model_targets(q, w, aux, c)[data.pose, data.target]
+    wts = np.ones(len(p)) if weights is None else weights
+    order = np.argsort(data.pose, kind="stable")  # the row order of the block (_blocks)
+    G = (relative.project(data.relative, relative.rigid(data.relative, p), p, wts)
+         * np.sqrt(wts)[:, None, None])[order].reshape(-1, 7)
+    H = blocks[0][0][:, columns]
+    R_rows = np.linalg.qr(H - G @ np.linalg.lstsq(G, H, rcond=None)[0], mode="r")
+    A = R_abs[:, excited]
+    V = relative.unseen(R_rows[:, excited], A, distances[:, excited])
+    R = R0[:, :-1].copy()
+    R[:, excited] = relative.blind(R[:, excited], V, A.T @ A)
+    R[:, excited[relative.spanning(V, np.linalg.norm(A, axis=0))]] = 0.0  # one coefficient dropped per direction
+    return _unseen_by_relative(cm, data, unexcited(struct, R, cm.robot, cm.model, n_targets, rank_tol), absolute)
+
+
+#: m: a tracker's or a socket's noise, for what does not depend on it
+TYPICAL_NOISE_M = 5e-5
+
+
+def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, absolute: Redundancy) -> Redundancy:
+    """`red` (the analysis of data with relative rows) with the coefficients the same rows would
+    excite as absolute measurements (`absolute`, their columns unprojected) eliminated for being
+    invisible to relative data, and why."""
+    seen = set(absolute.kept)
+    names = [e.split(".")[0] for e in cm.robot.error_names()]
+    scale = "" if data.relative.distances else "; a known distance between two points fixes the scale"
+
+    def why(j: int) -> str:
+        frame = names[cm.model.coefficients[j].error]
+        return ("relative data cannot see it: it moves every point and plane of the fixtures alike (the base "
+                "placement)" if frame == "0" else
+                "relative data cannot see it: at the measured poses it moves the points and planes only together, "
+                "as a rigid motion or a scaling of the whole set does" + scale)
+
+    return replace(red, eliminated=tuple(replace(e, reason="relative", detail=why(e.index))
+                                         if e.reason in ("unexcited", "weak") and e.index in seen else e
+                                         for e in red.eliminated))
 
 
 def redundancy(cm: CompiledModel, data: Measurements | None = None, registration_mode: str = "auto") -> Redundancy:
@@ -339,15 +434,20 @@ def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss
     """The tracker frame of each station of `data` ({station id: Registration}) with the model held
     at coefficients c (nc,), None for the nominal model: the robust rigid transform taking the
     modelled points onto the station's measured ones (`registration.register`: mode and loss; a
-    measured frame's vertices weigh 1/4 each, so a frame counts as much as a point)."""
+    measured frame's vertices weigh 1/4 each, so a frame counts as much as a point). Relative rows
+    have no measured position: a station with no other rows keeps the identity (nothing fixes it)."""
     prior = measured_rows(cm.robot, data).weight
+    absolute = np.ones(len(data.xyz), bool) if data.relative is None else ~data.relative.rows
     if c is None:
         p = cm.nominal_targets(data.q)[data.pose, data.target]
     else:
         p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), c)[data.pose, data.target]
     frames = {}
     for s in np.unique(data.station):
-        rows = data.station == s
+        rows = (data.station == s) & absolute
+        if not rows.any():
+            frames[int(s)] = IDENTITY
+            continue
         try:
             frames[int(s)] = register(p[rows], data.xyz[rows], mode, loss, prior[rows])
         except ModelError as exc:
@@ -446,13 +546,19 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     frames = fit_frames(cm, data, None, loss, registration_mode)
     hold = hold or {}
     fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold)
+    if data.relative is not None:
+        # at c = 0 the rows of a socket scatter by the model's whole error, which lets a rigid motion
+        # of the set look visible; at the fit they scatter by the noise: analysed again there
+        again = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, fit.c)
+        fit = replace(again, before=fit.before)
     if len(frames) > 1 and registration_mode != "never":
         first = min(frames)
         for _ in range(STATION_ROUNDS):
             # the first station keeps its frame: frame 0's errors stay relative to it as with one
             # station, rather than trading places with all the frames at once
             new = {**fit_frames(cm, data, fit.c, loss), first: frames[first]}
-            moved = np.linalg.norm(to_world(new, data) - to_world(frames, data), axis=1).max()
+            gone = np.linalg.norm(to_world(new, data) - to_world(frames, data), axis=1)
+            moved = float(np.max(gone, initial=0.0, where=~np.isnan(gone)))  # relative rows have no frame
             frames = new
             fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold),
                           before=fit.before)
@@ -469,8 +575,9 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
 
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
-         progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str]) -> Fit:
-    """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted.
+         progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], at: np.ndarray | None = None) -> Fit:
+    """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted,
+    from c = 0, the redundancy analysed at coefficients `at` (default 0).
     The robust unit is the measured row (`model.pose_targets.Rows`): a point, or a frame whose
     residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
     notes = []
@@ -479,7 +586,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     c = np.zeros(nc)
     rows = measured_rows(cm.robot, data)
     row_dof = rows.row_dof
-    red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight)
+    red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight, at)
     if hold:
         stay = [i for i, j in enumerate(red.kept) if j not in hold]
         names = cm.model.coefficient_names(cm.robot)
@@ -494,13 +601,17 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         raise ModelError(f"{data.source}: {m:.0f} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
     scale = np.linalg.norm(A0[:, :k], axis=0)
-    norm, count = np.sqrt(3 / row_dof), row_dof / 3
+    # a relative row whose point or plane has no other row says nothing (row_dof 0): it counts for nothing
+    norm = np.sqrt(3 / np.where(row_dof > 0, row_dof, np.inf))
+    count = row_dof / 3
     pos, rot, length = row_errors(cm, data, y, c, rows)
     e = length * norm
-    before = summary(pos, rot)
+    before = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, None))
     limit = robust.outlier_limit(e, loss)
     wr = robust.weights(e, limit, loss)
-    if loss == "l2":
+    known = _known_distances(cm, data)
+    m += known.n
+    if loss == "l2" and data.relative is None:
         # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
         # from this small matrix rather than from a second pass over the data
         R = np.linalg.qr(np.column_stack([A0[:, :k] / scale, A0[:, k]]), mode="r")
@@ -509,11 +620,16 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         stale = True
     converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
     for it in range(1, max_iter + 1):
+        w = rows.weight * wr[rows.group]
+        if data.relative is not None:  # the points and planes as these weights fit them
+            e = row_errors(cm, data, y, c, rows, w)[2] * norm
+            known = known.at(robust.scale(e))
         if stale:
-            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=rows.weight * wr[rows.group]), kept, scale)
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, distances_sigma_m=known.sigma_m),
+                                 kept, scale)
             stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
-        objective = robust.objective(e, limit, loss, count) + ridge * float(x @ x)
+        objective = robust.objective(e, limit, loss, count) + ridge * float(x @ x) + known.squares(c, w)
         full_step = damped_step(Rk, z, 0.0, ridge, x)
         predicted = np.linalg.norm(Rk @ full_step)
         if predicted / np.sqrt(m) < step_tol_m or predicted ** 2 <= RSS_TOL * objective:
@@ -522,10 +638,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         for _ in range(16):
             trial = c.copy()
             trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
-            errors_trial = row_errors(cm, data, y, trial, rows)
+            errors_trial = row_errors(cm, data, y, trial, rows, w)
             e_trial = errors_trial[2] * norm
             trial_objective = (robust.objective(e_trial, limit, loss, count)
-                               + ridge * float(np.sum((trial[kept] * scale) ** 2)))
+                               + ridge * float(np.sum((trial[kept] * scale) ** 2)) + known.squares(trial, w))
             if trial_objective < objective:
                 break
             lam = 1e-6 if lam == 0 else 10 * lam
@@ -544,9 +660,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             break
     w = rows.weight * wr[rows.group]
     if stale:
-        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w), kept, scale)
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, distances_sigma_m=known.sigma_m),
+                             kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
-    m_eff = float(row_dof @ wr)  # down-weighted rows count for their weight
+    m_eff = float(row_dof @ wr) + known.n  # down-weighted rows count for their weight
     sigma = float(np.sqrt(rss / max(m_eff - k, 1)))
     sv = np.linalg.svd(Rk, compute_uv=False) if k else np.ones(1)  # k = 0: every coefficient held at zero
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
@@ -588,7 +705,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                      f"may lack an effect (run diagnose) or the data mixes set-ups")
     inliers = e <= limit
     train_inliers = summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot)
-    train = summary(pos, rot)
+    train = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, c))
     if train["rms_mm"] > before["rms_mm"]:
         failures.append(f"the fit leaves more position error than the nominal model ({train['rms_mm']:.4g} mm rms "
                         f"against {before['rms_mm']:.4g} mm): the data is not what the model describes (an "
@@ -608,6 +725,33 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
                train_inliers=train_inliers,
                ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects)
+
+
+@dataclass(frozen=True)
+class _Known:
+    """The known distances of relative data in a fit (`runtime.relative.distance_rows`): n of them,
+    weighed against rows of per-coordinate noise sigma_m (m; None without distances)."""
+
+    cm: CompiledModel
+    data: Measurements
+    n: int = 0
+    sigma_m: float | None = None
+
+    def at(self, sigma_m: float) -> "_Known":
+        return self if not self.n else replace(self, sigma_m=sigma_m)
+
+    def squares(self, c: np.ndarray, w: np.ndarray) -> float:
+        """The distances' weighted squared residuals (m^2) at coefficients c, point weights w (R,)."""
+        if not self.n:
+            return 0.0
+        q, wr, aux = _poses_inputs(self.cm, self.data)
+        p = self.cm.model_targets(q, wr, aux, c)[self.data.pose, self.data.target]
+        return float(np.sum(relative.distance_rows(self.data.relative, None, p, w, self.sigma_m)[1] ** 2))
+
+
+def _known_distances(cm: CompiledModel, data: Measurements) -> _Known:
+    n = 0 if data.relative is None else len(data.relative.distances)
+    return _Known(cm, data, n, robust.SCALE_FLOOR_M if n else None)
 
 
 #: step (rad or m) of the central differences that give a pose's reading columns

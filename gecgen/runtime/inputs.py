@@ -52,13 +52,15 @@ def on_points(robot: Robot, length_m: float | None, *datasets):
 
 
 def measured_counts(robot: Robot, data: Measurements) -> dict:
-    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point), and
-    n_orientations, the rows that measure a frame, when there are any."""
+    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point),
+    n_orientations, the rows that measure a frame, when there are any, and `relative`, what the
+    rows of sockets and planes hold ({points, planes, distances, rows}), when there are any."""
     from gecgen.model.pose_targets import measured_rows
 
     rows = measured_rows(robot, data)
     oriented = int(rows.oriented.sum())
-    return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {})}
+    return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {}),
+            **({"relative": data.relative.summary()} if data.relative is not None else {})}
 
 
 def checked(model: ErrorModel, robot: Robot, *datas) -> CompiledModel:

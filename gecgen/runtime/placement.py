@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
-from gecgen.model.validation import ModelError
+from gecgen.model.validation import ModelError, require
 from gecgen.runtime import robust
 from gecgen.runtime.registration import kabsch
 
@@ -189,6 +189,13 @@ def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tup
     if missing:
         raise ModelError(f"{data.source}: target '{missing[0]}' is left to estimate (robot file) but the data never "
                          f"measures it; give its position in the robot file or remove it")
+    if data.relative is not None:  # sockets and planes place no target: only measured positions do
+        data = data.rows_of(~data.relative.rows)
+        if not len(data.target):
+            require(not robot.estimated, f"{robot.source}: target '{robot.estimated[0] if robot.estimated else ''}' "
+                                         f"is left to estimate, but the data has no measured positions to place "
+                                         f"it; give its nominal position in the robot file (the fit corrects it)")
+            return robot, None
     try:
         placement = estimate_placement(robot, data, loss)
     except ModelError:

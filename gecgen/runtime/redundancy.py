@@ -48,7 +48,9 @@ MERGE_REPORT_TOL = 1e-6
 class Eliminated:
     param: str
     index: int
-    reason: str  # "structural", "unexcited", "weak" or (identify's hold) "insignificant"
+    # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes) or (identify's
+    # hold) "insignificant"
+    reason: str
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
     share: float | None = None  # weak only: the part of its normalised column outside the kept ones
@@ -77,9 +79,10 @@ class Redundancy:
 
     def to_dict(self) -> dict:
         counts = {r: sum(e.reason == r for e in self.eliminated)
-                  for r in ("structural", "unexcited", "weak", "insignificant")}
+                  for r in ("structural", "unexcited", "weak", "relative", "insignificant")}
         return {"n_params": self.n_params, "n_identifiable": self.n_identifiable,
                 "n_structural": counts["structural"], "n_unexcited": counts["unexcited"], "n_weak": counts["weak"],
+                **({"n_relative": counts["relative"]} if counts["relative"] else {}),
                 **({"n_insignificant": counts["insignificant"], "n_carried": len(self.kept)}
                    if counts["insignificant"] else {}),
                 "identifiable": [self.names[k] for k in self.kept],

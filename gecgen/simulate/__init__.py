@@ -16,20 +16,11 @@ from scipy.spatial.transform import Rotation
 from gecgen.model.kinematics import target_positions, tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
-from gecgen.simulate.designs import Design, one_at_a_time, paper_pps, paper_split, random_design
+from gecgen.simulate.designs import Design, approach_directions, one_at_a_time, paper_pps, paper_split, random_design
 from gecgen.simulate.truth import Truth, load_truth, sensor_wrench, thermal_profile, true_state
 
 __all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_pps", "paper_split", "random_design",
            "simulate"]
-
-
-def approach_directions(q: np.ndarray) -> np.ndarray:
-    """Sign of each joint's last motion before each pose (+1 for the first pose and for no motion)."""
-    d = np.sign(np.diff(q, axis=0, prepend=q[:1] - 1.0))
-    for k in range(1, len(d)):
-        still = d[k] == 0
-        d[k, still] = d[k - 1, still]
-    return np.where(d == 0, 1.0, d)
 
 
 def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator,

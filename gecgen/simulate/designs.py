@@ -28,6 +28,15 @@ class Design:
         return len(self.q)
 
 
+def approach_directions(q: np.ndarray) -> np.ndarray:
+    """Sign of each joint's last motion before each pose (+1 for the first pose and for no motion)."""
+    d = np.sign(np.diff(q, axis=0, prepend=q[:1] - 1.0))
+    for k in range(1, len(d)):
+        still = d[k] == 0
+        d[k, still] = d[k - 1, still]
+    return np.where(d == 0, 1.0, d)
+
+
 def _limits(robot: Robot):
     lo, hi = map(np.array, robot.sampling_box())
     return lo, hi

@@ -1,0 +1,191 @@
+"""Relative rows in the least squares: sockets and planes whose positions are not measured.
+
+A point (socket) or plane of `model.relative` is a nuisance unknown. It is eliminated rather than
+carried (variable projection): at the current coefficients its best value follows in closed form
+from the modelled targets of its rows - the weighted mean of a point's rows, the total
+least-squares plane of a plane's - so the measured position of a relative row is that point, or
+the foot of the target on that plane (`fill`), and y - p is its residual as for any other row.
+The coefficients' columns are projected off what the nuisance unknowns absorb (`project`): within a
+point's rows a change common to all of them (3 columns), within a plane's a change of offset or
+tilt (3 columns). A coefficient that only moves a whole point set - the base placement, a scale
+without a known distance - projects to nothing and the redundancy analysis sees it as unobservable.
+
+A known distance between points a and b is one more row: L - |m_a - m_b| for the fitted points m.
+Carrying the points instead would give it the variance std^2 + sigma^2 (1/n_a + 1/n_b) (the
+points' means have sigma^2 / n along the line), so that is its weight against the rows' sigma; the
+eliminated and the carried problem then have the same minimum (to first order).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import eigh, qr
+
+from gecgen.model.relative import Relative
+
+
+def _centres(relative: Relative, p: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per group: the weighted centre of its rows' modelled targets (G, 3) m, the plane's unit
+    normal and two unit tangents (G, 3, 3: rows n, t1, t2; the identity for a point), and the
+    summed weight (G,). p (R, 3) and w (R,) over the rows of `relative`."""
+    G = len(relative.names)
+    rows = relative.rows
+    g = relative.group[rows]
+    W = np.bincount(g, w[rows], G)
+    centre = np.column_stack([np.bincount(g, w[rows] * p[rows, k], G) for k in range(3)]) / np.maximum(W, 1e-300)[:, None]
+    frame = np.tile(np.eye(3), (G, 1, 1))
+    for k in np.nonzero(relative.is_plane())[0]:
+        on = relative.group == k
+        d = p[on] - centre[k]
+        _, vectors = np.linalg.eigh(np.einsum("n,ni,nj->ij", w[on], d, d))
+        frame[k] = vectors[:, [0, 2, 1]].T  # the normal is the direction of least spread
+    return centre, frame, W
+
+
+def fill(relative: Relative, y: np.ndarray, p: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """y (R, 3) with its relative rows replaced by where the fitted point or plane puts each one's
+    target: the point itself, or the foot of the modelled target p (R, 3) on the plane; point
+    weights w (R,) (default 1)."""
+    w = np.ones(len(p)) if w is None else w
+    centre, frame, _ = _centres(relative, p, w)
+    out = y.copy()
+    rows = relative.rows
+    g = relative.group[rows]
+    plane = relative.is_plane()[g]
+    foot = p[rows] - np.einsum("ni,nj,nj->ni", frame[g, 0], frame[g, 0], p[rows] - centre[g])
+    out[rows] = np.where(plane[:, None], foot, centre[g])
+    return out
+
+
+def project(relative: Relative, H: np.ndarray, p: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """H (R, 3, k): the columns of every row projected off what its point's or plane's unknowns
+    absorb, in the metric of the weights w (R,) (absolute rows unchanged). A point's rows lose their
+    weighted mean; a plane's rows keep their normal component, less its weighted fit by an offset
+    and two tilts over the plane's rows."""
+    out = H.copy()
+    centre, frame, W = _centres(relative, p, w)
+    for k in range(len(relative.names)):
+        on = np.nonzero(relative.group == k)[0]
+        if not len(on):
+            continue
+        wk = w[on]
+        if relative.kinds[k] == "point":
+            out[on] = H[on] - np.einsum("n,nij->ij", wk, H[on]) / max(W[k], 1e-300)
+            continue
+        n, t = frame[k, 0], frame[k, 1:]
+        h = np.einsum("i,nij->nj", n, H[on])  # the normal component (rows, k)
+        N = np.column_stack([np.ones(len(on)), (p[on] - centre[k]) @ t.T])  # offset, two tilts
+        coef = np.linalg.lstsq(N * np.sqrt(wk)[:, None], h * np.sqrt(wk)[:, None], rcond=None)[0]
+        out[on] = n[None, :, None] * (h - N @ coef)[:, None, :]
+    return out
+
+
+def distance_rows(relative: Relative, H: np.ndarray | None, p: np.ndarray, w: np.ndarray,
+                  sigma_m: float) -> tuple[np.ndarray | None, np.ndarray]:
+    """The rows of the known distances, (D, k) and (D,): each distance's residual L - |m_a - m_b| (m)
+    and its columns (the change of |m_a - m_b| per coefficient; None without H), weighted against
+    rows of per-coordinate noise sigma_m (module docstring). H (R, 3, k) the rows' columns, p (R, 3)
+    their modelled targets, w (R,) their weights."""
+    centre, _, W = _centres(relative, p, w)
+    D = len(relative.distances)
+    A, r = None if H is None else np.zeros((D, H.shape[-1])), np.zeros(D)
+    for i, d in enumerate(relative.distances):
+        if W[d.a] <= 0 or W[d.b] <= 0:
+            continue  # a point without rows here (a subset of the data): the distance says nothing
+        between = centre[d.a] - centre[d.b]
+        length = np.linalg.norm(between)
+        weight = sigma_m / np.sqrt(d.std_m ** 2 + sigma_m ** 2 * (1 / W[d.a] + 1 / W[d.b]))
+        r[i] = weight * (d.length_m - length)
+        if H is not None:
+            mean = [np.einsum("n,nij->ij", w[relative.group == g], H[relative.group == g]) / W[g] for g in (d.a, d.b)]
+            A[i] = weight * (between / max(length, 1e-300)) @ (mean[0] - mean[1])
+    return A, r
+
+
+def measures(relative: Relative, p: np.ndarray) -> dict:
+    """What relative rows say about modelled targets p (R, 3), m: `consistency_mm`, the RMS distance
+    of the points' rows from their point's mean (mm); `flatness_mm`, the RMS distance of the planes'
+    rows from their total least-squares plane; `distances`, each known distance's error (the
+    distance between the two points' means less the declared length, mm), and its largest
+    magnitude `distance_error_mm`. Groups without rows, and their distances, are left out."""
+    w = np.ones(len(p))
+    centre, frame, W = _centres(relative, p, w)
+    y = fill(relative, np.zeros_like(p), p, w)
+    plane = relative.is_plane()
+    rows, g = relative.rows, relative.group
+    gap = np.linalg.norm(y - p, axis=1)
+    out = {}
+    for name, on in (("consistency_mm", rows & ~plane[np.maximum(g, 0)]), ("flatness_mm", rows & plane[np.maximum(g, 0)])):
+        if on.any():
+            out[name] = float(1e3 * np.sqrt(np.mean(gap[on] ** 2)))
+    errors = [{"between": [relative.names[d.a], relative.names[d.b]], "length_mm": 1e3 * d.length_m,
+               "error_mm": float(1e3 * (np.linalg.norm(centre[d.a] - centre[d.b]) - d.length_m))}
+              for d in relative.distances if W[d.a] > 0 and W[d.b] > 0]
+    if errors:
+        out["distances"] = errors
+        out["distance_error_mm"] = max(abs(e["error_mm"]) for e in errors)
+    return out
+
+
+#: a direction of the coefficients keeps less than this share of its motion of the measured points
+#: once each point's and plane's unknowns absorb what they can: relative data cannot see it. A rigid
+#: motion or a scaling of the whole set keeps only what the rows of one socket scatter over their
+#: lever arm (about 4e-4 for 0.2 mm at 0.5 m, once fitted); a coefficient the configurations of a
+#: socket tell apart keeps a good part of it (0.1 and more)
+UNSEEN = 1e-2
+
+
+#: a known distance sees a direction of the coefficients when it moves the distance by more than this
+#: share of the direction's motion of the rows
+DISTANCE_SEES = 1e-6
+def unseen(projected: np.ndarray, absolute: np.ndarray, distances: np.ndarray) -> np.ndarray:
+    """Directions of the coefficients (k, u) that relative rows cannot see, orthonormal in the
+    metric of `absolute`: those the projected rows (`projected`, R factor or rows, (m, k), with
+    what a motion of the whole set does taken out, `rigid`) keep less than UNSEEN of, against the
+    same rows as absolute measurements (`absolute`, (m', k), of full column rank), and that no
+    known distance (`distances`, (D, k)) sees either."""
+    if not absolute.shape[1]:
+        return np.zeros((0, 0))
+    norm = np.linalg.norm(absolute, axis=0)
+    P, A = projected / norm, absolute / norm
+    M = A.T @ A
+    share, V = eigh(P.T @ P, M)  # share of each direction's squared motion the projection keeps
+    V = V[:, share < UNSEEN ** 2]
+    if V.shape[1] and len(distances):
+        # a distance sees a scaling (a share of about 0.01 to 0.1: its rows weigh like a socket's
+        # mean) and no rigid motion at all (rounding, 1e-12): its view of a direction is against
+        # the direction's motion of the rows, which V normalises to 1
+        _, s, Wt = np.linalg.svd((distances / norm) @ V)
+        V = V @ Wt[int(np.sum(s > DISTANCE_SEES)):].T
+    return V / norm[:, None]
+
+
+def rigid(relative: Relative, p: np.ndarray) -> np.ndarray:
+    """(R, 3, 7): how a small motion of the whole measured set moves the relative rows' modelled
+    targets p (R, 3): translations along x y z, rotations about x y z through the origin, and a
+    scaling about it (zero on absolute rows). Relative rows see none of these: a socket moved with
+    every other keeps its rows together."""
+    G = np.zeros((len(p), 3, 7))
+    on = relative.rows
+    G[on, :, :3] = np.eye(3)
+    x = p[on]
+    G[on, :, 3:6] = np.stack([np.cross(np.eye(3)[k], x) for k in range(3)], axis=2)
+    G[on, :, 6] = x
+    return G
+
+
+def spanning(V: np.ndarray, norm: np.ndarray) -> np.ndarray:
+    """The coefficients (indices, u of them) that span the directions V (k, u) best: column-pivoted
+    QR of V's rows in the coefficients scaled by their columns' norms (k,). The rank analysis drops
+    these, not better-seen coefficients that a direction touches a little (a turn of the whole set
+    is frame 1's rotation about joint 1, not a mix of wrist errors)."""
+    if not V.shape[1]:
+        return np.zeros(0, int)
+    _, _, pivots = qr((V * norm[:, None]).T, pivoting=True, mode="economic")
+    return pivots[:V.shape[1]]
+
+
+def blind(R: np.ndarray, V: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """R (m, k) with the directions V (k, u) (orthonormal in the metric M (k, k)) taken out of its
+    columns' span: R (I - V V^T M), so those directions move nothing and the rank analysis drops a
+    coefficient for each."""
+    return R - (R @ V) @ (V.T @ M)

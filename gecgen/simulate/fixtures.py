@@ -1,0 +1,155 @@
+"""Simulated calibration without a tracker: a ball seated in the sockets of a plate, a probe touching
+planes (`model.relative`).
+
+The robot is moved until its target (the ball's centre, the probe's tip) truly sits in the socket or
+on the plane: the configurations come from inverse kinematics of the truth robot, from random
+starts within the joint limits, so each socket is reached in many different ways as a person
+guiding the arm by hand would. The true contact point scatters by the seating noise (a ball does not
+seat twice at the same micrometre; a probe's tip along the plane's normal), and the controller
+records the joints with the encoder noise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gecgen.model.kinematics import target_positions
+from gecgen.model.measurements import Measurements
+from gecgen.model.relative import PLANE, POINT, Distance, Relative
+from gecgen.model.robot import Robot
+from gecgen.model.validation import ModelError, require
+from gecgen.runtime.relative import measures
+from gecgen.simulate.designs import approach_directions
+from gecgen.simulate.truth import Truth, thermal_profile, true_state
+
+#: inverse kinematics: the true target within this of its goal (m) counts as reached
+REACHED_M = 1e-10
+#: restarts from new random configurations for goals a start did not reach
+RESTARTS = 30
+#: joint limits are shrunk by this share of their range for starts, so IK has room to move
+MARGIN = 0.1
+#: half-width (m) of the square patch of a plane the probe touches, around its centre
+PATCH_M = 0.1
+
+
+@dataclass(frozen=True)
+class Fixtures:
+    """What to simulate: `plates` placements of a plate with two sockets `distance_m` apart (m),
+    `per_socket` configurations each; `planes` planes (a table, then faces of a square standing on
+    it, up to three), `touches` configurations each; the `target` that sits in the sockets or
+    touches; seating_m (m, per coordinate of a seat; along the normal for a touch) and encoder_rad
+    (rad or m per joint reading) noise; distance_std_m the stated uncertainty of the distance."""
+
+    target: str
+    plates: int = 0
+    per_socket: int = 25
+    distance_m: float = 0.05
+    distance_std_m: float = 0.0
+    planes: int = 0
+    touches: int = 30
+    seating_m: float = 1e-5
+    encoder_rad: float = 1e-5
+
+
+def _goals(robot: Robot, truth: Truth, fixtures: Fixtures, rng: np.random.Generator):
+    """The true contact points (N, 3) m, the group of each (N,), the groups' names and kinds, the
+    plates' distances."""
+    lo, hi = _box(robot)
+    up = -truth.gravity / np.linalg.norm(truth.gravity) if np.linalg.norm(truth.gravity) > 0 else np.array([0, 0, 1.0])
+    t = list(robot.targets).index(fixtures.target)
+    goals, group, names, kinds, distances = [], [], [], [], []
+
+    def somewhere() -> np.ndarray:  # a point the target reaches: where it is at a random configuration
+        return target_positions(robot, rng.uniform(lo, hi, (1, robot.n)))[0, t]
+
+    for i in range(fixtures.plates):
+        centre = somewhere()
+        along = np.cross(up, rng.normal(size=3))  # the plate lies flat: its sockets apart across the vertical
+        along /= np.linalg.norm(along)
+        for k, sign in enumerate((0.5, -0.5)):
+            socket = centre + sign * fixtures.distance_m * along
+            goals.append(socket + rng.normal(0, fixtures.seating_m, (fixtures.per_socket, 3)))
+            group += [len(names)] * fixtures.per_socket
+            names.append(f"plate{i + 1}.{k}")
+            kinds.append(POINT)
+        distances.append(Distance(len(names) - 2, len(names) - 1, fixtures.distance_m, fixtures.distance_std_m))
+    require(fixtures.planes <= 3, f"{fixtures.planes} planes: simulated planes are a table and up to two faces of a "
+                                  f"square on it; give at most 3")
+    corner = somewhere() if fixtures.planes else None
+    side = np.cross(up, rng.normal(size=3))
+    side /= np.linalg.norm(side)
+    for i, normal in enumerate([up, side, np.cross(up, side)][:fixtures.planes]):
+        tangents = np.linalg.svd(normal[None, :])[2][1:]  # two unit vectors across the normal
+        offsets = rng.uniform(-PATCH_M, PATCH_M, (fixtures.touches, 2)) @ tangents
+        # the table below the corner, the square's faces through it: all within reach of one spot
+        goals.append(corner + offsets + rng.normal(0, fixtures.seating_m, (fixtures.touches, 1)) * normal)
+        group += [len(names)] * fixtures.touches
+        names.append(f"plane{i + 1}")
+        kinds.append(PLANE)
+    require(goals, "give plates or planes to simulate (--plates N or --planes N)")
+    return np.vstack(goals), np.array(group), tuple(names), tuple(kinds), tuple(distances)
+
+
+def _box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = map(np.array, robot.sampling_box())
+    return lo + MARGIN * (hi - lo), hi - MARGIN * (hi - lo)
+
+
+def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
+                      rng: np.random.Generator) -> tuple[Measurements, dict]:
+    """Measurements of the fixtures on the truth robot, one pose per configuration (in the order
+    sockets and planes are listed), and what seating and encoder noise alone leave of the relative
+    measures (consistency, flatness, distance errors in mm; `runtime.relative.measures` of the true
+    targets at the recorded joints): the floor a perfect calibration reaches."""
+    require(fixtures.target in robot.targets, f"--target {fixtures.target}: not a target of {robot.name} "
+                                              f"({', '.join(robot.targets)})")
+    built = truth.robot or robot  # the robot as built: its couplings may differ from the file's
+    goals, group, names, kinds, distances = _goals(built, truth, fixtures, rng)
+    N = len(goals)
+    aux = thermal_profile(truth, N)
+    t = list(built.targets).index(fixtures.target)
+
+    def reached(q: np.ndarray) -> np.ndarray:
+        q_true, eps = true_state(built, truth, q, np.zeros(N), np.zeros(3), aux, approach_directions(q))
+        return target_positions(built, q_true, eps)[:, t]
+
+    q = _inverse(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
+    recorded = q + rng.normal(0.0, fixtures.encoder_rad, q.shape)
+    lo, hi = (np.array(v) for v in built.sampling_box())
+    recorded = np.clip(recorded, lo, hi)  # an encoder never reads past the limit it stops at
+    relative = Relative(group, names, kinds, distances)
+    aux_names = tuple(aux)
+    data = Measurements(q=recorded, w=np.zeros((N, 6)),
+                        aux=np.column_stack([aux[a] for a in aux_names]) if aux_names else np.zeros((N, 0)),
+                        aux_names=aux_names, pose_ids=np.arange(N), pose=np.arange(N), target=np.full(N, t),
+                        xyz=np.full((N, 3), np.nan), source="simulated", relative=relative)
+    return data, measures(relative, reached(recorded))
+
+
+def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Joint readings (N, n) at which `reached` (readings -> true target positions, (N, 3)) meets each
+    goal (N, 3) within REACHED_M, within the joint limits: damped Newton steps from random starts,
+    restarted where a start does not get there. The steps take the Jacobian of the `nominal`
+    kinematics (readings -> positions): a robot's errors change it by a part in a thousand, which
+    slows no step noticeably, and it is far cheaper than the truth's (gravity, compliance)."""
+    lo, hi = _box(robot)
+    full_lo, full_hi = (np.array(v) for v in robot.sampling_box())
+    q = rng.uniform(lo, hi, (len(goals), robot.n))
+    todo = np.ones(len(goals), bool)
+    h = 1e-7
+    for _ in range(RESTARTS):
+        for _ in range(60):
+            x = reached(q)
+            err = goals - x
+            todo = np.linalg.norm(err, axis=1) > REACHED_M
+            if not todo.any():
+                return q
+            x0 = nominal(q)
+            J = np.stack([(nominal(q + h * np.eye(robot.n)[j]) - x0) / h for j in range(robot.n)], axis=2)
+            JJ = np.einsum("nij,nkj->nik", J, J) + 1e-8 * np.eye(3)
+            step = np.einsum("nji,nj->ni", J, np.linalg.solve(JJ, err[..., None])[..., 0])
+            q = np.where(todo[:, None], np.clip(q + step, full_lo, full_hi), q)
+        q[todo] = rng.uniform(lo, hi, (int(todo.sum()), robot.n))
+    raise ModelError(f"{int(todo.sum())} of {len(goals)} simulated sockets or touches are out of the robot's reach "
+                     f"from {RESTARTS} starts; place the fixtures closer, or use another seed")

@@ -1,0 +1,235 @@
+"""Calibration without a tracker: sockets, known distances and planes (gecgen/model/relative.py,
+gecgen/runtime/relative.py, gecgen/simulate/fixtures.py).
+
+The simulated robot is a Panda with geometric errors and joints that twist under gravity
+(robots/panda.truth.yaml), a ball on its hand (robots/panda_ball.yaml). The figures each test pins
+are the issue's acceptance figures: the consistency of held-out plate placements within 1.3 times
+what the seating and encoder noise alone give, the socket distance error under 0.05 mm.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import json
+import shutil
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gecgen import api
+from gecgen.cli import main
+from gecgen.model import load_robot
+from gecgen.model.kinematics import target_positions
+from gecgen.model.measurements import read_measurements, write_measurements
+from gecgen.model.validation import ModelError, read_yaml
+from gecgen.simulate import load_truth, random_design, simulate
+from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT = ROOT / "robots" / "panda_ball.yaml"
+MUKCA = ROOT / "tests" / "data" / "mukca_panda6"
+#: the Panda's joints twist under gravity: a stiffness per joint that gravity loads (joint 1 never)
+ELASTIC = {"default": ["1"], "frames": {j: {"er": ["1", f"gravity_torque(q{j})"]} for j in range(2, 8)}}
+#: the rigid motions of the whole set: what no socket or plane sees
+RIGID = {"0.ex:1", "0.ey:1", "0.es:1", "0.ep:1", "1.ez:1", "1.er:1"}
+
+
+def _run(*args) -> dict:
+    """A command's JSON, run in this process (as `gecgen ARGS --json`)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        assert main([*map(str, args), "--json"]) == 0, err.getvalue()
+    return json.loads(out.getvalue())
+
+
+@pytest.fixture(scope="module")
+def panda():
+    robot = load_robot(ROBOT)
+    return robot, load_truth(read_yaml(ROOT / "robots" / "panda.truth.yaml", "truth"), robot, "panda.truth.yaml")
+
+
+@pytest.fixture(scope="module")
+def elastic(tmp_path_factory) -> Path:
+    import yaml
+    path = tmp_path_factory.mktemp("relative") / "elastic.errors.yaml"
+    path.write_text(yaml.safe_dump(ELASTIC))
+    return path
+
+
+@pytest.fixture(scope="module")
+def plates(panda, tmp_path_factory):
+    """Three placements of a two-socket plate 50 mm apart, 25 configurations per socket; and three
+    other placements to validate on. Written as files, read back as users' are."""
+    robot, truth = panda
+    rng = np.random.default_rng(1)
+    folder = tmp_path_factory.mktemp("plates")
+    out = {}
+    for name in ("train", "val"):
+        data, floor = simulate_fixtures(robot, truth, Fixtures("ball", plates=3), rng)
+        write_measurements(folder / f"{name}.csv", robot, data, wrench=False)
+        out[name], out[f"{name}_floor"] = folder / f"{name}.csv", floor
+    return out
+
+
+def _fit(data, errors, **options) -> api.Calibrator:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return api.Calibrator(errors=str(errors), **options).fit(ROBOT, data)
+
+
+def test_relative_rows_round_trip(plates, panda):
+    robot, _ = panda
+    data = read_measurements(plates["train"], robot)
+    assert data.relative.summary() == {"points": 6, "planes": 0, "distances": 3, "rows": 150}
+    assert np.isnan(data.xyz).all()
+    assert {(data.relative.names[d.a], data.relative.names[d.b], d.length_m) for d in data.relative.distances} == \
+        {(f"plate{i}.0", f"plate{i}.1", 0.05) for i in (1, 2, 3)}
+    assert np.bincount(data.relative.group).tolist() == [25] * 6
+
+
+def test_sockets_reach_the_noise_floor_on_new_placements(plates, elastic):
+    """The issue's first acceptance figure: consistency on placements not used for training within 1.3x the
+    noise's, the distance error under 0.05 mm; the six rigid motions of the set, and only they, are
+    named as what relative data cannot see (a distance fixes the scale)."""
+    cal = _fit(plates["train"], elastic)
+    relative = {e["param"] for e in cal.report_["eliminated"] if e["reason"] == "relative"}
+    assert relative == RIGID
+    assert cal.report_["relative"] == {"points": 6, "planes": 0, "distances": 3, "rows": 150}
+    assert not cal.report_["outliers"]
+    after = cal.score(plates["val"]).after
+    floor = plates["val_floor"]
+    assert after.consistency_mm <= 1.3 * floor["consistency_mm"]
+    assert after.distance_error_mm < 0.05
+    before = cal.score(plates["val"]).before
+    assert before.consistency_mm > 20 * after.consistency_mm  # the nominal arm: about 1.1 mm
+
+
+def test_without_a_distance_the_scale_is_unseen(plates, panda, elastic, tmp_path):
+    robot, _ = panda
+    data = read_measurements(plates["train"], robot)
+    bare = replace(data, relative=replace(data.relative, distances=()))
+    cal = _fit(bare, elastic)
+    unseen = [e for e in cal.report_["eliminated"] if e["reason"] == "relative"]
+    assert len(unseen) == len(RIGID) + 1  # and the scale
+    assert RIGID <= {e["param"] for e in unseen}
+    assert any("known distance" in e["detail"] for e in unseen)
+
+
+def test_a_ball_that_did_not_seat_is_named(plates, panda, elastic):
+    """One configuration 2 mm off its socket (the ball resting on the rim): named as an outlier, and the
+    held-out consistency moves by less than 5 %."""
+    robot, _ = panda
+    data = read_measurements(plates["train"], robot)
+    clean = _fit(data, elastic).score(plates["val"]).after.consistency_mm
+    k = 7
+    p = target_positions(robot, data.q[k:k + 1])[0, 0]
+    q = data.q.copy()
+    q[k, 0] += 0.002 / np.hypot(p[0], p[1])  # joint 1 turned: the ball 2 mm off, across its radius
+    cal = _fit(replace(data, q=q), elastic)
+    assert [o["row"] for o in cal.report_["outliers"]] == [k + 2]
+    assert cal.report_["outliers"][0]["residual_mm"] > 1.5
+    assert abs(cal.score(plates["val"]).after.consistency_mm / clean - 1) < 0.05
+
+
+def test_planes_reach_the_noise_floor(panda, elastic, tmp_path):
+    """Three planes (a table and two faces of a square), 30 touches each: the held-out planes' flatness
+    within 1.3x the noise's; the rigid motions and, with no distance, the scale unseen."""
+    robot, truth = panda
+    rng = np.random.default_rng(2)
+    train, _ = simulate_fixtures(robot, truth, Fixtures("ball", planes=3, touches=30), rng)
+    val, floor = simulate_fixtures(robot, truth, Fixtures("ball", planes=3, touches=30), rng)
+    cal = _fit(train, elastic)
+    unseen = {e["param"] for e in cal.report_["eliminated"] if e["reason"] == "relative"}
+    assert RIGID <= unseen and len(unseen) == len(RIGID) + 1
+    assert cal.score(val).after.flatness_mm <= 1.3 * floor["flatness_mm"]
+
+
+def test_mixed_with_tracker_points_sees_the_base(plates, panda, elastic):
+    """Sockets and tracker points in one file: the points fix what the sockets cannot see."""
+    robot, truth = panda
+    sockets = read_measurements(plates["train"], robot)
+    tracker = simulate(robot, truth, random_design(robot, 20, np.random.default_rng(3)), np.random.default_rng(4))
+    both = _concat(sockets, tracker)
+    cal = _fit(both, elastic)
+    assert not [e for e in cal.report_["eliminated"] if e["reason"] == "relative"]
+    assert cal.score(plates["val"]).after.consistency_mm <= 1.3 * plates["val_floor"]["consistency_mm"]
+
+
+def _concat(a, b):
+    """Measurements a then b (b's poses renumbered after a's), b's rows absolute."""
+    from gecgen.model.measurements import Measurements
+    from gecgen.model.relative import Relative
+
+    n = a.n_poses
+    group = np.concatenate([a.relative.group, -np.ones(len(b.xyz), int)])
+    return Measurements(np.vstack([a.q, b.q]), np.vstack([a.w, b.w]), np.zeros((n + b.n_poses, 0)), (),
+                        np.arange(n + b.n_poses), np.concatenate([a.pose, b.pose + n]),
+                        np.concatenate([a.target, b.target]), np.vstack([a.xyz, b.xyz]), "mixed",
+                        relative=Relative(group, a.relative.names, a.relative.kinds, a.relative.distances))
+
+
+@pytest.mark.parametrize("cells, message", [
+    ({"x": "0.1"}, "row 3, column 'x': a point or plane row gives a position"),
+    ({"plane": "p"}, "row 3, column 'plane': the row names both a point and a plane"),
+    ({"distance_to": "nowhere", "distance_m": "0.05"}, "row 3, column 'distance_to': no point 'nowhere'"),
+    ({"distance_to": "b", "distance_m": "0.06"}, "row 3, column 'distance_m': the distance between points a and b "
+                                                 "is 0.06 +- 0 m here but 0.05 +- 0 m on row 2"),
+    ({"distance_to": "b", "distance_m": "-1"}, "row 3, column 'distance_m': '-1' is not a positive length"),
+    ({"distance_to": "a", "distance_m": "0.05"}, "row 3, column 'distance_to': a distance from point 'a' to itself"),
+    ({"point": "c"}, "row 2, column 'point': point 'a' has 1 row: it says nothing about the robot below 2"),
+])
+def test_bad_relative_rows_are_refused(panda, tmp_path, cells, message):
+    robot, _ = panda
+    header = ["pose", *[f"q{j}" for j in range(1, 8)], "target", "x", "y", "z", "point", "plane", "distance_to",
+              "distance_m"]
+    q = ["0.1", "0.2", "0.1", "-1.5", "0.1", "1.5", "0.3"]
+    rows = [dict(zip(header, [str(k), *q, "ball", "", "", "", "ab"[k // 2], "", "", ""])) for k in range(4)]
+    rows[0].update(distance_to="b", distance_m="0.05")
+    rows[1].update(cells)
+    path = tmp_path / "bad.csv"
+    path.write_text("\n".join([",".join(header), *(",".join(r[h] for h in header) for r in rows)]) + "\n")
+    with pytest.raises(ModelError) as exc:
+        read_measurements(path, robot)
+    assert message in str(exc.value)
+
+
+def test_simulate_and_import_through_the_command_line(tmp_path):
+    """`gecgen simulate --plates` and `gecgen import --sockets` write the same layout identify reads."""
+    sim = _run("simulate", ROBOT, "--truth", ROOT / "robots" / "panda.truth.yaml", "--plates", 1, "--per-socket", 5,
+               "--seed", 3, "-o", tmp_path / "s.csv")
+    assert sim["points"] == 2 and sim["distances"] == 1 and sim["noise_floor"]["consistency_mm"] > 0
+    for place in ("front", "left"):
+        shutil.copytree(MUKCA / place, tmp_path / place)
+    out = _run("import", ROBOT, tmp_path / "front" / "hole_0.csv", tmp_path / "front" / "hole_1.csv", "--sockets",
+               "--socket-distance", 0.05, "-o", tmp_path / "front.csv")
+    assert out["rows"] == 62 and out["points"] == 2 and out["distances"] == 1
+    data = read_measurements(tmp_path / "front.csv", load_robot(ROBOT))
+    assert data.relative.names == ("front/hole_0", "front/hole_1")
+    np.testing.assert_array_equal(data.q[:31], np.loadtxt(MUKCA / "front" / "hole_0.csv", delimiter=","))
+
+
+def test_mukca_panda6_held_out_placements(tmp_path):
+    """The MUKCa project's real Panda (tests/data/mukca_panda6): calibrated on `front` through the command
+    line, scored on the held-out `left` and `right` next to that project's own calibrated URDF (trained
+    on `front` too; figures from tests/data/mukca_panda6/reference.py)."""
+    spec = importlib.util.spec_from_file_location("reference", MUKCA / "reference.py")
+    reference = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(reference)
+    files = {}
+    for place in ("front", "left", "right"):
+        files[place] = tmp_path / f"{place}.csv"
+        _run("import", ROBOT, MUKCA / place / "hole_0.csv", MUKCA / place / "hole_1.csv", "--sockets",
+             "--socket-distance", 0.05, "-o", files[place])
+    fit = _run("identify", ROBOT, files["front"], "-o", tmp_path / "c.json")
+    assert {e["param"] for e in fit["eliminated"] if e["reason"] == "relative"} == RIGID
+    calibrated = reference.load_joints(MUKCA / "calibrated.urdf")
+    for place in ("left", "right"):
+        q = [np.loadtxt(MUKCA / place / f"hole_{k}.csv", delimiter=",") for k in (0, 1)]
+        theirs = reference.stats(*(reference.ball_positions(calibrated, qk) for qk in q))
+        ours = _run("evaluate", tmp_path / "c.json", files[place])["after"]
+        assert ours["consistency_mm"] < theirs["rms"]  # theirs: left 0.248 mm, right 0.315 mm
+        assert ours["distance_error_mm"] < 0.15  # theirs: left 0.195 mm, right 0.071 mm
