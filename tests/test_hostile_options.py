@@ -46,6 +46,9 @@ def invocations(t):
         "design": [PUMA, "--poses", "3", "--candidates", "200", "-o", str(t / "p.csv")],
         "diagnose": [PUMA, str(t / "d.csv"), "--max-rounds", "1", "-o", str(t / "diag.errors.yaml")],
         "calibrate": [PUMA, str(t / "d.csv"), "--models", "geometric", "-o", str(t / "cal")],
+        # a manifest refused as it is read: the options are checked before it, and no cluster starts
+        "fleet": [str(t / "wide.csv"), "-o", str(t / "fleet")],
+        "iso9283": [PUMA, "-o", str(t / "plan.csv"), "--cycles", "2"],
     }
 
 

@@ -34,6 +34,8 @@ COMMANDS = {
     "design": ("design", "choose the poses to measure (optimal experiment design)"),
     "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
     "calibrate": ("calibrate", "choose a model on the training data, fit it, write calibration, code and report"),
+    "fleet": ("fleet", "calibrate many robots at once (a manifest of robot and data files) on Dask"),
+    "iso9283": ("iso9283", "plan the ISO 9283 pose test, or its accuracy and repeatability from a measured run"),
 }
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
@@ -50,6 +52,8 @@ OUTPUTS = {
     "gravity": {"output": ("table", False)},
     "design": {"output": ("poses", False)},
     "calibrate": {"output": ("calibration folder", True)},
+    "fleet": {"output": ("fleet folder", True)},
+    "iso9283": {"output": ("plan", False)},
 }
 
 
@@ -98,10 +102,11 @@ def check_outputs(args) -> list[str]:
     naming an existing file, and the files those name: `read_through`) or another of its outputs:
     before the work, not after it. Returns the inputs, for `files.reading`."""
     outputs = OUTPUTS.get(args.command, {})
-    given = [(name, value) for name, value in vars(args).items() if name not in outputs]
-    given = [(name, v) for name, value in given for v in (value if isinstance(value, list) else [value])]
-    inputs = {f"the {name.replace('_', ' ')} {value}": value for name, value in given
-              if isinstance(value, str) and os.path.isfile(value)}
+    # an option naming several files (import's socket files) names each in its refusal
+    given = [(f"the {name.replace('_', ' ')}" + (f" {v}" if isinstance(value, list) else ""), v)
+             for name, value in vars(args).items() if name not in outputs
+             for v in (value if isinstance(value, list) else [value])]
+    inputs = {name: value for name, value in given if isinstance(value, str) and os.path.isfile(value)}
     for source in list(inputs.values()):
         inputs.update({f"the file {source} names": path for path in read_through(source)})
     written = {}

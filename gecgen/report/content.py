@@ -166,12 +166,15 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
         # a load case is a payload: the force's size in LOAD_STEP_N bins (its direction turns with the sensor)
         force = np.linalg.norm(data.w[data.pose[rows.first], :3], axis=1)
         loads, case = np.unique(np.round(force / LOAD_STEP_N), return_inverse=True)
-        stations = np.unique(data.station)
+        relative = data.relative
+        absolute = np.ones(len(data.target), bool) if relative is None else ~relative.rows
+        stations = np.unique(data.station[absolute])
         facts = [f"{data.n_poses} poses, {len(rows.first)} measured rows: "
                  + ", ".join(f"target `{n}` {c}" for n, c in zip(names, count)),
                  f"{int(rows.oriented.sum())} rows measure the orientation too" if rows.oriented.any() else
                  "positions only (no orientation measured)",
-                 f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}",
+                 *([f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}"] if absolute.any() else []),
+                 *([_fixtures_fact(relative)] if relative is not None else []),
                  f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
         if noise is not None and ds is sets[0]:
             facts.append(f"instrument noise from repeated poses: {noise['noise_mm']:.3g} mm per coordinate")
@@ -186,12 +189,24 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
                              f"{scale * joint.lower:.4g} to {scale * joint.upper:.4g} {unit}", f"{100 * share:.0f} %"))
         blocks.append(Table(("joint", "measured", "limits", "share of the range"), coverage))
         by = [(f"target `{n}`", *(_rms_max(st.position_mm[target == n]) for st in ds.stages)) for n in names]
+        if relative is not None:  # each socket's and plane's rows: a ball that did not seat shows in one
+            group = relative.group[rows.first]
+            by += [(f"{kind} `{n}`", *(_rms_max(st.position_mm[group == g]) for st in ds.stages))
+                   for g, (n, kind) in enumerate(zip(relative.names, relative.kinds)) if (group == g).any()]
         if 1 < len(loads) <= MAX_LOAD_CASES:
             by += [(f"force about {LOAD_STEP_N * loads[c]:g} N", *(_rms_max(st.position_mm[case == c])
                                                                    for st in ds.stages)) for c in range(len(loads))]
         blocks.append(Table(("rows", *(f"{st.stage}: RMS / max (mm)" for st in ds.stages)), by))
         blocks.append(plots.per_pose(robot, ds))
     return Section("What was measured", blocks)
+
+
+def _fixtures_fact(relative) -> str:
+    """What the relative rows of a data set hold, in words."""
+    n = relative.summary()
+    return (f"{n['rows']} rows without a measured position: {n['points']} point(s) (sockets: a row's error is its "
+            f"target's distance from the point's fitted position), {n['planes']} plane(s) (its distance from the "
+            f"fitted plane), {n['distances']} known distance(s) between points")
 
 
 def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:

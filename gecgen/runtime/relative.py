@@ -31,7 +31,8 @@ def _centres(relative: Relative, p: np.ndarray, w: np.ndarray) -> tuple[np.ndarr
     rows = relative.rows
     g = relative.group[rows]
     W = np.bincount(g, w[rows], G)
-    centre = np.column_stack([np.bincount(g, w[rows] * p[rows, k], G) for k in range(3)]) / np.maximum(W, 1e-300)[:, None]
+    centre = np.column_stack([np.bincount(g, w[rows] * p[rows, k], G) for k in range(3)])
+    centre /= np.maximum(W, 1e-300)[:, None]
     frame = np.tile(np.eye(3), (G, 1, 1))
     for k in np.nonzero(relative.is_plane())[0]:
         on = relative.group == k
@@ -114,7 +115,8 @@ def measures(relative: Relative, p: np.ndarray) -> dict:
     rows, g = relative.rows, relative.group
     gap = np.linalg.norm(y - p, axis=1)
     out = {}
-    for name, on in (("consistency_mm", rows & ~plane[np.maximum(g, 0)]), ("flatness_mm", rows & plane[np.maximum(g, 0)])):
+    on_plane = rows & plane[np.maximum(g, 0)]
+    for name, on in (("consistency_mm", rows & ~on_plane), ("flatness_mm", on_plane)):
         if on.any():
             out[name] = float(1e3 * np.sqrt(np.mean(gap[on] ** 2)))
     errors = [{"between": [relative.names[d.a], relative.names[d.b]], "length_mm": 1e3 * d.length_m,

@@ -26,7 +26,10 @@ from gecgen.simulate.truth import Truth, thermal_profile, true_state
 #: inverse kinematics: the true target within this of its goal (m) counts as reached
 REACHED_M = 1e-10
 #: restarts from new random configurations for goals a start did not reach
-RESTARTS = 30
+RESTARTS = 10
+#: placements of the fixtures tried before giving up: a random spot may leave a socket or a corner of
+#: a plane out of reach
+PLACEMENTS = 20
 #: joint limits are shrunk by this share of their range for starts, so IK has room to move
 MARGIN = 0.1
 #: half-width (m) of the square patch of a plane the probe touches, around its centre
@@ -105,16 +108,22 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
     require(fixtures.target in robot.targets, f"--target {fixtures.target}: not a target of {robot.name} "
                                               f"({', '.join(robot.targets)})")
     built = truth.robot or robot  # the robot as built: its couplings may differ from the file's
-    goals, group, names, kinds, distances = _goals(built, truth, fixtures, rng)
-    N = len(goals)
-    aux = thermal_profile(truth, N)
     t = list(built.targets).index(fixtures.target)
+    for _ in range(PLACEMENTS):
+        goals, group, names, kinds, distances = _goals(built, truth, fixtures, rng)
+        N = len(goals)
+        aux = thermal_profile(truth, N)
 
-    def reached(q: np.ndarray) -> np.ndarray:
-        q_true, eps = true_state(built, truth, q, np.zeros(N), np.zeros(3), aux, approach_directions(q))
-        return target_positions(built, q_true, eps)[:, t]
+        def reached(q: np.ndarray) -> np.ndarray:
+            q_true, eps = true_state(built, truth, q, np.zeros(N), np.zeros(3), aux, approach_directions(q))
+            return target_positions(built, q_true, eps)[:, t]
 
-    q = _inverse(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
+        q = _inverse(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
+        if q is not None:
+            break
+    else:
+        raise ModelError(f"no placement of the fixtures in {PLACEMENTS} tries puts every socket and touch within the "
+                         f"robot's reach; fewer or smaller fixtures, or another seed")
     recorded = q + rng.normal(0.0, fixtures.encoder_rad, q.shape)
     lo, hi = (np.array(v) for v in built.sampling_box())
     recorded = np.clip(recorded, lo, hi)  # an encoder never reads past the limit it stops at
@@ -127,12 +136,13 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
     return data, measures(relative, reached(recorded))
 
 
-def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
     """Joint readings (N, n) at which `reached` (readings -> true target positions, (N, 3)) meets each
     goal (N, 3) within REACHED_M, within the joint limits: damped Newton steps from random starts,
-    restarted where a start does not get there. The steps take the Jacobian of the `nominal`
-    kinematics (readings -> positions): a robot's errors change it by a part in a thousand, which
-    slows no step noticeably, and it is far cheaper than the truth's (gravity, compliance)."""
+    restarted where a start does not get there; None when some goal stays out of reach. The steps take
+    the Jacobian of the `nominal` kinematics (readings -> positions): a robot's errors change it by a
+    part in a thousand, which slows no step noticeably, and it is far cheaper than the truth's
+    (gravity, compliance)."""
     lo, hi = _box(robot)
     full_lo, full_hi = (np.array(v) for v in robot.sampling_box())
     q = rng.uniform(lo, hi, (len(goals), robot.n))
@@ -151,5 +161,4 @@ def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.G
             step = np.einsum("nji,nj->ni", J, np.linalg.solve(JJ, err[..., None])[..., 0])
             q = np.where(todo[:, None], np.clip(q + step, full_lo, full_hi), q)
         q[todo] = rng.uniform(lo, hi, (int(todo.sum()), robot.n))
-    raise ModelError(f"{int(todo.sum())} of {len(goals)} simulated sockets or touches are out of the robot's reach "
-                     f"from {RESTARTS} starts; place the fixtures closer, or use another seed")
+    return None

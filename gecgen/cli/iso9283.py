@@ -1,0 +1,110 @@
+"""`gecgen iso9283 ROBOT -o PLAN.csv [--tool-rpy R,P,Y (deg)] [--cycles 30]`: plans the ISO 9283 pose test;
+`gecgen iso9283 ROBOT --plan PLAN.csv --measured DATA.csv [--calibration CALIB.json]`: its characteristics.
+
+The plan (gecgen/runtime/iso9283.py) is the standard's test cube, its five points and the cycles, as
+joint commands in visiting order (`cycle, point, q1..qn`, plus `pose`, the row's pose id). Run it on
+the robot as it is (the "before" test), or its compensated commands (`gecgen compensate CALIB
+PLAN.csv`, the "after" test), and measure a target at every row: a measurement file whose pose ids
+are the plan's. The commanded pose of a row is where the nominal model puts the target at the plan's
+joints, in both tests: what the robot was asked to reach. The measured positions must be in the
+robot's world frame, or in the tracker frame of `--calibration` (its registration brings them there).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gecgen.cli.common import MAX_SEED, whole
+
+
+def add_parser(command):
+    """Register `iso9283` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("iso9283", run)
+    p.add_argument("robot", help="robot file")
+    p.add_argument("-o", "--output", help="write the plan here (joint commands in visiting order)")
+    p.add_argument("--tool-rpy", default="0,0,0",
+                   help="the tool's orientation in the test, roll,pitch,yaw about the world's x,y,z in degrees "
+                        "(default %(default)s)")
+    p.add_argument("--cycles", type=whole(2, 1000), default=30, help="cycles per point (default %(default)s, the "
+                                                                     "standard's)")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the cube search (default %(default)s)")
+    p.add_argument("--plan", help="the plan the measured test ran (with --measured)")
+    p.add_argument("--measured", help="measurements of the test, pose ids those of the plan's rows")
+    p.add_argument("--calibration", help="a calibration whose tracker frame the measurements are in")
+
+
+def run(args) -> dict:
+    from gecgen.model import load_robot
+    from gecgen.model.validation import require
+
+    robot = load_robot(args.robot)
+    require((args.plan is None) == (args.measured is None), "--plan and --measured go together: the plan the "
+                                                             "measured test ran")
+    if args.measured:
+        require(not args.output, "-o writes a plan; with --measured the characteristics are the result (--json)")
+        return _characteristics(robot, args)
+    require(args.output, "-o: give the file to write the plan to (or --plan and --measured to evaluate a test)")
+    return _plan(robot, args)
+
+
+def _plan(robot, args) -> dict:
+    from scipy.spatial.transform import Rotation
+
+    from gecgen.model.measurements import write_csv
+    from gecgen.model.validation import ModelError
+    from gecgen.runtime.iso9283 import command_table, plan_cube
+
+    try:
+        rpy = [float(v) for v in args.tool_rpy.split(",")]
+    except ValueError:
+        rpy = []
+    if len(rpy) != 3 or not np.all(np.isfinite(rpy)):
+        raise ModelError(f"--tool-rpy {args.tool_rpy}: give three angles roll,pitch,yaw")
+    tool = Rotation.from_euler("xyz", rpy, degrees=True).as_matrix()
+    plan = plan_cube(robot, tool, cycles=args.cycles, rng=np.random.default_rng(args.seed))
+    header, rows = command_table(plan)
+    write_csv(args.output, ["pose", *header],
+              ([k, int(r[0]), int(r[1]), *map(repr, r[2:].tolist())] for k, r in enumerate(rows)))
+    return {"robot": robot.name, "output": str(args.output), "side_mm": 1e3 * plan.side_m,
+            "centre": plan.centre.tolist(), "plane": plan.plane, "points": plan.points.tolist(),
+            "cycles": plan.cycles, "rows": len(rows)}
+
+
+def _characteristics(robot, args) -> dict:
+    from gecgen.model.kinematics import target_positions, tool_poses
+    from gecgen.model.measurements import read_measurements
+    from gecgen.model.table import read_table
+    from gecgen.model.validation import require
+    from gecgen.runtime.iso9283 import pose_characteristics
+
+    table = read_table(args.plan, "ISO 9283 plan", "pose, cycle, point, q1..qn")
+    for col in ("pose", "cycle", "point", *(f"q{j + 1}" for j in range(robot.n))):
+        require(col in table.header, f"{table.where}: row 1: missing column '{col}'; give the plan "
+                                     f"`gecgen iso9283 -o` wrote")
+    pose, point = table.numbers("pose").astype(int), table.numbers("point").astype(int)
+    q = np.column_stack([table.numbers(f"q{j + 1}") for j in range(robot.n)])
+    data = read_measurements(args.measured, robot)
+    unknown = np.setdiff1d(data.pose_ids, pose)
+    require(not len(unknown), f"{data.source}: pose {unknown[0] if len(unknown) else ''} is no row of the plan "
+                              f"{table.where}; the test's pose ids are the plan's")
+    y = data.xyz
+    if args.calibration:
+        from gecgen.api import load_calibration
+        from gecgen.runtime.identify import to_world
+
+        y = to_world(load_calibration(args.calibration)._fitted().frames, data)
+    row = np.searchsorted(pose, data.pose_ids)[data.pose]  # the plan row of every measured point
+    commanded = target_positions(robot, q)[row, data.target]
+    R_cmd = tool_poses(robot, q)[0][row, :3, :3]
+    out = {}
+    for name in sorted(set(robot.target_names[t] for t in data.target)):
+        for p in sorted(set(point[row].tolist())):
+            at = (point[row] == p) & (np.array(robot.target_names)[data.target] == name)
+            R = None if data.orientation is None or np.isnan(data.orientation[at][:, 0, 0]).any() else \
+                data.orientation[at]
+            c = pose_characteristics((commanded[at][0], R_cmd[at][0] if R is not None else None), (y[at], R))
+            out.setdefault(name, {})[f"P{p}"] = {k: (None if np.isnan(v) else float(v)) if isinstance(v, float) else v
+                                                 for k, v in vars(c).items()}
+    worst = {k: max(v[k] for t in out.values() for v in t.values()) for k in ("AP_p", "RP_l")}
+    return {"robot": robot.name, "plan": str(args.plan), "measured": str(args.measured),
+            "frame": "the calibration's tracker frame" if args.calibration else "the robot's world frame",
+            "points": out, "worst": worst}

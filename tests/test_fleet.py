@@ -1,0 +1,75 @@
+"""`gecgen fleet`: many robots calibrated as tasks on a local Dask cluster (gecgen/cli/fleet.py)."""
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import numpy as np
+import pytest
+
+from gecgen.cli import main
+from gecgen.cli.fleet import calibrate_fleet, read_manifest
+from gecgen.model.validation import ModelError
+
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """Two robots that calibrate and one whose data is missing, through a local cluster of two workers;
+    and the first robot calibrated alone, as `gecgen calibrate` would."""
+    root = tmp_path_factory.mktemp("fleet")
+    work = root / "a" / "b"
+    work.mkdir(parents=True)
+    for name, robot, seed in (("one", "puma560", 1), ("two", "puma560", 2)):
+        assert main(["simulate", f"robots/{robot}.yaml", "--poses", "30", "--seed", str(seed), "-o",
+                     str(work / f"{name}.csv")]) == 0
+    (work / "m.csv").write_text("name,robot,train,holdout,models\n"
+                                f"one,{_root()}/robots/puma560.yaml,one.csv,0.2,geometric\n"
+                                f"two,{_root()}/robots/puma560.yaml,two.csv,0.2,geometric default\n"
+                                f"gone,{_root()}/robots/puma560.yaml,missing.csv,,\n")
+    results = calibrate_fleet(work / "m.csv", root / "out", workers=2)
+    alone = root / "alone"
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["calibrate", f"{_root()}/robots/puma560.yaml", str(work / "one.csv"), "--holdout", "0.2",
+                     "--models", "geometric", "-o", str(alone), "--json"]) == 0
+    return root, results, alone
+
+
+def _root():
+    from pathlib import Path
+    return Path(__file__).resolve().parents[1]
+
+
+def test_each_robot_is_reported_and_a_failure_stops_none(fleet):
+    root, results, _ = fleet
+    assert [(r["name"], r["status"]) for r in results] == [("one", "ok"), ("two", "ok"), ("gone", "failed")]
+    assert "missing.csv" in results[2]["reason"] and "no such measurement file" in results[2]["reason"]
+    assert {c["model"] for c in results[0]["result"]["candidates"]} == {"geometric"}  # the manifest's models
+    table = (root / "out" / "fleet.csv").read_text().splitlines()
+    assert table[0] == "name,status,model,train_rms_mm,val_rms_mm,seconds,reason" and len(table) == 4
+    assert json.loads((root / "out" / "fleet.json").read_text())[2]["status"] == "failed"
+    assert (root / "out" / "two" / "report.html").is_file()
+
+
+def test_a_robot_in_the_fleet_is_as_calibrated_alone(fleet):
+    root, _, alone = fleet
+    a = json.loads((root / "out" / "one" / "calibration.json").read_text())
+    b = json.loads((alone / "calibration.json").read_text())
+    assert [c["value"] for c in a["coefficients"]] == [c["value"] for c in b["coefficients"]]
+    assert a["train"] == b["train"]
+    assert np.array_equal(a["covariance"], b["covariance"])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("name,robot\nx,r.yaml\n", "row 1: missing column 'train'"),
+    ("name,robot,train,colour\nx,r.yaml,t.csv,red\n", "row 1: unknown column 'colour'"),
+    ("name,robot,train\nx,r.yaml,t.csv\nx,r.yaml,u.csv\n", "row 3: name x is also row 2's"),
+    ("name,robot,train\n../up,r.yaml,t.csv\n", "row 2, column 'name': '../up' is no folder name"),
+    ("name,robot,train,val,holdout\nx,r.yaml,t.csv,v.csv,0.2\n", "row 2: val and holdout both given"),
+])
+def test_bad_manifests_are_refused(tmp_path, text, message):
+    (tmp_path / "m.csv").write_text(text)
+    with pytest.raises(ModelError) as exc:
+        read_manifest(tmp_path / "m.csv")
+    assert message in str(exc.value)
