@@ -111,6 +111,8 @@ class Errors:
     flatness_mm: float | None = None
     distance_error_mm: float | None = None
     distances: list | None = None
+    #: each declared relation between planes: how far the fitted planes are from it (angle_mrad, offset_error_mm)
+    relations: list | None = None
 
     @classmethod
     def of(cls, summary: dict) -> "Errors":

@@ -56,6 +56,11 @@ def add_parser(command):
                    help="planes touched: a table, then up to two faces of a square on it (default %(default)s)")
     g.add_argument("--touches", type=whole(4, MAX_POSES), default=30,
                    help="configurations touching each plane (default %(default)s)")
+    g.add_argument("--plane-relations", action="store_true",
+                   help="declare the planes' perpendicularity (the square's faces and the table) in the data")
+    g.add_argument("--block-width", type=number(0, 1, above=True),
+                   help="a block of this width (m) on the table: its far face a plane parallel to the first face, "
+                        "the offset declared")
     g.add_argument("--target", help="the target that sits in the sockets or touches (default: the robot's first)")
     g.add_argument("--seating-noise", type=number(0, 0.01), default=1e-5,
                    help="m per coordinate of a ball's seat, and along the normal for a touch (default %(default)s)")
@@ -121,7 +126,8 @@ def _fixtures(args, robot, truth, rng) -> dict:
     require(args.design == "random" and not args.orientation and args.val_poses is None,
             "--plates and --planes simulate sockets and planes, not a --design, --orientation or --val-poses")
     fixtures = Fixtures(args.target or next(iter(robot.targets)), args.plates, args.per_socket, args.socket_distance,
-                        args.distance_std, args.planes, args.touches, args.seating_noise, args.encoder_noise)
+                        args.distance_std, args.planes, args.touches, args.seating_noise, args.encoder_noise,
+                        args.plane_relations, args.block_width)
     data, floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),

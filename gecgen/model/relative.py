@@ -11,6 +11,10 @@ target is, what it coincides with:
 * `distance_to`, `distance_m`, `distance_std_m` - on a row of a point, a known distance (m) from
   that point to another point (a plate's two sockets, a ball bar's ends) and its standard
   uncertainty (m; 0 or empty: exact). Any rows of the point may carry it; rows that do must agree.
+* `plane_to`, `relation`, `offset_m`, `relation_std` - on a row of a plane, a known relation to
+  another plane: `parallel`, `perpendicular`, or `offset` (parallel, `offset_m` apart: a gauge
+  block's faces, a step of known height), with its standard uncertainty (rad for the angle of
+  parallel and perpendicular, m for an offset; 0 or empty: exact). Rows that give one must agree.
 
 Such a row leaves x y z empty. A file may mix relative rows with absolute ones. What relative
 data cannot see (where the whole set of points is, a scale without a known distance, directions
@@ -27,8 +31,11 @@ from gecgen.model.validation import ModelError, excerpt, require
 
 POINT, PLANE = "point", "plane"
 DISTANCE_TO, DISTANCE, DISTANCE_STD = "distance_to", "distance_m", "distance_std_m"
+PLANE_TO, RELATION, OFFSET, RELATION_STD = "plane_to", "relation", "offset_m", "relation_std"
+#: known relations between planes, and the rows each adds to the fit (two tilts, one angle, both and an offset)
+RELATIONS = {"parallel": 2, "perpendicular": 1, "offset": 3}
 #: the columns of relative measurements: never auxiliary signals
-COLUMNS = (POINT, PLANE, DISTANCE_TO, DISTANCE, DISTANCE_STD)
+COLUMNS = (POINT, PLANE, DISTANCE_TO, DISTANCE, DISTANCE_STD, PLANE_TO, RELATION, OFFSET, RELATION_STD)
 #: rows a group needs before it says anything: a point seen twice, a plane touched four times
 #: (three rows fix any plane)
 MIN_ROWS = {POINT: 2, PLANE: 4}
@@ -46,15 +53,33 @@ class Distance:
 
 
 @dataclass(frozen=True)
+class Relation:
+    """A known relation of plane b to plane a (group indices): `kind` (RELATIONS), offset_m (m, for
+    an offset) and the standard uncertainty std (rad for an angle, m for an offset; 0: exact)."""
+
+    a: int
+    b: int
+    kind: str
+    offset_m: float
+    std: float
+
+
+@dataclass(frozen=True)
 class Relative:
     """The relative rows of R measured rows: group (R,) the index into `names` of each row's point
     or plane, -1 for an absolute row; names (G,) the ids as the file writes them; kinds (G,) POINT
-    or PLANE; distances the known distances between points."""
+    or PLANE; distances the known distances between points, relations those between planes."""
 
     group: np.ndarray
     names: tuple[str, ...]
     kinds: tuple[str, ...]
     distances: tuple[Distance, ...] = ()
+    relations: tuple[Relation, ...] = ()
+
+    @property
+    def n_known(self) -> int:
+        """Rows the known distances and plane relations add to a fit."""
+        return len(self.distances) + sum(RELATIONS[r.kind] for r in self.relations)
 
     @property
     def rows(self) -> np.ndarray:
@@ -68,7 +93,7 @@ class Relative:
     def take(self, index: np.ndarray) -> "Relative":
         """The rows at `index` (a boolean mask or row indices, repeats allowed), every group and
         distance kept (a group may then have too few rows to say anything: it counts for nothing)."""
-        return Relative(self.group[index], self.names, self.kinds, self.distances)
+        return Relative(self.group[index], self.names, self.kinds, self.distances, self.relations)
 
     def counts(self) -> np.ndarray:
         """(G,) rows per group."""
@@ -84,10 +109,10 @@ class Relative:
         return np.where(self.rows, per_group[np.maximum(self.group, 0)], np.nan)
 
     def summary(self) -> dict:
-        """What the file holds: {points, planes, distances, rows}."""
+        """What the file holds: {points, planes, distances, rows}, and relations when it has any."""
         plane = self.is_plane()
         return {"points": int((~plane).sum()), "planes": int(plane.sum()), "distances": len(self.distances),
-                "rows": int(self.rows.sum())}
+                **({"relations": len(self.relations)} if self.relations else {}), "rows": int(self.rows.sum())}
 
 
 def read_relative(table: Table) -> Relative | None:
@@ -96,9 +121,9 @@ def read_relative(table: Table) -> Relative | None:
     that is not positive, names an unknown point or disagrees with another row's."""
     header, where = table.header, table.where
     if POINT not in header and PLANE not in header:
-        for col in (DISTANCE_TO, DISTANCE, DISTANCE_STD):
-            require(col not in header, f"{where}: row 1: column {col} but no '{POINT}' column; a known distance is "
-                                       f"between points: give each row's point id in a '{POINT}' column")
+        for col in COLUMNS[2:]:
+            require(col not in header, f"{where}: row 1: column {col} but no '{POINT}' or '{PLANE}' column; a known "
+                                       f"distance or relation is between points or planes: give each row's id")
         return None
     empty = np.full(len(table), "", object)
     point = np.char.strip(table.cells(POINT).astype(str)) if POINT in header else empty.astype(str)
@@ -117,7 +142,53 @@ def read_relative(table: Table) -> Relative | None:
             require(n >= MIN_ROWS[kind], f"{at(where, int(np.argmax(rows)) + 2, kind)}: {kind} {excerpt(name)} has "
                                          f"{n} row{'s' if n > 1 else ''}: it says nothing about the robot below "
                                          f"{MIN_ROWS[kind]}; measure it more often or remove the row")
-    return Relative(group, tuple(names), tuple(kinds), _distances(table, point, names, kinds))
+    return Relative(group, tuple(names), tuple(kinds), _distances(table, point, names, kinds),
+                    _relations(table, plane, names, kinds))
+
+
+def _relations(table: Table, plane: np.ndarray, names: list[str], kinds: list[str]) -> tuple[Relation, ...]:
+    """The known relations the rows of planes declare (see the module docstring)."""
+    header, where = table.header, table.where
+    if PLANE_TO not in header:
+        for col in (RELATION, OFFSET, RELATION_STD):
+            require(col not in header, f"{where}: row 1: column {col} but no {PLANE_TO}; name the other plane of "
+                                       f"each relation in a {PLANE_TO} column")
+        return ()
+    require(RELATION in header, f"{where}: row 1: column {PLANE_TO} but no {RELATION}; say how the planes relate "
+                                f"({', '.join(RELATIONS)})")
+
+    def cells(col: str) -> np.ndarray:
+        return (np.char.strip(table.cells(col).astype(str)) if col in header
+                else np.full(len(table), "", object).astype(str))
+
+    to, kind, offset, std = cells(PLANE_TO), cells(RELATION), cells(OFFSET), cells(RELATION_STD)
+    index = {(k, n): g for g, (k, n) in enumerate(zip(kinds, names))}
+    found: dict[tuple[int, int], tuple[Relation, int]] = {}
+    for r in np.nonzero(to != "")[0]:
+        row = int(r) + 2
+        require(plane[r] != "", f"{at(where, row, PLANE_TO)}: a relation on a row without a plane; put it on a row "
+                                f"of one of its planes")
+        b, a = index.get((PLANE, str(to[r]))), index[(PLANE, str(plane[r]))]
+        require(b is not None, f"{at(where, row, PLANE_TO)}: no plane {excerpt(str(to[r]))} in the file; name a plane "
+                               f"some rows touch")
+        require(b != a, f"{at(where, row, PLANE_TO)}: a relation of plane {excerpt(str(plane[r]))} to itself; name "
+                        f"the other plane")
+        require(kind[r] in RELATIONS, f"{at(where, row, RELATION)}: {excerpt(str(kind[r]))} is no relation; give "
+                                      f"{', '.join(RELATIONS)}")
+        require((offset[r] != "") == (kind[r] == "offset"), f"{at(where, row, OFFSET)}: an offset goes with the "
+                                                              f"relation offset, and only with it")
+        length = _number(offset[r], where, row, OFFSET, positive=True) if kind[r] == "offset" else 0.0
+        relation = Relation(min(a, b), max(a, b), str(kind[r]), length,
+                            _number(std[r], where, row, RELATION_STD) if std[r] != "" else 0.0)
+        key = (relation.a, relation.b)
+        if key in found and found[key][0] != relation:
+            raise ModelError(f"{at(where, row, RELATION)}: planes {names[key[0]]} and {names[key[1]]} are "
+                             f"{relation.kind} here but {found[key][0].kind} (or another value) on row "
+                             f"{found[key][1]}; give one relation per pair")
+        found.setdefault(key, (relation, row))
+    for r in np.nonzero((to == "") & ((kind != "") | (offset != "")))[0]:
+        raise ModelError(f"{at(where, int(r) + 2, RELATION)}: a relation without {PLANE_TO}; name the other plane")
+    return tuple(rel for rel, _ in found.values())
 
 
 def _distances(table: Table, point: np.ndarray, names: list[str], kinds: list[str]) -> tuple[Distance, ...]:
@@ -172,15 +243,18 @@ def _number(text: str, where: str, row: int, col: str, positive: bool = False) -
 
 def columns(relative: Relative, r: int) -> list[str]:
     """The cells of row r's relative columns, in COLUMNS order, as `write_measurements` writes them:
-    a point's first row carries each distance from it (one per row: a point with several distances
-    spreads them over its rows)."""
+    a point's k-th row carries its k-th distance, a plane's its k-th relation (a group has at least as
+    many rows as it has distances or relations: MIN_ROWS, and a pair is named once)."""
     g = int(relative.group[r])
     if g < 0:
         return [""] * len(COLUMNS)
     point, plane = (relative.names[g], "") if relative.kinds[g] == POINT else ("", relative.names[g])
-    mine = [d for d in relative.distances if d.a == g]
-    k = int(np.sum(relative.group[:r] == g))  # the row's number within its point
-    if k < len(mine):
-        d = mine[k]
-        return [point, plane, relative.names[d.b], repr(d.length_m), repr(d.std_m)]
-    return [point, plane, "", "", ""]
+    k = int(np.sum(relative.group[:r] == g))  # the row's number within its group
+    distances = [d for d in relative.distances if d.a == g]
+    relations = [x for x in relative.relations if x.a == g]
+    distance = ([relative.names[distances[k].b], repr(distances[k].length_m), repr(distances[k].std_m)]
+                if k < len(distances) else [""] * 3)
+    relation = ([relative.names[relations[k].b], relations[k].kind,
+                 repr(relations[k].offset_m) if relations[k].kind == "offset" else "", repr(relations[k].std)]
+                if k < len(relations) else [""] * 4)
+    return [point, plane, *distance, *relation]

@@ -162,13 +162,14 @@ def _blocks(data: Measurements, block: int):
 
 
 def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES,
-                        weights: np.ndarray | None = None, distances_sigma_m: float | None = None,
+                        weights: np.ndarray | None = None, known_sigma_m: float | None = None,
                         projected: bool = True):
     """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c; with
     point weights (R,), each point's three rows are scaled by the square root of its weight.
     Relative rows (`runtime.relative`) have y NaN: their y is filled and, when `projected`, their
     columns projected (else their residual is 0: the columns as absolute data would have them);
-    with distances_sigma_m (m) the known distances' rows follow the last block's."""
+    with known_sigma_m (m) the rows of the known distances and plane relations follow the last
+    block's."""
     q, w, aux = _poses_inputs(cm, data)
     nt = cm.dims.nt
     for start, stop, rows in _blocks(data, block):
@@ -185,8 +186,8 @@ def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c:
                 r = np.where(rel.rows[:, None], 0.0, r)
             else:
                 r = relative.fill(rel, y[rows], pr, wr) - pr
-                if distances_sigma_m is not None and rel.distances:
-                    extra = relative.distance_rows(rel, Hr, pr, wr, distances_sigma_m)
+                if known_sigma_m is not None and rel.n_known:
+                    extra = relative.known_rows(rel, Hr, pr, wr, known_sigma_m)
                 Hr = relative.project(rel, Hr, pr, wr)
         if weights is not None:
             root = np.sqrt(weights[rows])[:, None]
@@ -359,7 +360,7 @@ def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, rank_to
     c = np.zeros(cm.dims.nc) if at is None else at
     columns = np.array(struct.kept, int)
     # the distances' weight against the rows changes no rank: a typical noise stands for the fit's
-    blocks = list(rows_H_and_residual(cm, data, y, c, weights=weights, distances_sigma_m=TYPICAL_NOISE_M))
+    blocks = list(rows_H_and_residual(cm, data, y, c, weights=weights, known_sigma_m=TYPICAL_NOISE_M))
     R0, m = qr_accumulate(blocks, columns)
     if data.relative is None:
         red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
@@ -378,7 +379,8 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
     R_abs, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=weights, projected=False), columns)
     absolute = unexcited(struct, R_abs[:, :-1], cm.robot, cm.model, n_targets, rank_tol)
     excited = np.searchsorted(struct.kept, absolute.kept)
-    distances = blocks[-1][0][:, columns] if data.relative.distances else np.zeros((0, len(columns)))
+    lengths = blocks[-1][0][relative.scale_rows(data.relative)][:, columns] if data.relative.n_known else \
+        np.zeros((0, len(columns)))
     # what a motion of the whole set does, taken out: at c = 0 a socket's rows scatter by the model's
     # whole error, and a turn of the set would seem to move them apart
     q, w, aux = _poses_inputs(cm, data)
@@ -390,7 +392,7 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
     H = blocks[0][0][:, columns]
     R_rows = np.linalg.qr(H - G @ np.linalg.lstsq(G, H, rcond=None)[0], mode="r")
     A = R_abs[:, excited]
-    V = relative.unseen(R_rows[:, excited], A, distances[:, excited])
+    V = relative.unseen(R_rows[:, excited], A, lengths[:, excited])
     R = R0[:, :-1].copy()
     R[:, excited] = relative.blind(R[:, excited], V, A.T @ A)
     R[:, excited[relative.spanning(V, np.linalg.norm(A, axis=0))]] = 0.0  # one coefficient dropped per direction
@@ -407,7 +409,8 @@ def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, 
     invisible to relative data, and why."""
     seen = set(absolute.kept)
     names = [e.split(".")[0] for e in cm.robot.error_names()]
-    scale = "" if data.relative.distances else "; a known distance between two points fixes the scale"
+    scale = ("" if data.relative.distances or any(x.kind == "offset" for x in data.relative.relations) else
+             "; a known distance between two points, or offset between two planes, fixes the scale")
 
     def why(j: int) -> str:
         frame = names[cm.model.coefficients[j].error]
@@ -609,7 +612,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     before = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, None))
     limit = robust.outlier_limit(e, loss)
     wr = robust.weights(e, limit, loss)
-    known = _known_distances(cm, data)
+    known = _known_rows(cm, data)
     m += known.n
     if loss == "l2" and data.relative is None:
         # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
@@ -625,7 +628,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             e = row_errors(cm, data, y, c, rows, w)[2] * norm
             known = known.at(robust.scale(e))
         if stale:
-            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, distances_sigma_m=known.sigma_m),
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
                                  kept, scale)
             stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
@@ -660,7 +663,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             break
     w = rows.weight * wr[rows.group]
     if stale:
-        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, distances_sigma_m=known.sigma_m),
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
                              kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
     m_eff = float(row_dof @ wr) + known.n  # down-weighted rows count for their weight
@@ -729,8 +732,9 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
 
 @dataclass(frozen=True)
 class _Known:
-    """The known distances of relative data in a fit (`runtime.relative.distance_rows`): n of them,
-    weighed against rows of per-coordinate noise sigma_m (m; None without distances)."""
+    """The rows of the known distances and plane relations of relative data in a fit
+    (`runtime.relative.known_rows`): n of them, weighed against rows of per-coordinate noise sigma_m
+    (m; None without any)."""
 
     cm: CompiledModel
     data: Measurements
@@ -741,16 +745,16 @@ class _Known:
         return self if not self.n else replace(self, sigma_m=sigma_m)
 
     def squares(self, c: np.ndarray, w: np.ndarray) -> float:
-        """The distances' weighted squared residuals (m^2) at coefficients c, point weights w (R,)."""
+        """Their weighted squared residuals (m^2) at coefficients c, point weights w (R,)."""
         if not self.n:
             return 0.0
         q, wr, aux = _poses_inputs(self.cm, self.data)
         p = self.cm.model_targets(q, wr, aux, c)[self.data.pose, self.data.target]
-        return float(np.sum(relative.distance_rows(self.data.relative, None, p, w, self.sigma_m)[1] ** 2))
+        return float(np.sum(relative.known_rows(self.data.relative, None, p, w, self.sigma_m)[1] ** 2))
 
 
-def _known_distances(cm: CompiledModel, data: Measurements) -> _Known:
-    n = 0 if data.relative is None else len(data.relative.distances)
+def _known_rows(cm: CompiledModel, data: Measurements) -> _Known:
+    n = 0 if data.relative is None else data.relative.n_known
     return _Known(cm, data, n, robust.SCALE_FLOOR_M if n else None)
 
 

@@ -28,7 +28,7 @@ pose: 2.9 times), as it is hard to tell from misfit.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import special  # not scipy.stats: see runtime.robust
 from scipy.linalg import solve_triangular
 
 #: Bonferroni-corrected p-value below which a pose's deleted residual is significant
@@ -72,7 +72,7 @@ def suspects(drop: np.ndarray, dof: np.ndarray, rss: float, m: float, k: int) ->
     rest = np.maximum(m - k - dof, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         F = np.where(dof > 0, drop / dof / np.maximum((rss - drop) / rest, np.finfo(float).tiny), 0.0)
-    p = stats.f.sf(F, np.maximum(dof, 1), rest) * len(F)
+    p = special.fdtrc(np.maximum(dof, 1), rest, F) * len(F)  # the F law's survival function
     order = np.argsort(-F)
     for j in range(min(max(1, len(F) // 20), len(F) - 1), 0, -1):
         if F[order[j - 1]] >= GAP * F[order[j]] and np.all(p[order[:j]] < ALPHA):

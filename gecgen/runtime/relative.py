@@ -20,26 +20,34 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import eigh, qr
 
-from gecgen.model.relative import Relative
+from gecgen.model.relative import RELATIONS, Relative
 
 
 def _centres(relative: Relative, p: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per group: the weighted centre of its rows' modelled targets (G, 3) m, the plane's unit
     normal and two unit tangents (G, 3, 3: rows n, t1, t2; the identity for a point), and the
     summed weight (G,). p (R, 3) and w (R,) over the rows of `relative`."""
+    centre, frame, W, _ = _planes(relative, p, w)
+    return centre, frame, W
+
+
+def _planes(relative: Relative, p: np.ndarray, w: np.ndarray):
+    """`_centres`, and the weighted spread of each plane's rows along n, t1, t2 (G, 3) m^2 (the
+    eigenvalues of their scatter; zeros for a point)."""
     G = len(relative.names)
     rows = relative.rows
     g = relative.group[rows]
     W = np.bincount(g, w[rows], G)
     centre = np.column_stack([np.bincount(g, w[rows] * p[rows, k], G) for k in range(3)])
     centre /= np.maximum(W, 1e-300)[:, None]
-    frame = np.tile(np.eye(3), (G, 1, 1))
+    frame, spread = np.tile(np.eye(3), (G, 1, 1)), np.zeros((G, 3))
     for k in np.nonzero(relative.is_plane())[0]:
         on = relative.group == k
         d = p[on] - centre[k]
-        _, vectors = np.linalg.eigh(np.einsum("n,ni,nj->ij", w[on], d, d))
+        values, vectors = np.linalg.eigh(np.einsum("n,ni,nj->ij", w[on], d, d))
         frame[k] = vectors[:, [0, 2, 1]].T  # the normal is the direction of least spread
-    return centre, frame, W
+        spread[k] = values[[0, 2, 1]]
+    return centre, frame, W, spread
 
 
 def fill(relative: Relative, y: np.ndarray, p: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
@@ -80,25 +88,88 @@ def project(relative: Relative, H: np.ndarray, p: np.ndarray, w: np.ndarray) -> 
     return out
 
 
-def distance_rows(relative: Relative, H: np.ndarray | None, p: np.ndarray, w: np.ndarray,
-                  sigma_m: float) -> tuple[np.ndarray | None, np.ndarray]:
-    """The rows of the known distances, (D, k) and (D,): each distance's residual L - |m_a - m_b| (m)
-    and its columns (the change of |m_a - m_b| per coefficient; None without H), weighted against
+def scale_rows(relative: Relative) -> np.ndarray:
+    """(n_known,) True for the rows of `known_rows` that measure a length (a distance, an offset's
+    distance): the only ones that can see a scaling; angles between planes see no similarity."""
+    out = [True] * len(relative.distances)
+    for x in relative.relations:
+        out += [False] * (RELATIONS[x.kind] - (x.kind == "offset")) + [True] * (x.kind == "offset")
+    return np.array(out, bool)
+
+
+def known_rows(relative: Relative, H: np.ndarray | None, p: np.ndarray, w: np.ndarray,
+               sigma_m: float) -> tuple[np.ndarray | None, np.ndarray]:
+    """The rows of the known distances and plane relations, (K, k) and (K,) with K = relative.n_known:
+    each one's residual (declared less modelled) and its columns (None without H), weighted against
     rows of per-coordinate noise sigma_m (module docstring). H (R, 3, k) the rows' columns, p (R, 3)
-    their modelled targets, w (R,) their weights."""
-    centre, _, W = _centres(relative, p, w)
-    D = len(relative.distances)
-    A, r = None if H is None else np.zeros((D, H.shape[-1])), np.zeros(D)
-    for i, d in enumerate(relative.distances):
-        if W[d.a] <= 0 or W[d.b] <= 0:
-            continue  # a point without rows here (a subset of the data): the distance says nothing
-        between = centre[d.a] - centre[d.b]
-        length = np.linalg.norm(between)
-        weight = sigma_m / np.sqrt(d.std_m ** 2 + sigma_m ** 2 * (1 / W[d.a] + 1 / W[d.b]))
-        r[i] = weight * (d.length_m - length)
-        if H is not None:
-            mean = [np.einsum("n,nij->ij", w[relative.group == g], H[relative.group == g]) / W[g] for g in (d.a, d.b)]
-            A[i] = weight * (between / max(length, 1e-300)) @ (mean[0] - mean[1])
+    their modelled targets, w (R,) their weights. A distance: L - |m_a - m_b| for the points' fitted
+    positions m. A relation of planes a and b (normals n, tangents t, centres m): parallel, the two
+    tilts t_a.n_b; perpendicular, n_a.n_b; offset, both tilts and L - |n_a.(m_b - m_a)|; each weighted
+    by its variance, the declared std^2 and what the planes' own fits leave (sigma^2 over their
+    rows' spread)."""
+    centre, frame, W, spread = _planes(relative, p, w)
+    A, r = None if H is None else np.zeros((relative.n_known, H.shape[-1])), np.zeros(relative.n_known)
+    mean = {}
+
+    def mean_H(g: int) -> np.ndarray:  # how the group's centre moves per coefficient (3, k)
+        if g not in mean:
+            on = relative.group == g
+            mean[g] = np.einsum("n,nij->ij", w[on], H[on]) / W[g]
+        return mean[g]
+
+    def turn(g: int) -> np.ndarray:  # how the plane's normal turns per coefficient (3, k), to first order
+        on = relative.group == g
+        d = p[on] - centre[g]
+        along = np.einsum("i,nij->nj", frame[g, 0], H[on] - mean_H(g)[None])  # n.(dp_i - dm)
+        out = np.zeros((3, H.shape[-1]))
+        for j in (1, 2):
+            gap = max(spread[g, j] - spread[g, 0], 1e-300)
+            out -= np.outer(frame[g, j], (w[on] * (d @ frame[g, j])) @ along) / gap
+        return out
+
+    i = 0
+    for d in relative.distances:
+        n_rows = 1
+        if W[d.a] > 0 and W[d.b] > 0:  # else a subset of the data without the point: it says nothing
+            between = centre[d.a] - centre[d.b]
+            length = np.linalg.norm(between)
+            weight = sigma_m / np.sqrt(d.std_m ** 2 + sigma_m ** 2 * (1 / W[d.a] + 1 / W[d.b]))
+            r[i] = weight * (d.length_m - length)
+            if H is not None:
+                A[i] = weight * (between / max(length, 1e-300)) @ (mean_H(d.a) - mean_H(d.b))
+        i += n_rows
+    for x in relative.relations:
+        n_rows = RELATIONS[x.kind]
+        counts = relative.counts()
+        if counts[x.a] > 3 and counts[x.b] > 3:  # else a plane not yet fixed by this data: it says nothing
+            na, nb = frame[x.a, 0], frame[x.b, 0] * (1.0 if frame[x.a, 0] @ frame[x.b, 0] >= 0 else -1.0)
+            sign_b = 1.0 if frame[x.a, 0] @ frame[x.b, 0] >= 0 else -1.0
+            tilt = [sigma_m ** 2 * (np.sum((frame[g, 1:] @ u) ** 2 / np.maximum(spread[g, 1:], 1e-300)))
+                    for g, u in ((x.a, nb), (x.b, na))]
+            values, rows_A = [], []
+            if x.kind == "perpendicular":
+                values.append((-(na @ nb), x.std ** 2 + sum(tilt)))
+                if H is not None:
+                    rows_A.append(nb @ turn(x.a) + sign_b * na @ turn(x.b))
+            else:  # parallel, and the offset's tilts
+                for t in frame[x.a, 1:]:
+                    var = x.std ** 2 if x.kind == "parallel" else 0.0
+                    values.append((-(t @ nb), var + sigma_m ** 2 * (1 / max(spread[x.a, 1], 1e-300)
+                                                                    + 1 / max(spread[x.b, 1], 1e-300))))
+                    if H is not None:
+                        rows_A.append(t @ (sign_b * turn(x.b) - turn(x.a)))
+            if x.kind == "offset":
+                gap = centre[x.b] - centre[x.a]
+                s = na @ gap
+                values.append((x.offset_m - abs(s), x.std ** 2 + sigma_m ** 2 * (1 / W[x.a] + 1 / W[x.b])))
+                if H is not None:
+                    rows_A.append(np.sign(s) * (na @ (mean_H(x.b) - mean_H(x.a)) + gap @ turn(x.a)))
+            for k, (value, var) in enumerate(values):
+                weight = sigma_m / np.sqrt(max(var, 1e-300))
+                r[i + k] = weight * value
+                if H is not None:
+                    A[i + k] = weight * rows_A[k]
+        i += n_rows
     return A, r
 
 
@@ -125,6 +196,23 @@ def measures(relative: Relative, p: np.ndarray) -> dict:
     if errors:
         out["distances"] = errors
         out["distance_error_mm"] = max(abs(e["error_mm"]) for e in errors)
+    counts = relative.counts()
+    relations = [_relation_error(x, centre, frame, relative.names) for x in relative.relations
+                 if counts[x.a] > 3 and counts[x.b] > 3]
+    if relations:
+        out["relations"] = relations
+    return out
+
+
+def _relation_error(x, centre: np.ndarray, frame: np.ndarray, names) -> dict:
+    """How far the fitted planes a and b are from their declared relation: the angle from parallel or
+    from perpendicular (mrad), and for an offset the offset's error (mm) too."""
+    na, nb = frame[x.a, 0], frame[x.b, 0]
+    cos = abs(float(na @ nb))
+    angle = np.arccos(min(cos, 1.0)) if x.kind != "perpendicular" else np.arcsin(min(cos, 1.0))
+    out = {"between": [names[x.a], names[x.b]], "relation": x.kind, "angle_mrad": float(1e3 * angle)}
+    if x.kind == "offset":
+        out["offset_error_mm"] = float(1e3 * (abs(na @ (centre[x.b] - centre[x.a])) - x.offset_m))
     return out
 
 
@@ -153,11 +241,11 @@ def unseen(projected: np.ndarray, absolute: np.ndarray, distances: np.ndarray) -
     share, V = eigh(P.T @ P, M)  # share of each direction's squared motion the projection keeps
     V = V[:, share < UNSEEN ** 2]
     if V.shape[1] and len(distances):
-        # a distance sees a scaling (a share of about 0.01 to 0.1: its rows weigh like a socket's
-        # mean) and no rigid motion at all (rounding, 1e-12): its view of a direction is against
-        # the direction's motion of the rows, which V normalises to 1
+        # a distance (or an offset between planes) sees a scaling (a share of about 0.01 to 0.1: its
+        # rows weigh like a socket's mean) and no rigid motion (rounding): one direction at most, its
+        # view of it against the direction's motion of the rows, which V normalises to 1
         _, s, Wt = np.linalg.svd((distances / norm) @ V)
-        V = V @ Wt[int(np.sum(s > DISTANCE_SEES)):].T
+        V = V @ Wt[int(s[:1].sum() > DISTANCE_SEES):].T
     return V / norm[:, None]
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements
-from gecgen.model.relative import PLANE, POINT, Distance, Relative
+from gecgen.model.relative import PLANE, POINT, Distance, Relation, Relative
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.relative import measures
@@ -42,7 +42,10 @@ class Fixtures:
     `per_socket` configurations each; `planes` planes (a table, then faces of a square standing on
     it, up to three), `touches` configurations each; the `target` that sits in the sockets or
     touches; seating_m (m, per coordinate of a seat; along the normal for a touch) and encoder_rad
-    (rad or m per joint reading) noise; distance_std_m the stated uncertainty of the distance."""
+    (rad or m per joint reading) noise; distance_std_m the stated uncertainty of the distance;
+    `relations`: the planes' known perpendicularity is declared (the square's faces and the table);
+    block_m: a block of that width (m) stands on the table, its far face a fourth plane parallel to
+    the first face at that offset, declared."""
 
     target: str
     plates: int = 0
@@ -53,11 +56,13 @@ class Fixtures:
     touches: int = 30
     seating_m: float = 1e-5
     encoder_rad: float = 1e-5
+    relations: bool = False
+    block_m: float | None = None
 
 
 def _goals(robot: Robot, truth: Truth, fixtures: Fixtures, rng: np.random.Generator):
     """The true contact points (N, 3) m, the group of each (N,), the groups' names and kinds, the
-    plates' distances."""
+    plates' distances and the planes' relations."""
     lo, hi = _box(robot)
     up = -truth.gravity / np.linalg.norm(truth.gravity) if np.linalg.norm(truth.gravity) > 0 else np.array([0, 0, 1.0])
     t = list(robot.targets).index(fixtures.target)
@@ -82,16 +87,28 @@ def _goals(robot: Robot, truth: Truth, fixtures: Fixtures, rng: np.random.Genera
     corner = somewhere() if fixtures.planes else None
     side = np.cross(up, rng.normal(size=3))
     side /= np.linalg.norm(side)
-    for i, normal in enumerate([up, side, np.cross(up, side)][:fixtures.planes]):
+    faces = [(up, corner), (side, corner), (np.cross(up, side), corner)][:fixtures.planes]
+    if fixtures.block_m:
+        require(fixtures.planes >= 2, "a block's far face is parallel to the first face of the square: give "
+                                      "--planes 2 or 3 with --block-width")
+        faces.append((side, corner + fixtures.block_m * side))
+    first = len(names)
+    for i, (normal, through) in enumerate(faces):
         tangents = np.linalg.svd(normal[None, :])[2][1:]  # two unit vectors across the normal
         offsets = rng.uniform(-PATCH_M, PATCH_M, (fixtures.touches, 2)) @ tangents
         # the table below the corner, the square's faces through it: all within reach of one spot
-        goals.append(corner + offsets + rng.normal(0, fixtures.seating_m, (fixtures.touches, 1)) * normal)
+        goals.append(through + offsets + rng.normal(0, fixtures.seating_m, (fixtures.touches, 1)) * normal)
         group += [len(names)] * fixtures.touches
         names.append(f"plane{i + 1}")
         kinds.append(PLANE)
+    relations = []
+    if fixtures.relations:
+        relations = [Relation(first + a, first + b, "perpendicular", 0.0, 0.0)
+                     for a in range(min(fixtures.planes, 3)) for b in range(a + 1, min(fixtures.planes, 3))]
+    if fixtures.block_m:
+        relations.append(Relation(first + 1, first + len(faces) - 1, "offset", fixtures.block_m, 0.0))
     require(goals, "give plates or planes to simulate (--plates N or --planes N)")
-    return np.vstack(goals), np.array(group), tuple(names), tuple(kinds), tuple(distances)
+    return np.vstack(goals), np.array(group), tuple(names), tuple(kinds), tuple(distances), tuple(relations)
 
 
 def _box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +127,7 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
     built = truth.robot or robot  # the robot as built: its couplings may differ from the file's
     t = list(built.targets).index(fixtures.target)
     for _ in range(PLACEMENTS):
-        goals, group, names, kinds, distances = _goals(built, truth, fixtures, rng)
+        goals, group, names, kinds, distances, relations = _goals(built, truth, fixtures, rng)
         N = len(goals)
         aux = thermal_profile(truth, N)
 
@@ -127,7 +144,7 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
     recorded = q + rng.normal(0.0, fixtures.encoder_rad, q.shape)
     lo, hi = (np.array(v) for v in built.sampling_box())
     recorded = np.clip(recorded, lo, hi)  # an encoder never reads past the limit it stops at
-    relative = Relative(group, names, kinds, distances)
+    relative = Relative(group, names, kinds, distances, relations)
     aux_names = tuple(aux)
     data = Measurements(q=recorded, w=np.zeros((N, 6)),
                         aux=np.column_stack([aux[a] for a in aux_names]) if aux_names else np.zeros((N, 0)),
