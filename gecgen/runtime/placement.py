@@ -43,6 +43,8 @@ from gecgen.runtime.registration import kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
+#: rad: the forward-difference step of a tracker frame's rotation vector (`estimate_placement`)
+ROTATION_STEP = 1e-7
 #: a measured frame (pose data) this far (rad) from the robot's is turned to the estimate before the fit
 FAR_RAD = 0.02
 #: singular values of the refinement's column-scaled Jacobian below this share of the largest leave a
@@ -125,10 +127,29 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
             out[on] = p[on] @ R.T + x[6 * s + 3:6 * s + 6] - data.xyz[on]
         return out.ravel()
 
+    coords = np.arange(3 * len(data.xyz)).reshape(-1, 3)[:, :, None]  # each row's three residuals
+
+    def jacobian(x):
+        """d residual / d x: exact in the frames' translations and the targets (the residual is linear
+        in them), forward differences in the rotation vectors: 3 residuals per station rather than
+        one per unknown, which made this step a second of a PPS identify."""
+        J = np.zeros((3 * len(data.xyz), len(x)))
+        base = residual(x)
+        for s in range(len(stations)):
+            on = sidx == s
+            R = Rotation.from_rotvec(x[6 * s:6 * s + 3]).as_matrix()
+            J[coords[on], 6 * s + 3 + np.arange(3)] = np.eye(3)
+            J[coords[on], 6 * len(stations) + 3 * index[on][:, None, None] + np.arange(3)] = R @ Rp[on]
+            for j in range(3):
+                step = np.zeros_like(x)
+                step[6 * s + j] = ROTATION_STEP
+                J[:, 6 * s + j] = (residual(x + step) - base) / ROTATION_STEP
+        return J
+
     e0 = np.linalg.norm(residual(x0).reshape(-1, 3), axis=1)
     kind = {"l2": "linear", "huber": "huber", "cauchy": "cauchy"}[loss]
     f_scale = max(robust.scale(e0), robust.SCALE_FLOOR_M)
-    sol = least_squares(residual, x0, loss=kind, f_scale=f_scale, x_scale="jac", max_nfev=200)
+    sol = least_squares(residual, x0, jac=jacobian, loss=kind, f_scale=f_scale, x_scale="jac", max_nfev=200)
     J = sol.jac * np.maximum(np.linalg.norm(sol.jac, axis=0), 1e-300) ** -1
     s = np.linalg.svd(J, compute_uv=False)
     names = [robot.target_names[t] for t in measured]
