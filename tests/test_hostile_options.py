@@ -49,6 +49,7 @@ def invocations(t):
         # a manifest refused as it is read: the options are checked before it, and no cluster starts
         "fleet": [str(t / "wide.csv"), "-o", str(t / "fleet")],
         "iso9283": [PUMA, "-o", str(t / "plan.csv"), "--cycles", "2"],
+        "check": [str(t / "c.json"), str(t / "d.csv")],
     }
 
 

@@ -36,6 +36,7 @@ COMMANDS = {
     "calibrate": ("calibrate", "choose a model on the training data, fit it, write calibration, code and report"),
     "fleet": ("fleet", "calibrate many robots at once (a manifest of robot and data files) on Dask"),
     "iso9283": ("iso9283", "plan the ISO 9283 pose test, or its accuracy and repeatability from a measured run"),
+    "check": ("check", "a QA check: a short measurement against the calibration, pass or fail, and what changed"),
 }
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
@@ -54,6 +55,7 @@ OUTPUTS = {
     "calibrate": {"output": ("calibration folder", True)},
     "fleet": {"output": ("fleet folder", True)},
     "iso9283": {"output": ("plan", False)},
+    "check": {"history": ("history of checks", False)},
 }
 
 

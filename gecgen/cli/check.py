@@ -1,0 +1,104 @@
+"""`gecgen check CALIB DATA [--tolerance-mm T] [--history H.csv] [--label L]`: a QA check of a calibrated robot.
+
+A short measurement taken later (5 to 10 poses: a daily check of a patient positioner) against the
+calibration, in its tracker frame (gecgen/runtime/drift.py): pass or fail against the tolerance,
+whether the difference is beyond the calibration's noise, and what it looks like (the tracker moved:
+a rigid motion; the robot changed: the joint whose offset explains it). With --history, the check is
+appended to a CSV of checks and the history is plotted beside it (H.png).
+"""
+from __future__ import annotations
+
+import csv
+import io
+from datetime import datetime, timezone
+from pathlib import Path
+
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, number
+
+HISTORY = ["time_utc", "label", "n_points", "rms_mm", "max_mm", "tolerance_mm", "verdict", "beyond_noise",
+           "p_value", "looks_like"]
+
+
+def add_parser(command):
+    """Register `check` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("check", run)
+    p.add_argument("calibration", help=CALIBRATION_HELP)
+    p.add_argument("data", help=DATA_HELP + "; measured in the calibration's tracker frame")
+    p.add_argument("--tolerance-mm", type=number(0, above=True), help="largest point error that passes, mm")
+    p.add_argument("--history", help="CSV of checks to append this one to (created if absent); plotted beside it")
+    p.add_argument("--label", help="this check's name in the history (default: the data file's name)")
+
+
+def run(args) -> dict:
+    from gecgen.api import load_calibration
+    from gecgen.model.measurements import read_measurements
+    from gecgen.model.validation import require
+    from gecgen.runtime.drift import check
+    from gecgen.runtime.identify import to_world
+    from gecgen.runtime.inputs import checked
+
+    cal = load_calibration(args.calibration)
+    calib = cal.calibration_
+    data = read_measurements(args.data, calib.robot)
+    require(data.relative is None and data.orientation is None,
+            f"{args.data}: a check compares measured positions; give rows with x y z only")
+    sigma_m = 1e-3 * float(cal.report_["sigma_mm"])
+    cm = checked(calib.model, calib.robot, data)
+    y = to_world(calib.frames, data, "measure the check from the calibration's tracker stationing")
+    verdict = check(cm, data, y, calib.c, sigma_m, args.tolerance_mm)
+    result = {"robot": calib.robot.name, "data": str(args.data), "n_points": len(data.xyz),
+              "calibration_sigma_mm": 1e3 * sigma_m, **verdict.to_dict()}
+    if args.history:
+        result["history"] = _append(Path(args.history), args.label or Path(args.data).name, result)
+    return result
+
+
+def _append(path: Path, label: str, result: dict) -> dict:
+    """Append the check to the history CSV at path and plot the history beside it (path.png)."""
+    from gecgen.files import write_atomically
+    from gecgen.model.validation import require
+
+    rows = []
+    if path.exists():
+        rows = list(csv.reader(io.StringIO(path.read_text())))
+        require(rows and rows[0] == HISTORY, f"{path}: not a history of gecgen check (its header should be "
+                                             f"{','.join(HISTORY)}); give a new file or that history")
+        rows = rows[1:]
+    looks = result["looks_like"]
+    rows.append([datetime.now(timezone.utc).isoformat(timespec="seconds"), label, str(result["n_points"]),
+                 f"{result['rms_mm']:.4g}", f"{result['max_mm']:.4g}",
+                 "" if result["tolerance_mm"] is None else f"{result['tolerance_mm']:.4g}", result["verdict"],
+                 str(result["beyond_noise"]).lower(), f"{result['p_value']:.3g}",
+                 looks["kind"] + (f" {looks['joint']}" if looks["kind"] == "joint" else "")])
+    text = io.StringIO()
+    csv.writer(text, lineterminator="\n").writerows([HISTORY, *rows])
+    write_atomically(path, text.getvalue())
+    plot = path.with_suffix(".png")
+    _plot(rows, plot)
+    return {"file": str(path), "checks": len(rows), "plot": str(plot)}
+
+
+def _plot(rows: list[list[str]], path: Path):
+    """The history's RMS and largest error per check, and the tolerance where given."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gecgen.files import write_atomically
+
+    k = range(1, len(rows) + 1)
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    ax.plot(k, [float(r[3]) for r in rows], "o-", label="RMS point error")
+    ax.plot(k, [float(r[4]) for r in rows], "s-", label="largest point error")
+    tolerances = [(i, float(r[5])) for i, r in zip(k, rows) if r[5]]
+    if tolerances:
+        ax.plot(*zip(*tolerances), "k--", label="tolerance")
+    ax.set_xticks(list(k), [r[1] for r in rows], rotation=30, ha="right", fontsize=7)
+    ax.set_ylabel("mm")
+    ax.set_title("QA checks")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_atomically(path, buf.getvalue())
