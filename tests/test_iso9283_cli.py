@@ -50,3 +50,12 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
         assert abs(got["RP_l"] - 1e3 * (l.mean() + 3 * l.std(ddof=1))) < 1e-9
         assert 0.2 < got["AP_x"] < 0.4  # the base offset, within the noise of 6 cycles
     assert out["worst"]["AP_p"] == max(v["AP_p"] for v in out["points"]["t1"].values())
+    # the same test on the robot without its base offset (as compensation would leave it): scored
+    # against the same commanded poses, its accuracy is the noise's alone
+    fixed = load_truth({"noise": {"repeatability": 5e-5, "tracker": 0.0}}, robot)
+    after = simulate(robot, fixed, Design(q, np.zeros(len(q)), np.zeros(3), ("t1",), np.array(["iso"] * len(q))),
+                     np.random.default_rng(1))
+    write_measurements(tmp_path / "after.csv", robot, after)
+    both = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv",
+                "--after", tmp_path / "after.csv")
+    assert both["worst"] == out["worst"] and both["after"]["worst"]["AP_p"] < 0.15 < out["worst"]["AP_p"]

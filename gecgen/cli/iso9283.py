@@ -1,11 +1,12 @@
 """`gecgen iso9283 ROBOT -o PLAN.csv [--tool-rpy R,P,Y (deg)] [--cycles 30]`: plans the ISO 9283 pose test;
-`gecgen iso9283 ROBOT --plan PLAN.csv --measured DATA.csv [--calibration CALIB.json]`: its characteristics.
+`gecgen iso9283 ROBOT --plan PLAN.csv --measured DATA.csv [--after DATA2.csv] [--calibration CALIB.json]`: its
+characteristics, before and after compensation.
 
 The plan (gecgen/runtime/iso9283.py) is the standard's test cube, its five points and the cycles, as
 joint commands in visiting order (`cycle, point, q1..qn`, plus `pose`, the row's pose id). Run it on
 the robot as it is (the "before" test), or its compensated commands (`gecgen compensate CALIB
-PLAN.csv`, the "after" test), and measure a target at every row: a measurement file whose pose ids
-are the plan's. The commanded pose of a row is where the nominal model puts the target at the plan's
+PLAN.csv`, the "after" test, `--after`), and measure a target at every row: a measurement file whose
+pose ids are the plan's. The commanded pose of a row is where the nominal model puts the target at the plan's
 joints, in both tests: what the robot was asked to reach. The measured positions must be in the
 robot's world frame, or in the tracker frame of `--calibration` (its registration brings them there).
 """
@@ -29,6 +30,8 @@ def add_parser(command):
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the cube search (default %(default)s)")
     p.add_argument("--plan", help="the plan the measured test ran (with --measured)")
     p.add_argument("--measured", help="measurements of the test, pose ids those of the plan's rows")
+    p.add_argument("--after", help="measurements of the same test run with the compensated commands (gecgen "
+                                   "compensate of the plan): scored against the same commanded poses")
     p.add_argument("--calibration", help="a calibration whose tracker frame the measurements are in")
 
 
@@ -39,6 +42,7 @@ def run(args) -> dict:
     robot = load_robot(args.robot)
     require((args.plan is None) == (args.measured is None), "--plan and --measured go together: the plan the "
                                                              "measured test ran")
+    require(args.after is None or args.measured, "--after goes with --plan and --measured (the run before)")
     if args.measured:
         require(not args.output, "-o writes a plan; with --measured the characteristics are the result (--json)")
         return _characteristics(robot, args)
@@ -70,11 +74,8 @@ def _plan(robot, args) -> dict:
 
 
 def _characteristics(robot, args) -> dict:
-    from gecgen.model.kinematics import target_positions, tool_poses
-    from gecgen.model.measurements import read_measurements
     from gecgen.model.table import read_table
     from gecgen.model.validation import require
-    from gecgen.runtime.iso9283 import pose_characteristics
 
     table = read_table(args.plan, "ISO 9283 plan", "pose, cycle, point, q1..qn")
     for col in ("pose", "cycle", "point", *(f"q{j + 1}" for j in range(robot.n))):
@@ -82,16 +83,34 @@ def _characteristics(robot, args) -> dict:
                                      f"`gecgen iso9283 -o` wrote")
     pose, point = table.numbers("pose").astype(int), table.numbers("point").astype(int)
     q = np.column_stack([table.numbers(f"q{j + 1}") for j in range(robot.n)])
-    data = read_measurements(args.measured, robot)
+    out = {"robot": robot.name, "plan": str(args.plan), "measured": str(args.measured),
+           "frame": "the calibration's tracker frame" if args.calibration else "the robot's world frame",
+           **_run_characteristics(robot, args.calibration, args.measured, table.where, pose, point, q)}
+    if args.after:
+        out["after"] = {"measured": str(args.after),
+                        **_run_characteristics(robot, args.calibration, args.after, table.where, pose, point, q)}
+    return out
+
+
+def _run_characteristics(robot, calibration: str | None, measured, plan_where: str, pose, point, q) -> dict:
+    """{points: {target: {P1: characteristics, ...}}, worst: {AP_p, RP_l}} of one measured run of the
+    plan (its rows: pose ids, points, joints q), against the nominal poses at the plan's joints; the
+    measured points in `calibration`'s tracker frame when given, else in the robot's world frame."""
+    from gecgen.model.kinematics import target_positions, tool_poses
+    from gecgen.model.measurements import read_measurements
+    from gecgen.model.validation import require
+    from gecgen.runtime.iso9283 import pose_characteristics
+
+    data = read_measurements(measured, robot)
     unknown = np.setdiff1d(data.pose_ids, pose)
     require(not len(unknown), f"{data.source}: pose {unknown[0] if len(unknown) else ''} is no row of the plan "
-                              f"{table.where}; the test's pose ids are the plan's")
+                              f"{plan_where}; the test's pose ids are the plan's")
     y = data.xyz
-    if args.calibration:
+    if calibration:
         from gecgen.api import load_calibration
         from gecgen.runtime.identify import to_world
 
-        y = to_world(load_calibration(args.calibration)._fitted().frames, data)
+        y = to_world(load_calibration(calibration).calibration_.frames, data)
     row = np.searchsorted(pose, data.pose_ids)[data.pose]  # the plan row of every measured point
     commanded = target_positions(robot, q)[row, data.target]
     R_cmd = tool_poses(robot, q)[0][row, :3, :3]
@@ -105,6 +124,4 @@ def _characteristics(robot, args) -> dict:
             out.setdefault(name, {})[f"P{p}"] = {k: (None if np.isnan(v) else float(v)) if isinstance(v, float) else v
                                                  for k, v in vars(c).items()}
     worst = {k: max(v[k] for t in out.values() for v in t.values()) for k in ("AP_p", "RP_l")}
-    return {"robot": robot.name, "plan": str(args.plan), "measured": str(args.measured),
-            "frame": "the calibration's tracker frame" if args.calibration else "the robot's world frame",
-            "points": out, "worst": worst}
+    return {"points": out, "worst": worst}

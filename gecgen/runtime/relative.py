@@ -138,17 +138,18 @@ def known_rows(relative: Relative, H: np.ndarray | None, p: np.ndarray, w: np.nd
             if H is not None:
                 A[i] = weight * (between / max(length, 1e-300)) @ (mean_H(d.a) - mean_H(d.b))
         i += n_rows
+    counts = relative.counts()
     for x in relative.relations:
         n_rows = RELATIONS[x.kind]
-        counts = relative.counts()
         if counts[x.a] > 3 and counts[x.b] > 3:  # else a plane not yet fixed by this data: it says nothing
-            na, nb = frame[x.a, 0], frame[x.b, 0] * (1.0 if frame[x.a, 0] @ frame[x.b, 0] >= 0 else -1.0)
-            sign_b = 1.0 if frame[x.a, 0] @ frame[x.b, 0] >= 0 else -1.0
-            tilt = [sigma_m ** 2 * (np.sum((frame[g, 1:] @ u) ** 2 / np.maximum(spread[g, 1:], 1e-300)))
-                    for g, u in ((x.a, nb), (x.b, na))]
+            sign_b = 1.0 if frame[x.a, 0] @ frame[x.b, 0] >= 0 else -1.0  # the normals' signs are arbitrary
+            na, nb = frame[x.a, 0], sign_b * frame[x.b, 0]
             values, rows_A = [], []
             if x.kind == "perpendicular":
-                values.append((-(na @ nb), x.std ** 2 + sum(tilt)))
+                # each normal's tilt towards the other, as its plane's fit leaves it: sigma^2 / spread
+                tilt = sum(sigma_m ** 2 * np.sum((frame[g, 1:] @ u) ** 2 / np.maximum(spread[g, 1:], 1e-300))
+                           for g, u in ((x.a, nb), (x.b, na)))
+                values.append((-(na @ nb), x.std ** 2 + tilt))
                 if H is not None:
                     rows_A.append(nb @ turn(x.a) + sign_b * na @ turn(x.b))
             else:  # parallel, and the offset's tilts
