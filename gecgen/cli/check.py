@@ -43,6 +43,8 @@ def run(args) -> dict:
     require(data.relative is None and data.orientation is None,
             f"{args.data}: a check compares measured positions; give rows with x y z only")
     sigma_m = 1e-3 * float(cal.report_["sigma_mm"])
+    require(sigma_m > 0, f"{args.calibration}: its fit left no residual (sigma 0): noise cannot be told from a change; "
+                         f"check against a calibration from measured data")
     cm = checked(calib.model, calib.robot, data)
     y = to_world(calib.frames, data, "measure the check from the calibration's tracker stationing")
     verdict = check(cm, data, y, calib.c, sigma_m, args.tolerance_mm)

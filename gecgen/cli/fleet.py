@@ -52,7 +52,7 @@ def add_parser(command):
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
                    help="calibrate's --seed for every robot (default %(default)s)")
     p.add_argument("--timeout", type=number(0, above=True), default=None,
-                   help="seconds to wait for a scheduler's workers (default: Dask's)")
+                   help="seconds to wait for the connection to --scheduler (default: Dask's)")
 
 
 def read_manifest(path) -> list[dict]:
@@ -63,7 +63,7 @@ def read_manifest(path) -> list[dict]:
     where, folder = table.where, Path(path).resolve().parent
     for col in ("name", "robot", "train"):
         require(col in table.header, f"{where}: row 1: missing column '{col}' (needed: name, robot, train; optional: "
-                                     f"val or holdout, errors)")
+                                     f"val or holdout, errors, models)")
     unknown = [h for h in table.header if h not in COLUMNS]
     require(not unknown, f"{where}: row 1: unknown column {excerpt(unknown[0]) if unknown else ''}; the columns are "
                          f"{', '.join(COLUMNS)}")
@@ -109,13 +109,14 @@ def calibrate_one(row: dict, out: str, seed: int = 0) -> dict:
     try:
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
             code = main(argv)
+        result = json.loads(stdout.getvalue()) if code == 0 else None
     except BaseException as exc:  # noqa: BLE001 - a worker must report, never take the fleet down
         code = 1
         stderr.write(f"gecgen calibrate: {exc.__class__.__name__}: {exc}\n")
     seconds = time.perf_counter() - start
     lines = [ln for ln in stderr.getvalue().splitlines() if ln.strip()]
     if code == 0:
-        return {"name": row["name"], "status": "ok", "seconds": seconds, "result": json.loads(stdout.getvalue()),
+        return {"name": row["name"], "status": "ok", "seconds": seconds, "result": result,
                 "warnings": [ln for ln in lines if ": warning: " in ln]}
     reason = next((ln for ln in reversed(lines) if ": warning: " not in ln), "failed without a reason")
     return {"name": row["name"], "status": "failed", "seconds": seconds,

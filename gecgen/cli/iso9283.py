@@ -102,6 +102,8 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
     from gecgen.runtime.iso9283 import pose_characteristics
 
     data = read_measurements(measured, robot)
+    require(data.relative is None, f"{data.source}: the ISO 9283 test compares measured positions; give x y z on "
+                                   f"every row (no point or plane rows)")
     unknown = np.setdiff1d(data.pose_ids, pose)
     require(not len(unknown), f"{data.source}: pose {unknown[0] if len(unknown) else ''} is no row of the plan "
                               f"{plan_where}; the test's pose ids are the plan's")
@@ -111,13 +113,16 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
         from gecgen.runtime.identify import to_world
 
         y = to_world(load_calibration(calibration).calibration_.frames, data)
-    row = np.searchsorted(pose, data.pose_ids)[data.pose]  # the plan row of every measured point
+    plan_row = {int(p): k for k, p in enumerate(pose)}
+    row = np.array([plan_row[int(p)] for p in data.pose_ids])[data.pose]  # the plan row of every measured point
     commanded = target_positions(robot, q)[row, data.target]
     R_cmd = tool_poses(robot, q)[0][row, :3, :3]
     out = {}
     for name in sorted(set(robot.target_names[t] for t in data.target)):
         for p in sorted(set(point[row].tolist())):
             at = (point[row] == p) & (np.array(robot.target_names)[data.target] == name)
+            require(at.sum() >= 2, f"{data.source}: target {name} is measured {int(at.sum())} time(s) at P{p}; the "
+                                   f"test needs it at every cycle of every point")
             R = None if data.orientation is None or np.isnan(data.orientation[at][:, 0, 0]).any() else \
                 data.orientation[at]
             c = pose_characteristics((commanded[at][0], R_cmd[at][0] if R is not None else None), (y[at], R))

@@ -258,6 +258,10 @@ def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot 
     (`model.pose_targets`), so the noise is per degree of freedom as the fit's sigma is."""
     if noise_mm is not None:
         return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
+    if data.relative is not None:  # a socket's or plane's rows have no position to repeat
+        data = data.rows_of(~data.relative.rows)
+        if not len(data.target):
+            return None
     q = data.q
     if robot is not None:  # a revolute joint read 2 pi apart is in the same place (a wrist at -360 and +360 deg)
         turns = np.array([j.kind == "R" for j in robot.joints])

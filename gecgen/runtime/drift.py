@@ -68,15 +68,13 @@ def check(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, s
     p_value = _p_value(e, sigma_m, e.size)
     beyond = p_value < ALPHA
     looks = {"kind": "as calibrated"}
-    if beyond:
-        R, t = kabsch(p, y)
-        rest = y - (p @ R.T + t)
-        if len(y) >= 3 and _p_value(rest, sigma_m, e.size - 6) >= ALPHA:
-            angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
-            looks = {"kind": "rigid motion", "rotation_deg": float(angle),
-                     "translation_mm": float(1e3 * np.linalg.norm(t + (R - np.eye(3)) @ p.mean(axis=0)))}
-        else:
-            looks = _joint(cm, data, aux, c, e)
+    R, t = kabsch(p, y) if beyond and len(y) >= 3 else (None, None)  # three points fix a rigid motion
+    if R is not None and _p_value(y - (p @ R.T + t), sigma_m, e.size - 6) >= ALPHA:
+        angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+        looks = {"kind": "rigid motion", "rotation_deg": float(angle),
+                 "translation_mm": float(1e3 * np.linalg.norm(t + (R - np.eye(3)) @ p.mean(axis=0)))}
+    elif beyond:
+        looks = _joint(cm, data, aux, c, e)
     rms, worst = float(1e3 * np.sqrt(np.mean(length ** 2))), float(1e3 * length.max())
     return Check(rms, worst, tolerance_mm, None if tolerance_mm is None else worst <= tolerance_mm, p_value, beyond,
                  looks)

@@ -563,8 +563,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             gone = np.linalg.norm(to_world(new, data) - to_world(frames, data), axis=1)
             moved = float(np.max(gone, initial=0.0, where=~np.isnan(gone)))  # relative rows have no frame
             frames = new
-            fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold),
-                          before=fit.before)
+            fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold,
+                               fit.c if data.relative is not None else None), before=fit.before)
             if moved <= STATION_TOL_M:
                 break
         else:
@@ -599,7 +599,8 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         A0 = A0[:, [*stay, -1]]
     kept = np.array(red.kept, int)
     k = len(kept)
-    m = float(row_dof.sum())
+    known = _known_rows(cm, data)
+    m = float(row_dof.sum()) + known.n  # a known distance or plane relation is one more equation
     if m <= k:
         raise ModelError(f"{data.source}: {m:.0f} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
@@ -612,8 +613,6 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     before = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, None))
     limit = robust.outlier_limit(e, loss)
     wr = robust.weights(e, limit, loss)
-    known = _known_rows(cm, data)
-    m += known.n
     if loss == "l2" and data.relative is None:
         # [H_kept / scale | r] at c = 0 is A0 scaled up to an orthogonal factor: its R factor comes
         # from this small matrix rather than from a second pass over the data

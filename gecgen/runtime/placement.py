@@ -212,6 +212,11 @@ def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tup
                          f"measures it; give its position in the robot file or remove it")
     if data.relative is not None:  # sockets and planes place no target: only measured positions do
         data = data.rows_of(~data.relative.rows)
+        seen = {robot.target_names[t] for t in np.unique(data.target)}
+        unplaced = [n for n in robot.estimated if n not in seen]
+        require(not unplaced or not len(data.target),
+                f"{robot.source}: target '{unplaced[0] if unplaced else ''}' is left to estimate, but only socket or "
+                f"plane rows measure it; give its nominal position in the robot file (the fit corrects it)")
         if not len(data.target):
             require(not robot.estimated, f"{robot.source}: target '{robot.estimated[0] if robot.estimated else ''}' "
                                          f"is left to estimate, but the data has no measured positions to place "

@@ -152,11 +152,12 @@ def known_rows(relative: Relative, H: np.ndarray | None, p: np.ndarray, w: np.nd
                 values.append((-(na @ nb), x.std ** 2 + tilt))
                 if H is not None:
                     rows_A.append(nb @ turn(x.a) + sign_b * na @ turn(x.b))
-            else:  # parallel, and the offset's tilts
-                for t in frame[x.a, 1:]:
-                    var = x.std ** 2 if x.kind == "parallel" else 0.0
-                    values.append((-(t @ nb), var + sigma_m ** 2 * (1 / max(spread[x.a, 1], 1e-300)
-                                                                    + 1 / max(spread[x.b, 1], 1e-300))))
+            else:  # parallel, and the offset's tilts: each about its own tangent, as both fits leave it
+                for j, t in enumerate(frame[x.a, 1:]):
+                    var = (x.std ** 2 if x.kind == "parallel" else 0.0) + sigma_m ** 2 * (
+                        1 / max(spread[x.a, 1 + j], 1e-300)
+                        + np.sum((frame[x.b, 1:] @ t) ** 2 / np.maximum(spread[x.b, 1:], 1e-300)))
+                    values.append((-(t @ nb), var))
                     if H is not None:
                         rows_A.append(t @ (sign_b * turn(x.b) - turn(x.a)))
             if x.kind == "offset":
@@ -228,6 +229,8 @@ UNSEEN = 1e-2
 #: a known distance sees a direction of the coefficients when it moves the distance by more than this
 #: share of the direction's motion of the rows
 DISTANCE_SEES = 1e-6
+
+
 def unseen(projected: np.ndarray, absolute: np.ndarray, distances: np.ndarray) -> np.ndarray:
     """Directions of the coefficients (k, u) that relative rows cannot see, orthonormal in the
     metric of `absolute`: those the projected rows (`projected`, R factor or rows, (m, k), with
