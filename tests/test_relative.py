@@ -108,7 +108,7 @@ def test_sockets_reach_the_noise_floor_on_new_placements(plates, elastic):
     assert before.consistency_mm > 20 * after.consistency_mm  # the nominal arm: about 1.1 mm
 
 
-def test_without_a_distance_the_scale_is_unseen(plates, panda, elastic, tmp_path):
+def test_without_a_distance_the_scale_is_unseen(plates, panda, elastic):
     robot, _ = panda
     data = read_measurements(plates["train"], robot)
     bare = replace(data, relative=replace(data.relative, distances=()))
@@ -135,7 +135,7 @@ def test_a_ball_that_did_not_seat_is_named(plates, panda, elastic):
     assert abs(cal.score(plates["val"]).after.consistency_mm / clean - 1) < 0.05
 
 
-def test_planes_reach_the_noise_floor(panda, elastic, tmp_path):
+def test_planes_reach_the_noise_floor(panda, elastic):
     """Three planes (a table and two faces of a square), 100 touches each: the held-out planes' flatness
     within 1.3x the noise's; the rigid motions and, with no distance, the scale unseen. (With 30 touches
     a plane the ratio is 1.24 to 1.87 over seeds: docs/tracker-free.md says why.)"""
