@@ -277,7 +277,8 @@ def test_bad_input_is_refused_in_one_line_in_process(tmp_path, case, monkeypatch
             code = exc.code
     lines = err.getvalue().splitlines()
     assert code != 0 and out.getvalue() == "" and len(lines) == 1, err.getvalue()[-2000:]
-    assert filename in lines[0] and phrase in lines[0] and len(lines[0]) < 300, lines[0]
+    # the length is the message's own: the temporary folder's path is as long as the test runner makes it
+    assert filename in lines[0] and phrase in lines[0] and len(lines[0].replace(str(tmp_path), "T")) < 300, lines[0]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -289,7 +290,8 @@ def test_bad_input_is_refused_in_one_short_line(tmp_path, case):
                          cwd=tmp_path, timeout=60)
     lines = run.stderr.splitlines()
     assert run.returncode != 0 and run.stdout == "" and len(lines) == 1, run.stderr[-2000:]
-    assert filename in lines[0] and phrase in lines[0] and len(lines[0]) < 300, lines[0]
+    # the length is the message's own: the temporary folder's path is as long as the test runner makes it
+    assert filename in lines[0] and phrase in lines[0] and len(lines[0].replace(str(tmp_path), "T")) < 300, lines[0]
 
 
 def test_a_byte_order_mark_and_modest_aliases_are_accepted(tmp_path):

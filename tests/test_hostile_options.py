@@ -23,6 +23,7 @@ def files(tmp_path_factory):
     with contextlib.redirect_stdout(quiet), contextlib.redirect_stderr(quiet):
         assert main(["simulate", PUMA, "--poses", "12", "--seed", "1", "-o", str(t / "d.csv")]) == 0
         assert main(["identify", PUMA, str(t / "d.csv"), "-o", str(t / "c.json")]) == 0
+    (t / "v.yaml").write_text("angle_unit: deg\nsamples: 5\n")
     (t / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,0.2,-0.3,0.4,0.5,-0.6\n")
     (t / "q.csv").write_text("q1,q2,q3,q4,q5,q6,q7,q8,q9,q10,q11,q12,q13,q14,q15,q16\n" + ",".join(["0.1"] * 16) + "\n")
     (t / "wide.csv").write_text("a,b,c,d,e,f,x,y,z\n0.1,0.2,0.3,0.1,0.2,0.3,0.5,0.1,0.4\n")
@@ -50,6 +51,7 @@ def invocations(t):
         "fleet": [str(t / "wide.csv"), "-o", str(t / "fleet")],
         "iso9283": [PUMA, "-o", str(t / "plan.csv"), "--cycles", "2"],
         "check": [str(t / "c.json"), str(t / "d.csv")],
+        "accuracy": [str(t / "c.json"), str(t / "v.yaml"), str(t / "d.csv"), "--draws", "100"],
     }
 
 

@@ -37,6 +37,8 @@ COMMANDS = {
     "fleet": ("fleet", "calibrate many robots at once (a manifest of robot and data files) on Dask"),
     "iso9283": ("iso9283", "plan the ISO 9283 pose test, or its accuracy and repeatability from a measured run"),
     "check": ("check", "a QA check: a short measurement against the calibration, pass or fail, and what changed"),
+    "accuracy": ("accuracy", "the worst compensated error over a declared volume, with a confidence, against a "
+                             "tolerance"),
 }
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
@@ -56,6 +58,7 @@ OUTPUTS = {
     "fleet": {"output": ("fleet folder", True)},
     "iso9283": {"output": ("plan", False)},
     "check": {"history": ("history of checks", False)},
+    "accuracy": {"plot": ("map", False)},
 }
 
 

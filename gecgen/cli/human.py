@@ -40,6 +40,10 @@ def print_human(result: dict):
             for e in value:
                 print(f"  {e['error']}: {', '.join(e['terms'])} ({e['family']}; cross-validated gain "
                       f"{e['gain_mm']:.4f} mm)")
+        elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+            print(f"{key}:")
+            for line in value[:MAX_LISTED]:
+                print(f"  {line}")
         elif isinstance(value, list) and value and isinstance(value[0], dict):
             print(f"{key}: {len(value)} (use --json for the list)")
         elif isinstance(value, dict):

@@ -66,6 +66,10 @@ class ErrorModel:
     def coefficient_names(self, robot: Robot) -> list[str]:
         return [c.name(robot) for c in self.coefficients]
 
+    def variables(self) -> set[str]:
+        """The names of the variables (joints, wrench components, aux signals) its terms use."""
+        return {s.name for t in self.unique_terms() for s in t.expr.free_symbols}
+
     def unique_terms(self) -> list[Term]:
         """Distinct basis functions in first-use order: the generated code evaluates each once."""
         seen: dict[str, Term] = {}

@@ -13,14 +13,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.model.kinematics import target_positions, tool_poses
+from gecgen.model.kinematics import target_positions, tool_pose, tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.simulate.designs import Design, approach_directions, one_at_a_time, paper_pps, paper_split, random_design
 from gecgen.simulate.truth import Truth, load_truth, sensor_wrench, thermal_profile, true_state
 
 __all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_pps", "paper_split", "random_design",
-           "simulate"]
+           "simulate", "true_tool_points"]
 
 
 def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator,
@@ -48,3 +48,16 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     return Measurements(q=design.q, w=wrench, aux=np.column_stack([aux[a] for a in aux_names]) if aux_names
                         else np.zeros((N, 0)), aux_names=aux_names, pose_ids=np.arange(N), pose=pose,
                         target=np.tile(targets, N), xyz=y.reshape(-1, 3), source="simulated", orientation=measured)
+
+
+def true_tool_points(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
+                     points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the truth robot puts tool-frame points (N, 3) when its joints read q (N, n) under payloads
+    (N,) kg at payload_at (3,), m, and the wrench (N, 6) its sensor reads there: its systematic error
+    only, without repeatability or tracker noise (what an accuracy statement is about). Every joint
+    is taken as approached from below."""
+    robot = truth.robot or robot
+    q_true, eps = true_state(robot, truth, q, payload_kg, payload_at, {}, np.ones_like(q))
+    T = tool_pose(robot, q_true, eps)
+    return (np.einsum("nij,nj->ni", T[:, :3, :3], points) + T[:, :3, 3],
+            sensor_wrench(robot, q_true, payload_kg, payload_at, truth.gravity, eps))

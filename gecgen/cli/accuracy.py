@@ -1,0 +1,126 @@
+"""`gecgen accuracy CALIB VOLUME DATA [--val VAL] [--tolerance-mm T] [--noise-mm S] [--plot MAP.png]`.
+
+The accuracy statement over a declared volume (gecgen/model/volume.py for the file,
+gecgen/runtime/volume.py for the method): the volume is sampled, the compensated error's worst over it
+is bounded with a stated confidence from the coefficients' covariance and the residual the model
+leaves, and judged against the tolerance: meets, does not meet, or cannot tell; and where in the
+volume the error is largest.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, whole
+
+#: Monte Carlo draws of the coefficient and unmodelled errors
+DRAWS = 2000
+
+
+def add_parser(command):
+    """Register `accuracy` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
+    p = command("accuracy", run)
+    p.add_argument("calibration", help=CALIBRATION_HELP)
+    p.add_argument("volume", help="volume file (YAML: angle_unit, joints, targets or tool_box, place_at, payload_kg, "
+                                  "samples; docs/reference.md, \"Volume files\")")
+    p.add_argument("data", help=DATA_HELP + "; the data the calibration was fitted to: the coefficients' covariance "
+                                            "is taken from it pose by pose, and, without --val, the error the "
+                                            "model does not describe")
+    p.add_argument("--tolerance-mm", type=number(0, above=True),
+                   help="the largest compensated point error the volume may have, mm")
+    p.add_argument("--confidence", type=number(0.5, 1, above=True), default=0.95,
+                   help="confidence of the stated bound (default 0.95)")
+    p.add_argument("--noise-mm", type=number(0, 100),
+                   help="the instrument's noise per point and coordinate in the data, mm (1 sigma); without it the "
+                        "whole residual counts as unmodelled error")
+    p.add_argument("--repeatability-mm", type=number(0, 100), default=0.0,
+                   help="the robot's repeatability per coordinate, mm (1 sigma: ISO 9283 RP / 3 / sqrt(3) roughly); "
+                        "taken off the residual as it moves every target of a pose alike. The bound is on the "
+                        "systematic error: a single visit adds the repeatability")
+    p.add_argument("--val", metavar="DATA", help="measurements held out from the fit, in the calibration's tracker "
+                                                 "frame: their residual, instead of DATA's, sets the error the model "
+                                                 "does not describe (best taken inside the volume)")
+    p.add_argument("--draws", type=whole(100, 1_000_000), default=DRAWS, help=f"Monte Carlo draws (default {DRAWS})")
+    p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the samples and draws")
+    p.add_argument("--plot", metavar="PNG", help="map of where in the volume the error bound is largest")
+
+
+def run(args) -> dict:
+    import numpy as np
+
+    from gecgen.api import load_calibration
+    from gecgen.model.validation import require
+    from gecgen.model.volume import load_volume
+    from gecgen.runtime.volume import accuracy
+
+    cal = load_calibration(args.calibration)
+    calib = cal.calibration_
+    require(not calib.model.aux, f"{args.calibration}: its model uses auxiliary signals "
+                                 f"({', '.join(calib.model.aux)}); a volume statement over them is not supported")
+    volume = load_volume(args.volume, calib.robot)
+    data, y = _positions(args.data, calib)
+    held_out = _positions(args.val, calib) if args.val else None
+    samples, statement, _ = accuracy(calib, volume, data, y, held_out,
+                                     None if args.noise_mm is None else 1e-3 * args.noise_mm,
+                                     1e-3 * args.repeatability_mm, args.tolerance_mm,
+                                     args.confidence, args.draws, np.random.default_rng(args.seed))
+    k = int(np.argmax(statement.per_point_mm))
+    units = [(180 / np.pi, "deg") if j.kind == "R" else (1.0, "m") for j in calib.robot.joints]
+    worst = {"bound_mm": float(statement.per_point_mm[k]),
+             "joints": {j.name: float(scale * v) for j, (scale, _), v in zip(calib.robot.joints, units, samples.q[k])},
+             "payload_kg": float(samples.payload_kg[k]), "world_m": samples.world[k].tolist(),
+             **({"tool_point_m": samples.point[k].tolist()} if volume.tool_box is not None else
+                {"target": list(calib.robot.targets)[samples.target[k]]})}
+    result = {"robot": calib.robot.name, "volume": str(args.volume), "samples": len(samples.q),
+              "unreachable": samples.unreachable, **statement.to_dict(),
+              "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst}
+    if args.plot:
+        _plot(calib.robot, volume, samples, statement, Path(args.plot))
+        result["plot"] = str(args.plot)
+    return result
+
+
+def _positions(path: str, calib):
+    """Measurements at path and their points in the calibration's world (m); positions only."""
+    from gecgen.model.measurements import read_measurements
+    from gecgen.model.validation import require
+    from gecgen.runtime.identify import to_world
+
+    data = read_measurements(path, calib.robot)
+    require(data.relative is None and data.orientation is None,
+            f"{path}: the statement is read from measured positions; give rows with x y z only")
+    return data, to_world(calib.frames, data, "measure it from the calibration's tracker stationing")
+
+
+def _plot(robot, volume, samples, statement, path: Path):
+    """Each sample's own bound (the confidence quantile of its error) against every input the volume
+    varies: the tool point's coordinates or the world position, each ranged joint, the payload."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from gecgen.files import write_atomically
+
+    where = samples.point if volume.tool_box is not None else samples.world
+    frame = "tool point" if volume.tool_box is not None else "world"
+    axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
+    axes += [(f"{j.name} ({'deg' if j.kind == 'R' else 'm'})", samples.q[:, k] * (180 / np.pi if j.kind == "R" else 1))
+             for k, j in enumerate(robot.joints)]
+    axes += [("payload (kg)", samples.payload_kg)]
+    axes = [(label, x) for label, x in axes if np.ptp(x) > 1e-9]
+    fig, panels = plt.subplots(1, len(axes), figsize=(3 * len(axes), 3.2), sharey=True, squeeze=False)
+    for ax, (label, x) in zip(panels[0], axes):
+        ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
+        if statement.tolerance_mm is not None:
+            ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
+        ax.axhline(statement.bound_mm, color="C3", lw=1)
+        ax.set_xlabel(label, fontsize=8)
+    panels[0][0].set_ylabel(f"{statement.confidence:.0%} bound of the point's error (mm)", fontsize=8)
+    fig.suptitle(f"Compensated error over the volume: worst {statement.bound_mm:.3g} mm (red), "
+                 f"{statement.verdict}", fontsize=9)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_atomically(path, buf.getvalue())

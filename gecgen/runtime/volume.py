@@ -1,0 +1,457 @@
+"""Accuracy over a declared volume: the worst compensated error, with a stated confidence.
+
+After compensation the robot's error at a pose x is what the calibrated model does not predict:
+
+    e(x) = G(x) (c_true - c) + u(x),
+
+G(x) (3, k) the rows of H_e of the stated point over the identified coefficients, c - c_true the
+coefficients' estimation error (its covariance taken pose by pose, `pose_covariance`), and u(x) the
+error the model's terms cannot describe. The statement is about max_x |e(x)| over the region, which no single pose's standard
+deviation bounds: it is drawn jointly, by Monte Carlo. Each draw takes a coefficient error from
+N(0, cov) and an unmodelled error independently at every sample, and records the worst |e| over the
+samples. The bound is the `confidence` quantile of those worsts; their (1 - confidence) quantile is
+the lower bound used to say "does not meet".
+
+The unmodelled error is read from measured residuals, less the measurement noise the user states
+(instrument and repeatability). Where every pose measures three or more targets, it is a rigid motion
+of the tool (`Unmodelled`): a tilt the model misses, hidden in the noise at targets near the flange,
+grows with the lever arm to a point 40 cm above them, and a point-wise sigma would miss that. Without
+a stated noise the whole residual counts as unmodelled error, which is safe and pessimistic.
+Independent draws at every sample are pessimistic for a smooth unmodelled error and optimistic where
+it is concentrated in one corner of the volume; docs/volume.md gives the coverage measured on
+simulated truths.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from gecgen.model.kinematics import tool_pose
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import Robot
+from gecgen.model.validation import require
+from gecgen.model.volume import Volume
+from gecgen.runtime.calibration import Calibration, extrapolation
+from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, CompiledModel
+from gecgen.simulate.truth import sensor_wrench
+
+#: place_at: a sample is solved when the point is this close to its place (m) within the limits
+PLACED_M = 1e-9
+#: place_at: Newton iterations per start, and random starts per sample before it counts as unreachable
+NEWTON_STEPS, STARTS = 30, 4
+#: rad or m: the central-difference step of a free joint
+STEP = 1e-7
+#: Newton steps on the wrench the sensor reads (the map is nearly linear: three settle it to rounding),
+#: their difference step (N or N m), and the loop gain from which the reading is not settled
+WRENCH_PASSES, WRENCH_STEP, LOOP_GAIN = 3, 1e-3, 0.5
+#: coefficient draws per block of the Monte Carlo (memory: 3 x samples x block doubles)
+BLOCK = 250
+
+
+@dataclass(frozen=True)
+class Samples:
+    """The region's samples: q (N, n) joints, w (N, 6) the wrench the sensor reads, payload_kg (N,);
+    point (N, 3) the stated tool-frame point (with a tool box) and target (N,) the stated target's
+    index in robot.targets (-1 for a tool-box point); world (N, 3) where the nominal robot puts it, m;
+    unreachable: samples of the declaration that no joints within the limits place."""
+
+    q: np.ndarray
+    w: np.ndarray
+    payload_kg: np.ndarray
+    point: np.ndarray
+    target: np.ndarray
+    world: np.ndarray
+    unreachable: int
+
+
+def _box(robot: Robot, volume: Volume) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = map(np.array, robot.sampling_box())
+    for k, (a, b) in volume.joints.items():
+        lo[k], hi[k] = a, b
+    return lo, hi
+
+
+def _placed(robot: Robot, q: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """World position (N, 3) of tool-frame points (N, 3) on the nominal robot."""
+    T = tool_pose(robot, q)
+    return np.einsum("nij,nj->ni", T[:, :3, :3], point) + T[:, :3, 3]
+
+
+def _solve(robot: Robot, q: np.ndarray, point: np.ndarray, goal: np.ndarray, free: list[int]) -> np.ndarray:
+    """Newton on the free joints so that the tool point (N, 3) sits at goal (3,): q (N, n) solved in
+    place from its values as starts; (N,) True where it converged."""
+    for _ in range(NEWTON_STEPS):
+        r = goal - _placed(robot, q, point)
+        J = np.empty((len(q), 3, len(free)))
+        for i, k in enumerate(free):
+            step = np.zeros(robot.n)
+            step[k] = STEP
+            J[:, :, i] = (_placed(robot, q + step, point) - _placed(robot, q - step, point)) / (2 * STEP)
+        with np.errstate(all="ignore"):
+            ok = np.abs(np.linalg.det(J)) > 1e-12
+            delta = np.zeros((len(q), len(free)))
+            delta[ok] = np.linalg.solve(J[ok], r[ok][..., None])[..., 0]
+        q[:, free] += delta
+    return np.linalg.norm(goal - _placed(robot, q, point), axis=1) < PLACED_M
+
+
+def sample(robot: Robot, volume: Volume, rng: np.random.Generator) -> Samples:
+    """volume.samples configurations drawn uniformly over the declared joint ranges and tool box,
+    each with every payload; with place_at, the free joints solved from random starts."""
+    lo, hi = _box(robot, volume)
+    n = volume.samples
+    q = rng.uniform(lo, hi, (n, robot.n))
+    if volume.tool_box is not None:
+        point = rng.uniform(volume.tool_box[0], volume.tool_box[1], (n, 3))
+        target = np.full(n, -1)
+    else:
+        names = list(robot.targets)
+        target = rng.choice([names.index(t) for t in volume.targets], n)
+        point = np.array(list(robot.targets.values()), float)[target]
+    unreachable = 0
+    if volume.place_at is not None:
+        free = volume.free(robot)
+        joint_lo = np.array([j.lower for j in robot.joints])
+        joint_hi = np.array([j.upper for j in robot.joints])
+        todo = np.arange(n)
+        for _ in range(STARTS):
+            trial = q[todo]
+            trial[:, free] = rng.uniform(lo[free], hi[free], (len(todo), len(free)))
+            ok = _solve(robot, trial, point[todo], volume.place_at, free)
+            ok &= ((trial >= joint_lo - 1e-9) & (trial <= joint_hi + 1e-9)).all(axis=1)
+            q[todo[ok]] = trial[ok]
+            todo = todo[~ok]
+            if not len(todo):
+                break
+        unreachable = len(todo)
+        keep = np.setdiff1d(np.arange(n), todo)
+        q, point, target = q[keep], point[keep], target[keep]
+    m = len(volume.payload_kg)
+    q, point, target = np.vstack([q] * m), np.vstack([point] * m), np.tile(target, m)
+    payload = np.repeat(np.array(volume.payload_kg, float), len(q) // m)
+    w = sensor_wrench(robot, q, payload, volume.payload_at, np.array(robot.gravity, float))
+    return Samples(q, w, payload, point, target, _placed(robot, q, point), unreachable)
+
+
+def read_wrench(cm: CompiledModel, c: np.ndarray, samples: Samples, volume: Volume) -> tuple[np.ndarray, float]:
+    """The wrench (N, 6) the sensor reads at the samples on the calibrated robot, and the largest loop
+    gain of that reading. The robot as built is tilted by its errors, so the sensor sees small force
+    components the nominal robot does not, and a model may use them (fz*q3 stands for payload*q3 when
+    the carriage tilts): predicting with the nominal wrench would misjudge it. The reading is the fixed
+    point of wrench -> generalized errors -> wrench, by Newton; the loop gain is the spectral radius of
+    that map's Jacobian, 1 or more where the model's tilt feeds itself through the reading."""
+    gravity = np.array(cm.robot.gravity, float)
+    aux = np.zeros((len(samples.q), cm.dims.naux))
+
+    def reads(w):
+        return sensor_wrench(cm.robot, samples.q, samples.payload_kg, volume.payload_at, gravity,
+                             cm.eps(samples.q, w, aux, c))
+
+    def jacobian(w):
+        J = np.empty((len(w), 6, 6))
+        for k in range(6):
+            step = np.zeros(6)
+            step[k] = WRENCH_STEP
+            J[:, :, k] = (reads(w + step) - reads(w - step)) / (2 * WRENCH_STEP)
+        return J
+
+    w = samples.w
+    for _ in range(WRENCH_PASSES):
+        with np.errstate(all="ignore"):
+            step = np.linalg.solve(jacobian(w) - np.eye(6), (reads(w) - w)[..., None])[..., 0]
+        w = w - np.where(np.isfinite(step), step, 0.0)
+    gain = float(np.abs(np.linalg.eigvals(jacobian(w))).max()) if len(w) else 0.0
+    return w, gain
+
+
+def point_rows(cm: CompiledModel, samples: Samples, c: np.ndarray, kept) -> np.ndarray:
+    """G (N, 3, k): the rows of H_e of each sample's stated point over the kept coefficients. A
+    tool-box point's rows are the affine combination of four tool points' (`affine_model`): a rigid
+    tool moves every point of it by the same affine map, so the weights are exact."""
+    aux = np.zeros((len(samples.q), cm.dims.naux))
+    _, H = cm.model_targets(samples.q, samples.w, aux, c, with_H=True)
+    H = H.reshape(len(H), cm.dims.nt, 3, cm.dims.nc)[..., list(kept)]
+    if (samples.target >= 0).all():
+        return H[np.arange(len(H)), samples.target]
+    basis = np.array(list(cm.robot.targets.values()), float)  # origin corner, then one per axis
+    u = (samples.point - basis[0]) / np.diag(basis[1:] - basis[0])
+    weights = np.column_stack([1 - u.sum(axis=1), u])  # (N, 4): sum to one
+    return np.einsum("nt,ntrk->nrk", weights, H)
+
+
+def affine_model(robot: Robot, volume: Volume) -> Robot:
+    """The robot whose targets are four tool points spanning the volume's tool box (its min corner and
+    one step along each tool axis): every point of the box is an affine combination of them."""
+    lo, hi = volume.tool_box
+    span = np.where(hi > lo, hi - lo, 1.0)
+    corners = [lo, *(lo + span[i] * np.eye(3)[i] for i in range(3))]
+    return dataclasses.replace(robot, targets={f"box{i}": tuple(map(float, p)) for i, p in enumerate(corners)},
+                               estimated=(), target_frames={})
+
+
+#: poses with three or more targets needed to read the unmodelled error as a rigid tool motion
+MIN_TWIST_POSES = 20
+#: the unmodelled motion's variance is taken at the confidence limit it exceeds with this probability
+UPPER = 0.05
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """[v]x (..., 3, 3): [v]x a = v x a."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+def _factor(cov: np.ndarray) -> np.ndarray:
+    """L with L L^T = cov for a symmetric positive semi-definite cov (rounding below zero dropped)."""
+    vals, vecs = np.linalg.eigh((cov + cov.T) / 2) if len(cov) else (np.zeros(0), np.zeros((0, 0)))
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))
+
+
+def pose_covariance(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, kept) -> np.ndarray:
+    """The coefficients' covariance (k, k) over `kept`, robust to what the fit's own assumes away: the
+    sandwich A^-1 (sum_p g_p g_p^T) A^-1 with A = H^T H and g_p = H_p^T r_p summed over the rows of
+    pose p, scaled by P / (P - k) for P poses. The rows of one pose share the robot's repeatability
+    (every target moves alike) and any error the model lacks, so they are not independent; taking
+    them as independent, as sigma^2 (H^T H)^-1 does, makes the bound too tight."""
+    q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
+    p, H = cm.model_targets(q, w, aux, c, with_H=True)
+    H = H.reshape(len(H), cm.dims.nt, 3, cm.dims.nc)[data.pose, data.target][..., list(kept)]  # (R, 3, k)
+    r = y - p[data.pose, data.target]
+    g = np.zeros((data.n_poses, H.shape[-1]))
+    np.add.at(g, data.pose, np.einsum("rik,ri->rk", H, r))
+    A_inv = np.linalg.pinv(np.einsum("rik,ril->kl", H, H))
+    return data.n_poses / max(data.n_poses - H.shape[-1], 1) * A_inv @ (g.T @ g) @ A_inv
+
+
+@dataclass(frozen=True)
+class Unmodelled:
+    """The error the model leaves, read from residuals (per coordinate residual_m, m, over `poses`):
+    a rigid motion of the tool, xi = (translation m, rotation rad) in the tool frame ~ N(0, twist_cov),
+    when the data measured three or more targets per pose; else a point error of sigma_m per
+    coordinate (twist_cov None)."""
+
+    residual_m: float
+    sigma_m: float
+    twist_cov: np.ndarray | None
+    poses: int
+
+    def maps(self, R: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """U (N, 3, d): the unmodelled error at tool-frame points (N, 3) of tools turned by R (N, 3, 3)
+        is U z, z ~ N(0, I_d): R (t + r x point) for a tool motion (t, r)."""
+        if self.twist_cov is None:
+            return np.broadcast_to(self.sigma_m * np.eye(3), (len(point), 3, 3))
+        A = np.concatenate([np.broadcast_to(np.eye(3), (len(point), 3, 3)), -_skew(point)], axis=2)
+        return R @ A @ _factor(self.twist_cov)
+
+
+def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, noise_m: float | None,
+               repeatability_m: float = 0.0, shrink: float = 1.0) -> Unmodelled:
+    """The unmodelled error from residuals of measured points y (R, 3, world, m) of `data` at
+    coefficients c, less the instrument's noise_m per point and coordinate (None: nothing taken off)
+    and the robot's repeatability_m per pose and coordinate (it moves every target of a pose alike).
+    shrink (>= 1) undoes what a fit took out of its own training residuals (m / (m - k)); 1 for
+    held-out data. A pose's tool motion is fitted to its targets' residuals; the motions' covariance,
+    less what the noise puts into them (noise_m^2 (A^T A)^-1 per pose, repeatability_m^2 on the
+    translation), is the tool's. Noise stated as one figure is taken off per point, which leaves the
+    repeatability's share in the motion: safe."""
+    q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
+    r = y - cm.model_targets(q, w, aux, c)[data.pose, data.target]
+    residual = float(np.sqrt(shrink * np.mean(r ** 2)))
+    noise2 = (noise_m or 0.0) ** 2
+    point = float(np.sqrt(max(residual ** 2 - noise2 - repeatability_m ** 2, 0.0)))
+    if cm.robot.branches:
+        return Unmodelled(residual, point, None, data.n_poses)
+    R = tool_pose(cm.robot, q)[:, :3, :3]
+    targets = np.array(list(cm.robot.targets.values()), float)
+    S, noise_part, used = np.zeros((6, 6)), np.zeros((6, 6)), 0
+    order = np.argsort(data.pose, kind="stable")
+    for rows in np.split(order, np.flatnonzero(np.diff(data.pose[order])) + 1):
+        if len(rows) < 3:
+            continue
+        p = data.pose[rows[0]]
+        A = np.concatenate([np.broadcast_to(np.eye(3), (len(rows), 3, 3)), -_skew(targets[data.target[rows]])],
+                           axis=2).reshape(-1, 6)
+        AtA = A.T @ A
+        if np.linalg.cond(AtA) > 1e12:  # collinear targets: a turn about their line is not seen
+            continue
+        xi = np.linalg.solve(AtA, A.T @ (r[rows] @ R[p]).ravel())
+        S += np.outer(xi, xi)
+        noise_part += np.linalg.inv(AtA)
+        used += 1
+    if used < MIN_TWIST_POSES:
+        return Unmodelled(residual, point, None, data.n_poses)
+    seen = shrink * S / used
+    noise = noise2 * noise_part / used + np.diag([repeatability_m ** 2] * 3 + [0.0] * 3)
+    if noise_m is None or not np.all(np.linalg.eigvalsh(noise) > 0):
+        return Unmodelled(residual, point, seen, used)
+    # whitened by the noise, the motions' covariance is I plus the unmodelled part. Each direction's
+    # variance is taken at its upper confidence limit (a variance of `used` poses: lam used / chi2):
+    # a bound must not read "not detected" as "absent", least of all from a few held-out poses
+    W = np.linalg.inv(np.linalg.cholesky(noise))
+    lam, V = np.linalg.eigh(W @ seen @ W.T)
+    excess = np.clip(lam * used / special.chdtri(used, 1 - UPPER) - 1, 0.0, None)
+    Wi = np.linalg.inv(W)
+    return Unmodelled(residual, point, Wi @ (V * excess) @ V.T @ Wi.T, used)
+
+
+@dataclass(frozen=True)
+class Statement:
+    """The worst compensated error over the samples (mm): bound (the confidence quantile of the worst
+    over Monte Carlo draws), lower (its 1 - confidence quantile), parametric (the bound from the
+    coefficients' uncertainty alone); per_point (N,) the confidence quantile of each sample's own
+    error, for the map; unmodelled_mm the unmodelled error's RMS per coordinate over the samples,
+    read as a rigid tool motion or a point error (`unmodelled_as`); verdict against tolerance_mm."""
+
+    bound_mm: float
+    lower_mm: float
+    parametric_mm: float
+    per_point_mm: np.ndarray
+    unmodelled_mm: float
+    unmodelled_as: str
+    residual_mm: float
+    noise_mm: float | None
+    confidence: float
+    draws: int
+    tolerance_mm: float | None
+    verdict: str
+    reasons: tuple[str, ...]
+
+    def to_dict(self) -> dict:
+        return {"bound_mm": self.bound_mm, "lower_mm": self.lower_mm, "parametric_bound_mm": self.parametric_mm,
+                "unmodelled_rms_mm": self.unmodelled_mm, "unmodelled_as": self.unmodelled_as,
+                "residual_sigma_mm": self.residual_mm, "noise_mm": self.noise_mm, "confidence": self.confidence,
+                "draws": self.draws, "tolerance_mm": self.tolerance_mm, "verdict": self.verdict,
+                "reasons": list(self.reasons)}
+
+
+def worst_over_draws(G: np.ndarray, cov: np.ndarray, U: np.ndarray, draws: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Monte Carlo of e = G dc + U z: G (N, 3, k), dc ~ N(0, cov (k, k)); U (N, 3, d), z ~ N(0, I_d)
+    independently per sample. Returns worst |e| per draw (draws,), worst |G dc| per draw (draws,)
+    and |e| per sample and draw (N, draws), all in m."""
+    L = _factor(cov)
+    N = len(G)
+    flat = G.reshape(3 * N, -1)
+    worst, worst_param, norms = [], [], []
+    for start in range(0, draws, BLOCK):
+        b = min(BLOCK, draws - start)
+        e = (flat @ (L @ rng.standard_normal((L.shape[1], b)))).reshape(N, 3, b)
+        worst_param.append(np.linalg.norm(e, axis=1).max(axis=0))
+        e += U @ rng.standard_normal((N, U.shape[2], b))
+        n = np.linalg.norm(e, axis=1)
+        worst.append(n.max(axis=0))
+        norms.append(n)
+    return np.concatenate(worst), np.concatenate(worst_param), np.hstack(norms)
+
+
+def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
+          tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
+          extrapolated: dict[str, int], unreachable: int, n_declared: int, loop_gain: float,
+          beyond: dict[str, int], moved: dict[str, int], failed: int) -> Statement:
+    """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
+    maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated measurement noise per coordinate (None:
+    unknown); extrapolated {input: samples} outside the training ranges; loop_gain of the wrench
+    the model's errors make the sensor read (`read_wrench`); beyond {joint: samples} whose compensated
+    command leaves that joint's limits; moved {input: samples} whose compensated command (not the
+    nominal one) leaves the training ranges; failed: samples the compensation does not converge at."""
+    worst, worst_param, norms = worst_over_draws(G, cov, U, draws, rng)
+    bound, lower = (1e3 * float(np.quantile(worst, p)) for p in (confidence, 1 - confidence))
+    reasons, doubt = [], []
+    if noise_m is None:
+        reasons.append("no measurement noise stated (--noise-mm): the whole residual is counted as error the "
+                       "model does not describe, so the bound is pessimistic")
+    if extrapolated:
+        parts = ", ".join(f"{k} {v}" for k, v in extrapolated.items())
+        doubt.append(f"samples outside the ranges the calibration was fitted over, per input: {parts} (of {len(G)}): "
+                     f"the model is not validated there")
+    if loop_gain >= LOOP_GAIN:
+        doubt.append(f"the model turns the tool by the force its own tilt makes the sensor read (loop gain "
+                     f"{loop_gain:.2g}): what it predicts depends on a reading it cannot settle; drop the force "
+                     f"terms gravity does not excite (e.g. fx, fz when the tool stays level)")
+    if failed:
+        doubt.append(f"the calibration's compensation does not converge at {failed} of {len(G)} samples (singular, "
+                     f"or the model's correction not settling there): the robot cannot be corrected there")
+    if unreachable:
+        reasons.append(f"{unreachable} of {n_declared} declared samples cannot be placed within the joint limits; "
+                       f"the statement covers the others")
+    if moved:
+        parts = ", ".join(f"{k} {v}" for k, v in moved.items())
+        reasons.append(f"samples whose compensated command leaves the ranges the calibration was fitted over, per "
+                       f"input: {parts} (of {len(G)}): compensation moves joints the data never moved, and the "
+                       f"second-order error of their unseen axes is not in the bound; measure with them moving")
+    if beyond:
+        parts = ", ".join(f"{k} {v}" for k, v in beyond.items())
+        reasons.append(f"samples whose compensated command leaves the joint limits, per joint: {parts} (of "
+                       f"{len(G)}): the statement holds there only if the controller may go beyond them; narrow "
+                       f"the declared ranges otherwise")
+    if tolerance_mm is None:
+        verdict = "no tolerance given"
+    elif doubt:
+        verdict = "cannot tell"
+    elif bound <= tolerance_mm:
+        verdict = "meets"
+    elif lower > tolerance_mm:
+        verdict = "does not meet"
+    else:
+        verdict = "cannot tell"
+    rms_u = float(np.sqrt(np.einsum("nrd,nrd->", U, U) / (3 * len(U))))
+    return Statement(bound, lower, 1e3 * float(np.quantile(worst_param, confidence)),
+                     1e3 * np.quantile(norms, confidence, axis=1), 1e3 * rms_u,
+                     "point" if unmod.twist_cov is None else "rigid tool motion", 1e3 * unmod.residual_m,
+                     None if noise_m is None else 1e3 * noise_m, confidence, draws, tolerance_mm, verdict,
+                     tuple(doubt + reasons))
+
+
+def _outside(calib: Calibration, q: np.ndarray, w: np.ndarray) -> dict[str, int]:
+    """{input: samples} outside the training ranges at joints q (N, n) and wrenches w (N, 6): every joint
+    (each moves the chain), and the forces the model's terms read (a force no term reads is no
+    extrapolation)."""
+    used = calib.model.variables() | {f"q{i + 1}" for i in range(calib.robot.n)}
+    return {k: n for k, n in extrapolation(calib, q, w, np.zeros((len(q), 0))).items() if k in used}
+
+
+def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarray,
+             held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, repeatability_m: float,
+             tolerance_mm: float | None, confidence: float, draws: int,
+             rng: np.random.Generator) -> tuple[Samples, Statement, CompiledModel]:
+    """The statement for a calibration over a declared volume from the data it was fitted to (world
+    points y (R, 3), m): the coefficients' covariance by pose (`pose_covariance`), and the unmodelled
+    error (`unmodelled`) from a held-out set (data, world points) when given, else from the fit's
+    residuals scaled up for the coefficients fitted to them; less the stated instrument noise and
+    robot repeatability per coordinate (m). Returns the samples, the statement, and the compiled
+    model whose targets are the stated points (the tool box's affine basis, or the robot's)."""
+    samples = sample(calib.robot, volume, rng)
+    require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
+                            f"the tool box and the joint ranges against the robot")
+    robot = affine_model(calib.robot, volume) if volume.tool_box is not None else calib.robot
+    cm = CompiledModel(robot, calib.model)
+    w, gain = read_wrench(cm, calib.c, samples, volume)
+    samples = dataclasses.replace(samples, w=w)
+    fitted = CompiledModel(calib.robot, calib.model)
+    # a coefficient held at zero for want of significance is not known to be zero: it stays uncertain
+    names = calib.model.coefficient_names(calib.robot)
+    held = {names.index(e["param"]) for e in calib.report.get("eliminated", []) if e["reason"] == "insignificant"}
+    columns = sorted(set(calib.kept) | held)
+    cov = pose_covariance(fitted, data, y, calib.c, columns)
+    m = 3 * len(data.xyz)
+    residuals, shrink = held_out or (data, y), 1.0 if held_out else m / max(m - len(calib.kept), 1)
+    unmod = unmodelled(fitted, *residuals, calib.c, noise_m, repeatability_m, shrink)
+    U = unmod.maps(tool_pose(calib.robot, samples.q)[:, :3, :3], samples.point)
+    outside = _outside(calib, samples.q, samples.w)
+    q_c, status = cm.compensate(samples.q, samples.w, None, calib.c)
+    beyond = {j.name: int(n) for j, n in zip(calib.robot.joints, (
+        (q_c < [j.lower for j in calib.robot.joints]) | (q_c > [j.upper for j in calib.robot.joints]))[
+        status == OUTSIDE_LIMITS].sum(axis=0)) if n}
+    moved = {k: n for k, n in _outside(calib, q_c, samples.w).items() if k not in outside}
+    statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
+                      confidence, draws, rng, outside, samples.unreachable, volume.samples, gain, beyond, moved,
+                      int(np.isin(status, FAILED).sum()))
+    return samples, statement, cm
+
+
+__all__ = ["Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "point_rows", "pose_covariance",
+           "read_wrench", "sample", "state", "unmodelled", "worst_over_draws"]
