@@ -50,6 +50,12 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
         assert abs(got["RP_l"] - 1e3 * (l.mean() + 3 * l.std(ddof=1))) < 1e-9
         assert 0.2 < got["AP_x"] < 0.4  # the base offset, within the noise of 6 cycles
     assert out["worst"]["AP_p"] == max(v["AP_p"] for v in out["points"]["t1"].values())
+    # distance P2 to P4, cycle by cycle (the plan's cycle column pairs them)
+    d = np.linalg.norm(data.xyz[table["point"] == 2] - data.xyz[table["point"] == 4], axis=1)
+    d_c = np.linalg.norm(commanded[table["point"] == 2][0] - commanded[table["point"] == 4][0])
+    got = out["distance"]["t1"]
+    assert got["n"] == 6 and abs(got["AD_p"] - 1e3 * (d.mean() - d_c)) < 1e-9
+    assert abs(got["RD_p"] - 3e3 * d.std(ddof=1)) < 1e-9
     # the same test on the robot without its base offset (as compensation would leave it): scored
     # against the same commanded poses, its accuracy is the noise's alone
     fixed = load_truth({"noise": {"repeatability": 5e-5, "tracker": 0.0}}, robot)

@@ -82,24 +82,28 @@ def _characteristics(robot, args) -> dict:
         require(col in table.header, f"{table.where}: row 1: missing column '{col}'; give the plan "
                                      f"`gecgen iso9283 -o` wrote")
     pose, point = table.numbers("pose").astype(int), table.numbers("point").astype(int)
+    cycle = table.numbers("cycle").astype(int)
     q = np.column_stack([table.numbers(f"q{j + 1}") for j in range(robot.n)])
     out = {"robot": robot.name, "plan": str(args.plan), "measured": str(args.measured),
            "frame": "the calibration's tracker frame" if args.calibration else "the robot's world frame",
-           **_run_characteristics(robot, args.calibration, args.measured, table.where, pose, point, q)}
+           **_run_characteristics(robot, args.calibration, args.measured, table.where, pose, point, cycle, q)}
     if args.after:
         out["after"] = {"measured": str(args.after),
-                        **_run_characteristics(robot, args.calibration, args.after, table.where, pose, point, q)}
+                        **_run_characteristics(robot, args.calibration, args.after, table.where, pose, point, cycle,
+                                               q)}
     return out
 
 
-def _run_characteristics(robot, calibration: str | None, measured, plan_where: str, pose, point, q) -> dict:
-    """{points: {target: {P1: characteristics, ...}}, worst: {AP_p, RP_l}} of one measured run of the
-    plan (its rows: pose ids, points, joints q), against the nominal poses at the plan's joints; the
-    measured points in `calibration`'s tracker frame when given, else in the robot's world frame."""
+def _run_characteristics(robot, calibration: str | None, measured, plan_where: str, pose, point, cycle, q) -> dict:
+    """{points: {target: {P1: characteristics, ...}}, distance: {target: P2-P4 characteristics},
+    worst: {AP_p, RP_l}} of one measured run of the plan (its rows: pose ids, points, cycles, joints
+    q), against the nominal poses at the plan's joints; the measured points in `calibration`'s tracker
+    frame when given, else in the robot's world frame. The distance is the standard's P2 to P4, over
+    the cycles that measured the target at both."""
     from gecgen.model.kinematics import target_positions, tool_poses
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
-    from gecgen.runtime.iso9283 import pose_characteristics
+    from gecgen.runtime.iso9283 import distance_characteristics, pose_characteristics
 
     data = read_measurements(measured, robot)
     require(data.relative is None, f"{data.source}: the ISO 9283 test compares measured positions; give x y z on "
@@ -128,5 +132,16 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
             c = pose_characteristics((commanded[at][0], R_cmd[at][0] if R is not None else None), (y[at], R))
             out.setdefault(name, {})[f"P{p}"] = {k: (None if np.isnan(v) else float(v)) if isinstance(v, float) else v
                                                  for k, v in vars(c).items()}
+    distance = {}
+    for name in out:
+        ends = []
+        for p in (2, 4):
+            at = (point[row] == p) & (np.array(robot.target_names)[data.target] == name)
+            ends.append(({int(k): i for k, i in zip(cycle[row][at], np.flatnonzero(at))}, commanded[at]))
+        both = sorted(set(ends[0][0]) & set(ends[1][0]))
+        if len(both) >= 2:
+            d = distance_characteristics(ends[0][1][0], ends[1][1][0], y[[ends[0][0][k] for k in both]],
+                                         y[[ends[1][0][k] for k in both]])
+            distance[name] = {"between": "P2-P4", **vars(d)}
     worst = {k: max(v[k] for t in out.values() for v in t.values()) for k in ("AP_p", "RP_l")}
-    return {"points": out, "worst": worst}
+    return {"points": out, "distance": distance, "worst": worst}
