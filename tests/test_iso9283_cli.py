@@ -65,3 +65,8 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
     both = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv",
                 "--after", tmp_path / "after.csv")
     assert both["worst"] == out["worst"] and both["after"]["worst"]["AP_p"] < 0.15 < out["worst"]["AP_p"]
+    reported = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured",
+                    tmp_path / "run.csv", "--after", tmp_path / "after.csv", "--report", tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "After compensation" in text and f"{out['worst']['AP_p']:.3g}" in text and "P2-P4" in text
+    assert (tmp_path / "report" / "report.html").stat().st_size > 0 and reported["report"].endswith("report.md")

@@ -56,7 +56,7 @@ OUTPUTS = {
     "design": {"output": ("poses", False)},
     "calibrate": {"output": ("calibration folder", True)},
     "fleet": {"output": ("fleet folder", True)},
-    "iso9283": {"output": ("plan", False)},
+    "iso9283": {"output": ("plan", False), "report": ("report", True)},
     "check": {"history": ("history of checks", False)},
     "accuracy": {"plot": ("map", False)},
 }

@@ -33,6 +33,8 @@ def add_parser(command):
     p.add_argument("--after", help="measurements of the same test run with the compensated commands (gecgen "
                                    "compensate of the plan): scored against the same commanded poses")
     p.add_argument("--calibration", help="a calibration whose tracker frame the measurements are in")
+    p.add_argument("--report", metavar="DIR", help="with --measured: folder for report.md and report.html (the "
+                                                   "characteristics per point, before and after)")
 
 
 def run(args) -> dict:
@@ -43,9 +45,16 @@ def run(args) -> dict:
     require((args.plan is None) == (args.measured is None), "--plan and --measured go together: the plan the "
                                                              "measured test ran")
     require(args.after is None or args.measured, "--after goes with --plan and --measured (the run before)")
+    require(args.report is None or args.measured, "--report goes with --plan and --measured: it reports a "
+                                                  "measured test")
     if args.measured:
         require(not args.output, "-o writes a plan; with --measured the characteristics are the result (--json)")
-        return _characteristics(robot, args)
+        result = _characteristics(robot, args)
+        if args.report:
+            from gecgen import report
+
+            result.update(report.write(report.content.iso9283(result), args.report))
+        return result
     require(args.output, "-o: give the file to write the plan to (or --plan and --measured to evaluate a test)")
     return _plan(robot, args)
 

@@ -512,3 +512,37 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
                    *residual_sections(robot, sets),
                    *coefficient_section(robot, calib), glossary(robot), extrapolation_section(robot, calib, None, None),
                    files])
+
+
+def _iso_run(title: str, run: dict) -> Section:
+    """One measured run of the ISO 9283 pose test: per target and point, and the distance P2 to P4."""
+    orient = any(v.get("AP_a") is not None for t in run["points"].values() for v in t.values())
+    keys = ["n", "AP_p", "AP_x", "AP_y", "AP_z", "RP_l"] + (["AP_a", "AP_b", "AP_c", "RP_a", "RP_b", "RP_c"]
+                                                           if orient else [])
+    rows = [(target, point, *(str(v[k]) if k == "n" else "-" if v[k] is None else f"{v[k]:.3g}" for k in keys))
+            for target, points in run["points"].items() for point, v in points.items()]
+    blocks = [f"Measurements `{run['measured']}`. Lengths in mm, angles in mrad; repeatabilities are the "
+              f"half-width 3 S of the standard.",
+              Table(("target", "point", *keys), rows),
+              f"Worst over the points: pose accuracy AP_p {run['worst']['AP_p']:.3g} mm, pose repeatability RP_l "
+              f"{run['worst']['RP_l']:.3g} mm."]
+    if run["distance"]:
+        blocks.append(Table(("target", "between", "cycles", "D_c (mm)", "D_bar (mm)", "AD_p (mm)", "RD_p (mm)"),
+                            [(t, d["between"], str(d["n"]), f"{d['D_c']:.4g}", f"{d['D_bar']:.4g}",
+                              f"{d['AD_p']:.3g}", f"{d['RD_p']:.3g}") for t, d in run["distance"].items()]))
+    return Section(title, blocks)
+
+
+def iso9283(result: dict) -> Report:
+    """The ISO 9283 pose test's report from `gecgen iso9283 --measured`'s result."""
+    sections = [_iso_run("Before compensation" if "after" in result else "The test", result)]
+    if "after" in result:
+        sections.append(_iso_run("After compensation", result["after"]))
+        sections.insert(0, Section("Summary", [Table(
+            ("", "AP_p worst (mm)", "RP_l worst (mm)"),
+            [(stage, f"{run['worst']['AP_p']:.3g}", f"{run['worst']['RP_l']:.3g}")
+             for stage, run in (("before", result), ("after", result["after"]))])]))
+    return Report(f"gecgen iso9283: {result['robot']}",
+                  [f"ISO 9283 pose test of plan `{result['plan']}`, scored against the pose the nominal model gives "
+                   f"each target at the plan's joints (what the robot was commanded to reach); measured in "
+                   f"{result['frame']}."], sections)
