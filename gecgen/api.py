@@ -83,6 +83,15 @@ def _choice(value, name: str, allowed: tuple):
     return value
 
 
+def _noise(noise_mm) -> float | None:
+    """noise_mm (mm per coordinate, or None) as m, refused in one line unless a positive finite number."""
+    if noise_mm is None:
+        return None
+    require(isinstance(noise_mm, (int, float)) and not isinstance(noise_mm, bool) and 0 < noise_mm < 1e3,
+            f"noise_mm: {excerpt(noise_mm)}; give the instrument's noise per coordinate in mm, a number above 0")
+    return 1e-3 * float(noise_mm)
+
+
 def _length(value):
     from gecgen.model.pose_targets import LENGTH_M
 
@@ -202,7 +211,9 @@ class Calibrator:
     position error (m; None: 0.1 when fitting, the calibration's when scoring). keep_insignificant:
     carry every identifiable coefficient into the calibration; by default those the data do not
     determine (|value| / std below 2 after backward elimination, `runtime.significance`) are held
-    at zero and the rest refitted, and the report lists them (`report_["significance"]`).
+    at zero and the rest refitted, and the report lists them (`report_["significance"]`). noise_mm:
+    the instrument's noise per coordinate (mm), when known: `report_["significance"]["overall"]`
+    says whether the fit leaves more than it (`runtime.significance.overall`), with a warning.
 
     Fitted attributes: calibration_ (runtime.calibration.Calibration, what `save` writes), fit_
     (runtime.identify.Fit), report_ (the report the calibration file holds: metrics in mm, outliers,
@@ -212,13 +223,15 @@ class Calibrator:
     """
 
     def __init__(self, errors=None, *, loss: str = "cauchy", ridge=0.0, rank_tol=None, register: str = "auto",
-                 orientation_length: float | None = None, keep_insignificant: bool = False):
+                 orientation_length: float | None = None, keep_insignificant: bool = False,
+                 noise_mm: float | None = None):
         # refused here, not at fit, so the line that made the mistake is the one named
         _choice(loss, "loss", LOSSES), _choice(register, "register", REGISTER), _length(orientation_length)
+        _noise(noise_mm)
         fit_option(ridge, "ridge"), fit_option(rank_tol, "rank_tol")
         self.errors, self.loss, self.ridge, self.rank_tol = errors, loss, ridge, rank_tol
         self.register, self.orientation_length = register, orientation_length
-        self.keep_insignificant = keep_insignificant
+        self.keep_insignificant, self.noise_mm = keep_insignificant, noise_mm
 
     def __repr__(self) -> str:
         state = f"fitted on {self.calibration_.robot.name}" if hasattr(self, "calibration_") else "not fitted"
@@ -255,8 +268,8 @@ class Calibrator:
         if fit.failures:
             raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {'; '.join(fit.failures)}")
         full = fit
-        fit, verdict = significance.determined(cm, data, fit, self.keep_insignificant, registration_mode=register,
-                                               **options)
+        fit, verdict = significance.determined(cm, data, fit, self.keep_insignificant, _noise(self.noise_mm),
+                                               registration_mode=register, **options)
         if fit is full:  # not refitted: the fit's own notes stand (a refit said its own)
             for w in said:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -575,14 +588,15 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
-              register_val: bool = False, progress=None, keep_insignificant: bool = False) -> Selection:
+              register_val: bool = False, progress=None, keep_insignificant: bool = False,
+              noise_mm: float | None = None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
-    per candidate. keep_insignificant: as for Calibrator."""
+    per candidate. keep_insignificant, noise_mm: as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
     names = model_names(NAMES if models is None else models)
@@ -596,7 +610,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     if default is not None:
         checked(default, fitted, data, val)
     choice = choose(fitted, data, default, seed, progress=progress, names=names)
-    fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant)
+    fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
     choice = replace(choice, fit=fit)
     calib = _calibration.from_fit(robot, choice.model, choice.fit)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,

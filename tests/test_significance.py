@@ -4,6 +4,7 @@ what the data determine."""
 import numpy as np
 import pytest
 
+from gecgen.model import ModelError
 from gecgen.runtime import significance
 
 
@@ -59,3 +60,38 @@ def test_the_held_out_interval_resamples_poses_and_covers_the_rms():
     assert lo < np.sqrt(np.mean(errors ** 2)) < hi
     assert (lo, hi) == significance.rms_interval(per_pose, np.arange(5))  # rows of a pose do not add draws
     assert significance.rms_interval(np.full(4, 2e-3), np.zeros(4, int)) == pytest.approx((2e-3, 2e-3))
+
+
+def test_the_residual_is_judged_against_the_stated_noise():
+    """`overall` against scipy's chi-square law, and through identify on industrial6r (noise 3e-5 m
+    repeatability and tracker: 0.042 mm per coordinate): with only geometric errors, constant errors
+    leave that noise and no more; with its truth's elastic and other effects, the default model
+    leaves more, reported with a warning."""
+    import warnings
+
+    from scipy import stats
+
+    from gecgen.api import Calibrator
+    from gecgen.model import load_robot
+    from gecgen.model.validation import read_yaml
+    from gecgen.simulate import load_truth, random_design, simulate
+
+    o = significance.overall(2e-5, 300, 1.5e-5)
+    assert o["p_value"] == pytest.approx(stats.chi2.sf(300 * (2 / 1.5) ** 2, 300), rel=1e-9)
+    assert o["beyond_noise"] and o["unexplained_mm"] == pytest.approx(1e3 * np.sqrt(2e-5 ** 2 - 1.5e-5 ** 2))
+    robot = load_robot("robots/industrial6r.yaml")
+    spec = read_yaml("robots/industrial6r.truth.yaml", "truth")
+    noise_mm = 1e3 * np.hypot(spec["noise"]["repeatability"], spec["noise"]["tracker"])
+    design = random_design(robot, 120, np.random.default_rng(3))
+    geometric = simulate(robot, load_truth({**spec, "sources": []}, robot), design, np.random.default_rng(4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fair = Calibrator("robots/constant.errors.yaml", noise_mm=noise_mm).fit(robot, geometric)
+    fair = fair.report_["significance"]["overall"]
+    assert not fair["beyond_noise"] and 0.8 < fair["ratio"] < 1.2
+    full = simulate(robot, load_truth(spec, robot), design, np.random.default_rng(4))
+    with pytest.warns(UserWarning, match="the model misses about"):
+        low = Calibrator(noise_mm=noise_mm).fit(robot, full).report_["significance"]["overall"]
+    assert low["beyond_noise"] and low["unexplained_mm"] > 0.1
+    with pytest.raises(ModelError, match="noise_mm"):
+        Calibrator(noise_mm=-1)

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, add_keep_insignificant, add_orientation_length, progress_status, whole
+from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, progress_status,
+                               whole)
 from gecgen.loop.calibrate import NAMES
 
 
@@ -35,6 +36,7 @@ def add_parser(command):
                                                          "NAME_calibration.h with the coefficients, NAME_example.c)")
     add_orientation_length(p)
     add_keep_insignificant(p)
+    add_noise(p)
 
 
 def run(args) -> dict:
@@ -53,7 +55,7 @@ def run(args) -> dict:
 
         sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
                         seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
-                        progress=progress, keep_insignificant=args.keep_insignificant)
+                        progress=progress, keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
     out = Path(args.output)
     cal, choice = sel.calibrator, sel.choice
     cal.save(out / "calibration.json")

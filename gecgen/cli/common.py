@@ -112,6 +112,12 @@ def add_orientation_length(p, calibration_first: bool = False):
                         f"position error (m; default {default}); set L = position noise / orientation noise")
 
 
+def add_noise(p):
+    p.add_argument("--noise-mm", type=number(0, 1000, above=True),
+                   help="the instrument's noise per coordinate, mm (1 sigma): the fit's residual is judged against it "
+                        "(significance.overall in the JSON), with a warning when the model leaves more")
+
+
 def add_keep_insignificant(p):
     p.add_argument("--keep-insignificant", action="store_true",
                    help="carry every identifiable coefficient into the calibration; by default those the data do not "

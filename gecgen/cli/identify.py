@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 
-from gecgen.cli.common import ROBOT_HELP, add_keep_insignificant, add_orientation_length, fit_options, progress_status
+from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, fit_options,
+                               progress_status)
 
 
 def add_parser(command):
@@ -27,6 +28,7 @@ def add_parser(command):
                         "on DATA); default: exact dependencies only (1e-7)")
     add_orientation_length(p)
     add_keep_insignificant(p)
+    add_noise(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
 
@@ -35,7 +37,7 @@ def run(args) -> dict:
     from gecgen.api import Calibrator
 
     cal = Calibrator(args.errors, loss=args.loss, register=args.register, orientation_length=args.orientation_length,
-                     keep_insignificant=args.keep_insignificant, **fit_options(args))
+                     keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm, **fit_options(args))
     with progress_status(not args.json) as status:
         def progress(it, rms_mm):
             if status:

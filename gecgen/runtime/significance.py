@@ -21,6 +21,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from scipy import special
 
 from gecgen.runtime.identify import identify
 
@@ -81,10 +82,27 @@ def judge(names: list[str], c: np.ndarray, std: np.ndarray, kept, cov: np.ndarra
     return {"t_min": T_MIN, "n_determined": len(kept) - len(hold), "held": held, "frames": frames}, hold
 
 
-def determined(cm, data, fit, keep: bool = False, **options):
+#: the residual is beyond the stated noise when noise alone leaves one as large with less than this probability
+NOISE_ALPHA = 0.01
+
+
+def overall(sigma_m: float, dof: float, noise_m: float) -> dict:
+    """The fit's residual sigma (m per coordinate, over dof degrees of freedom) against the
+    instrument noise a user states (m per coordinate): their ratio, the probability that noise alone
+    leaves a residual as large (chi-square, dof), and the error the model leaves beyond the noise,
+    sqrt(sigma^2 - noise^2) (mm)."""
+    p = float(special.chdtrc(max(dof, 1.0), max(dof, 1.0) * sigma_m ** 2 / noise_m ** 2))
+    return {"sigma_mm": 1e3 * sigma_m, "noise_mm": 1e3 * noise_m, "ratio": sigma_m / noise_m, "p_value": p,
+            "beyond_noise": p < NOISE_ALPHA,
+            "unexplained_mm": 1e3 * float(np.sqrt(max(sigma_m ** 2 - noise_m ** 2, 0.0)))}
+
+
+def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, **options):
     """(the fit, the verdict on its coefficients `judge`): unless keep, refitted (`identify` with
     `options`, on compiled model cm and data) with the coefficients the data do not determine held
-    at zero, and a warning naming them. Raises RuntimeError when that refit cannot be trusted."""
+    at zero, and a warning naming them. Raises RuntimeError when that refit cannot be trusted. With
+    the instrument noise noise_m (m per coordinate), the verdict's `overall` says whether the fit's
+    residual is beyond it (`overall`), with a warning when it is."""
     verdict, hold = judge(cm.model.coefficient_names(cm.robot), fit.c, fit.std, fit.redundancy.kept, fit.cov,
                           fit.sigma_m, fit.measured_dof)
     verdict["insignificant_carried"] = bool(hold) and keep
@@ -98,6 +116,12 @@ def determined(cm, data, fit, keep: bool = False, **options):
         if fit.failures:
             raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
                                f"calibration made or written: {'; '.join(fit.failures)}")
+    if noise_m is not None:
+        verdict["overall"] = o = overall(fit.sigma_m, fit.measured_dof - len(fit.redundancy.kept), noise_m)
+        if o["beyond_noise"]:
+            warnings.warn(f"the fit leaves {o['sigma_mm']:.3g} mm per coordinate against the stated noise "
+                          f"{o['noise_mm']:.3g} mm ({o['ratio']:.3g} times, p = {o['p_value']:.2g}): the model misses "
+                          f"about {o['unexplained_mm']:.3g} mm; run gecgen diagnose to find what", stacklevel=3)
     return fit, verdict
 
 
