@@ -1,8 +1,12 @@
+import contextlib
+import io
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gecgen.cli import main
 from gecgen.model import load_error_model, load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,3 +29,11 @@ def shipped(request):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def run_json(*args) -> dict:
+    """A command's JSON, run in this process (as `gecgen ARGS --json`); its stderr shown if it fails."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        assert main([*map(str, args), "--json"]) == 0, err.getvalue()
+    return json.loads(out.getvalue())

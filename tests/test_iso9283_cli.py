@@ -2,29 +2,21 @@
 cycles (gecgen/cli/iso9283.py), against the standard's formulas computed here with numpy."""
 from __future__ import annotations
 
-import contextlib
-import io
-import json
 
 import numpy as np
+from conftest import run_json
 
-from gecgen.cli import main
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import write_measurements
 from gecgen.simulate import Design, load_truth, simulate
 
 
-def _run(*args) -> dict:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        assert main([*map(str, args), "--json"]) == 0
-    return json.loads(out.getvalue())
 
 
 def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
     robot = load_robot("robots/puma560.yaml")
-    plan = _run("iso9283", "robots/puma560.yaml", "-o", tmp_path / "plan.csv", "--tool-rpy", "180,0,0",
+    plan = run_json("iso9283", "robots/puma560.yaml", "-o", tmp_path / "plan.csv", "--tool-rpy", "180,0,0",
                 "--cycles", 6)
     assert plan["rows"] == 30 and plan["side_mm"] > 100
     table = np.genfromtxt(tmp_path / "plan.csv", delimiter=",", names=True)
@@ -36,7 +28,7 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
     data = simulate(robot, truth, Design(q, np.zeros(len(q)), np.zeros(3), ("t1",), np.array(["iso"] * len(q))),
                     np.random.default_rng(0))
     write_measurements(tmp_path / "run.csv", robot, data)
-    out = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv")
+    out = run_json("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv")
     commanded = target_positions(robot, q)[:, 0]
     for p in range(1, 6):
         rows = table["point"] == p
@@ -62,10 +54,10 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
     after = simulate(robot, fixed, Design(q, np.zeros(len(q)), np.zeros(3), ("t1",), np.array(["iso"] * len(q))),
                      np.random.default_rng(1))
     write_measurements(tmp_path / "after.csv", robot, after)
-    both = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv",
+    both = run_json("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv",
                 "--after", tmp_path / "after.csv")
     assert both["worst"] == out["worst"] and both["after"]["worst"]["AP_p"] < 0.15 < out["worst"]["AP_p"]
-    reported = _run("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured",
+    reported = run_json("iso9283", "robots/puma560.yaml", "--plan", tmp_path / "plan.csv", "--measured",
                     tmp_path / "run.csv", "--after", tmp_path / "after.csv", "--report", tmp_path / "report")
     text = (tmp_path / "report" / "report.md").read_text()
     assert "After compensation" in text and f"{out['worst']['AP_p']:.3g}" in text and "P2-P4" in text

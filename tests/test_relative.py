@@ -8,20 +8,17 @@ what the seating and encoder noise alone give, the socket distance error under 0
 """
 from __future__ import annotations
 
-import contextlib
 import importlib.util
-import io
-import json
 import shutil
 import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from conftest import run_json
 import pytest
 
 from gecgen import api
-from gecgen.cli import main
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import read_measurements, write_measurements
@@ -38,12 +35,6 @@ ELASTIC = {"default": ["1"], "frames": {j: {"er": ["1", f"gravity_torque(q{j})"]
 RIGID = {"0.ex:1", "0.ey:1", "0.es:1", "0.ep:1", "1.ez:1", "1.er:1"}
 
 
-def _run(*args) -> dict:
-    """A command's JSON, run in this process (as `gecgen ARGS --json`)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        assert main([*map(str, args), "--json"]) == 0, err.getvalue()
-    return json.loads(out.getvalue())
 
 
 @pytest.fixture(scope="module")
@@ -224,12 +215,12 @@ def test_bad_relative_rows_are_refused(panda, tmp_path, cells, message):
 
 def test_simulate_and_import_through_the_command_line(tmp_path):
     """`gecgen simulate --plates` and `gecgen import --sockets` write the same layout identify reads."""
-    sim = _run("simulate", ROBOT, "--truth", ROOT / "robots" / "panda.truth.yaml", "--plates", 1, "--per-socket", 5,
+    sim = run_json("simulate", ROBOT, "--truth", ROOT / "robots" / "panda.truth.yaml", "--plates", 1, "--per-socket", 5,
                "--seed", 3, "-o", tmp_path / "s.csv")
     assert sim["points"] == 2 and sim["distances"] == 1 and sim["noise_floor"]["consistency_mm"] > 0
     for place in ("front", "left"):
         shutil.copytree(MUKCA / place, tmp_path / place)
-    out = _run("import", ROBOT, tmp_path / "front" / "hole_0.csv", tmp_path / "front" / "hole_1.csv", "--sockets",
+    out = run_json("import", ROBOT, tmp_path / "front" / "hole_0.csv", tmp_path / "front" / "hole_1.csv", "--sockets",
                "--socket-distance", 0.05, "-o", tmp_path / "front.csv")
     assert out["rows"] == 62 and out["points"] == 2 and out["distances"] == 1
     data = read_measurements(tmp_path / "front.csv", load_robot(ROBOT))
@@ -247,14 +238,14 @@ def test_mukca_panda6_held_out_placements(tmp_path):
     files = {}
     for place in ("front", "left", "right"):
         files[place] = tmp_path / f"{place}.csv"
-        _run("import", ROBOT, MUKCA / place / "hole_0.csv", MUKCA / place / "hole_1.csv", "--sockets",
+        run_json("import", ROBOT, MUKCA / place / "hole_0.csv", MUKCA / place / "hole_1.csv", "--sockets",
              "--socket-distance", 0.05, "-o", files[place])
-    fit = _run("identify", ROBOT, files["front"], "-o", tmp_path / "c.json")
+    fit = run_json("identify", ROBOT, files["front"], "-o", tmp_path / "c.json")
     assert {e["param"] for e in fit["eliminated"] if e["reason"] == "relative"} == RIGID
     calibrated = reference.load_joints(MUKCA / "calibrated.urdf")
     for place in ("left", "right"):
         q = [np.loadtxt(MUKCA / place / f"hole_{k}.csv", delimiter=",") for k in (0, 1)]
         theirs = reference.stats(*(reference.ball_positions(calibrated, qk) for qk in q))
-        ours = _run("evaluate", tmp_path / "c.json", files[place])["after"]
+        ours = run_json("evaluate", tmp_path / "c.json", files[place])["after"]
         assert ours["consistency_mm"] < theirs["rms"]  # theirs: left 0.248 mm, right 0.315 mm
         assert ours["distance_error_mm"] < 0.15  # theirs: left 0.195 mm, right 0.071 mm

@@ -3,19 +3,15 @@ sampling, the rows of a tool-box point, the Monte Carlo bound against a closed f
 error read as a tool motion, and the statement against the true worst error of simulated robots."""
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import io
-import json
 import warnings
 
 import numpy as np
 import pytest
-from conftest import ROBOTS
+from conftest import ROBOTS, run_json
 from scipy import stats
 
 from gecgen.api import Calibrator
-from gecgen.cli import main
 from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import write_measurements
@@ -31,11 +27,6 @@ VOLUME = ROBOTS / "pps.volume.yaml"
 TRACKER, REPEATABILITY = 4e-5, 5e-5  # robots/pps.truth.yaml's noise, m per coordinate
 
 
-def _run(*args) -> dict:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        assert main([*map(str, args), "--json"]) == 0
-    return json.loads(out.getvalue())
 
 
 @pytest.fixture(scope="module")
@@ -162,13 +153,13 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     write_measurements(tmp_path / "train.csv", pps, train)
     volume = tmp_path / "v.yaml"
     volume.write_text(VOLUME.read_text().replace("samples: 1000", "samples: 100"))
-    out = _run("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.01",
+    out = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.01",
                "--noise-mm", "0.04", "--repeatability-mm", "0.05", "--draws", "500", "--plot", tmp_path / "map.png")
     assert out["verdict"] == "does not meet" and out["lower_mm"] > 0.01
     assert out["samples"] == 200 and out["unreachable"] == 0 and out["held_out"] is False
     assert (tmp_path / "map.png").stat().st_size > 0
     assert -90 <= out["worst_at"]["joints"]["theta"] <= 90 and len(out["worst_at"]["tool_point_m"]) == 3
-    bare = _run("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.5",
+    bare = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.5",
                 "--draws", "500")
     assert bare["noise_mm"] is None and any("no measurement noise stated" in r for r in bare["reasons"])
     assert bare["bound_mm"] > out["bound_mm"]  # the whole residual counted as unmodelled error
