@@ -197,13 +197,15 @@ def _concat(a, b):
     ({"distance_to": "a", "distance_m": "0.05"}, "row 3, column 'distance_to': a distance from point 'a' to itself"),
     ({"point": "c"}, "row 2, column 'point': point 'a' has 1 row: it says nothing about the robot below 2"),
     ({"plane_to": "p"}, "row 3, column 'plane_to': a relation on a row without a plane"),
+    ({"distance_std_m": "0.001"}, "row 3, column 'distance_std_m': a distance without distance_to"),
 ])
 def test_bad_relative_rows_are_refused(panda, tmp_path, cells, message):
     robot, _ = panda
     header = ["pose", *[f"q{j}" for j in range(1, 8)], "target", "x", "y", "z", "point", "plane", "distance_to",
-              "distance_m", "plane_to", "relation"]
+              "distance_m", "distance_std_m", "plane_to", "relation"]
     q = ["0.1", "0.2", "0.1", "-1.5", "0.1", "1.5", "0.3"]
-    rows = [dict(zip(header, [str(k), *q, "ball", "", "", "", "ab"[k // 2], "", "", "", "", ""])) for k in range(4)]
+    rows = [dict(zip(header, [str(k), *q, "ball", "", "", "", "ab"[k // 2], "", "", "", "", "", ""]))
+            for k in range(4)]
     rows[0].update(distance_to="b", distance_m="0.05")
     rows[1].update(cells)
     path = tmp_path / "bad.csv"

@@ -186,8 +186,9 @@ def _relations(table: Table, plane: np.ndarray, names: list[str], kinds: list[st
                              f"{relation.kind} here but {found[key][0].kind} (or another value) on row "
                              f"{found[key][1]}; give one relation per pair")
         found.setdefault(key, (relation, row))
-    for r in np.nonzero((to == "") & ((kind != "") | (offset != "")))[0]:
-        raise ModelError(f"{at(where, int(r) + 2, RELATION)}: a relation without {PLANE_TO}; name the other plane")
+    for r in np.nonzero((to == "") & ((kind != "") | (offset != "") | (std != "")))[0]:
+        col = next(c for c, v in ((RELATION, kind[r]), (OFFSET, offset[r]), (RELATION_STD, std[r])) if v != "")
+        raise ModelError(f"{at(where, int(r) + 2, col)}: a relation without {PLANE_TO}; name the other plane")
     return tuple(rel for rel, _ in found.values())
 
 
@@ -195,8 +196,9 @@ def _distances(table: Table, point: np.ndarray, names: list[str], kinds: list[st
     """The known distances the rows of points declare (see the module docstring)."""
     header, where = table.header, table.where
     if DISTANCE_TO not in header:
-        require(DISTANCE not in header, f"{where}: row 1: column {DISTANCE} but no {DISTANCE_TO}; name the other "
-                                        f"point of each distance in a {DISTANCE_TO} column")
+        for col in (DISTANCE, DISTANCE_STD):
+            require(col not in header, f"{where}: row 1: column {col} but no {DISTANCE_TO}; name the other point of "
+                                       f"each distance in a {DISTANCE_TO} column")
         return ()
     require(DISTANCE in header, f"{where}: row 1: column {DISTANCE_TO} but no {DISTANCE}; give each distance's "
                                 f"length in m in a {DISTANCE} column")
@@ -224,8 +226,9 @@ def _distances(table: Table, point: np.ndarray, names: list[str], kinds: list[st
                              f"{names[key[1]]} is {length:g} +- {std:g} m here but {found[key][0]:g} +- "
                              f"{found[key][1]:g} m on row {found[key][2]}; give one value")
         found.setdefault(key, (length, std, row))
-    for r in np.nonzero((to == "") & (length_cells != ""))[0]:
-        raise ModelError(f"{at(where, int(r) + 2, DISTANCE)}: a distance without {DISTANCE_TO}; name the other point")
+    for r in np.nonzero((to == "") & ((length_cells != "") | (std_cells != "")))[0]:
+        col = DISTANCE if length_cells[r] != "" else DISTANCE_STD
+        raise ModelError(f"{at(where, int(r) + 2, col)}: a distance without {DISTANCE_TO}; name the other point")
     return tuple(Distance(a, b, length, std) for (a, b), (length, std, _) in found.items())
 
 
