@@ -30,6 +30,7 @@ from gecgen.api import Calibrator
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.validation import read_yaml
 from gecgen.model.volume import load_volume
+from gecgen.runtime.identify import to_world
 from gecgen.runtime.volume import accuracy
 from gecgen.simulate import load_truth, paper_pps, paper_split, simulate, true_tool_points
 
@@ -75,7 +76,8 @@ def one_truth(robot, spec, seed: int, cases: dict, volume, noise: tuple[float, f
                 fits[key] = Calibrator(model).fit(robot, data.subset(train)), data.subset(val)
         cal, val = fits[key]
         calib = cal.calibration_
-        samples, st, cm = accuracy(calib, volume, cal.data_, cal.data_.xyz, (val, val.xyz) if held_out else None,
+        world = cal.data_, to_world(calib.frames, cal.data_)
+        samples, st, cm = accuracy(calib, volume, *world, (val, to_world(calib.frames, val)) if held_out else None,
                                    noise[0] if stated else None,
                                    noise[1] if stated else 0.0, TOLERANCE_MM, CONFIDENCE, DRAWS,
                                    np.random.default_rng(seed))

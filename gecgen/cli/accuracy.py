@@ -22,7 +22,7 @@ def add_parser(command):
     p = command("accuracy", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("volume", help="volume file (YAML: angle_unit, joints, targets or tool_box, place_at, payload_kg, "
-                                  "samples; docs/reference.md, \"Volume files\")")
+                                  "samples; docs/reference.md, \"Accuracy over a volume\")")
     p.add_argument("data", help=DATA_HELP + "; the data the calibration was fitted to: the coefficients' covariance "
                                             "is taken from it pose by pose, and, without --val, the error the "
                                             "model does not describe")
@@ -56,7 +56,8 @@ def run(args) -> dict:
     cal = load_calibration(args.calibration)
     calib = cal.calibration_
     require(not calib.model.aux, f"{args.calibration}: its model uses auxiliary signals "
-                                 f"({', '.join(calib.model.aux)}); a volume statement over them is not supported")
+                                 f"({', '.join(calib.model.aux)}), which a volume file cannot range over yet; state "
+                                 f"the accuracy of a model without them")
     volume = load_volume(args.volume, calib.robot)
     data, y = _positions(args.data, calib)
     held_out = _positions(args.val, calib) if args.val else None
@@ -88,8 +89,9 @@ def _positions(path: str, calib):
 
     data = read_measurements(path, calib.robot)
     require(data.relative is None and data.orientation is None,
-            f"{path}: the statement is read from measured positions; give rows with x y z only")
-    return data, to_world(calib.frames, data, "measure it from the calibration's tracker stationing")
+            f"{path}: point, plane or orientation rows: a statement over a volume is read from measured positions "
+            f"only, and is not supported for calibrations from sockets, planes or poses yet")
+    return data, to_world(calib.frames, data, "calibrate with it")
 
 
 def _plot(robot, volume, samples, statement, path: Path):

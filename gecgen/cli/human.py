@@ -44,6 +44,8 @@ def print_human(result: dict):
             print(f"{key}:")
             for line in value[:MAX_LISTED]:
                 print(f"  {line}")
+            if len(value) > MAX_LISTED:
+                print(f"  ... {len(value) - MAX_LISTED} more (use --json for the list)")
         elif isinstance(value, list) and value and isinstance(value[0], dict):
             print(f"{key}: {len(value)} (use --json for the list)")
         elif isinstance(value, dict):

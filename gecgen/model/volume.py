@@ -14,7 +14,9 @@ for it. Example (the seed paper's PPS):
     payload_at: [0, 0, 0]            # tool frame, m
     samples: 2000
 
-Without `place_at`, unlisted joints range over their limits. Lengths in m, angles in `angle_unit`.
+Without `place_at`, unlisted joints range over their limits, within one turn about zero (as random
+poses are drawn). Lengths in m, angles in `angle_unit`. The wrench at a sample is what a sensor tared
+without payload reads of the payload's weight alone.
 """
 from __future__ import annotations
 
@@ -30,6 +32,8 @@ from gecgen.model.validation import excerpt, nearest, read_yaml, require, requir
 #: samples a volume may ask for (each costs one H_e evaluation and a column of the Monte Carlo)
 MAX_SAMPLES = 100_000
 DEFAULT_SAMPLES = 2000
+#: payloads a volume may list (every sample is taken with each)
+MAX_PAYLOADS = 20
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,10 @@ def _joints(spec, robot: Robot, scale: float, where: str) -> dict[int, tuple[flo
 def load_volume(path: str | Path, robot: Robot) -> Volume:
     """Read and check a volume file against the robot it is stated for (one-line refusals)."""
     where = str(path)
+    require(not robot.branches, f"{where}: {robot.name} is branched; a statement over a volume is made for a serial "
+                                f"chain (one tool) only")
+    require(robot.n >= 6, f"{where}: {robot.name} has {robot.n} joints: compensation places the tool's pose (6 "
+                          f"degrees of freedom), so a statement over a volume needs 6 joints or more")
     spec = read_yaml(Path(path), "volume")
     require(isinstance(spec, dict), f"{where}: expected a mapping (angle_unit, joints, tool_box or targets, ...)")
     require_keys(spec, where, required={"angle_unit"},
@@ -110,7 +118,6 @@ def load_volume(path: str | Path, robot: Robot) -> Volume:
                 f"{where}: tool_box: expected {{min: [x, y, z], max: [x, y, z]}} in the tool frame, m")
         box = (_vector(b["min"], f"{where}: tool_box.min"), _vector(b["max"], f"{where}: tool_box.max"))
         require((box[0] <= box[1]).all(), f"{where}: tool_box: min is above max on an axis; swap them")
-        require(not robot.branches, f"{where}: tool_box: {robot.name} is branched; name its targets instead")
         targets: tuple[str, ...] = ()
     else:
         targets = spec.get("targets", list(robot.targets))
@@ -138,7 +145,8 @@ def load_volume(path: str | Path, robot: Robot) -> Volume:
     payloads = spec.get("payload_kg", [0.0])
     payloads = payloads if isinstance(payloads, list) else [payloads]
     payloads = tuple(_number(v, f"{where}: payload_kg", "kg") for v in payloads)
-    require(payloads and all(v >= 0 for v in payloads), f"{where}: payload_kg: expected masses >= 0 kg")
+    require(0 < len(payloads) <= MAX_PAYLOADS and all(v >= 0 for v in payloads),
+            f"{where}: payload_kg: expected 1 to {MAX_PAYLOADS} masses >= 0 kg")
     samples = spec.get("samples", DEFAULT_SAMPLES)
     require(isinstance(samples, int) and not isinstance(samples, bool) and 1 <= samples <= MAX_SAMPLES,
             f"{where}: samples: expected a whole number from 1 to {MAX_SAMPLES}, got {excerpt(samples)}")

@@ -47,8 +47,10 @@ STEP = 1e-7
 #: Newton steps on the wrench the sensor reads (the map is nearly linear: three settle it to rounding),
 #: their difference step (N or N m), and the loop gain from which the reading is not settled
 WRENCH_PASSES, WRENCH_STEP, LOOP_GAIN = 3, 1e-3, 0.5
-#: coefficient draws per block of the Monte Carlo (memory: 3 x samples x block doubles)
+#: coefficient draws per block of the Monte Carlo (memory: a few times 3 x samples x block doubles)
 BLOCK = 250
+#: samples times draws at most: the Monte Carlo keeps every sample's error of every draw (8 bytes each)
+MAX_CELLS = 5e7
 
 
 @dataclass(frozen=True)
@@ -262,7 +264,11 @@ def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
     r = y - cm.model_targets(q, w, aux, c)[data.pose, data.target]
     residual = float(np.sqrt(shrink * np.mean(r ** 2)))
     noise2 = (noise_m or 0.0) ** 2
-    point = float(np.sqrt(max(residual ** 2 - noise2 - repeatability_m ** 2, 0.0)))
+    if noise_m is None:  # nothing taken off, as for the tool motion below
+        repeatability_m = 0.0
+    # point by point, the residual's variance at its upper confidence limit (r.size coordinates), less the noise
+    upper = residual ** 2 * r.size / special.chdtri(r.size, 1 - UPPER)
+    point = float(np.sqrt(max(upper - noise2 - repeatability_m ** 2, 0.0)))
     if cm.robot.branches:
         return Unmodelled(residual, point, None, data.n_poses)
     R = tool_pose(cm.robot, q)[:, :3, :3]
@@ -350,68 +356,98 @@ def worst_over_draws(G: np.ndarray, cov: np.ndarray, U: np.ndarray, draws: int,
 
 def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
           tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
-          extrapolated: dict[str, int], unreachable: int, n_declared: int, loop_gain: float,
-          beyond: dict[str, int], moved: dict[str, int], failed: int) -> Statement:
+          doubts: list[str], notes: list[str]) -> Statement:
     """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
-    maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated measurement noise per coordinate (None:
-    unknown); extrapolated {input: samples} outside the training ranges; loop_gain of the wrench
-    the model's errors make the sensor read (`read_wrench`); beyond {joint: samples} whose compensated
-    command leaves that joint's limits; moved {input: samples} whose compensated command (not the
-    nominal one) leaves the training ranges; failed: samples the compensation does not converge at."""
+    maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated noise per coordinate (None: unknown).
+    doubts: what keeps the bound from being signed (the verdict is then "cannot tell" unless even
+    the lower bound fails the tolerance); notes: what the reader must know."""
     worst, worst_param, norms = worst_over_draws(G, cov, U, draws, rng)
     bound, lower = (1e3 * float(np.quantile(worst, p)) for p in (confidence, 1 - confidence))
-    reasons, doubt = [], []
     if noise_m is None:
-        reasons.append("no measurement noise stated (--noise-mm): the whole residual is counted as error the "
-                       "model does not describe, so the bound is pessimistic")
-    if extrapolated:
-        parts = ", ".join(f"{k} {v}" for k, v in extrapolated.items())
-        doubt.append(f"samples outside the ranges the calibration was fitted over, per input: {parts} (of {len(G)}): "
-                     f"the model is not validated there")
-    if loop_gain >= LOOP_GAIN:
-        doubt.append(f"the model turns the tool by the force its own tilt makes the sensor read (loop gain "
-                     f"{loop_gain:.2g}): what it predicts depends on a reading it cannot settle; drop the force "
-                     f"terms gravity does not excite (e.g. fx, fz when the tool stays level)")
-    if failed:
-        doubt.append(f"the calibration's compensation does not converge at {failed} of {len(G)} samples (singular, "
-                     f"or the model's correction not settling there): the robot cannot be corrected there")
-    if unreachable:
-        reasons.append(f"{unreachable} of {n_declared} declared samples cannot be placed within the joint limits; "
-                       f"the statement covers the others")
-    if moved:
-        parts = ", ".join(f"{k} {v}" for k, v in moved.items())
-        reasons.append(f"samples whose compensated command leaves the ranges the calibration was fitted over, per "
-                       f"input: {parts} (of {len(G)}): compensation moves joints the data never moved, and the "
-                       f"second-order error of their unseen axes is not in the bound; measure with them moving")
-    if beyond:
-        parts = ", ".join(f"{k} {v}" for k, v in beyond.items())
-        reasons.append(f"samples whose compensated command leaves the joint limits, per joint: {parts} (of "
-                       f"{len(G)}): the statement holds there only if the controller may go beyond them; narrow "
-                       f"the declared ranges otherwise")
+        notes = ["no measurement noise stated (--noise-mm): the whole residual is counted as error the model does "
+                 "not describe, so the bound is pessimistic", *notes]
     if tolerance_mm is None:
         verdict = "no tolerance given"
-    elif doubt:
-        verdict = "cannot tell"
-    elif bound <= tolerance_mm:
-        verdict = "meets"
     elif lower > tolerance_mm:
         verdict = "does not meet"
-    else:
+    elif doubts or bound > tolerance_mm:
         verdict = "cannot tell"
+    else:
+        verdict = "meets"
     rms_u = float(np.sqrt(np.einsum("nrd,nrd->", U, U) / (3 * len(U))))
     return Statement(bound, lower, 1e3 * float(np.quantile(worst_param, confidence)),
                      1e3 * np.quantile(norms, confidence, axis=1), 1e3 * rms_u,
                      "point" if unmod.twist_cov is None else "rigid tool motion", 1e3 * unmod.residual_m,
                      None if noise_m is None else 1e3 * noise_m, confidence, draws, tolerance_mm, verdict,
-                     tuple(doubt + reasons))
+                     tuple(doubts + notes))
 
 
 def _outside(calib: Calibration, q: np.ndarray, w: np.ndarray) -> dict[str, int]:
     """{input: samples} outside the training ranges at joints q (N, n) and wrenches w (N, 6): every joint
     (each moves the chain), and the forces the model's terms read (a force no term reads is no
-    extrapolation)."""
+    extrapolation; the payload is checked apart, `_heavier`)."""
     used = calib.model.variables() | {f"q{i + 1}" for i in range(calib.robot.n)}
     return {k: n for k, n in extrapolation(calib, q, w, np.zeros((len(q), 0))).items() if k in used}
+
+
+def _per_input(counts: dict[str, int], n: int, what: str) -> str:
+    return f"{what}, per input: {', '.join(f'{k} {v}' for k, v in counts.items())} (of {n})"
+
+
+def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.ndarray, status: np.ndarray,
+              gain: float, held_out: bool, n_columns: int, n_declared: int) -> tuple[list[str], list[str]]:
+    """(doubts, notes) about a statement: what keeps it from being signed, and what it assumes."""
+    doubts, notes, n = [], [], len(samples.q)
+    outside = _outside(calib, samples.q, samples.w)
+    if outside:
+        doubts.append(_per_input(outside, n, "samples outside the ranges the calibration was fitted over") +
+                      ": the model is not validated there")
+    force, carried = (np.linalg.norm(x[:, :3], axis=1) for x in (samples.w, data.w))
+    heavier = int(((force < carried.min() - 1.0) | (force > carried.max() + 1.0)).sum())  # 1 N: the sensor's tilt
+    if heavier:
+        doubts.append(f"{heavier} of {n} samples carry a payload the data never carried (force {force.min():.4g} to "
+                      f"{force.max():.4g} N against {carried.min():.4g} to {carried.max():.4g} N measured): the "
+                      f"model's load terms are not validated there")
+    if gain >= LOOP_GAIN:
+        doubts.append(f"the model turns the tool by the force its own tilt makes the sensor read (loop gain "
+                      f"{gain:.2g}): what it predicts depends on a reading it cannot settle; drop the force terms "
+                      f"gravity does not excite (e.g. fx, fz when the tool stays level)")
+    failed = int(np.isin(status, FAILED).sum())
+    if failed:
+        doubts.append(f"the calibration's compensation does not converge at {failed} of {n} samples (singular, or "
+                      f"the model's correction not settling there): the robot cannot be corrected there")
+    if data.n_poses < 2 * n_columns:
+        doubts.append(f"{data.n_poses} poses for {n_columns} coefficients: the covariance taken pose by pose needs "
+                      f"at least twice as many poses as coefficients")
+    if not held_out:
+        doubts.append("the bound rests on the training residuals alone, which cannot show an effect the model lacks "
+                      "where the poses did not reach (docs/volume.md): measure held-out poses inside the volume, at "
+                      "its extremes, and give them as --val to sign it")
+    limits = ((q_c < [j.lower for j in calib.robot.joints]) | (q_c > [j.upper for j in calib.robot.joints]))
+    beyond = {j.name: int(k) for j, k in zip(calib.robot.joints, limits[status == OUTSIDE_LIMITS].sum(axis=0)) if k}
+    if beyond:
+        notes.append(_per_input(beyond, n, "samples whose compensated command leaves the joint limits") +
+                     ": the statement holds there only if the controller may go beyond them; narrow the declared "
+                     "ranges otherwise")
+    moved = {k: v for k, v in _outside(calib, q_c, samples.w).items() if k not in outside}
+    if moved:
+        notes.append(_per_input(moved, n, "samples whose compensated command leaves the ranges the calibration was "
+                                          "fitted over") +
+                     ": compensation moves joints the data never moved, and the second-order error of their unseen "
+                     "axes is not in the bound; measure with them moving")
+    if samples.unreachable:
+        notes.append(f"{samples.unreachable} of {n_declared} declared samples cannot be placed within the joint "
+                     f"limits; the statement covers the others")
+    return doubts, notes
+
+
+def _inliers(calib: Calibration, data: Measurements, y: np.ndarray) -> tuple[Measurements, np.ndarray, int]:
+    """The data without the rows the fit found to be outliers (its report's file rows), their world
+    points, and how many were left out: a glitch the robust fit down-weighted must not count as
+    model error here either."""
+    bad = {o["row"] for o in calib.report.get("outliers", [])}
+    keep = ~np.isin(data.file_rows, list(bad))
+    return (data, y, 0) if keep.all() else (data.rows_of(keep), y[keep], int((~keep).sum()))
 
 
 def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarray,
@@ -424,14 +460,21 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     residuals scaled up for the coefficients fitted to them; less the stated instrument noise and
     robot repeatability per coordinate (m). Returns the samples, the statement, and the compiled
     model whose targets are the stated points (the tool box's affine basis, or the robot's)."""
+    require(draws >= 20 / (1 - confidence) if confidence < 1 else False,
+            f"{draws} draws for a {confidence:g} confidence: give at least {20 / max(1 - confidence, 1e-12):.0f} "
+            f"(20 beyond the quantile), or a lower confidence")
     samples = sample(calib.robot, volume, rng)
     require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
                             f"the tool box and the joint ranges against the robot")
+    require(len(samples.q) * draws <= MAX_CELLS, f"{volume.source}: {len(samples.q)} samples (with their payloads) "
+                                                 f"times {draws} draws is more than {MAX_CELLS:.0e} errors to draw; "
+                                                 f"give fewer samples or draws")
     robot = affine_model(calib.robot, volume) if volume.tool_box is not None else calib.robot
     cm = CompiledModel(robot, calib.model)
     w, gain = read_wrench(cm, calib.c, samples, volume)
     samples = dataclasses.replace(samples, w=w)
     fitted = CompiledModel(calib.robot, calib.model)
+    data, y, dropped = _inliers(calib, data, y)
     # a coefficient held at zero for want of significance is not known to be zero: it stays uncertain
     names = calib.model.coefficient_names(calib.robot)
     held = {names.index(e["param"]) for e in calib.report.get("eliminated", []) if e["reason"] == "insignificant"}
@@ -441,15 +484,17 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     residuals, shrink = held_out or (data, y), 1.0 if held_out else m / max(m - len(calib.kept), 1)
     unmod = unmodelled(fitted, *residuals, calib.c, noise_m, repeatability_m, shrink)
     U = unmod.maps(tool_pose(calib.robot, samples.q)[:, :3, :3], samples.point)
-    outside = _outside(calib, samples.q, samples.w)
     q_c, status = cm.compensate(samples.q, samples.w, None, calib.c)
-    beyond = {j.name: int(n) for j, n in zip(calib.robot.joints, (
-        (q_c < [j.lower for j in calib.robot.joints]) | (q_c > [j.upper for j in calib.robot.joints]))[
-        status == OUTSIDE_LIMITS].sum(axis=0)) if n}
-    moved = {k: n for k, n in _outside(calib, q_c, samples.w).items() if k not in outside}
+    doubts, notes = _findings(calib, data, samples, q_c, status, gain, held_out is not None, len(columns),
+                              volume.samples)
+    if dropped:
+        notes.append(f"{dropped} measured rows the fit found to be outliers are left out of the covariance and the "
+                     f"unmodelled error")
+    if unmod.twist_cov is None and volume.tool_box is not None:
+        notes.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
+                     "poses): a tilt's growth with the lever arm to the tool box is not in it")
     statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, outside, samples.unreachable, volume.samples, gain, beyond, moved,
-                      int(np.isin(status, FAILED).sum()))
+                      confidence, draws, rng, doubts, notes)
     return samples, statement, cm
 
 
