@@ -103,8 +103,78 @@ def table(results: list[dict], label: str) -> list[str]:
     wrong += sum(x[label]["verdict"] == "does not meet" and x[label]["true_worst"] <= TOLERANCE_MM for x in results)
     return [f"| {label} | {len(results)} | {covered.mean():.0%} ({covered.sum()}) | {np.median(ratio):.2f} "
             f"({ratio.min():.2f} - {ratio.max():.2f}) | {np.median(r['true_worst']):.3f} | {np.median(r['bound']):.3f} "
-            f"| {np.median(r['parametric']):.3f} | {np.median(r['sigma_u']):.3f} | {np.median(r['per_point_covers']):.1%} "
+            f"| {np.median(r['parametric']):.3f} | {np.median(r['sigma_u']):.3f} "
+            f"| {np.median(r['per_point_covers']):.1%} "
             f"| {verdicts['meets']} / {verdicts['does not meet']} / {verdicts['cannot tell']} | {truly} | {wrong} |"]
+
+
+def _figures(results: list[dict], label: str) -> dict:
+    worst = np.array([x[label]["true_worst"] for x in results])
+    bound = np.array([x[label]["bound"] for x in results])
+    return {"covered": float(np.mean(worst <= bound)), "ratio": float(np.median(bound / worst)),
+            "lo": float(np.min(bound / worst)), "hi": float(np.max(bound / worst)),
+            "worst": float(np.median(worst)),
+            "meets_wrong": sum(x[label]["verdict"] == "meets" and x[label]["true_worst"] > TOLERANCE_MM
+                               for x in results)}
+
+
+def discussion(results: list[dict]) -> list[str]:
+    """What the table says, with its figures."""
+    geo, diag = _figures(results, "geometric truth, constant model"), _figures(results, "full truth, diagnosed model")
+    bare = _figures(results, "full truth, diagnosed model, noise not stated")
+    val = _figures(results, "full truth, diagnosed model, --val the validation half")
+    default = _figures(results, "full truth, default GEC model")
+    return [
+        "## What it shows",
+        "",
+        f"- **Where the model describes the robot** (only geometric errors, constant model) the bound holds the true "
+        f"worst in {geo['covered']:.0%} of the truths, {geo['ratio']:.1f} times it in the median. The bound is loose "
+        "because the unmodelled error is taken at its upper 95 % confidence limit (396 poses leave about 13 % of "
+        "the noise's variance in doubt in every direction) and drawn independently at 2000 samples; the true worst "
+        f"({geo['worst']:.3f} mm) is the coefficients' error alone.",
+        f"- **Where the model misses an effect** (the diagnosed model, fitted on one simulated robot and applied to "
+        f"all: it lacks part of what the patient's weight does, the couch's droop growing as the cube of the "
+        f"longitudinal extension and the roll and pitch giving under the load) the bound from the training "
+        f"residuals holds the true worst in only "
+        f"{diag['covered']:.0%} ({bare['covered']:.0%} without the noise stated). The true worst "
+        f"({diag['worst']:.3f} mm in the median) sits in one corner of the volume: couch angle near +-90 deg, "
+        "longitudinal axis extended, 70 kg, the top of the box. There the effect reaches 0.3 to 0.7 mm, while at the "
+        "measured targets, over the whole design, it stays inside the 0.11 mm noise: no residual at the training "
+        "poses can show it. This is why `gecgen accuracy` never says *meets* from training residuals alone.",
+        f"- **With held-out poses** (`--val`: the paper's validation half, 56 configurations at the vertices of the "
+        f"treatment volume) the bound holds the true worst in {val['covered']:.0%} of the truths, "
+        f"{val['ratio']:.1f} times it in the median; {val['meets_wrong']} of the 50 *meets* were wrong. The vertices "
+        "reach the corner where the effect is largest, but 56 poses pin its size loosely and the corner's worst "
+        "configuration is not among them.",
+        f"- **The default GEC model** (quadratic in each joint and linear in all six wrench components) is never "
+        f"signed: its fx and fz terms read the couch's tilt through the force sensor, the loop gain of wrench -> "
+        f"errors -> wrench comes near 1, and its true worst in the volume is {default['worst']:.1f} mm in the "
+        "median, against 0.6 mm at the paper's validation vertices, which share the training poses' configurations. "
+        "The statement says *cannot tell* (the loop gain), or *does not meet* where its coefficients' own "
+        "uncertainty already passes 0.5 mm.",
+        "",
+        "## Against the issue's acceptance",
+        "",
+        "The issue asks for the true worst within the bound in at least 95 % of the truths and a bound at most 1.5 "
+        "times the true worst in the median, on the PPS with the paper's design. Measured above:",
+        "",
+        f"- 95 % coverage is reached where the model describes the robot ({geo['covered']:.0%}), not where it misses "
+        f"an effect the design cannot see ({diag['covered']:.0%} from the training residuals, {val['covered']:.0%} "
+        "with the validation half).",
+        f"- 1.5 times is not reached: {geo['ratio']:.1f} times where the coverage holds. Drawing the unmodelled error "
+        "independently at every sample is what keeps coverage at all; a smooth field drawn with a correlation "
+        "length would be tighter, but the data give no correlation length to draw it with, and a wrong one would "
+        "cost the coverage.",
+        "",
+        "The figure defended here: the bound holds the true worst (at least 95 %) when the model describes the robot "
+        f"over the volume, at {geo['lo']:.1f} to {geo['hi']:.1f} times it; a statement is signed (*meets*) only "
+        "with held-out poses measured "
+        "inside the volume; and the corner a design never reached is named as the limit. What would close the gap: "
+        "a design that measures the volume's corners (the largest payload at the longest reach and the extreme "
+        "couch angles) and a target high on the couch, so that the tilt's lever arm is seen at the measured "
+        "points.",
+        "",
+    ]
 
 
 def main():
@@ -161,6 +231,7 @@ def main():
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[row for label in cases for row in table(results, label)],
         "",
+        *discussion(results),
     ]
     (ROOT / "docs" / "volume.md").write_text("\n".join(lines))
     print("\n".join(lines))
