@@ -1,4 +1,5 @@
-"""`gecgen check CALIB DATA [--tolerance-mm T] [--history H.csv] [--label L]`: a QA check of a calibrated robot.
+"""`gecgen check CALIB DATA [--tolerance-mm T] [--baseline BASE.csv [--noise-mm S]] [--history H.csv] [--label L]`:
+a QA check of a calibrated robot.
 
 A short measurement taken later (5 to 10 poses: a daily check of a patient positioner) against the
 calibration, in its tracker frame (gecgen/runtime/drift.py): pass or fail against the tolerance,
@@ -25,6 +26,13 @@ def add_parser(command):
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("data", help=DATA_HELP + "; measured in the calibration's tracker frame")
     p.add_argument("--tolerance-mm", type=number(0, above=True), help="largest point error that passes, mm")
+    p.add_argument("--baseline", metavar="BASE", help="the same poses measured right after the calibration (a "
+                                                      "measurement file, pose ids and targets those of DATA): the "
+                                                      "change is judged against it point by point, so the model's "
+                                                      "misfit at the check poses cancels")
+    p.add_argument("--noise-mm", type=number(0, 1000, above=True),
+                   help="with --baseline: the noise of one measurement per coordinate, mm (instrument and robot "
+                        "repeatability); default the calibration's sigma, which also holds its misfit (safe)")
     p.add_argument("--history", help="CSV of checks to append this one to (created if absent); plotted beside it")
     p.add_argument("--label", help="this check's name in the history (default: the data file's name)")
 
@@ -47,12 +55,39 @@ def run(args) -> dict:
                          f"check against a calibration from measured data")
     cm = checked(calib.model, calib.robot, data)
     y = to_world(calib.frames, data, "measure the check from the calibration's tracker stationing")
-    verdict = check(cm, data, y, calib.c, sigma_m, args.tolerance_mm)
+    require(args.noise_mm is None or args.baseline, "--noise-mm goes with --baseline: without one the change is "
+                                                    "judged against the calibration's own sigma")
+    baseline = _baseline(args.baseline, calib, data) if args.baseline else None
+    noise_m = sigma_m if args.noise_mm is None else 1e-3 * args.noise_mm
+    verdict = check(cm, data, y, calib.c, noise_m if baseline is not None else sigma_m, args.tolerance_mm, baseline)
     result = {"robot": calib.robot.name, "data": str(args.data), "n_points": len(data.xyz),
-              "calibration_sigma_mm": 1e3 * sigma_m, **verdict.to_dict()}
+              "calibration_sigma_mm": 1e3 * sigma_m,
+              **({"baseline": str(args.baseline), "noise_mm": 1e3 * noise_m} if baseline is not None else {}),
+              **verdict.to_dict()}
     if args.history:
         result["history"] = _append(Path(args.history), args.label or Path(args.data).name, result)
     return result
+
+
+def _baseline(path: str, calib, data):
+    """The baseline's points (R, 3, world) in the order of data's rows, matched by pose id and target."""
+    import numpy as np
+
+    from gecgen.model.measurements import read_measurements
+    from gecgen.model.validation import require
+    from gecgen.runtime.identify import to_world
+
+    base = read_measurements(path, calib.robot)
+    require(base.relative is None and base.orientation is None,
+            f"{path}: a baseline gives measured positions; give rows with x y z only")
+    y = to_world(calib.frames, base, "measure the baseline from the calibration's tracker stationing")
+    at = {(int(base.pose_ids[base.pose[r]]), int(base.target[r])): r for r in range(len(base.xyz))}
+    rows = [at.get((int(data.pose_ids[data.pose[r]]), int(data.target[r]))) for r in range(len(data.xyz))]
+    for r, k in enumerate(rows):
+        require(k is not None, f"{data.source}: row {data.file_rows[r]}: pose {data.pose_ids[data.pose[r]]} target "
+                               f"{calib.robot.target_names[data.target[r]]} is not in the baseline {path}; measure "
+                               f"the baseline's poses and targets")
+    return y[np.array(rows)]
 
 
 def _append(path: Path, label: str, result: dict) -> dict:

@@ -7,7 +7,9 @@ the calibration's tracker frame):
 * does it pass? the largest point error against the user's tolerance;
 * is the difference beyond noise? sum |e|^2 / sigma^2 against a chi-square law with 3 degrees of
   freedom per point, sigma the calibration's residual sigma (taken as known: its fit had many more
-  points than a check);
+  points than a check); or, with a baseline (the same poses measured right after the calibration),
+  the difference from it against twice the noise's variance, so the model's misfit at the check's
+  poses cancels;
 * what does it look like? a rigid motion (the tracker, or the robot's base, moved): the residual once
   a rigid transform is fitted to it, tested again (six degrees of freedom fewer); else the joint whose
   offset best explains it (the model's change per reading, by central differences), and its share.
@@ -58,21 +60,25 @@ def _p_value(e: np.ndarray, sigma_m: float, dof: int) -> float:
 
 
 def check(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, sigma_m: float,
-          tolerance_mm: float | None = None) -> Check:
+          tolerance_mm: float | None = None, baseline: np.ndarray | None = None) -> Check:
     """The verdict on `data` (its measured points y (R, 3) in the robot world, m) for the model at
-    coefficients c whose fit left a residual sigma of sigma_m (m per coordinate)."""
+    coefficients c whose fit left a residual sigma of sigma_m (m per coordinate). With a baseline
+    (R, 3): the same points measured right after the calibration, the change is judged against it
+    rather than against the model, point by point, with sigma_m then the noise of one measurement:
+    the model's own misfit at the check's poses cancels. Pass or fail is the model's error either way."""
     q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
     p = cm.model_targets(q, w, aux, c)[data.pose, data.target]
-    e = y - p
-    length = np.linalg.norm(e, axis=1)
-    p_value = _p_value(e, sigma_m, e.size)
+    length = np.linalg.norm(y - p, axis=1)
+    ref, sigma = (p, sigma_m) if baseline is None else (baseline, np.sqrt(2) * sigma_m)  # two measurements' noise
+    e = y - ref
+    p_value = _p_value(e, sigma, e.size)
     beyond = p_value < ALPHA
-    looks = {"kind": "as calibrated"}
-    R, t = kabsch(p, y) if beyond and len(y) >= 3 else (None, None)  # three points fix a rigid motion
-    if R is not None and _p_value(y - (p @ R.T + t), sigma_m, e.size - 6) >= ALPHA:
+    looks = {"kind": "as calibrated" if baseline is None else "as at the baseline"}
+    R, t = kabsch(ref, y) if beyond and len(y) >= 3 else (None, None)  # three points fix a rigid motion
+    if R is not None and _p_value(y - (ref @ R.T + t), sigma, e.size - 6) >= ALPHA:
         angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
         looks = {"kind": "rigid motion", "rotation_deg": float(angle),
-                 "translation_mm": float(1e3 * np.linalg.norm(t + (R - np.eye(3)) @ p.mean(axis=0)))}
+                 "translation_mm": float(1e3 * np.linalg.norm(t + (R - np.eye(3)) @ ref.mean(axis=0)))}
     elif beyond:
         looks = _joint(cm, data, aux, c, e)
     rms, worst = float(1e3 * np.sqrt(np.mean(length ** 2))), float(1e3 * length.max())
