@@ -76,7 +76,7 @@ def test_report_numbers_are_the_commands(reports, command, before, after):
     res = reports[command]
     for stage, key in (("uncalibrated", before), ("calibrated", after)):
         cells = re.search(rf"<td>{stage}</td>(.*?)</tr>", html_of(res)).group(1)
-        assert f"{res[key]['rms_mm']:.4f}" in cells and f"{res[key]['max_mm']:.4f}" in cells, (stage, cells)
+        assert f"{res[key]['rms_mm']:.3g}" in cells and f"{res[key]['max_mm']:.3g}" in cells, (stage, cells)
 
 
 @pytest.mark.parametrize("command", list(ONLY))

@@ -128,9 +128,9 @@ def headline(sets: list[DataSet], robot: Robot | None = None) -> Section:
         row = [st.stage]
         for ds in sets:
             s = ds.stages[k].summary()
-            row += [f"{s['rms_mm']:.4f}", f"{s['max_mm']:.4f}"]
+            row += [f"{s['rms_mm']:.3g}", f"{s['max_mm']:.3g}"]
             if "rot_rms_mrad" in s:
-                row += [f"{s['rot_rms_mrad']:.4f}", f"{s['rot_max_mrad']:.4f}"]
+                row += [f"{s['rot_rms_mrad']:.3g}", f"{s['rot_max_mrad']:.3g}"]
         rows.append(tuple(row))
     counts = "; ".join(f"{ds.name}: {ds.data.n_poses} poses, {len(ds.stages[0].pose)} measured rows "
                        f"(`{ds.data.source or 'in memory'}`)" for ds in sets)
@@ -219,7 +219,7 @@ def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:
         for ds in sets:
             side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
             d = np.linalg.norm(ds.stages[k].position_mm, axis=1)
-            row += [f"{np.sqrt(np.mean(d[side == b] ** 2)):.4f}" if (side == b).any() else "-"
+            row += [f"{np.sqrt(np.mean(d[side == b] ** 2)):.3g}" if (side == b).any() else "-"
                     for b in range(len(robot.branches))]
         rows.append(tuple(row))
     return Table(tuple(header), rows)
@@ -448,7 +448,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
         found.append(f"{diag.remaining['outliers']} training rows were outliers of the robust fit (down-weighted, "
                      "listed by `gecgen identify`); they neither chose nor hid an effect.")
     rounds = Table(("round", "training RMS (mm)", "CV RMS (mm)", "candidates", "accepted"),
-                   [(str(h["round"]), f"{h['train_rms_mm']:.4f}", f"{h['cv_rms_mm']:.4f}", str(h["candidates"]),
+                   [(str(h["round"]), f"{h['train_rms_mm']:.3g}", f"{h['cv_rms_mm']:.3g}", str(h["candidates"]),
                      h["accepted"] or "-") for h in diag.history])
     return Report(f"gecgen diagnose: {robot.name}",
                   [f"Training data `{data.source}` ({data.n_poses} poses); validation "
@@ -480,7 +480,7 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
                                                     for label, c in (("uncalibrated", None), ("calibrated", fit.c))]))
     rows = []
     for c in result["candidates"]:
-        cv = f"{c['cv_rms_mm']:.4f}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
+        cv = f"{c['cv_rms_mm']:.3g}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
         size = f"{c['n_params']} + what diagnose adds" if c["diagnose"] else str(c["n_params"])
         rows.append((c["model"] + (" (chosen)" if c["model"] == result["model"] else ""), size, cv))
     choose = Section("Model choice", [
