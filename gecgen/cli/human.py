@@ -31,7 +31,7 @@ def print_human(result: dict):
         elif key == "candidates":
             print(f"candidates: {len(value)} (cross-validated on the training poses)")
             for c in value:
-                score = f"{c['cv_rms_mm']:.4f} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
+                score = f"{c['cv_rms_mm']:.3g} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
                 print(f"  {c['model']}: {score}")
         elif key == "table":
             print_error_table(value)
@@ -39,7 +39,7 @@ def print_human(result: dict):
             print(f"effects: {len(value)}")
             for e in value:
                 print(f"  {e['error']}: {', '.join(e['terms'])} ({e['family']}; cross-validated gain "
-                      f"{e['gain_mm']:.4f} mm)")
+                      f"{e['gain_mm']:.3g} mm)")
         elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
             print(f"{key}:")
             for line in value[:MAX_LISTED]:
