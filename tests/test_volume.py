@@ -156,7 +156,7 @@ def test_the_bound_holds_the_true_worst_error_of_a_robot_the_model_describes(pps
 
 
 def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
-    _, train, _, cal = geometric
+    _, train, val, cal = geometric
     cal.save(tmp_path / "c.json")
     write_measurements(tmp_path / "train.csv", pps, train)
     volume = tmp_path / "v.yaml"
@@ -173,3 +173,7 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     assert bare["bound_mm"] > out["bound_mm"]  # the whole residual counted as unmodelled error
     # training residuals alone cannot sign it
     assert bare["verdict"] == "cannot tell" and any("give them as --val" in r for r in bare["reasons"])
+    write_measurements(tmp_path / "val.csv", pps, val)
+    with pytest.raises(ModelError, match="not the data the calibration was fitted to"):
+        accuracy(cal.calibration_, load_volume(volume, pps), val, to_world(cal.calibration_.frames, val), None, None,
+                 0.0, 0.5, 0.95, 500, np.random.default_rng(0))

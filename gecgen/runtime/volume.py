@@ -446,6 +446,23 @@ def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.
     return doubts, notes
 
 
+#: DATA is taken for the data the calibration was fitted to when its RMS residual is within this share
+SAME_FIT = 1e-6
+
+
+def _require_fitted(calib: Calibration, cm: CompiledModel, data: Measurements, y: np.ndarray):
+    """Refuse data that is not what the calibration was fitted to: its residual RMS at the calibration's
+    coefficients must be the fit's own training RMS (the covariance is taken pose by pose from it)."""
+    train = calib.report.get("train", {}).get("rms_mm")
+    if train is None:
+        return
+    p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), calib.c)[data.pose, data.target]
+    rms = 1e3 * float(np.sqrt(np.mean(np.sum((y - p) ** 2, axis=1))))
+    require(abs(rms - train) <= SAME_FIT * train + 1e-9,
+            f"{data.source}: not the data the calibration was fitted to (its RMS residual is {rms:.4g} mm, the fit's "
+            f"{train:.4g} mm); give the training data, and held-out data as --val")
+
+
 def _inliers(calib: Calibration, data: Measurements, y: np.ndarray) -> tuple[Measurements, np.ndarray, int]:
     """The data without the rows the fit found to be outliers (its report's file rows), their world
     points, and how many were left out: a glitch the robust fit down-weighted must not count as
@@ -479,6 +496,7 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     w, gain = read_wrench(cm, calib.c, samples, volume)
     samples = dataclasses.replace(samples, w=w)
     fitted = CompiledModel(calib.robot, calib.model)
+    _require_fitted(calib, fitted, data, y)
     data, y, dropped = _inliers(calib, data, y)
     # a coefficient held at zero for want of significance is not known to be zero: it stays uncertain
     names = calib.model.coefficient_names(calib.robot)
