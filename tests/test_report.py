@@ -77,6 +77,9 @@ def test_report_numbers_are_the_commands(reports, command, before, after):
     for stage, key in (("uncalibrated", before), ("calibrated", after)):
         cells = re.search(rf"<td>{stage}</td>(.*?)</tr>", html_of(res)).group(1)
         assert f"{res[key]['rms_mm']:.3g}" in cells and f"{res[key]['max_mm']:.3g}" in cells, (stage, cells)
+        if command == "evaluate":  # held-out data: the RMS with its interval by pose, as the command gives it
+            lo, hi = res[key]["rms_mm_ci95"]
+            assert f"{lo:.3g} to {hi:.3g}" in cells, (stage, cells)
 
 
 @pytest.mark.parametrize("command", list(ONLY))

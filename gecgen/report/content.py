@@ -13,6 +13,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.runtime.identify import filled, fit_frames, summary, to_world
+from gecgen.runtime.significance import rms_interval
 
 
 @dataclass(frozen=True)
@@ -116,19 +117,24 @@ def frame_label(robot: Robot, i: int) -> str:
 def headline(sets: list[DataSet], robot: Robot | None = None) -> Section:
     """Per stage, RMS and max point error on each data set (and orientation error when measured); on
     a tree, also per branch."""
-    header, cols = ["model"], []
+    header = ["model"]
     for ds in sets:
         s = ds.stages[0].summary()
         header += [f"{ds.name} RMS (mm)", f"{ds.name} max (mm)"]
-        cols.append(("rms_mm", "max_mm"))
+        if ds.name != "training":  # a held-out score says how well new poses will do: with its uncertainty
+            header += [f"{ds.name} RMS, 95 % interval by pose (mm)"]
         if "rot_rms_mrad" in s:
             header += [f"{ds.name} orientation RMS (mrad)", f"{ds.name} orientation max (mrad)"]
     rows = []
     for k, st in enumerate(sets[0].stages):
         row = [st.stage]
         for ds in sets:
-            s = ds.stages[k].summary()
+            stage = ds.stages[k]
+            s = stage.summary()
             row += [f"{s['rms_mm']:.3g}", f"{s['max_mm']:.3g}"]
+            if ds.name != "training":
+                lo, hi = rms_interval(np.linalg.norm(stage.position_mm, axis=1), stage.pose)
+                row += [f"{lo:.3g} to {hi:.3g}"]
             if "rot_rms_mrad" in s:
                 row += [f"{s['rot_rms_mrad']:.3g}", f"{s['rot_max_mrad']:.3g}"]
         rows.append(tuple(row))
