@@ -162,10 +162,14 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     volume = tmp_path / "v.yaml"
     volume.write_text(VOLUME.read_text().replace("samples: 1000", "samples: 100"))
     out = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.01",
-               "--noise-mm", "0.04", "--repeatability-mm", "0.05", "--draws", "500", "--plot", tmp_path / "map.png")
+               "--noise-mm", "0.04", "--repeatability-mm", "0.05", "--draws", "500", "--plot", tmp_path / "map.png",
+               "--report", tmp_path / "report")
     assert out["verdict"] == "does not meet" and out["lower_mm"] > 0.01
     assert out["samples"] == 200 and out["unreachable"] == 0 and out["held_out"] is False
-    assert (tmp_path / "map.png").stat().st_size > 0
+    assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert f"{out['bound_mm']:.3g} mm at 95%" in text and "does not meet" in text and "Where it is worst" in text
+    assert (tmp_path / "report" / "report.html").stat().st_size > 0
     assert -90 <= out["worst_at"]["joints"]["theta"] <= 90 and len(out["worst_at"]["tool_point_m"]) == 3
     bare = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.5",
                 "--draws", "500")

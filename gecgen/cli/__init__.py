@@ -58,7 +58,7 @@ OUTPUTS = {
     "fleet": {"output": ("fleet folder", True)},
     "iso9283": {"output": ("plan", False), "report": ("report", True)},
     "check": {"history": ("history of checks", False)},
-    "accuracy": {"plot": ("map", False)},
+    "accuracy": {"plot": ("map", False), "report": ("report", True)},
 }
 
 

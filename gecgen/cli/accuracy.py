@@ -8,7 +8,6 @@ volume the error is largest.
 """
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, whole
@@ -43,6 +42,8 @@ def add_parser(command):
     p.add_argument("--draws", type=whole(100, 1_000_000), default=DRAWS, help=f"Monte Carlo draws (default {DRAWS})")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0, help="seed of the samples and draws")
     p.add_argument("--plot", metavar="PNG", help="map of where in the volume the error bound is largest")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md and report.html: the statement, its reasons, "
+                                                   "where it is worst (the map) and what it was read from")
 
 
 def run(args) -> dict:
@@ -69,15 +70,23 @@ def run(args) -> dict:
     units = [(180 / np.pi, "deg") if j.kind == "R" else (1.0, "m") for j in calib.robot.joints]
     worst = {"bound_mm": float(statement.per_point_mm[k]),
              "joints": {j.name: float(scale * v) for j, (scale, _), v in zip(calib.robot.joints, units, samples.q[k])},
+             "joint_units": {j.name: unit for j, (_, unit) in zip(calib.robot.joints, units)},
              "payload_kg": float(samples.payload_kg[k]), "world_m": samples.world[k].tolist(),
              **({"tool_point_m": samples.point[k].tolist()} if volume.tool_box is not None else
                 {"target": list(calib.robot.targets)[samples.target[k]]})}
     result = {"robot": calib.robot.name, "volume": str(args.volume), "samples": len(samples.q),
               "unreachable": samples.unreachable, **statement.to_dict(),
               "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst}
-    if args.plot:
-        _plot(calib.robot, volume, samples, statement, Path(args.plot))
-        result["plot"] = str(args.plot)
+    if args.plot or args.report:
+        from gecgen.files import write_atomically
+        from gecgen.report import content, plots, write
+
+        figure = plots.volume_map(calib.robot, volume, samples, statement)
+        if args.plot:
+            write_atomically(Path(args.plot), figure.png)
+            result["plot"] = str(args.plot)
+        if args.report:
+            result.update(write(content.accuracy(result, figure), args.report))
     return result
 
 
@@ -92,37 +101,3 @@ def _positions(path: str, calib):
             f"{path}: point, plane or orientation rows: a statement over a volume is read from measured positions "
             f"only, and is not supported for calibrations from sockets, planes or poses yet")
     return data, to_world(calib.frames, data, "calibrate with it")
-
-
-def _plot(robot, volume, samples, statement, path: Path):
-    """Each sample's own bound (the confidence quantile of its error) against every input the volume
-    varies: the tool point's coordinates or the world position, each ranged joint, the payload."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from gecgen.files import write_atomically
-
-    where = samples.point if volume.tool_box is not None else samples.world
-    frame = "tool point" if volume.tool_box is not None else "world"
-    axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
-    axes += [(f"{j.name} ({'deg' if j.kind == 'R' else 'm'})", samples.q[:, k] * (180 / np.pi if j.kind == "R" else 1))
-             for k, j in enumerate(robot.joints)]
-    axes += [("payload (kg)", samples.payload_kg)]
-    axes = [(label, x) for label, x in axes if np.ptp(x) > 1e-9]
-    fig, panels = plt.subplots(1, len(axes), figsize=(3 * len(axes), 3.2), sharey=True, squeeze=False)
-    for ax, (label, x) in zip(panels[0], axes):
-        ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
-        if statement.tolerance_mm is not None:
-            ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
-        ax.axhline(statement.bound_mm, color="C3", lw=1)
-        ax.set_xlabel(label, fontsize=8)
-    panels[0][0].set_ylabel(f"{statement.confidence:.0%} bound of the point's error (mm)", fontsize=8)
-    fig.suptitle(f"Compensated error over the volume: worst {statement.bound_mm:.3g} mm (red), "
-                 f"{statement.verdict}", fontsize=9)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_atomically(path, buf.getvalue())

@@ -552,3 +552,33 @@ def iso9283(result: dict) -> Report:
                   [f"ISO 9283 pose test of plan `{result['plan']}`, scored against the pose the nominal model gives "
                    f"each target at the plan's joints (what the robot was commanded to reach); measured in "
                    f"{result['frame']}."], sections)
+
+
+def accuracy(result: dict, figure: Figure) -> Report:
+    """The accuracy statement over a volume from `gecgen accuracy`'s result and its map."""
+    tol = result["tolerance_mm"]
+    rows = [("bound on the worst compensated error", f"{result['bound_mm']:.3g} mm at {result['confidence']:.0%}"),
+            ("from the coefficients' uncertainty alone", f"{result['parametric_bound_mm']:.3g} mm (its low "
+                                                         f"quantile {result['lower_mm']:.3g} mm)"),
+            ("unmodelled error, RMS per coordinate", f"{result['unmodelled_rms_mm']:.3g} mm, read as a "
+                                                     f"{result['unmodelled_as']}"),
+            ("residual it was read from, per coordinate", f"{result['residual_sigma_mm']:.3g} mm"),
+            ("stated noise per coordinate", "not stated" if result["noise_mm"] is None else
+             f"{result['noise_mm']:.3g} mm"),
+            ("tolerance", "none given" if tol is None else f"{tol:.3g} mm"),
+            ("verdict", result["verdict"])]
+    worst = result["worst_at"]
+    at = ", ".join(f"{k} {v:.4g} {worst['joint_units'][k]}" for k, v in worst["joints"].items())
+    where = (f"tool point {', '.join(f'{v:.3g}' for v in worst['tool_point_m'])} m" if "tool_point_m" in worst
+             else f"target {worst['target']}")
+    source = "held out from the fit" if result["held_out"] else "the data the calibration was fitted to"
+    return Report(f"gecgen accuracy: {result['robot']}",
+                  [f"The worst compensated error over the volume `{result['volume']}` ({result['samples']} samples, "
+                   f"{result['draws']} Monte Carlo draws), its unmodelled part read from `{result['residual_from']}` "
+                   f"({source})."],
+                  [Section("Statement", [Table(("", "value"), rows)]),
+                   Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
+                                                        "Nothing keeps it from being signed."]),
+                   Section("Where it is worst", [f"The sample with the largest own bound ({worst['bound_mm']:.3g} "
+                                                 f"mm): joints {at}; payload {worst['payload_kg']:.3g} kg; {where}.",
+                                                 figure])])

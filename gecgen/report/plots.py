@@ -161,3 +161,29 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
     return _figure(fig, f"effect_{_slug(eff.error)}_{_slug(eff.terms[0])}_{_slug(name)}",
                    f"{eff.error} ({', '.join(eff.terms)}) against {label}: the fitted effect, and the residual "
                    "without it and with it")
+
+
+def volume_map(robot: Robot, volume, samples, statement) -> Figure:
+    """Each sample's own bound (the confidence quantile of its error, `runtime.volume.Statement`)
+    against every input the volume varies: the tool point's coordinates or the world position, each
+    ranged joint, the payload; the worst's bound in red, the tolerance dashed."""
+    where = samples.point if volume.tool_box is not None else samples.world
+    frame = "tool point" if volume.tool_box is not None else "world"
+    axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
+    axes += [(f"{j.name} ({'deg' if j.kind == 'R' else 'm'})", samples.q[:, k] * (180 / np.pi if j.kind == "R" else 1))
+             for k, j in enumerate(robot.joints)]
+    axes += [("payload (kg)", samples.payload_kg)]
+    axes = [(label, x) for label, x in axes if np.ptp(x) > 1e-9]
+    fig, panels = plt.subplots(1, len(axes), figsize=(3 * len(axes), 3.2), sharey=True, squeeze=False)
+    for ax, (label, x) in zip(panels[0], axes):
+        ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
+        if statement.tolerance_mm is not None:
+            ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
+        ax.axhline(statement.bound_mm, color="C3", lw=1)
+        ax.set_xlabel(label, fontsize=8)
+    panels[0][0].set_ylabel(f"{statement.confidence:.0%} bound of the point's error (mm)", fontsize=8)
+    fig.suptitle(f"Compensated error over the volume: worst {statement.bound_mm:.3g} mm (red), "
+                 f"{statement.verdict}", fontsize=9)
+    fig.tight_layout()
+    return _figure(fig, "volume-map", "Each sample's own bound against every input the volume varies; the bound "
+                                      "on the worst over the volume in red, the tolerance dashed.")
