@@ -194,6 +194,11 @@ IN_PROCESS = {
         "telescope.urdf", "telescope.yaml names, which this command reads; writing the calibration there"),
     # issue 21: a near miss is named, YAML errors say where, paths say what they are relative to
     "a mistyped command": (lambda t: ["simulat"], "simulat", "did you mean 'simulate'?"),
+    # issue 22: an option of sockets and planes, or of a design, is never silently ignored
+    "a socket option without sockets": (lambda t: ["simulate", pps(t), "--per-socket", "30", "-o", t / "s.csv"],
+                                        "--per-socket", "goes with --plates or --planes"),
+    "poses with sockets": (lambda t: ["simulate", str(ROBOTS / "panda_ball.yaml"), "--plates", "1", "--poses",
+                                      "10", "-o", t / "s.csv"], "--poses", "--plates and --planes simulate sockets"),
     "YAML that does not parse": (lambda t: ["redundancy", write(t, "bad.yaml", "name: x\nangle_unit: rad\n  b: [1\n")],
                                  "bad.yaml", "line 3, column 4: not valid YAML"),
     "a tip_link the URDF lacks": (

@@ -17,6 +17,13 @@ from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, r
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
+#: poses of the random design when --poses is not given
+POSES = 200
+#: the socket and plane options' values when not given (each is refused without --plates or --planes)
+FIXTURE_DEFAULTS = {"per_socket": 25, "socket_distance": 0.05, "distance_std": 0.0, "touches": 30,
+                    "seating_noise": 1e-5, "encoder_noise": 1e-5}
+
+
 def add_parser(command):
     p = command("simulate", run)
     p.add_argument("robot", help=ROBOT_HELP)
@@ -25,12 +32,12 @@ def add_parser(command):
     p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
                    help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
                         "(default %(default)s)")
-    p.add_argument("--poses", type=whole(1, MAX_POSES), default=200,
-                   help="poses of the random design (default %(default)s)")
+    p.add_argument("--poses", type=whole(1, MAX_POSES),
+                   help=f"poses of the random design (default {POSES})")
     p.add_argument("--step", type=number(0, above=True), default=0.05,
                    help="step (m or rad) of the one-at-a-time design (default %(default)s)")
-    p.add_argument("--payload-kg", type=numbers(0), default=[0.0],
-                   help="comma-separated payloads (kg), at the tool origin (default %(default)s)")
+    p.add_argument("--payload-kg", type=numbers(0),
+                   help="comma-separated payloads (kg), at the tool origin (default 0; with --design paper 0,70)")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
                    help="seed of the poses, the truth's draws and the noise (default %(default)s)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
@@ -46,26 +53,28 @@ def add_parser(command):
                              "--design, a ball seated in the sockets of plates and a probe touching planes")
     g.add_argument("--plates", type=whole(0, 1000), default=0,
                    help="placements of a plate with two sockets, anywhere in reach (default %(default)s)")
-    g.add_argument("--per-socket", type=whole(2, MAX_POSES), default=25,
-                   help="configurations per socket (default %(default)s)")
-    g.add_argument("--socket-distance", type=number(0, 10, above=True), default=0.05,
-                   help="distance between a plate's sockets, m (default %(default)s)")
-    g.add_argument("--distance-std", type=number(0, 1), default=0.0,
-                   help="stated uncertainty of that distance, m (default %(default)s: exact)")
+    g.add_argument("--per-socket", type=whole(2, MAX_POSES),
+                   help=f"configurations per socket (default {FIXTURE_DEFAULTS['per_socket']})")
+    g.add_argument("--socket-distance", type=number(0, 10, above=True),
+                   help=f"distance between a plate's sockets, m (default {FIXTURE_DEFAULTS['socket_distance']})")
+    g.add_argument("--distance-std", type=number(0, 1),
+                   help="stated uncertainty of that distance, m (default 0: exact)")
     g.add_argument("--planes", type=whole(0, 3), default=0,
                    help="planes touched: a table, then up to two faces of a square on it (default %(default)s)")
-    g.add_argument("--touches", type=whole(4, MAX_POSES), default=30,
-                   help="configurations touching each plane (default %(default)s)")
+    g.add_argument("--touches", type=whole(4, MAX_POSES),
+                   help=f"configurations touching each plane (default {FIXTURE_DEFAULTS['touches']})")
     g.add_argument("--plane-relations", action="store_true",
                    help="declare the planes' perpendicularity (the square's faces and the table) in the data")
     g.add_argument("--block-width", type=number(0, 1, above=True),
                    help="a block of this width (m) on the table: its far face a plane parallel to the first face, "
                         "the offset declared")
     g.add_argument("--target", help="the target that sits in the sockets or touches (default: the robot's first)")
-    g.add_argument("--seating-noise", type=number(0, 0.01), default=1e-5,
-                   help="m per coordinate of a ball's seat, and along the normal for a touch (default %(default)s)")
-    g.add_argument("--encoder-noise", type=number(0, 0.01), default=1e-5,
-                   help="rad (m for a prismatic joint) per recorded joint reading (default %(default)s)")
+    g.add_argument("--seating-noise", type=number(0, 0.01),
+                   help=f"m per coordinate of a ball's seat, and along the normal for a touch (default "
+                        f"{FIXTURE_DEFAULTS['seating_noise']:g})")
+    g.add_argument("--encoder-noise", type=number(0, 0.01),
+                   help=f"rad (m for a prismatic joint) per recorded joint reading (default "
+                        f"{FIXTURE_DEFAULTS['encoder_noise']:g})")
 
 
 def run(args) -> dict:
@@ -79,12 +88,16 @@ def run(args) -> dict:
     rng = np.random.default_rng(args.seed)
     if args.plates or args.planes:
         return _fixtures(args, robot, truth, rng)
-    payloads = args.payload_kg
+    given = [f"--{k.replace('_', '-')}" for k in (*FIXTURE_DEFAULTS, "block_width", "target")
+             if getattr(args, k) is not None] + (["--plane-relations"] if args.plane_relations else [])
+    require(not given, f"{given[0] if given else ''} goes with --plates or --planes (sockets and planes); drop it, or "
+                       f"add one of them")
+    payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
     if args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
-        design = paper_pps(robot, payloads_kg=payloads if payloads != [0.0] else (0.0, 70.0))
+        design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
     elif args.design == "one-at-a-time":
         lo, hi = robot.sampling_box()
         count = len(payloads) * sum(int((b - a) / args.step) + 1 for a, b in zip(lo, hi))
@@ -92,7 +105,7 @@ def run(args) -> dict:
                                     f"most {MAX_POSES:,}); give a larger step")
         design = one_at_a_time(robot, {j + 1: args.step for j in range(robot.n)}, payloads)
     else:
-        design = random_design(robot, args.poses, rng, payloads)
+        design = random_design(robot, args.poses or POSES, rng, payloads)
     data = simulate(robot, truth, design, rng, args.orientation)
     files = {"data": args.output}
     if args.design == "paper":
@@ -106,7 +119,7 @@ def run(args) -> dict:
                 f"--val-out with --design {args.design}: validation poses come with --design random or paper")
         write_measurements(args.output, robot, data)
         if args.val_out:
-            n_val = args.poses if args.val_poses is None else args.val_poses
+            n_val = args.val_poses or args.poses or POSES
             require(n_val >= 1, f"--val-poses {n_val}: give 1 or more")
             val = simulate(robot, truth, random_design(robot, n_val, rng, payloads), rng, args.orientation)
             write_measurements(args.val_out, robot, val)
@@ -123,11 +136,14 @@ def run(args) -> dict:
 
 def _fixtures(args, robot, truth, rng) -> dict:
     """Socket and plane data (`simulate.fixtures`); --val-out gets new placements of the same fixtures."""
-    require(args.design == "random" and not args.orientation and args.val_poses is None,
-            "--plates and --planes simulate sockets and planes, not a --design, --orientation or --val-poses")
-    fixtures = Fixtures(args.target or next(iter(robot.targets)), args.plates, args.per_socket, args.socket_distance,
-                        args.distance_std, args.planes, args.touches, args.seating_noise, args.encoder_noise,
-                        args.plane_relations, args.block_width)
+    require(args.design == "random" and not args.orientation and args.val_poses is None and args.poses is None
+            and args.payload_kg is None,
+            "--plates and --planes simulate sockets and planes, not a --design, --poses, --payload-kg, --orientation or "
+            "--val-poses")
+    value = {k: default if getattr(args, k) is None else getattr(args, k) for k, default in FIXTURE_DEFAULTS.items()}
+    fixtures = Fixtures(args.target or next(iter(robot.targets)), args.plates, value["per_socket"],
+                        value["socket_distance"], value["distance_std"], args.planes, value["touches"],
+                        value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width)
     data, floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),
