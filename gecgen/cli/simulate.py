@@ -12,7 +12,7 @@ from gecgen.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import write_measurements
-from gecgen.model.validation import read_yaml, require
+from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
@@ -90,8 +90,8 @@ def run(args) -> dict:
         return _fixtures(args, robot, truth, rng)
     given = [f"--{k.replace('_', '-')}" for k in (*FIXTURE_DEFAULTS, "block_width", "target")
              if getattr(args, k) is not None] + (["--plane-relations"] if args.plane_relations else [])
-    require(not given, f"{given[0] if given else ''} goes with --plates or --planes (sockets and planes); drop it, or "
-                       f"add one of them")
+    if given:
+        raise ModelError(f"{given[0]} goes with --plates or --planes (sockets and planes); drop it, or add one of them")
     payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")

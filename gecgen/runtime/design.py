@@ -38,7 +38,7 @@ from typing import Callable
 
 import numpy as np
 
-from gecgen.model.kinematics import tool_poses
+from gecgen.model.kinematics import sensor_wrench, tool_poses
 from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_commands
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
@@ -47,7 +47,6 @@ from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structur
 from gecgen.runtime.redundancy import Redundancy, unexcited
 from gecgen.runtime.threads import one_blas_thread
 from gecgen.simulate.designs import random_design, with_payloads
-from gecgen.simulate.truth import sensor_wrench
 
 #: poses whose H_e is evaluated at once (the PPS default model: 12 x 330 doubles per pose, 63 MB)
 BLOCK = 2000

@@ -31,14 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from gecgen.model.kinematics import tool_pose
+from gecgen.model.kinematics import sensor_wrench, tool_pose
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import require
 from gecgen.model.volume import Volume
 from gecgen.runtime.calibration import Calibration, extrapolation
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, CompiledModel
-from gecgen.simulate.truth import sensor_wrench
 
 #: place_at: a sample is solved when the point is this close to its place (m) within the limits
 PLACED_M = 1e-9
@@ -233,7 +232,7 @@ def pose_covariance(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.
 
 @dataclass(frozen=True)
 class Unmodelled:
-    """The error the model leaves, read from residuals (per coordinate residual_m, m, over `poses`):
+    """The error the model leaves, read from residuals (per coordinate residual_m, m):
     a rigid motion of the tool, xi = (translation m, rotation rad) in the tool frame ~ N(0, twist_cov),
     when the data measured three or more targets per pose; else a point error of sigma_m per
     coordinate (twist_cov None)."""
@@ -241,7 +240,6 @@ class Unmodelled:
     residual_m: float
     sigma_m: float
     twist_cov: np.ndarray | None
-    poses: int
 
     def maps(self, R: np.ndarray, point: np.ndarray) -> np.ndarray:
         """U (N, 3, d): the unmodelled error at tool-frame points (N, 3) of tools turned by R (N, 3, 3)
@@ -272,7 +270,7 @@ def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
     upper = residual ** 2 * r.size / special.chdtri(r.size, 1 - UPPER)
     point = float(np.sqrt(max(upper - noise2 - repeatability_m ** 2, 0.0)))
     if cm.robot.branches:
-        return Unmodelled(residual, point, None, data.n_poses)
+        return Unmodelled(residual, point, None)
     R = tool_pose(cm.robot, q)[:, :3, :3]
     targets = np.array(list(cm.robot.targets.values()), float)
     S, noise_part, used = np.zeros((6, 6)), np.zeros((6, 6)), 0
@@ -291,11 +289,11 @@ def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
         noise_part += np.linalg.inv(AtA)
         used += 1
     if used < MIN_TWIST_POSES:
-        return Unmodelled(residual, point, None, data.n_poses)
+        return Unmodelled(residual, point, None)
     seen = shrink * S / used
     noise = noise2 * noise_part / used + np.diag([repeatability_m ** 2] * 3 + [0.0] * 3)
     if noise_m is None or not np.all(np.linalg.eigvalsh(noise) > 0):
-        return Unmodelled(residual, point, seen, used)
+        return Unmodelled(residual, point, seen)
     # whitened by the noise, the motions' covariance is I plus the unmodelled part. Each direction's
     # variance is taken at its upper confidence limit (a variance of `used` poses: lam used / chi2):
     # a bound must not read "not detected" as "absent", least of all from a few held-out poses
@@ -303,7 +301,7 @@ def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
     lam, V = np.linalg.eigh(W @ seen @ W.T)
     excess = np.clip(lam * used / special.chdtri(used, 1 - UPPER) - 1, 0.0, None)
     Wi = np.linalg.inv(W)
-    return Unmodelled(residual, point, Wi @ (V * excess) @ V.T @ Wi.T, used)
+    return Unmodelled(residual, point, Wi @ (V * excess) @ V.T @ Wi.T)
 
 
 @dataclass(frozen=True)

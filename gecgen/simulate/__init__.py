@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.model.kinematics import target_positions, tool_pose, tool_poses
+from gecgen.model.kinematics import sensor_wrench, target_positions, tool_pose, tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.simulate.designs import Design, approach_directions, one_at_a_time, paper_pps, paper_split, random_design
-from gecgen.simulate.truth import Truth, load_truth, sensor_wrench, thermal_profile, true_state
+from gecgen.simulate.truth import Truth, load_truth, thermal_profile, true_state
 
 __all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_pps", "paper_split", "random_design",
            "simulate", "true_tool_points"]

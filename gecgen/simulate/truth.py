@@ -179,21 +179,6 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
                  float(noise.get("orientation", 0.0)), built)
 
 
-def sensor_wrench(robot: Robot, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
-                  gravity: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
-    """What a force/torque sensor in robot.wrench_frame reads for a payload (N, 6): [F; r x F] in the
-    sensor frame, r the payload point (tool frame, m) relative to the sensor. On a tree the payload
-    hangs from the first branch's tool."""
-    F = frames(robot, q, eps)
-    tool = F[robot.n_frames + 1]
-    S = tool if robot.wrench_frame == "tool" else F[robot.wrench_frame]
-    force_world = payload_kg[:, None] * gravity
-    force = np.einsum("nji,nj->ni", S[:, :3, :3], force_world)
-    point_world = np.einsum("nij,j->ni", tool[:, :3, :3], payload_at) + tool[:, :3, 3]
-    r = np.einsum("nji,nj->ni", S[:, :3, :3], point_world - S[:, :3, 3])
-    return np.column_stack([force, np.cross(r, force)])
-
-
 def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray,
                     payload_at: np.ndarray) -> np.ndarray:
     """Static torque on every revolute joint variable (N, n), N m, from the link masses beyond it and
