@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gecgen.runtime.compiled import NONFINITE, OK
+from gecgen.runtime.compiled import NONFINITE, NOT_CONVERGED, OK
 
 pytest.importorskip("hypothesis")
 from hypothesis import given, settings  # noqa: E402
@@ -138,6 +138,24 @@ def test_a_tool_turned_half_a_turn_is_never_ok(driver):
             batch.append({"max_iter": 50, "tol": 1.0, "q": list((LO + HI) / 2), "w": [0.0] * 6, "c": c})
     for case, (status, _, deviation) in zip(batch, run_cases(driver, batch)):
         assert status != OK or deviation <= 1.5 * case["tol"], (deviation, case["c"])
+
+
+def test_no_solution_near_stops_however_many_steps_max_iter_allows(driver):
+    """A coefficient of -2.7e16 m per N m (an edited file) leaves no correction to find: each Newton
+    step took a sliver off the residual (200,000 steps: 4 s at -O2, 38 s under the sanitizers) and
+    max_iter 2**31 - 1 let it run for days (found by the property below, which timed out). It stops
+    as not converged once the steps stall, as it does for a tolerance below rounding level."""
+    names = MANIFEST["coefficients"]
+    absurd = [0.0] * NC
+    absurd[names.index("3.ez:my")] = -2.723306708156749e16
+    absurd[names.index("1.ez:fz")] = 2.2250738585072014e-308
+    q = [0.2545184509014511, -0.28, -0.04004961606026214, 1.532510000590941, 2.2250738585072014e-308,
+         -0.05235987755982989]
+    wrench = [94.34641007934874, -778.3119116084496, -841.5779185670606, -495.42668378604515, 469.16932083232837,
+              -187.10135455223326]  # N, N m
+    batch = [{"max_iter": 2 ** 31 - 1, "tol": tol, "q": q, "w": wrench, "c": c}
+             for tol, c in ((2.2250738585072014e-308, absurd), (1e-300, list(1e-4 * SMALL_C)))]
+    assert [status for status, _, _ in run_cases(driver, batch)] == [NOT_CONVERGED] * 2
 
 
 @settings(max_examples=40, deadline=None)

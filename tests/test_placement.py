@@ -137,3 +137,24 @@ def test_tiago_markers_placed_from_the_data_and_a_misplaced_one_corrected(tmp_pa
     assert moved["m3"] == pytest.approx(50, abs=2) and max(v for k, v in moved.items() if k != "m3") < 1
     assert fits["off"]["train"]["rms_mm"] == pytest.approx(fits["shipped"]["train"]["rms_mm"], rel=0.01)
     assert fits["shipped"]["placement"] is None  # the shipped targets stand
+
+
+def test_large_data_is_placed_from_rows_spread_through_every_stationing():
+    """The placement only starts the fit: beyond PLACEMENT_ROWS rows it reads an even spread of
+    them, each stationing keeping its share and at least MIN_STATION_ROWS, so that a small station
+    still gets its frame; smaller data is used whole."""
+    from gecgen.runtime.placement import MIN_STATION_ROWS, PLACEMENT_ROWS, spread_sample
+
+    n = 3 * PLACEMENT_ROWS // 2
+    station = np.r_[np.zeros(n - 600, int), np.ones(600, int)]
+    pose = np.arange(n)
+    data = Measurements(np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 0)), (), pose, pose, np.zeros(n, int),
+                        np.zeros((n, 3)), "big", station=station)
+    sample = spread_sample(data)
+    assert PLACEMENT_ROWS - 1 <= len(sample.xyz) <= PLACEMENT_ROWS + MIN_STATION_ROWS
+    assert np.sum(sample.station == 1) == MIN_STATION_ROWS
+    kept = sample.pose_ids[sample.pose]
+    assert kept[0] == 0 and kept[-1] == n - 1  # spread to both ends of the file
+    assert np.diff(kept[sample.station == 0]).max() <= 2
+    small = dataclasses.replace(data, station=None).subset(np.arange(100))
+    assert spread_sample(small) is small

@@ -6,6 +6,7 @@ plus shoulder and elbow compliance under gravity) fitted with the default model,
 other poses."""
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -140,6 +141,22 @@ def test_absurd_or_undetermined_values_are_failures(arm):
     c[rotation], std[rotation] = 0.0, np.nan
     assert "3.ep:1 has no finite uncertainty" in _fit_failures(cm, train, c, std, kept, True, "")[0]
     assert _fit_failures(cm, train, c, np.full(cm.dims.nc, 1e-6), kept, False, "did not converge") == ["did not converge"]
+
+
+def test_an_absurd_error_at_one_pose_of_many_is_found_block_by_block(arm):
+    """absurd_error reads the poses in blocks (its memory does not grow with the data): one pose in
+    the last block, where a joint term's coefficient makes a 1 m translation error, is enough."""
+    from gecgen.runtime.identify import BLOCK_POSES, absurd_error
+
+    robot, cm, train, val = arm
+    names = cm.model.coefficient_names(robot)
+    term = next(n for n in names if re.fullmatch(r"\d+\.e[xyz]:q\d", n))
+    c = np.zeros(cm.dims.nc)
+    c[names.index(term)] = 0.01  # m per rad
+    q = np.zeros((2 * BLOCK_POSES + 10, robot.n))
+    assert absurd_error(cm, q, np.zeros(6), np.zeros((len(q), 0)), c) is None
+    q[-3, int(term.split(":q")[1]) - 1] = 100.0
+    assert f"{term.split(':')[0]} reaches 1 m" in absurd_error(cm, q, np.zeros(6), np.zeros((len(q), 0)), c)
 
 
 def test_data_of_another_robot_is_a_failure_not_a_fit(arm):

@@ -92,3 +92,26 @@ def test_folded_holds_on_columns_one_fold_carries_and_on_singular_training_rows(
         scale = np.linalg.norm(A[~test], axis=0)
         dc = np.linalg.lstsq(A[~test] / scale, r[~test], rcond=None)[0] / scale
         assert fs.held_out_sq(f, extra) == pytest.approx(np.sum((r[test] - A[test] @ dc) ** 2), rel=1e-6)
+
+
+def test_screen_batches_many_candidates_and_breaks_exact_ties_in_candidate_order(system):
+    """Hundreds of one-column candidates, a third restricted to one error (thousands of auxiliary
+    signals are screened this way, a batch per size): every hit's drop is lstsq's; the true effect
+    offered twice with the same values (an auxiliary torque and the model's own gravity torque) is
+    found as the copy that comes first among the candidates, whichever that is."""
+    rows_pose, H, J, Q, r, cands, _ = system
+    rng = np.random.default_rng(5)
+    noise = [Candidate("polynomial", (f"a{i}",), (f"a{i}",), rng.normal(size=(40, 1)), None if i % 3 else (1,))
+             for i in range(300)]
+    twin = Candidate("aux", ("tau",), ("s", "c", "t"), cands[1].values.copy())
+    base = basis(H, [np.linalg.qr(H, mode="r")])
+    sigma2 = float(r @ r) / (len(r) - H.shape[1])
+    for first, second in ((cands[1], twin), (twin, cands[1])):
+        offered = [*noise, first, second, cands[0]]
+        hits = screen(J, rows_pose, r, base, sigma2, offered, [0, 1, 2, 3])
+        assert offered[hits[0].candidate] is first and hits[0].error == 2
+        assert all(h.error == 1 for h in hits if offered[h.candidate].errors == (1,))  # offered to error 1 only
+        for h in hits:
+            X = _projected(Q, columns(J, offered[h.candidate], h.error, rows_pose))
+            beta = np.linalg.lstsq(X, r, rcond=None)[0]
+            assert h.drop == pytest.approx(float(np.sum((X @ beta) ** 2)), rel=1e-9)

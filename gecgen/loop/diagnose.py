@@ -33,7 +33,7 @@ from scipy import stats
 
 from gecgen.files import write_atomically
 from gecgen.loop.dictionary import candidates, refine_period, shown_family
-from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms
+from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms, significance_order
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.pose_targets import measured_rows
@@ -193,7 +193,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             chosen = _choose(found, cands, fs, J, rows_pose, n_tests, base_cv)
             if chosen:
                 break
-        results.sort(key=lambda h: h.log_p)
+        results.sort(key=significance_order)
         history.append({"round": round_no, "train_rms_mm": rnd.fit.train["rms_mm"], "cv_rms_mm": 1e3 * base_cv,
                         "candidates": n_tests, "accepted": None})
         if chosen is None:

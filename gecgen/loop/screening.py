@@ -126,11 +126,15 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     S, poses, group = _pose_sums(rows_pose)
     F = np.asfortranarray(np.concatenate([c.values for c in cands], axis=1)[poses])  # (G, total columns)
     bounds = np.cumsum([0] + [c.values.shape[1] for c in cands])
+    dofs = np.array([c.dof for c in cands])
+    free = np.array([c.errors is None for c in cands])
+    only = {e: [ci for ci, c in enumerate(cands) if c.errors is not None and e in c.errors] for e in errors}
     found = []  # (drop, dof, candidate, error, v, QtX v)
     for e in errors:
-        offered = [ci for ci, c in enumerate(cands) if c.errors is None or e in c.errors]
+        offered = free.copy()
+        offered[only[e]] = True
         j = J[:, e]
-        if not offered or not np.any(j):
+        if not offered.any() or not np.any(j):
             continue
         S.data = j  # the sums over each pose's rows of J_e times what follows
         BtS = (S @ base.B).T  # (k, G): B^T X = BtS F; R^-T on whichever side is smaller
@@ -138,21 +142,26 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
         rX = (S @ resid) @ F
         w = S @ j
         Fw = np.multiply(w[:, None], F, order="F")
-        for ci in offered:
-            s = slice(bounds[ci], bounds[ci + 1])
-            XtX = F[:, s].T @ Fw[:, s]
-            G = XtX - QtX[:, s].T @ QtX[:, s]  # Gram matrix of the projected columns
-            scale = np.sqrt(np.maximum(np.diag(XtX), 1e-300))
-            Gs = G / np.outer(scale, scale)
-            if np.linalg.eigvalsh(Gs).min() < MIN_INDEPENDENCE:
-                continue  # (nearly) inside the current model: nothing new to add
-            b = rX[s] / scale
-            beta = np.linalg.solve(Gs, b)
-            drop = float(b @ beta)
-            dof = cands[ci].dof
-            if drop > max(9, 3 * dof) * sigma2:  # cheap pre-filter; the real test follows
-                v = beta / scale
-                found.append((drop, dof, ci, e, v, QtX[:, s] @ v))
+        # candidates of one size at once (thousands of auxiliary signals are thousands of
+        # candidates), found in candidate order as one at a time would be
+        ours = []
+        for dof in np.unique(dofs[offered]):
+            group_of = np.flatnonzero(offered & (dofs == dof))
+            cols = bounds[group_of][:, None] + np.arange(dof)  # (n, dof) each candidate's columns
+            XtX = np.einsum("gni,gnj->nij", F[:, cols], Fw[:, cols])
+            Q = QtX[:, cols]
+            G = XtX - np.einsum("kni,knj->nij", Q, Q)  # Gram matrices of the projected columns
+            scale = np.sqrt(np.maximum(np.diagonal(XtX, axis1=1, axis2=2), 1e-300))  # (n, dof)
+            Gs = G / (scale[:, :, None] * scale[:, None, :])
+            new = np.linalg.eigvalsh(Gs).min(axis=1) >= MIN_INDEPENDENCE  # else inside the current model
+            group_of, cols, scale = group_of[new], cols[new], scale[new]
+            b = rX[cols] / scale
+            beta = np.linalg.solve(Gs[new], b[:, :, None])[:, :, 0]
+            drop = np.einsum("ni,ni->n", b, beta)
+            for i in np.flatnonzero(drop > max(9, 3 * dof) * sigma2):  # cheap pre-filter; the real test follows
+                v = beta[i] / scale[i]
+                ours.append((float(drop[i]), int(dof), int(group_of[i]), e, v, QtX[:, cols[i]] @ v))
+        found += sorted(ours, key=lambda h: h[2])
     if not found:
         return []
     drops, dofs = np.array([h[0] for h in found]), np.array([h[1] for h in found])
@@ -160,8 +169,15 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     # the fitted effect, projected off the model: J_e (F v) - Q (Q^T X v), R x (c + k)
     hits = [Hit(drop, float(lp), ci, e, (J[:, e], F[:, bounds[ci]:bounds[ci + 1]] @ v, group, base, qv))
             for (drop, _, ci, e, v, qv), lp in zip(found, log_p)]
-    hits.sort(key=lambda h: h.log_p)
+    hits.sort(key=significance_order)
     return hits
+
+
+def significance_order(hit: Hit) -> float:
+    """Sort key of hits, most significant first. Hits equal to 10 digits are one column offered twice
+    (an auxiliary torque and the model's own gravity_torque of the same joint): they keep the order
+    they were found in, candidate order, not whichever the arithmetic's last digits favour."""
+    return float(f"{hit.log_p:.10g}")
 
 
 def folds(n_poses: int, rng: np.random.Generator) -> np.ndarray:

@@ -273,7 +273,8 @@ class CompiledModel:
     def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0):
         """Corrected joint commands (N, nq) and status codes (N,) for nominal commands q_cmd (N, nq)
         (m or rad), residual tolerance tol (m; 1 rad counts as 1 m). The codes, per row:
-        OK (0) converged inside the joint limits; NOT_CONVERGED (1) the last iterate;
+        OK (0) converged inside the joint limits; NOT_CONVERGED (1) the last iterate (max_iter steps, or
+        20 in a row that each lowered the residual by under 0.1 %);
         SINGULAR (2) the joint Jacobian is singular at the returned iterate; OUTSIDE_LIMITS (3)
         converged, outside the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0,
         max_iter < 0 or the computation overflowed, and the row holds q_cmd unchanged. On a tree, the

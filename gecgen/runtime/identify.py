@@ -360,7 +360,9 @@ def _data_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, rank_to
     c = np.zeros(cm.dims.nc) if at is None else at
     columns = np.array(struct.kept, int)
     # the distances' weight against the rows changes no rank: a typical noise stands for the fit's
-    blocks = list(rows_H_and_residual(cm, data, y, c, weights=weights, known_sigma_m=TYPICAL_NOISE_M))
+    blocks = rows_H_and_residual(cm, data, y, c, weights=weights, known_sigma_m=TYPICAL_NOISE_M)
+    if data.relative is not None:  # one block (_blocks), read again by _relative_analysis
+        blocks = list(blocks)
     R0, m = qr_accumulate(blocks, columns)
     if data.relative is None:
         red = unexcited(struct, R0[:, :-1], cm.robot, cm.model, len(targets), rank_tol)
@@ -493,9 +495,14 @@ def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.
 
 def absurd_error(cm: CompiledModel, q: np.ndarray, w: np.ndarray, aux: np.ndarray, c: np.ndarray) -> str | None:
     """The largest generalized error at poses q (P, n), w, aux beyond ABSURD_TRANSLATION_M or
-    ABSURD_ROTATION_RAD ("generalized error 3.ey reaches 2.1 m (limit 0.5 m)"), or None."""
-    eps = np.abs(cm.eps(q, w, aux, c))
-    eps = np.where(np.isfinite(eps), eps, np.inf).max(axis=0)
+    ABSURD_ROTATION_RAD ("generalized error 3.ey reaches 2.1 m (limit 0.5 m)"), or None. Blocks of
+    BLOCK_POSES poses, so the memory does not grow with the data; w and aux may be shared by all poses."""
+    q = np.atleast_2d(q)
+    eps = np.zeros(cm.robot.n_errors)
+    for start in range(0, len(q), BLOCK_POSES):
+        part = slice(start, start + BLOCK_POSES)
+        block = np.abs(cm.eps(q[part], *(a[part] if np.ndim(a) == 2 else a for a in (w, aux)), c))
+        eps = np.maximum(eps, np.where(np.isfinite(block), block, np.inf).max(axis=0))
     limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n_frames + 1)
     if not np.any(eps > limit):
         return None

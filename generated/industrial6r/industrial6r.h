@@ -68,7 +68,8 @@ extern "C" {
 #ifndef GECGEN_STATUS_CODES
 #define GECGEN_STATUS_CODES
 #define GECGEN_OK 0             /* converged, inside the joint limits; q_out is the correction */
-#define GECGEN_NOT_CONVERGED 1  /* no convergence in max_iter steps; q_out holds the last iterate */
+#define GECGEN_NOT_CONVERGED 1  /* no convergence in max_iter steps, or 20 steps in a row that each
+                                 * lowered the residual by under 0.1 %; q_out holds the last iterate */
 #define GECGEN_SINGULAR 2       /* the joint Jacobian is singular at an iterate; q_out holds that iterate */
 #define GECGEN_OUTSIDE_LIMITS 3 /* converged, but q_out (the correction) leaves the joint limits */
 #endif

@@ -15,6 +15,10 @@
 #define NL PPS_NL
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
+/* Newton steps in a row that each take less than a thousandth off the residual: a plateau with no
+ * solution near (an absurd calibration) or rounding level below tol; compensate then stops, however
+ * many steps max_iter allows, so a call's time is bounded by the data, not by max_iter alone */
+#define STALL_STEPS 20
 
 const double pps_q_min[NQ] = { -1.125, -0.28, -0.735, -1.5707963267948966, -0.05235987755982989, -0.05235987755982989 };
 const double pps_q_max[NQ] = { 1.125, 0.28, 0.735, 1.5707963267948966, 0.05235987755982989, 0.05235987755982989 };
@@ -2100,7 +2104,7 @@ int pps_compensate(const double *q_cmd, const double *w, const double *aux, cons
                           int max_iter, double tol, double *q_out, int *iterations)
 {
     double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], L[NL > 0 ? NL : 1], norm;
-    int it, j, halvings;
+    int it, j, halvings, stalled = 0;
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
     if (!all_finite(q_cmd, NQ) || !all_finite(w, 6) || !all_finite(aux, NAUX) || !all_finite(c, NC)
@@ -2114,7 +2118,7 @@ int pps_compensate(const double *q_cmd, const double *w, const double *aux, cons
     norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
     for (it = 0; finite_bits(norm) && norm > tol; ++it) {
         double alpha = 1.0, norm_try = norm;
-        if (it == max_iter) {
+        if (it == max_iter || stalled == STALL_STEPS) {
             if (iterations) *iterations = it;
             return GECGEN_NOT_CONVERGED;
         }
@@ -2137,6 +2141,7 @@ int pps_compensate(const double *q_cmd, const double *w, const double *aux, cons
         memcpy(q_out, q_try, sizeof(q_try));
         memcpy(r, r_try, sizeof(r_try));
         memcpy(Jq, J_try, sizeof(J_try));
+        stalled = norm_try > 0.999 * norm ? stalled + 1 : 0;
         norm = norm_try;
     }
     if (!finite_bits(norm) || !all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, iterations, it);

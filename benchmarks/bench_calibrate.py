@@ -1,0 +1,119 @@
+"""calibrate end to end, as a user runs it: every candidate model, warm and cold code cache.
+
+    python benchmarks/bench_calibrate.py         # prints a table, updates docs/benchmarks.md
+
+Cases (issue 23's): the README walk-through's UR10 (23 real poses, 18 for training with
+--holdout 0.2); industrial6r, 150 simulated poses and 50 for validation (the README's); the PPS
+paper design (396 poses); TALOS's torso and left arm (9 joints, URDF masses), 400 poses with a
+bending torso and shoulder. Each is the `gecgen calibrate` command in a fresh process, timed with
+the code of every model it builds already compiled (warm: the second of two runs) and, for
+industrial6r, with an empty cache (cold). The time of one `gecgen diagnose` of the same data
+(warm) stands beside it: calibrate runs diagnose once per fold for its diagnosed candidate.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_large import gecgen, timed  # noqa: E402
+from bench_runtime import cpu_model, write_section  # noqa: E402
+
+TALOS_TRUTH = """seed: 5
+gravity: [0, 0, -9.81]
+masses: urdf
+constant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}
+joint_offsets: {std: 3.0e-4}
+sources:
+  - {type: compliance, joint: 2, compliance: 6.0e-5}
+  - {type: compliance, joint: 4, compliance: 4.0e-5}
+noise: {repeatability: 3.0e-5, tracker: 5.0e-5}
+"""
+
+README_UR10 = """name: ur10
+angle_unit: rad
+urdf: {urdf}
+base_link: base_link
+tip_link: wrist_3_link
+tool: {{origin: [0.0, -0.12, 0.0], rpy: [-0.5, 0.0, 0.0]}}
+targets:
+  probe: estimate
+"""
+
+
+def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
+    """(case, robot file, calibrate's data arguments, diagnose's data arguments) of every case."""
+    robots, talos = ROOT / "robots", ROOT / "tests" / "data" / "talos"
+    ur10 = ROOT / "tests" / "data" / "ur10"
+    ur10_robot = tmp / "ur10.yaml"  # the README's, its probe left to the data
+    ur10_robot.write_text(README_UR10.format(urdf=ur10 / "ur10_robot.urdf"))
+    subprocess.run(gecgen("import", str(ur10_robot), str(ur10 / "calibration.csv"), "--mapping",
+                          str(ur10 / "calibration.mapping.yaml"), "-o", str(tmp / "ur10.csv")),
+                   check=True, capture_output=True)
+    (tmp / "talos_left.truth.yaml").write_text(TALOS_TRUTH)
+    sims = {"industrial6r": (robots / "industrial6r.yaml", ["--poses", "150", "--val-poses", "50"]),
+            "pps": (robots / "pps.yaml", ["--design", "paper"]),
+            "talos": (talos / "talos_left.yaml", ["--poses", "400", "--val-poses", "100", "--truth",
+                                                  str(tmp / "talos_left.truth.yaml")])}
+    for name, (robot, args) in sims.items():
+        subprocess.run(gecgen("simulate", str(robot), *args, "--seed", "1", "-o", str(tmp / f"{name}.csv"),
+                              "--val-out", str(tmp / f"{name}.val.csv")), check=True, capture_output=True)
+    val = {name: ["--val", str(tmp / f"{name}.val.csv")] for name in sims}
+    return [("UR10 walk-through, 18 training poses (real)", ur10_robot,
+             [str(tmp / "ur10.csv"), "--holdout", "0.2"], [str(tmp / "ur10.csv")]),
+            ("industrial6r, 150 poses", robots / "industrial6r.yaml", [str(tmp / "industrial6r.csv"),
+                                                                      *val["industrial6r"]],
+             [str(tmp / "industrial6r.csv"), *val["industrial6r"]]),
+            ("PPS paper design, 396 poses", robots / "pps.yaml", [str(tmp / "pps.csv"), *val["pps"]],
+             [str(tmp / "pps.csv"), *val["pps"]]),
+            ("TALOS torso + left arm (9 joints), 400 poses", talos / "talos_left.yaml",
+             [str(tmp / "talos.csv"), *val["talos"]], [str(tmp / "talos.csv"), *val["talos"]])]
+
+
+def main():
+    tmp = Path(tempfile.mkdtemp(prefix="gecgen-bench-calibrate-"))
+    cache = tmp / "cache"
+    rows = []
+    try:
+        for label, robot, data, diag_data in inputs(tmp):
+            def calibrate(env):
+                r = timed(*gecgen("calibrate", str(robot), *data, "-o", str(tmp / "out"), "--json"), env=env)
+                if r["rc"] != 0:
+                    raise SystemExit(f"{label}: calibrate exit {r['rc']}: {r['stderr']}")
+                return r, json.loads(r["stdout"])
+
+            cold = None
+            if label.startswith("industrial6r"):
+                cold, _ = calibrate({"GECGEN_CACHE": str(tmp / "cold-cache")})
+            calibrate({"GECGEN_CACHE": str(cache)})  # builds every model's code
+            warm, result = calibrate({"GECGEN_CACHE": str(cache)})
+            diag = timed(*gecgen("diagnose", str(robot), *diag_data, "--errors", str(ROOT / "robots" /
+                                 "constant.errors.yaml"), "-o", str(tmp / "d.errors.yaml")),
+                         env={"GECGEN_CACHE": str(cache)})
+            candidates = ", ".join(f"{c['model']} {c['cv_rms_mm']:.3g}" if c.get("cv_rms_mm") is not None
+                                   else f"{c['model']} refused" for c in result["candidates"])
+            rows.append((label, warm["s"], cold["s"] if cold else None, diag["s"], result["model"], candidates))
+            print(f"{label:48s} warm {warm['s']:7.1f} s  cold {cold['s'] if cold else float('nan'):7.1f} s  "
+                  f"diagnose {diag['s']:6.1f} s  chose {result['model']}  ({candidates})")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    lines = ["## calibrate end to end (every candidate model)", "",
+             f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average "
+             f"{os.getloadavg()[0]:.1f} when the benchmark ended. Regenerate: `python benchmarks/bench_calibrate.py`. "
+             "`gecgen calibrate` in a fresh process; warm: every model's code already compiled; cold: an empty "
+             "code cache. One `gecgen diagnose` of the same data from the constant model (warm) beside it.", "",
+             "| case | calibrate warm (s) | calibrate cold (s) | one diagnose (s) | chosen | candidates (cv RMS, mm) |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {model} | {cands} |"
+              for label, warm, cold, diag, model, cands in rows]
+    write_section("calibrate", "\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
