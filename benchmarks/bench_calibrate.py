@@ -96,6 +96,8 @@ def main():
             diag = timed(*gecgen("diagnose", str(robot), *diag_data, "--errors", str(ROOT / "robots" /
                                  "constant.errors.yaml"), "-o", str(tmp / "d.errors.yaml")),
                          env={"GECGEN_CACHE": str(cache)})
+            if diag["rc"] != 0:
+                raise SystemExit(f"{label}: diagnose exit {diag['rc']}: {diag['stderr']}")
             candidates = ", ".join(f"{c['model']} {c['cv_rms_mm']:.3g}" if c.get("cv_rms_mm") is not None
                                    else f"{c['model']} refused" for c in result["candidates"])
             rows.append((label, warm["s"], cold["s"] if cold else None, diag["s"], result["model"], candidates))

@@ -141,20 +141,28 @@ def test_tiago_markers_placed_from_the_data_and_a_misplaced_one_corrected(tmp_pa
 
 def test_large_data_is_placed_from_rows_spread_through_every_stationing():
     """The placement only starts the fit: beyond PLACEMENT_ROWS rows it reads an even spread of
-    them, each stationing keeping its share and at least MIN_STATION_ROWS, so that a small station
-    still gets its frame; smaller data is used whole."""
+    them, each stationing and target keeping its share and at least MIN_STATION_ROWS (all of fewer),
+    so that a small station still gets its frame and a rarely measured target its place; only the
+    chosen rows of the chosen poses are kept; smaller data is used whole."""
     from gecgen.runtime.placement import MIN_STATION_ROWS, PLACEMENT_ROWS, spread_sample
 
     n = 3 * PLACEMENT_ROWS // 2
     station = np.r_[np.zeros(n - 600, int), np.ones(600, int)]
     pose = np.arange(n)
-    data = Measurements(np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 0)), (), pose, pose, np.zeros(n, int),
+    target = np.zeros(n, int)
+    target[5:5 + 300 * 7:7] = 1  # a second target on 300 rows of station 0
+    data = Measurements(np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 0)), (), pose, pose, target,
                         np.zeros((n, 3)), "big", station=station)
     sample = spread_sample(data)
-    assert PLACEMENT_ROWS - 1 <= len(sample.xyz) <= PLACEMENT_ROWS + MIN_STATION_ROWS
+    assert PLACEMENT_ROWS - 1 <= len(sample.xyz) <= PLACEMENT_ROWS + 2 * MIN_STATION_ROWS
     assert np.sum(sample.station == 1) == MIN_STATION_ROWS
+    assert np.sum(sample.target == 1) == 300
     kept = sample.pose_ids[sample.pose]
     assert kept[0] == 0 and kept[-1] == n - 1  # spread to both ends of the file
-    assert np.diff(kept[sample.station == 0]).max() <= 2
+    assert np.diff(kept[(sample.station == 0) & (sample.target == 0)]).max() <= 3  # 2 of 3, a target-1 row between
+    # three targets a pose: the rows chosen, not every row of their poses
+    three = Measurements(np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 0)), (), pose, np.repeat(pose, 3)[:n],
+                         np.tile([0, 1, 2], n)[:n], np.zeros((n, 3)), "big")
+    assert len(spread_sample(three).xyz) <= PLACEMENT_ROWS + 3
     small = dataclasses.replace(data, station=None).subset(np.arange(100))
     assert spread_sample(small) is small

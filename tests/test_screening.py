@@ -104,10 +104,12 @@ def test_screen_batches_many_candidates_and_breaks_exact_ties_in_candidate_order
     noise = [Candidate("polynomial", (f"a{i}",), (f"a{i}",), rng.normal(size=(40, 1)), None if i % 3 else (1,))
              for i in range(300)]
     twin = Candidate("aux", ("tau",), ("s", "c", "t"), cands[1].values.copy())
+    # the true effect again, offered to error 1 alone: were it offered to error 2 it would lead the hits
+    elsewhere = Candidate("aux", ("tau1",), ("s1", "c1", "t1"), cands[1].values.copy(), (1,))
     base = basis(H, [np.linalg.qr(H, mode="r")])
     sigma2 = float(r @ r) / (len(r) - H.shape[1])
     for first, second in ((cands[1], twin), (twin, cands[1])):
-        offered = [*noise, first, second, cands[0]]
+        offered = [*noise, elsewhere, first, second, cands[0]]
         hits = screen(J, rows_pose, r, base, sigma2, offered, [0, 1, 2, 3])
         assert offered[hits[0].candidate] is first and hits[0].error == 2
         assert all(h.error == 1 for h in hits if offered[h.candidate].errors == (1,))  # offered to error 1 only

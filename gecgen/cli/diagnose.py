@@ -38,6 +38,7 @@ def add_parser(command):
 def run(args) -> dict:
     from gecgen.api import Diagnoser
     from gecgen.emit import generate
+    from gecgen.runtime.compiled import printed_code
 
     register_val = args.register == "val"
     if register_val and not args.val:
@@ -54,7 +55,7 @@ def run(args) -> dict:
     diag, robot, placement = diagnoser.diagnosis_, diagnoser.robot_, diagnoser.placement_
     out = diagnoser.save(args.output or f"{robot.name}.diagnosed.errors.yaml")
     generated = Path(args.generated or out.with_suffix("").with_suffix("").as_posix() + "_generated")
-    generate(robot, diag.final.model, generated)
+    generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model, diag.final.cm.key))
     result = {"robot": robot.name, "error_model": diag.initial.model.source, "before": diag.before, "after": diag.after,
               "effects": [e.to_dict() for e in diag.effects], "errors_out": str(out), "generated": str(generated),
               "rounds": diag.history, "candidates_tested": diag.candidates_tested, "remaining": diag.remaining,

@@ -104,14 +104,25 @@ def _printed(fn: Function, printer, element, signature: bool) -> dict:
                 signature=sig if signature else "")
 
 
-def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = None) -> dict[str, str]:
-    """File name -> text of every generated file, manifest included; deterministic."""
+def printed(robot: Robot, model: ErrorModel) -> dict[str, list[dict]]:
+    """Every function's straight-line code as the C and the CasADi templates print it ({"c": [...],
+    "casadi": [...]}, plain lists and strings): the symbolic build and its printing, the slow part of
+    `render`, which depends on the robot's and the model's content alone (runtime.compiled keeps it
+    in the code cache)."""
     robot.require_placed()
-    functions = functions or all_functions(robot, model)
+    functions = all_functions(robot, model)
+    return {"c": [_printed(f, CPrinter(), c_element, True) for f in functions],
+            "casadi": [_printed(f, CasadiPrinter(), casadi_element, False) for f in functions]}
+
+
+def render(robot: Robot, model: ErrorModel, code: dict[str, list[dict]] | None = None) -> dict[str, str]:
+    """File name -> text of every generated file, manifest included; deterministic. `code`: what
+    `printed` returns for this robot and model, when already at hand."""
+    robot.require_placed()
+    code = code or printed(robot, model)
     ctx = context(robot, model)
     c_env, ca_env = _env("c"), _env("casadi")
-    c_fns = [_printed(f, CPrinter(), c_element, True) for f in functions]
-    ca_fns = [_printed(f, CasadiPrinter(), casadi_element, False) for f in functions]
+    c_fns, ca_fns = code["c"], code["casadi"]
     files = {
         f"{robot.name}.h": c_env.get_template("header.h.j2").render(functions=c_fns, **ctx),
         f"{robot.name}.c": c_env.get_template("source.c.j2").render(functions=c_fns, **ctx),
@@ -132,9 +143,11 @@ def render(robot: Robot, model: ErrorModel, functions: list[Function] | None = N
     return files
 
 
-def generate(robot: Robot, model: ErrorModel, outdir: str | Path) -> dict[str, str]:
-    """Write the generated files into outdir (created if needed), each atomically; returns them."""
-    files = render(robot, model)
+def generate(robot: Robot, model: ErrorModel, outdir: str | Path,
+             code: dict[str, list[dict]] | None = None) -> dict[str, str]:
+    """Write the generated files into outdir (created if needed), each atomically; returns them.
+    `code`: as for `render`."""
+    files = render(robot, model, code)
     for name, text in files.items():
         write_atomically(Path(outdir) / name, text)
     return files

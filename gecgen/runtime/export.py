@@ -25,7 +25,7 @@ from gecgen.model.kinematics import error_transform
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import require
 from gecgen.runtime.calibration import Calibration, model_hash
-from gecgen.runtime.compiled import OK, CompiledModel
+from gecgen.runtime.compiled import OK, CompiledModel, rendered
 from gecgen.runtime.redundancy import generic_design
 
 #: the example program's compensation settings: `gecgen compensate`'s (Newton steps, residual m),
@@ -69,12 +69,12 @@ def example_command(calib: Calibration, cm: CompiledModel, where: str) -> dict[s
 def c_files(calib: Calibration, cm: CompiledModel, where: str) -> tuple[dict[str, str], dict[str, list[float]]]:
     """File name -> text: what `gecgen generate` writes for the calibration's robot and error model,
     NAME_calibration.h and NAME_example.c; and the example's command."""
-    from gecgen.emit import render, render_calibration
+    from gecgen.emit import render_calibration
 
     # the generated comments and manifest then name the calibration as the error model's source
     model = dataclasses.replace(calib.model, source=Path(where).name,
                                 source_hash=model_hash(calib.robot, calib.model))
-    files = render(calib.robot, model)
+    files = rendered(calib.robot, model)
     command = example_command(calib, cm, where)
     reasons = {e["param"]: e["reason"] for e in calib.report.get("eliminated", [])}
     files.update(render_calibration(calib.robot, model, calib.c, calib.std, command, EXAMPLE_MAX_ITER, EXAMPLE_TOL,

@@ -498,10 +498,11 @@ def absurd_error(cm: CompiledModel, q: np.ndarray, w: np.ndarray, aux: np.ndarra
     ABSURD_ROTATION_RAD ("generalized error 3.ey reaches 2.1 m (limit 0.5 m)"), or None. Blocks of
     BLOCK_POSES poses, so the memory does not grow with the data; w and aux may be shared by all poses."""
     q = np.atleast_2d(q)
+    w, aux = (None if a is None else np.broadcast_to(a, (len(q), np.shape(a)[-1])) for a in (w, aux))
     eps = np.zeros(cm.robot.n_errors)
     for start in range(0, len(q), BLOCK_POSES):
         part = slice(start, start + BLOCK_POSES)
-        block = np.abs(cm.eps(q[part], *(a[part] if np.ndim(a) == 2 else a for a in (w, aux)), c))
+        block = np.abs(cm.eps(q[part], *(None if a is None else a[part] for a in (w, aux)), c))
         eps = np.maximum(eps, np.where(np.isfinite(block), block, np.inf).max(axis=0))
     limit = np.tile([ABSURD_TRANSLATION_M] * 3 + [ABSURD_ROTATION_RAD] * 3, cm.robot.n_frames + 1)
     if not np.any(eps > limit):

@@ -54,7 +54,7 @@ FAR_RAD = 0.02
 RANK_TOL = 1e-7
 #: measured rows the placement is estimated from at most: it only starts the fit, which sees every
 #: row, and its dense Jacobian would otherwise take memory in proportion to the data (330 MB at
-#: 200,000 rows); spread evenly through each stationing, each keeping at least MIN_STATION_ROWS
+#: 200,000 rows); spread evenly through each stationing and target, each keeping at least MIN_STATION_ROWS
 PLACEMENT_ROWS, MIN_STATION_ROWS = 20_000, 500
 
 
@@ -206,16 +206,19 @@ def with_targets(robot: Robot, targets: dict[str, tuple[float, float, float]],
 
 
 def spread_sample(data: Measurements) -> Measurements:
-    """The poses of at most about PLACEMENT_ROWS measured rows, evenly spread through each
-    stationing's rows in file order (every pose of data with fewer rows)."""
+    """At most about PLACEMENT_ROWS measured rows (and their poses), evenly spread in file order
+    through the rows of each stationing and target, each keeping at least MIN_STATION_ROWS (all of
+    fewer): every frame and every target keeps its share. data itself when it has fewer rows."""
     if len(data.xyz) <= PLACEMENT_ROWS:
         return data
     keep = np.zeros(len(data.xyz), bool)
-    for s in np.unique(data.station):
-        rows = np.nonzero(data.station == s)[0]
+    groups = np.unique(np.column_stack([data.station, data.target]), axis=0)
+    for station, target in groups:
+        rows = np.nonzero((data.station == station) & (data.target == target))[0]
         share = min(len(rows), max(MIN_STATION_ROWS, PLACEMENT_ROWS * len(rows) // len(data.xyz)))
         keep[rows[np.linspace(0, len(rows) - 1, share).astype(int)]] = True
-    return data.subset(np.unique(data.pose[keep]))
+    poses = np.unique(data.pose[keep])
+    return data.subset(poses).rows_of(keep[np.isin(data.pose, poses)])
 
 
 def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tuple[Robot, Placement | None]:

@@ -16,8 +16,8 @@
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 /* Newton steps in a row that each take less than a thousandth off the residual: a plateau with no
- * solution near (an absurd calibration) or rounding level below tol; compensate then stops, however
- * many steps max_iter allows, so a call's time is bounded by the data, not by max_iter alone */
+ * solution near (an absurd calibration) or rounding level below tol; compensate then stops rather
+ * than run on to a large max_iter (2**31 - 1 steps of such a plateau took days) */
 #define STALL_STEPS 20
 
 const double industrial6r_q_min[NQ] = { -3.2288591161895095, -2.443460952792061, -2.0943951023931957, -6.1086523819801535, -2.129301687433082, -6.1086523819801535 };

@@ -16,8 +16,8 @@
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 /* Newton steps in a row that each take less than a thousandth off the residual: a plateau with no
- * solution near (an absurd calibration) or rounding level below tol; compensate then stops, however
- * many steps max_iter allows, so a call's time is bounded by the data, not by max_iter alone */
+ * solution near (an absurd calibration) or rounding level below tol; compensate then stops rather
+ * than run on to a large max_iter (2**31 - 1 steps of such a plateau took days) */
 #define STALL_STEPS 20
 
 const double pps_q_min[NQ] = { -1.125, -0.28, -0.735, -1.5707963267948966, -0.05235987755982989, -0.05235987755982989 };

@@ -16,8 +16,8 @@
 /* Rows of the system solved per Newton step: min(6, NQ). */
 #define NS (NQ < 6 ? NQ : 6)
 /* Newton steps in a row that each take less than a thousandth off the residual: a plateau with no
- * solution near (an absurd calibration) or rounding level below tol; compensate then stops, however
- * many steps max_iter allows, so a call's time is bounded by the data, not by max_iter alone */
+ * solution near (an absurd calibration) or rounding level below tol; compensate then stops rather
+ * than run on to a large max_iter (2**31 - 1 steps of such a plateau took days) */
 #define STALL_STEPS 20
 
 const double puma560_q_min[NQ] = { -2.792526803190927, -0.7853981633974483, -3.9269908169872414, -1.9198621771937625, -1.7453292519943295, -4.642575810304916 };
