@@ -46,6 +46,17 @@ targets:
   probe: estimate
 """
 
+#: where the time goes: cProfile of one warm run each (2026-11-25; the profiler slows it about 1.6x)
+PROFILE = """Where the time goes (cProfile, warm, before the generated code was cached by content):
+- UR10, 18 poses, 18.2 s under the profiler: the report 12.0 s (its figures 8.5 s, matplotlib drawing the
+  residual-per-joint grids), rendering the generated C again for the output folder 3.0 s (now read from the
+  cache: `runtime.compiled.printed_code`), imports and the parser 2.2 s, and the choice itself, every candidate in
+  every fold, 0.85 s.
+- PPS paper design, 29.4 s under the profiler: the choice 15.9 s (diagnose in the five folds and on all the data
+  15.0 s: screening 11.1 s, of which the choice's own cross-validation 6.6 s), the report 10.7 s (figures 5.7 s,
+  the effects' 4.9 s), imports 2.0 s.
+So on small data calibrate is its report, and on a diagnosed model it is diagnose run six times: one diagnose
+(last column) is 2 to 5 s of it."""
 
 def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
     """(case, robot file, calibrate's data arguments, diagnose's data arguments) of every case."""
@@ -66,7 +77,7 @@ def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
                               "--val-out", str(tmp / f"{name}.val.csv")), check=True, capture_output=True)
     val = {name: ["--val", str(tmp / f"{name}.val.csv")] for name in sims}
     return [("UR10 walk-through, 18 training poses (real)", ur10_robot,
-             [str(tmp / "ur10.csv"), "--holdout", "0.2"], [str(tmp / "ur10.csv")]),
+             [str(tmp / "ur10.csv"), "--holdout", "0.2"], [str(tmp / "ur10.csv"), "--holdout", "0.2"]),
             ("industrial6r, 150 poses", robots / "industrial6r.yaml", [str(tmp / "industrial6r.csv"),
                                                                       *val["industrial6r"]],
              [str(tmp / "industrial6r.csv"), *val["industrial6r"]]),
@@ -93,9 +104,13 @@ def main():
                 cold, _ = calibrate({"GECGEN_CACHE": str(tmp / "cold-cache")})
             calibrate({"GECGEN_CACHE": str(cache)})  # builds every model's code
             warm, result = calibrate({"GECGEN_CACHE": str(cache)})
-            diag = timed(*gecgen("diagnose", str(robot), *diag_data, "--errors", str(ROOT / "robots" /
-                                 "constant.errors.yaml"), "-o", str(tmp / "d.errors.yaml")),
-                         env={"GECGEN_CACHE": str(cache)})
+            def diagnose():
+                return timed(*gecgen("diagnose", str(robot), *diag_data, "--errors", str(ROOT / "robots" /
+                                     "constant.errors.yaml"), "-o", str(tmp / "d.errors.yaml")),
+                             env={"GECGEN_CACHE": str(cache)})
+
+            diagnose()  # its rounds' models built
+            diag = diagnose()
             if diag["rc"] != 0:
                 raise SystemExit(f"{label}: diagnose exit {diag['rc']}: {diag['stderr']}")
             candidates = ", ".join(f"{c['model']} {c['cv_rms_mm']:.3g}" if c.get("cv_rms_mm") is not None
@@ -114,6 +129,7 @@ def main():
              "|---|---|---|---|---|---|"]
     lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {model} | {cands} |"
               for label, warm, cold, diag, model, cands in rows]
+    lines += ["", PROFILE]
     write_section("calibrate", "\n".join(lines))
 
 

@@ -12,7 +12,7 @@ so a group of ten load columns is not preferred over one sinusoid for its size a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import linalg, sparse, stats
@@ -282,17 +282,17 @@ def selection_cv_rms(fs: Folded, J: np.ndarray, rows_pose: np.ndarray, cands: li
     better than new ones; only an effect that wins on the other folds' poses too is real. The folds
     choose among `shortlist`, the (candidate, error) pairs strongest on all poses: a pair far down
     that list does not win on four fifths of them."""
-    by_error: dict[int, list[int]] = {}
-    for ci, e in shortlist:
-        by_error.setdefault(e, []).append(ci)
+    # each pair offered to its own error alone: one screening per fold, not one per error
+    offered = [replace(cands[ci], errors=(e,)) for ci, e in shortlist]
+    errors = sorted({e for _, e in shortlist})
     sq = 0.0
     for f in range(FOLDS):
         train, base = fs.training(f), fs.basis(f)
         resid = base.residual(fs.r[train])
         sigma2 = float(resid @ resid) / max(_dof(fs.rows_dof, fs.r, train) - fs.B.shape[1], 1)
         Jt, pt = J[train], rows_pose[train]  # once per fold: the copies are large at thousands of poses
-        hits = [(h.log_p, cis[h.candidate], e) for e, cis in by_error.items()
-                for h in screen(Jt, pt, resid, base, sigma2, [cands[k] for k in cis], [e])]
+        hits = [(h.log_p, shortlist[h.candidate][0], h.error)
+                for h in (screen(Jt, pt, resid, base, sigma2, offered, errors) if offered else [])]
         best = min(hits, default=None)
         sq += fs.held_out_sq(f, None if best is None else columns(J, cands[best[1]], best[2], rows_pose))
     return float(np.sqrt(sq / (_dof(fs.rows_dof, fs.r) / 3)))
