@@ -137,17 +137,25 @@ def test_load_terms_agree_in_c_casadi_and_sympy_and_compose(rng):
     q, w = random_q(robot, rng, 3), rng.normal(0, 30, (3, 6))
     coef = rng.normal(0, 1e-4, len(model.coefficients))
     np.testing.assert_allclose(c_model.eps(q, w, None, coef), ca_model.eps(q, w, None, coef), atol=1e-13)
-    names, L = c_model.load_signals(q, w)
+    names, L = c_model.load_signals(q, w)  # every signal, in numpy
     assert names == ca_model.load_signals(q, w)[0] == catalog(robot).names
-    np.testing.assert_allclose(L, ca_model.load_signals(q, w)[1], atol=1e-12)
+    # the generated code computes the model's own signals only, in catalog order
+    used = model.load_signals(robot)
+    assert used == [n for n in names if n in {"gravity_torque(q6)", "wrench_torque(q2)", "gravity(q4,2)"}
+                    or n.startswith("gravity(q6,")]
+    own = [names.index(n) for n in used]
+    f_c, f_ca = c_model.basis(q, w, None), ca_model.basis(q, w, None)
+    np.testing.assert_allclose(f_c, f_ca, atol=1e-12)
     for i in range(3):
-        np.testing.assert_allclose(L[i], fns["loads"].evaluate(q=q[i], w=w[i])["L"], atol=1e-12)
+        np.testing.assert_allclose(L[i, own], fns["loads"].evaluate(q=q[i], w=w[i])["L"], atol=1e-12)
         f = fns["basis"].evaluate(q=q[i], w=w[i], aux=[])["f"]
-        np.testing.assert_allclose(f, fns["basis_at_loads"].evaluate(q=q[i], w=w[i], aux=[], L=L[i])["f"], atol=1e-12)
+        np.testing.assert_allclose(f, fns["basis_at_loads"].evaluate(q=q[i], w=w[i], aux=[], L=L[i, own])["f"],
+                                   atol=1e-12)
         value = dict(zip(names, L[i]))
         expect = [1.0, np.sign(value["gravity_torque(q6)"]), *[value[f"gravity(q6,{r})"] for r in range(1, 5)],
                   q[i, 2] * value["wrench_torque(q2)"], abs(value["gravity(q4,2)"])]
         np.testing.assert_allclose(f, expect, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(f_c[i], expect, rtol=1e-12, atol=1e-12)  # the C's loads: the numpy values
 
 
 def test_spellings_canonical_text_labels_and_round_trip():

@@ -73,10 +73,11 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     coef_term = [terms.index(c.term.text) for c in coefs]
     sources = list(robot.source_hashes) + ([Path(model.source).name] if model.source_hash else [])
     loads = catalog(robot)
+    used = [loads.by_name(n) for n in model.load_signals(robot)]
     return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
                 mimics=any(j.coupling for j in robot.chain) or bool(robot.branches),
                 frame_names=frame_names(robot), branch_suffixes=branch_suffixes(robot),
-                nl=len(loads.signals), loads=[(s.name, loads.describe(s, robot)) for s in loads.signals],
+                nl=len(used), loads=[(s.name, loads.describe(s, robot)) for s in used],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
                 nq=robot.n, nt=len(robot.targets), ne=robot.n_errors, nc=len(coefs), nf=len(terms),

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
+from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms, catalog
 from gecgen.model.orientation import PREFIXES as ORIENTATION_PREFIXES
 from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
 from gecgen.model.validation import ModelError, excerpt, is_name, read_yaml, require, require_keys
@@ -69,6 +69,12 @@ class ErrorModel:
     def variables(self) -> set[str]:
         """The names of the variables (joints, wrench components, aux signals) its terms use."""
         return {s.name for t in self.unique_terms() for s in t.expr.free_symbols}
+
+    def load_signals(self, robot: Robot) -> list[str]:
+        """The load signals its terms use, in the robot's catalog order (`model.loads`): the ones its
+        generated code computes (NAME_loads, NAME_NL)."""
+        used = self.variables()
+        return [name for name in catalog(robot).names if name in used]
 
     def unique_terms(self) -> list[Term]:
         """Distinct basis functions in first-use order: the generated code evaluates each once."""

@@ -200,6 +200,35 @@ def _numeric_columns(robot: Robot, q: np.ndarray) -> list[np.ndarray]:
             for J in range(1, robot.n + 1)]
 
 
+def signal_values(robot: Robot, q: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Every load signal of the robot's catalog (N, L) at joints q (N, n) and wrenches w (N, 6) or
+    (6,), by the formulas the generated code prints (module docstring), on the nominal chain in
+    numpy: diagnose's candidates use every signal, the generated code computes only a model's own."""
+    q = np.atleast_2d(np.asarray(q, float))
+    w = np.broadcast_to(np.asarray(w, float), (len(q), 6))
+    cat = catalog(robot)
+    W = frames(robot, q)
+    F = [W[robot.parent(k)] @ constant(joint.pre) for k, joint in enumerate(robot.chain, start=1)]
+    axes = [tuple((Fk[:, :3, :3] @ np.array([float(v) for v in joint.axis])).T) for Fk, joint in zip(F, robot.chain)]
+    origins = [tuple(Fk[:, :3, 3].T) for Fk in F]
+    S = W[robot.n_frames + 1] if robot.wrench_frame == "tool" else W[robot.wrench_frame]  # the sensor frame
+    force, moment = (tuple(np.einsum("nij,nj->in", S[:, :3, :3], w[:, k:k + 3])) for k in (0, 3))
+    moving = set(robot.path(robot.sensor_frame()))  # the frames that move the sensor
+    columns = _numeric_columns(robot, q) if any(s.kind != "wrench_torque" for s in cat.signals) else []
+    out = np.empty((len(q), len(cat.signals)))
+    for i, s in enumerate(cat.signals):
+        moved = robot.driven(s.joint - 1)
+        if s.kind == "wrench_torque":
+            out[:, i] = sum(float(mult) * frame_wrench_torque(lambda x: x, robot.chain[k - 1].kind, axes[k - 1],
+                                                              origins[k - 1], tuple(S[:, :3, 3].T), force, moment)
+                            for k, mult in moved if k in moving)
+        elif s.kind == "gravity":
+            out[:, i] = columns[s.joint - 1][:, s.column]
+        else:
+            out[:, i] = columns[s.joint - 1] @ np.concatenate(cat.params[moved[0][0]:])
+    return out
+
+
 def _independent(Y: np.ndarray, g: float) -> list[int]:
     """Indices of the columns of Y (P poses) that are independent of the columns before them
     (Gram-Schmidt, twice for accuracy), relative to Y's largest column and at least to |g| sqrt(P),

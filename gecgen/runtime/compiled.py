@@ -29,7 +29,7 @@ import numpy as np
 
 from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
-from gecgen.model.loads import catalog
+from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
 
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
@@ -258,14 +258,10 @@ class CompiledModel:
     def load_signals(self, q, w=None) -> tuple[list[str], np.ndarray]:
         """Every load signal the robot supports at joints q (N, nq) and wrenches w (N, 6) (zero when
         None): their names, exactly the term-language spellings (`gecgen.model.loads`), and values
-        (N, L) in N m (N for a prismatic joint; gravity columns per kg and per kg m)."""
-        q, w, _, N = self._poses(q, w, np.zeros(self.dims.naux))  # the loads need no aux signals
-        names = catalog(self.robot).names
-        if self.backend == "casadi":
-            return names, self._casadi("loads", N, q, w)[0].reshape(N, len(names))
-        out = np.empty((N, len(names)))
-        self._fn("loads_batch")(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(out))
-        return names, out
+        (N, L) in N m (N for a prismatic joint; gravity columns per kg and per kg m). Computed in numpy
+        (`model.loads.signal_values`): the generated code computes only the model's own."""
+        q, w, _, _ = self._poses(q, w, np.zeros(self.dims.naux))  # the loads need no aux signals
+        return catalog(self.robot).names, signal_values(self.robot, q, w)
 
     def nominal_targets(self, q):
         """Target positions (N, nt, 3) of the nominal model."""

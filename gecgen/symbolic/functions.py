@@ -4,7 +4,7 @@ from __future__ import annotations
 import sympy as sp
 
 from gecgen.model.errors import ErrorModel, joint_symbols
-from gecgen.model.loads import catalog, load_symbol
+from gecgen.model.loads import load_symbol
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.symbolic.chain import fk_function, jacobian_function, targets_function, tool_jacobian_function
 from gecgen.symbolic.loads import load_values, loads_function
@@ -22,15 +22,14 @@ def basis_function(robot: Robot, model: ErrorModel, loads_given: bool = False) -
     w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
     aux = tuple(sp.Symbol(n, real=True) for n in model.aux)
     terms = model.unique_terms()
-    names = catalog(robot).names
+    names = model.load_signals(robot)
     if loads_given:
         L = tuple(load_symbol(n) for n in names)
         f = [b.let(t.expr) for t in terms]
         return b.function("basis_at_loads", f"Basis terms f as {robot.name}_basis computes them, with the load "
                           f"signals L ({robot.name.upper()}_NL, as {robot.name}_loads returns them) given instead of "
                           f"computed from q and w.", {"q": q, "w": w, "aux": aux, "L": L}, {"f": f})
-    used = set().union(*(t.expr.free_symbols for t in terms))
-    values = load_values(b, robot, q, w, [n for n in names if load_symbol(n) in used])
+    values = load_values(b, robot, q, w, names)
     f = [b.let(t.expr.xreplace(values)) for t in terms]
     return b.function("basis", "Distinct basis terms f of the error model at joints q, wrench w "
                       "(fx fy fz mx my mz) and auxiliary signals aux.", {"q": q, "w": w, "aux": aux}, {"f": f})
@@ -41,4 +40,4 @@ def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
     branches = range(len(robot.tips()))
     return [*(fk_function(robot, b) for b in branches), targets_function(robot), jacobian_function(robot),
             *(tool_jacobian_function(robot, b) for b in branches), basis_function(robot, model),
-            loads_function(robot), basis_function(robot, model, loads_given=True)]
+            loads_function(robot, model.load_signals(robot)), basis_function(robot, model, loads_given=True)]

@@ -57,11 +57,12 @@ def load_values(b: Builder, robot: Robot, q, w, names) -> dict[sp.Symbol, sp.Exp
     return out
 
 
-def loads_function(robot: Robot) -> Function:
-    """Every load signal the robot supports, L (NL), at joints q and wrench w."""
+def loads_function(robot: Robot, names: list[str]) -> Function:
+    """The load signals `names` (canonical spellings, those an error model uses), L (NL), at joints q
+    and wrench w: only these, since a long chain supports thousands (their number grows with the
+    square of the joints)."""
     b, q = Builder(), joint_symbols(robot)
     w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
-    names = catalog(robot).names
     values = load_values(b, robot, q, w, names)
     return b.function("loads", f"Load signals L ({robot.name.upper()}_NL, listed above) at joints q and wrench w "
                       "(fx fy fz mx my mz): N m, N along a prismatic joint; gravity columns N m per kg and per kg m.",

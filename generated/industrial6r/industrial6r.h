@@ -9,42 +9,6 @@
  * Generalized errors eps (INDUSTRIAL6R_NE): frame i errors ex ey ez es er ep at 6i..6i+5.
  * Load signals L (INDUSTRIAL6R_NL), computed on the nominal chain with gravity (0.0, 0.0, -9.80665) m/s^2
  * in the world; each name is the term-language spelling an error model uses:
- *   L[0] wrench_torque(q1): torque of the measured wrench on joint q1 (a1), N m
- *   L[1] wrench_torque(q2): torque of the measured wrench on joint q2 (a2), N m
- *   L[2] wrench_torque(q3): torque of the measured wrench on joint q3 (a3), N m
- *   L[3] wrench_torque(q4): torque of the measured wrench on joint q4 (a4), N m
- *   L[4] wrench_torque(q5): torque of the measured wrench on joint q5 (a5), N m
- *   L[5] wrench_torque(q6): torque of the measured wrench on joint q6 (a6), N m
- *   L[6] gravity(q2,1): gravity on joint q2 (a2) of a unit mass at the origin of frame 2, N m per kg
- *   L[7] gravity(q2,2): gravity on joint q2 (a2) of a unit first moment along the y axis of frame 2, N m per kg m
- *   L[8] gravity(q2,3): gravity on joint q2 (a2) of a unit mass at the origin of frame 3, N m per kg
- *   L[9] gravity(q2,4): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 3, N m per kg m
- *   L[10] gravity(q2,5): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 4, N m per kg m
- *   L[11] gravity(q2,6): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 4, N m per kg m
- *   L[12] gravity(q2,7): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 5, N m per kg m
- *   L[13] gravity(q2,8): gravity on joint q2 (a2) of a unit first moment along the z axis of frame 5, N m per kg m
- *   L[14] gravity(q2,9): gravity on joint q2 (a2) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[15] gravity(q2,10): gravity on joint q2 (a2) of a unit first moment along the y axis of frame 6, N m per kg m
- *   L[16] gravity(q3,1): gravity on joint q3 (a3) of a unit mass at the origin of frame 3, N m per kg
- *   L[17] gravity(q3,2): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 3, N m per kg m
- *   L[18] gravity(q3,3): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 4, N m per kg m
- *   L[19] gravity(q3,4): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 4, N m per kg m
- *   L[20] gravity(q3,5): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 5, N m per kg m
- *   L[21] gravity(q3,6): gravity on joint q3 (a3) of a unit first moment along the z axis of frame 5, N m per kg m
- *   L[22] gravity(q3,7): gravity on joint q3 (a3) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[23] gravity(q3,8): gravity on joint q3 (a3) of a unit first moment along the y axis of frame 6, N m per kg m
- *   L[24] gravity(q4,1): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 4, N m per kg m
- *   L[25] gravity(q4,2): gravity on joint q4 (a4) of a unit first moment along the z axis of frame 4, N m per kg m
- *   L[26] gravity(q4,3): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 5, N m per kg m
- *   L[27] gravity(q4,4): gravity on joint q4 (a4) of a unit first moment along the z axis of frame 5, N m per kg m
- *   L[28] gravity(q4,5): gravity on joint q4 (a4) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[29] gravity(q4,6): gravity on joint q4 (a4) of a unit first moment along the y axis of frame 6, N m per kg m
- *   L[30] gravity(q5,1): gravity on joint q5 (a5) of a unit first moment along the x axis of frame 5, N m per kg m
- *   L[31] gravity(q5,2): gravity on joint q5 (a5) of a unit first moment along the z axis of frame 5, N m per kg m
- *   L[32] gravity(q5,3): gravity on joint q5 (a5) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[33] gravity(q5,4): gravity on joint q5 (a5) of a unit first moment along the y axis of frame 6, N m per kg m
- *   L[34] gravity(q6,1): gravity on joint q6 (a6) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[35] gravity(q6,2): gravity on joint q6 (a6) of a unit first moment along the y axis of frame 6, N m per kg m
  * No function allocates memory or keeps state; all are safe to call from any thread.
  */
 #ifndef GECGEN_INDUSTRIAL6R_H
@@ -60,7 +24,7 @@ extern "C" {
 #define INDUSTRIAL6R_NC 330
 #define INDUSTRIAL6R_NF 19
 #define INDUSTRIAL6R_NAUX 0
-#define INDUSTRIAL6R_NL 36
+#define INDUSTRIAL6R_NL 0
 /* The robot and error model this code computes: the first 60 bits of manifest.json's model_hash. A
  * coefficient header from `gecgen export` compares it with its own and stops the build on a mismatch. */
 #define INDUSTRIAL6R_MODEL_HASH 0x31021de457306ba

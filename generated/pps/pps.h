@@ -9,19 +9,6 @@
  * Generalized errors eps (PPS_NE): frame i errors ex ey ez es er ep at 6i..6i+5.
  * Load signals L (PPS_NL), computed on the nominal chain with gravity (0.0, -9.80665, 0.0) m/s^2
  * in the world; each name is the term-language spelling an error model uses:
- *   L[0] wrench_torque(q1): force of the measured wrench on joint q1 (lateral), N
- *   L[1] wrench_torque(q2): force of the measured wrench on joint q2 (vertical), N
- *   L[2] wrench_torque(q3): force of the measured wrench on joint q3 (longitudinal), N
- *   L[3] wrench_torque(q4): torque of the measured wrench on joint q4 (theta), N m
- *   L[4] wrench_torque(q5): torque of the measured wrench on joint q5 (roll), N m
- *   L[5] wrench_torque(q6): torque of the measured wrench on joint q6 (pitch), N m
- *   L[6] gravity(q2,1): gravity on joint q2 (vertical) of a unit mass at the origin of frame 2, N per kg
- *   L[7] gravity(q5,1): gravity on joint q5 (roll) of a unit first moment along the x axis of frame 5, N m per kg m
- *   L[8] gravity(q5,2): gravity on joint q5 (roll) of a unit first moment along the z axis of frame 5, N m per kg m
- *   L[9] gravity(q5,3): gravity on joint q5 (roll) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[10] gravity(q5,4): gravity on joint q5 (roll) of a unit first moment along the y axis of frame 6, N m per kg m
- *   L[11] gravity(q6,1): gravity on joint q6 (pitch) of a unit first moment along the x axis of frame 6, N m per kg m
- *   L[12] gravity(q6,2): gravity on joint q6 (pitch) of a unit first moment along the y axis of frame 6, N m per kg m
  * No function allocates memory or keeps state; all are safe to call from any thread.
  */
 #ifndef GECGEN_PPS_H
@@ -37,7 +24,7 @@ extern "C" {
 #define PPS_NC 330
 #define PPS_NF 19
 #define PPS_NAUX 0
-#define PPS_NL 13
+#define PPS_NL 0
 /* The robot and error model this code computes: the first 60 bits of manifest.json's model_hash. A
  * coefficient header from `gecgen export` compares it with its own and stops the build on a mismatch. */
 #define PPS_MODEL_HASH 0xa14fbd46f6855cb

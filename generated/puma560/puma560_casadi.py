@@ -7,9 +7,9 @@ functions in puma560.h (flat row-major arrays); call `.generate()` on one for Ca
 import casadi as ca
 
 NAME = "puma560"
-NQ, NT, NE, NC, NF, NAUX, NL = 6, 3, 42, 42, 1, 0, 36
+NQ, NT, NE, NC, NF, NAUX, NL = 6, 3, 42, 42, 1, 0, 0
 #: the load signals L of `loads`, in order (term-language spellings)
-LOADS = ("wrench_torque(q1)", "wrench_torque(q2)", "wrench_torque(q3)", "wrench_torque(q4)", "wrench_torque(q5)", "wrench_torque(q6)", "gravity(q2,1)", "gravity(q2,2)", "gravity(q2,3)", "gravity(q2,4)", "gravity(q2,5)", "gravity(q2,6)", "gravity(q2,7)", "gravity(q2,8)", "gravity(q2,9)", "gravity(q2,10)", "gravity(q3,1)", "gravity(q3,2)", "gravity(q3,3)", "gravity(q3,4)", "gravity(q3,5)", "gravity(q3,6)", "gravity(q3,7)", "gravity(q3,8)", "gravity(q4,1)", "gravity(q4,2)", "gravity(q4,3)", "gravity(q4,4)", "gravity(q4,5)", "gravity(q4,6)", "gravity(q5,1)", "gravity(q5,2)", "gravity(q5,3)", "gravity(q5,4)", "gravity(q6,1)", "gravity(q6,2)", )
+LOADS = ()
 COEF_ERROR = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39, 40, 41,)
 COEF_TERM = (0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
@@ -1122,105 +1122,7 @@ def _basis(q, w, aux):
 
 
 def _loads(q, w):
-    t0 = ca.cos(q[0])
-    t1 = ca.sin(q[0])
-    t2 = ca.cos(q[1])
-    t3 = ca.sin(q[1])
-    t4 = t0*t2
-    t5 = -t0*t3
-    t6 = t1*t2
-    t7 = -t1*t3
-    t8 = 0.4318*t4
-    t9 = 0.4318*t6
-    t10 = 0.4318*t3
-    t11 = ca.cos(q[2])
-    t12 = ca.sin(q[2])
-    t13 = t11*t4 + t12*t5
-    t14 = t11*t5 - t12*t4
-    t15 = t11*t6 + t12*t7
-    t16 = t11*t7 - t12*t6
-    t17 = t11*t3 + t12*t2
-    t18 = t11*t2 - t12*t3
-    t19 = 0.15005*t1 + 0.0203*t13 + t8
-    t20 = -0.15005*t0 + 0.0203*t15 + t9
-    t21 = t10 + 0.0203*t17
-    t22 = ca.cos(q[3])
-    t23 = ca.sin(q[3])
-    t24 = -t1*t23 + t13*t22
-    t25 = -t1*t22 - t13*t23
-    t26 = t0*t23 + t15*t22
-    t27 = t0*t22 - t15*t23
-    t28 = t17*t22
-    t29 = -t17*t23
-    t30 = 0.4318*t14 + t19
-    t31 = 0.4318*t16 + t20
-    t32 = 0.4318*t18 + t21
-    t33 = ca.cos(q[4])
-    t34 = ca.sin(q[4])
-    t35 = t14*t34 + t24*t33
-    t36 = t14*t33 - t24*t34
-    t37 = t16*t34 + t26*t33
-    t38 = t16*t33 - t26*t34
-    t39 = t18*t34 + t28*t33
-    t40 = t18*t33 - t28*t34
-    t41 = ca.cos(q[5])
-    t42 = ca.sin(q[5])
-    t43 = t25*t42 + t35*t41
-    t44 = t25*t41 - t35*t42
-    t45 = t27*t42 + t37*t41
-    t46 = t27*t41 - t37*t42
-    t47 = t29*t42 + t39*t41
-    t48 = t29*t41 - t39*t42
-    t49 = t36*w[2] + t43*w[0] + t44*w[1]
-    t50 = t38*w[2] + t45*w[0] + t46*w[1]
-    t51 = t40*w[2] + t47*w[0] + t48*w[1]
-    t52 = t36*w[5] + t43*w[3] + t44*w[4]
-    t53 = t38*w[5] + t45*w[3] + t46*w[4]
-    t54 = t40*w[5] + t47*w[3] + t48*w[4]
-    t55 = t30*t50 - t31*t49 + t54
-    t56 = -t0*(-t30*t51 + t32*t49 + t53) + t1*(t31*t51 - t32*t50 + t52)
-    t57 = t30 - t8
-    t58 = t31 - t9
-    t59 = -t10 + t32
-    t60 = -t0*(t49*t59 - t51*t57 + t53) + t1*(-t50*t59 + t51*t58 + t52)
-    t61 = -t19 + t30
-    t62 = -t20 + t31
-    t63 = -t21 + t32
-    t64 = t14*(-t50*t63 + t51*t62 + t52) + t16*(t49*t63 - t51*t61 + t53) + t18*(-t49*t62 + t50*t61 + t54)
-    t65 = -t25*t52 - t27*t53 - t29*t54
-    t66 = t36*t52 + t38*t53 + t40*t54
-    t67 = -9.80665*t0
-    t68 = -9.80665*t1
-    t69 = t67*t8 + t68*t9
-    t70 = t5*t67 + t68*t7
-    t71 = t19*t67 + t20*t68
-    t72 = t14*t67 + t16*t68
-    t73 = t24*t67 + t26*t68
-    t74 = -t25*t67 - t27*t68
-    t75 = t35*t67 + t37*t68
-    t76 = t36*t67 + t38*t68
-    t77 = t43*t67 + t45*t68
-    t78 = t44*t67 + t46*t68
-    t79 = t67*(t19 - t8) + t68*(t20 - t9)
-    t80 = 9.80665*t16
-    t81 = -9.80665*t14
-    t82 = t24*t80 + t26*t81
-    t83 = -t25*t80 - t27*t81
-    t84 = t35*t80 + t37*t81
-    t85 = t36*t80 + t38*t81
-    t86 = t43*t80 + t45*t81
-    t87 = t44*t80 + t46*t81
-    t88 = -9.80665*t27
-    t89 = 9.80665*t25
-    t90 = t35*t88 + t37*t89
-    t91 = t36*t88 + t38*t89
-    t92 = t43*t88 + t45*t89
-    t93 = t44*t88 + t46*t89
-    t94 = 9.80665*t38
-    t95 = -9.80665*t36
-    t96 = t43*t94 + t45*t95
-    t97 = t44*t94 + t46*t95
-    return (ca.vertcat(t55, t56, t60, t64, t65, t66, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t72, t73, t74, t75, t76, t77, t78, t82, t83, t84, t85, t86, t87, t90, t91, t92, t93, t96, t97), )
+    return (ca.vertcat(), )
 
 
 def _basis_at_loads(q, w, aux, L):
