@@ -24,6 +24,8 @@ from bench_runtime import cpu_model, write_section  # noqa: E402
 
 from gecgen.emit import render  # noqa: E402
 from gecgen.model import load_error_model, load_robot  # noqa: E402
+from gecgen.model.errors import error_model_from_dict  # noqa: E402
+from gecgen.model.loads import catalog  # noqa: E402
 from gecgen.model.kinematics import target_positions  # noqa: E402
 from gecgen.runtime.compiled import CFLAGS, CompiledModel, compiler  # noqa: E402
 
@@ -140,8 +142,12 @@ def main():
         eps = rng.normal(0, 1e-3, (n_je, robot.n_errors))
         c = rng.normal(0, 1e-5, len(model.coefficients))
         w = rng.normal(0, 50, (n_h, 6))
-        c_loop, c_loads = c_loop_seconds(files, name)
-        n_loads = len(c_model.load_signals(q[:1])[0])
+        c_loop, _ = c_loop_seconds(files, name)
+        # NAME_loads computes the signals the model's terms use: timed where they are all the robot supports
+        n_loads = len(catalog(robot).names)
+        every = error_model_from_dict({"default": ["1"], "frames": {0: {"ex": ["1", *catalog(robot).names]}}}, robot,
+                                      "<every load signal>")
+        _, c_loads = c_loop_seconds(render(robot, every), name)
         c_je = best(lambda: c_model.J_e(q, eps)) / n_je
         c_h = best(lambda: c_model.model_targets(q[:n_h], w, None, c, with_H=True)) / n_h
         mapped = ca_model._ca["J_e"].map(n_ca)
@@ -167,8 +173,9 @@ def main():
              "several batched calls: C through ctypes over 20,000 poses (J_e; the batch writes 3 nt x 6(n+1) doubles "
              "per pose to memory) and 2,000 poses (H_e, at eps(c), wrench included), "
              "CasADi's `Function.map` over 20,000 poses, and numpy central finite differences of the exact chain over "
-             "2,000 poses. Loads = NAME_loads (every load signal the robot supports: wrench torques, "
-             "gravity regressor columns) in the same C loop as J_e.", "",
+             "2,000 poses. Loads = NAME_loads generated for a model whose terms use every load signal the robot "
+             "supports (wrench torques, gravity regressor columns; a model's code computes only those its terms "
+             "use), in the same C loop as J_e.", "",
              "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | J_e C loop (us) | "
              "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | "
              "H_e C batch (us) | load signals | loads C loop (us) | loads / J_e (C loop) |",
