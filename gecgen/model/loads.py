@@ -186,15 +186,23 @@ def generic_poses(robot: Robot) -> np.ndarray:
     return np.random.default_rng(SEED).uniform(lo, hi, (max(MIN_POSES, 8 * robot.n + 8), robot.n))
 
 
-def _numeric_columns(robot: Robot, q: np.ndarray) -> list[np.ndarray]:
-    """Per joint variable J, its candidate columns at poses q: (P, 4 (m - k + 1)), k its first frame."""
-    W = frames(robot, q)[:robot.n_frames + 1]
-    g = np.array([float(v) for v in robot.gravity])
-    poses = [(tuple(tuple(T[:, r, c] for c in range(3)) for r in range(3)), tuple(T[:, r, 3] for r in range(3)))
-             for T in W]
+def _chain_geometry(robot: Robot, q: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """At poses q (P, n): the world frames W (frames 0..m, then each branch's tool; (P, 4, 4) each)
+    and every frame's joint axis and a point on it in the world ((3, P) each), as the generated
+    code computes them on the nominal chain."""
+    W = frames(robot, q)
     F = [W[robot.parent(k)] @ constant(joint.pre) for k, joint in enumerate(robot.chain, start=1)]
     axes = [(Fk[:, :3, :3] @ np.array([float(v) for v in joint.axis])).T for Fk, joint in zip(F, robot.chain)]
-    origins = [Fk[:, :3, 3].T for Fk in F]
+    return W, axes, [Fk[:, :3, 3].T for Fk in F]
+
+
+def _numeric_columns(robot: Robot, q: np.ndarray, geometry=None) -> list[np.ndarray]:
+    """Per joint variable J, its candidate columns at poses q: (P, 4 (m - k + 1)), k its first frame;
+    geometry: `_chain_geometry(robot, q)` when already at hand."""
+    W, axes, origins = geometry or _chain_geometry(robot, q)
+    g = np.array([float(v) for v in robot.gravity])
+    poses = [(tuple(tuple(T[:, r, c] for c in range(3)) for r in range(3)), tuple(T[:, r, 3] for r in range(3)))
+             for T in W[:robot.n_frames + 1]]
     return [np.column_stack([np.broadcast_to(c, len(q)) for c in joint_columns(lambda x: x, robot, J, axes, origins,
                                                                                  poses, g, numeric=True)])
             for J in range(1, robot.n + 1)]
@@ -207,20 +215,17 @@ def signal_values(robot: Robot, q: np.ndarray, w: np.ndarray) -> np.ndarray:
     q = np.atleast_2d(np.asarray(q, float))
     w = np.broadcast_to(np.asarray(w, float), (len(q), 6))
     cat = catalog(robot)
-    W = frames(robot, q)
-    F = [W[robot.parent(k)] @ constant(joint.pre) for k, joint in enumerate(robot.chain, start=1)]
-    axes = [tuple((Fk[:, :3, :3] @ np.array([float(v) for v in joint.axis])).T) for Fk, joint in zip(F, robot.chain)]
-    origins = [tuple(Fk[:, :3, 3].T) for Fk in F]
+    geometry = W, axes, origins = _chain_geometry(robot, q)
     S = W[robot.n_frames + 1] if robot.wrench_frame == "tool" else W[robot.wrench_frame]  # the sensor frame
-    force, moment = (tuple(np.einsum("nij,nj->in", S[:, :3, :3], w[:, k:k + 3])) for k in (0, 3))
+    force, moment = (np.einsum("nij,nj->in", S[:, :3, :3], w[:, k:k + 3]) for k in (0, 3))
     moving = set(robot.path(robot.sensor_frame()))  # the frames that move the sensor
-    columns = _numeric_columns(robot, q) if any(s.kind != "wrench_torque" for s in cat.signals) else []
+    columns = _numeric_columns(robot, q, geometry) if any(s.kind != "wrench_torque" for s in cat.signals) else []
     out = np.empty((len(q), len(cat.signals)))
     for i, s in enumerate(cat.signals):
         moved = robot.driven(s.joint - 1)
         if s.kind == "wrench_torque":
             out[:, i] = sum(float(mult) * frame_wrench_torque(lambda x: x, robot.chain[k - 1].kind, axes[k - 1],
-                                                              origins[k - 1], tuple(S[:, :3, 3].T), force, moment)
+                                                              origins[k - 1], S[:, :3, 3].T, force, moment)
                             for k, mult in moved if k in moving)
         elif s.kind == "gravity":
             out[:, i] = columns[s.joint - 1][:, s.column]
