@@ -32,7 +32,7 @@ from gecgen.model.validation import read_yaml
 from gecgen.model.volume import load_volume
 from gecgen.runtime.identify import to_world
 from gecgen.runtime.volume import accuracy
-from gecgen.simulate import load_truth, paper_pps, paper_split, simulate, true_tool_points
+from gecgen.simulate import load_truth, paper_data, true_tool_points
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "volume"
@@ -48,13 +48,10 @@ def diagnosed_model(robot, truth) -> Path:
 
     path = OUT / "pps.diagnosed.errors.yaml"
     if not path.exists():
-        design = paper_pps(robot)
-        rng = np.random.default_rng(1)
-        data = simulate(robot, truth, design, rng)
-        train, _ = paper_split(design, rng)
+        train, _ = paper_data(robot, truth, np.random.default_rng(1))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            Diagnoser(ROOT / "robots" / "constant.errors.yaml").fit(robot, data.subset(train)).save(path)
+            Diagnoser(ROOT / "robots" / "constant.errors.yaml").fit(robot, train).save(path)
     return path
 
 
@@ -67,13 +64,10 @@ def one_truth(robot, spec, seed: int, cases: dict, volume, noise: tuple[float, f
         truth = load_truth({**spec, **change, "seed": 1000 + seed}, robot)
         key = (str(change), model.source)
         if key not in fits:
-            design = paper_pps(robot)
-            rng = np.random.default_rng(seed)
-            data = simulate(robot, truth, design, rng)
-            train, val = paper_split(design, rng)
+            train, val = paper_data(robot, truth, np.random.default_rng(seed))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                fits[key] = Calibrator(model).fit(robot, data.subset(train)), data.subset(val)
+                fits[key] = Calibrator(model).fit(robot, train), val
         cal, val = fits[key]
         calib = cal.calibration_
         world = cal.data_, to_world(calib.frames, cal.data_)

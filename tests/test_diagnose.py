@@ -12,7 +12,7 @@ from gecgen.model import load_error_model, load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, write_measurements
 from gecgen.model.validation import read_yaml
-from gecgen.simulate import load_truth, paper_pps, paper_split, simulate
+from gecgen.simulate import load_truth, paper_data
 
 NOISE = 3e-5  # tracker noise per coordinate, m
 FLOOR_MM = 1e3 * NOISE * np.sqrt(3)  # rms point error of pure noise
@@ -112,11 +112,8 @@ def test_paper_design_with_undeclared_waviness_and_bending_meets_the_specificati
     must find both effects on the training poses and bring the held-out max under the 0.5 mm spec."""
     robot = load_robot(ROBOTS / "pps.yaml")
     truth = load_truth(read_yaml(ROBOTS / "pps.truth.yaml", "truth"), robot)
-    rng = np.random.default_rng(1)
-    design = paper_pps(robot)
-    data = simulate(robot, truth, design, rng)
-    train, val = paper_split(design, rng)
-    diag = diagnose(robot, load_error_model(None, robot), data.subset(train), data.subset(val))
+    train, val = paper_data(robot, truth, np.random.default_rng(1))
+    diag = diagnose(robot, load_error_model(None, robot), train, val)
     traced = [set(e.variables) for e in diag.effects]
     assert {"q1"} in traced, traced  # the waviness, on the axis that carries it
     assert any({"q3", "fy"} <= v for v in traced), traced  # bending: extension times the payload's weight
@@ -133,11 +130,8 @@ def test_diagnose_adds_nothing_on_the_paper_design_with_per_pose_repeatability()
     robot = load_robot(ROBOTS / "pps.yaml")
     spec = {"seed": 7, "gravity": [0, -9.81, 0], "constant": {"translation_std": 1.5e-3, "rotation_std": 1.0e-3},
             "noise": {"repeatability": 5.0e-5, "tracker": 4.0e-5}}
-    rng = np.random.default_rng(2)
-    design = paper_pps(robot)
-    data = simulate(robot, load_truth(spec, robot), design, rng)
-    train, val = paper_split(design, rng)
-    diag = diagnose(robot, load_error_model(None, robot), data.subset(train), data.subset(val))
+    train, val = paper_data(robot, load_truth(spec, robot), np.random.default_rng(2))
+    diag = diagnose(robot, load_error_model(None, robot), train, val)
     assert diag.effects == [], [e.to_dict()["terms"] for e in diag.effects]
 
 

@@ -21,7 +21,7 @@ from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import to_world
 from gecgen.runtime.volume import (_placed, accuracy, affine_model, point_rows, sample, unmodelled,
                                    worst_over_draws)
-from gecgen.simulate import load_truth, paper_pps, paper_split, simulate, true_tool_points
+from gecgen.simulate import load_truth, paper_data, paper_pps, simulate, true_tool_points
 
 PPS = ROBOTS / "pps.yaml"
 VOLUME = ROBOTS / "pps.volume.yaml"
@@ -41,14 +41,11 @@ def geometric(pps):
     paper's design, calibrated with constant errors: a model that describes the robot."""
     spec = read_yaml(ROBOTS / "pps.truth.yaml", "truth")
     truth = load_truth({**spec, "sources": [], "seed": 7}, pps)
-    design = paper_pps(pps)
-    rng = np.random.default_rng(7)
-    data = simulate(pps, truth, design, rng)
-    train, val = paper_split(design, rng)
+    train, val = paper_data(pps, truth, np.random.default_rng(7))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        cal = Calibrator(ROBOTS / "constant.errors.yaml").fit(pps, data.subset(train))
-    return truth, data.subset(train), data.subset(val), cal
+        cal = Calibrator(ROBOTS / "constant.errors.yaml").fit(pps, train)
+    return truth, train, val, cal
 
 
 @pytest.mark.parametrize("text, says", [

@@ -19,7 +19,7 @@ from gecgen.model.robot import Robot
 from gecgen.simulate.designs import Design, approach_directions, one_at_a_time, paper_pps, paper_split, random_design
 from gecgen.simulate.truth import Truth, load_truth, thermal_profile, true_state
 
-__all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_pps", "paper_split", "random_design",
+__all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_data", "paper_pps", "paper_split", "random_design",
            "simulate", "true_tool_points"]
 
 
@@ -48,6 +48,15 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     return Measurements(q=design.q, w=wrench, aux=np.column_stack([aux[a] for a in aux_names]) if aux_names
                         else np.zeros((N, 0)), aux_names=aux_names, pose_ids=np.arange(N), pose=pose,
                         target=np.tile(targets, N), xyz=y.reshape(-1, 3), source="simulated", orientation=measured)
+
+
+def paper_data(robot: Robot, truth: Truth, rng: np.random.Generator) -> tuple[Measurements, Measurements]:
+    """The seed paper's PPS design (`paper_pps`) measured on the truth robot and split as the paper
+    splits it (`paper_split`): (training, validation) measurements."""
+    design = paper_pps(robot)
+    data = simulate(robot, truth, design, rng)
+    train, val = paper_split(design, rng)
+    return data.subset(train), data.subset(val)
 
 
 def true_tool_points(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
