@@ -286,7 +286,7 @@ class Calibrator:
         if data.relative is not None:  # the errors "relative" in `eliminated` are those it cannot see
             calib.report["relative"] = data.relative.summary()
         self._set(calib, fit)
-        self.placement_, self.cv_, self.counts_ = placement, cv, measured_counts(fitted, data)
+        self.placement_, self.cv_, self.counts_ = placement, cv, measured_counts(data)
         self.cm_, self.data_ = cm, data  # the model fitted (a measured frame as its vertices) and its data
         return self
 
@@ -428,7 +428,7 @@ class Calibrator:
         else:
             y = y_before = to_world(calib.frames, data, "the tracker was re-stationed: score it with register=True "
                                                         "(gecgen evaluate or calibrate --register)")
-        counts = measured_counts(robot, data)
+        counts = measured_counts(data)
         before, after = by_branch(cm, data, y_before, {"before": None}), by_branch(cm, data, y, {"after": calib.c})
         branches = {name: before[name] | after[name] for name in after}
         inside = None
@@ -452,14 +452,12 @@ class Calibrator:
 def _summary(cm, data, y, c, interval: bool = False) -> dict:
     """`runtime.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
     confidence interval by pose (mm) too."""
-    from gecgen.model.pose_targets import measured_rows
     from gecgen.runtime.identify import fixture_measures, row_errors, summary
 
-    rows = measured_rows(cm.robot, data)
-    position, rotation, _ = row_errors(cm, data, y, c, rows)
+    position, rotation, _ = row_errors(cm, data, y, c)
     out = summary(position, rotation)
     if interval:
-        out["rms_mm_ci95"] = [1e3 * v for v in significance.rms_interval(position, data.pose[rows.first])]
+        out["rms_mm_ci95"] = [1e3 * v for v in significance.rms_interval(position, data.pose[data.rows.first])]
     return out if data.relative is None else {**out, **fixture_measures(cm, data, c)}
 
 
@@ -619,7 +617,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
         calib.report["orientation_length_m"] = fitted.pose_length
     cal = Calibrator(choice.model, orientation_length=orientation_length, keep_insignificant=keep_insignificant)
     cal._set(calib, choice.fit)
-    cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(fitted, data)
+    cal.placement_, cal.cv_, cal.counts_ = placement, [], measured_counts(data)
     effects = choice.diagnosis.effects if choice.diagnosis else []
     if raw_val is None:
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)

@@ -17,7 +17,7 @@ from gecgen.cli import main
 from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import read_measurements, write_measurements
-from gecgen.model.pose_targets import as_points, measured_rows, with_pose_targets
+from gecgen.model.pose_targets import as_points, with_pose_targets
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import identify, row_errors, summary
 from gecgen.simulate import load_truth, random_design, simulate
@@ -109,13 +109,34 @@ def test_a_frame_s_vertices_weigh_position_and_orientation_apart(rng):
                          np.zeros(n, int), pp, "x", orientation=Rp.as_matrix())
     y, p = as_points(robot, data), as_points(robot, model)
     assert len(y.xyz) == 4 * n and np.array_equal(y.row, np.repeat(np.arange(n) + 2, 4))
-    rows = measured_rows(robot, y)
+    rows = y.rows
     position, angle, length = rows.errors(y.xyz, p.xyz)
     theta = (Rm * Rp.inv()).magnitude()
     assert np.allclose(position, np.linalg.norm(pm - pp, axis=1), rtol=0, atol=1e-12)
     assert np.allclose(angle, theta, rtol=0, atol=1e-9)
     assert np.allclose(length ** 2, np.sum((pm - pp) ** 2, 1) + (0.2 * 2 * np.sin(theta / 2)) ** 2, rtol=1e-12)
     assert np.array_equal(rows.row_dof, np.full(n, 6.0))
+
+
+def test_the_rows_of_pose_data_follow_its_subsets(rng):
+    """The measured rows are part of the data: pose data turned into points and then cut to some
+    poses or points group exactly as the same cut turned into points (a frame's four vertices stay
+    one row; a position-only row stays a row of its own)."""
+    robot = with_pose_targets(load_robot(ROBOTS / "puma560.yaml"))
+    from gecgen.model.measurements import Measurements
+
+    n = 12
+    orientation = Rotation.random(2 * n, random_state=3).as_matrix()
+    orientation[::3] = np.nan  # every third row measures its position only
+    data = Measurements(np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n),
+                        np.repeat(np.arange(n), 2), np.tile([0, 1], n),
+                        rng.normal(size=(2 * n, 3)), "x", orientation=orientation)
+    poses = np.array([1, 4, 5, 9])
+    cut, whole = as_points(robot, data.subset(poses)), as_points(robot, data).subset(poses)
+    assert np.array_equal(whole.rows.group, cut.rows.group) and np.array_equal(whole.rows.vertex, cut.rows.vertex)
+    assert np.array_equal(whole.rows.row_dof, np.where(np.isnan(data.subset(poses).orientation[:, 0, 0]), 3.0, 6.0))
+    keep = whole.target == 0  # a branch's points: the rows of the plain points of target 0 only
+    assert np.array_equal(whole.rows_of(keep).rows.vertex, np.full(keep.sum(), -1))
 
 
 def test_robots_that_differ_only_in_their_targets_compile_apart(tmp_path, monkeypatch):

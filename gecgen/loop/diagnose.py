@@ -36,7 +36,6 @@ from gecgen.loop.dictionary import candidates, refine_period, shown_family
 from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms, significance_order
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
-from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, fit_frames, identify, row_errors, rows_H_and_residual, summary, to_world
@@ -105,11 +104,11 @@ def _linear_system(rnd: Round, data: Measurements, y: np.ndarray):
     return np.vstack(H)[:, list(rnd.fit.redundancy.kept)], np.concatenate(r)
 
 
-def _rows_pose(robot: Robot, data: Measurements) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rows_pose(data: Measurements) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per row of the linear system: its pose (3R,) and degrees of freedom (3R,; 1, or 1/2 for a
     coordinate of a measured frame's vertex); and the point order rows_H_and_residual yields."""
     order = np.argsort(data.pose, kind="stable")
-    return np.repeat(data.pose[order], 3), np.repeat(measured_rows(robot, data).dof[order] / 3, 3), order
+    return np.repeat(data.pose[order], 3), np.repeat(data.rows.dof[order] / 3, 3), order
 
 
 @dataclass
@@ -166,7 +165,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             progress(round_no, rnd.fit.train["rms_mm"])
         y = rnd.fit.to_world(data)
         H, r = _linear_system(rnd, data, y)
-        rows_pose, rows_dof, order = _rows_pose(robot, data)
+        rows_pose, rows_dof, order = _rows_pose(data)
         fs = Folded(H, r, rows_pose, fold, rows_dof)
         base = fs.basis()
         m, k = rows_dof.sum(), H.shape[1]
@@ -273,8 +272,7 @@ def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot 
     repeated = size[point_group] > 1
     if not repeated.any():
         return None
-    rows = measured_rows(robot, data) if robot is not None else None
-    weight, point_dof = (rows.weight, rows.dof) if rows is not None else (np.ones(len(key)), np.full(len(key), 3.0))
+    weight, point_dof = data.rows.weight, data.rows.dof
     mean = np.zeros((len(size), 3))
     np.add.at(mean, point_group, data.xyz)
     mean /= size[:, None]
@@ -299,8 +297,8 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
     then nobody can say that the model covers the data, only that nothing in the dictionary
     explains what remains."""
     fit, robot = rnd.fit, rnd.cm.robot
-    rows = measured_rows(robot, data)
-    pos, rot, length = row_errors(rnd.cm, data, fit.to_world(data), fit.c, rows)
+    rows = data.rows
+    pos, rot, length = row_errors(rnd.cm, data, fit.to_world(data), fit.c)
     e = length * np.sqrt(3 / rows.row_dof)  # as the robust fit scales it
     inliers = np.nonzero(e <= fit.outlier_limit_m)[0]  # outliers are counted, not ranked with the rest
     top = inliers[np.argsort(-e[inliers])[:LARGEST]]

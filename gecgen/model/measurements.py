@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from gecgen.files import write_atomically
 from gecgen.model import relative as rel
 from gecgen.model.orientation import PREFIXES, QUATERNION, Convention, file_convention, quaternions, rotations
 from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.rows import Rows, Vertices, point_rows
 from gecgen.model.table import Table, at, numbers, read_table
 from gecgen.model.validation import ModelError, excerpt, require
 
@@ -57,7 +59,9 @@ class Measurements:
     orientation (R, 3, 3) the measured orientation of each row's target frame (parallel to the tool
     frame) in the measuring frame, NaN for a row that measures the position only; None when no
     row has one (docs/reference.md, "Pose measurements"); relative the rows that say only which
-    point or plane their target sits at (`model.relative`; their xyz NaN), None when no row does.
+    point or plane their target sits at (`model.relative`; their xyz NaN), None when no row does;
+    vertices which points are the vertices of a measured frame once pose data are points
+    (`model.pose_targets.as_points`), None for point data.
     """
 
     q: np.ndarray
@@ -73,6 +77,7 @@ class Measurements:
     station: np.ndarray | None = None
     orientation: np.ndarray | None = None
     relative: rel.Relative | None = None
+    vertices: Vertices | None = None
 
     def __post_init__(self):
         if self.station is None:  # one stationing: every point in the same tracker frame
@@ -87,6 +92,11 @@ class Measurements:
         """(R,) the file line of each measured point (header = 1)."""
         return self.row if self.row is not None else np.arange(len(self.xyz)) + 2
 
+    @cached_property
+    def rows(self) -> Rows:
+        """The measured rows (`model.rows.Rows`): one per pose and measured frame or point."""
+        return point_rows(self.pose, self.target, self.vertices, None if self.relative is None else self.relative.row_dof())
+
     def subset(self, poses: np.ndarray) -> "Measurements":
         """The measurements of the given pose indices (rows follow their poses)."""
         poses = np.asarray(poses)
@@ -97,14 +107,16 @@ class Measurements:
                             remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
                             self.file_rows[keep], self.station[keep],
                             None if self.orientation is None else self.orientation[keep],
-                            None if self.relative is None else self.relative.take(keep))
+                            None if self.relative is None else self.relative.take(keep),
+                            None if self.vertices is None else self.vertices.take(keep))
 
     def rows_of(self, keep: np.ndarray) -> "Measurements":
         """The measured rows where `keep` (R,) holds, every pose kept (a branch's points of a tree)."""
         return Measurements(self.q, self.w, self.aux, self.aux_names, self.pose_ids, self.pose[keep],
                             self.target[keep], self.xyz[keep], self.source, self.file_rows[keep], self.station[keep],
                             None if self.orientation is None else self.orientation[keep],
-                            None if self.relative is None else self.relative.take(keep))
+                            None if self.relative is None else self.relative.take(keep),
+                            None if self.vertices is None else self.vertices.take(keep))
 
     def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
         """(P, len(names)) values of the named auxiliary signals."""

@@ -10,7 +10,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gecgen.model.measurements import Measurements
-from gecgen.model.pose_targets import measured_rows
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.runtime.identify import filled, fit_frames, summary, to_world
 from gecgen.runtime.significance import rms_interval
@@ -77,7 +76,7 @@ class DataSet:
 
 def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> Residuals:
     """Residuals of compiled model cm at coefficients c (None: nominal) against measured world points y (R, 3) m."""
-    rows = measured_rows(cm.robot, data)
+    rows = data.rows
     p = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux),
                          np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
     d, rot = rows.signed(filled(data, y, p), p)  # a socket's rows against their own mean
@@ -166,7 +165,7 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
     noise = noise_floor(sets[0].data, robot=robot)
     blocks = []
     for ds in sets:
-        data, rows = ds.data, measured_rows(robot, ds.data)
+        data, rows = ds.data, ds.data.rows
         target = np.array([robot.vertex_of.get(n, (n,))[0] for n in robot.target_names])[data.target[rows.first]]
         names, count = np.unique(target, return_counts=True)
         # a load case is a payload: the force's size in LOAD_STEP_N bins (its direction turns with the sensor)

@@ -21,7 +21,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
-from gecgen.model.pose_targets import Rows, measured_rows
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
 from gecgen.runtime import influence, relative, robust
@@ -274,14 +273,14 @@ def filled(data: Measurements, y: np.ndarray, p: np.ndarray, weights: np.ndarray
 
 
 def row_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None,
-               rows: Rows | None = None, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per measured row (`model.pose_targets.Rows`; one per point unless the data measures
+               weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per measured row (`model.rows.Rows`; one per point unless the data measures
     frames): position error (G,) m, orientation error (G,) rad (NaN for a position-only row) and
     residual length (G,) m, at coefficients c (None: the nominal model) with measured points y (a
     relative row's from its fitted point or plane, with point weights (R,), `filled`)."""
     q, w, aux = _poses_inputs(cm, data)
     p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
-    return (rows or measured_rows(cm.robot, data)).errors(filled(data, y, p, weights), p)
+    return data.rows.errors(filled(data, y, p, weights), p)
 
 
 def squared_error(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> tuple[float, float]:
@@ -289,8 +288,8 @@ def squared_error(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.nd
     for): a measured frame counts as two points, its six degrees of freedom, so that the square
     root of their ratio is an RMS point error for position data and the fit's weighted residual
     per three degrees of freedom for pose data."""
-    rows = measured_rows(cm.robot, data)
-    e = row_errors(cm, data, y, c, rows)[2]
+    rows = data.rows
+    e = row_errors(cm, data, y, c)[2]
     return float(e @ e), float(rows.row_dof.sum()) / 3
 
 
@@ -431,7 +430,7 @@ def redundancy(cm: CompiledModel, data: Measurements | None = None, registration
     if data is None:
         return structural_analysis(cm, np.arange(cm.dims.nt))
     return _data_analysis(cm, data, to_world(fit_frames(cm, data, None, mode=registration_mode), data), RANK_TOL,
-                          measured_rows(cm.robot, data).weight)[0]
+                          data.rows.weight)[0]
 
 
 def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss: str = "cauchy",
@@ -441,7 +440,7 @@ def fit_frames(cm: CompiledModel, data: Measurements, c: np.ndarray | None, loss
     modelled points onto the station's measured ones (`registration.register`: mode and loss; a
     measured frame's vertices weigh 1/4 each, so a frame counts as much as a point). Relative rows
     have no measured position: a station with no other rows keeps the identity (nothing fixes it)."""
-    prior = measured_rows(cm.robot, data).weight
+    prior = data.rows.weight
     absolute = np.ones(len(data.xyz), bool) if data.relative is None else ~data.relative.rows
     if c is None:
         p = cm.nominal_targets(data.q)[data.pose, data.target]
@@ -589,13 +588,13 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
          progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], at: np.ndarray | None = None) -> Fit:
     """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted,
     from c = 0, the redundancy analysed at coefficients `at` (default 0).
-    The robust unit is the measured row (`model.pose_targets.Rows`): a point, or a frame whose
+    The robust unit is the measured row (`model.rows.Rows`): a point, or a frame whose
     residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
     notes = []
     y = to_world(frames, data)
     nc = cm.dims.nc
     c = np.zeros(nc)
-    rows = measured_rows(cm.robot, data)
+    rows = data.rows
     row_dof = rows.row_dof
     red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight, at)
     if hold:
@@ -616,7 +615,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     # a relative row whose point or plane has no other row says nothing (row_dof 0): it counts for nothing
     norm = np.sqrt(3 / np.where(row_dof > 0, row_dof, np.inf))
     count = row_dof / 3
-    pos, rot, length = row_errors(cm, data, y, c, rows)
+    pos, rot, length = row_errors(cm, data, y, c)
     e = length * norm
     before = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, None))
     limit = robust.outlier_limit(e, loss)
@@ -632,7 +631,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     for it in range(1, max_iter + 1):
         w = rows.weight * wr[rows.group]
         if data.relative is not None:  # the points and planes as these weights fit them
-            e = row_errors(cm, data, y, c, rows, w)[2] * norm
+            e = row_errors(cm, data, y, c, w)[2] * norm
             known = known.at(robust.scale(e))
         if stale:
             R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
@@ -648,7 +647,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         for _ in range(16):
             trial = c.copy()
             trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
-            errors_trial = row_errors(cm, data, y, trial, rows, w)
+            errors_trial = row_errors(cm, data, y, trial, w)
             e_trial = errors_trial[2] * norm
             trial_objective = (robust.objective(e_trial, limit, loss, count)
                                + ridge * float(np.sum((trial[kept] * scale) ** 2)) + known.squares(trial, w))

@@ -51,13 +51,11 @@ def on_points(robot: Robot, length_m: float | None, *datasets):
     return (derived, *(None if d is None else as_points(derived, d) for d in datasets))
 
 
-def measured_counts(robot: Robot, data: Measurements) -> dict:
-    """{n_poses, n_points} of data on `robot` (a frame's vertices are one measured point),
+def measured_counts(data: Measurements) -> dict:
+    """{n_poses, n_points} of data (a measured frame's vertices are one measured point),
     n_orientations, the rows that measure a frame, when there are any, and `relative`, what the
     rows of sockets and planes hold ({points, planes, distances, rows}), when there are any."""
-    from gecgen.model.pose_targets import measured_rows
-
-    rows = measured_rows(robot, data)
+    rows = data.rows
     oriented = int(rows.oriented.sum())
     return {"n_poses": data.n_poses, "n_points": len(rows.first), **({"n_orientations": oriented} if oriented else {}),
             **({"relative": data.relative.summary()} if data.relative is not None else {})}
