@@ -72,3 +72,13 @@ def test_help_version_and_a_typo_load_no_numerical_library(args):
             "print(sorted(m for m in ('numpy', 'sympy', 'scipy', 'pandas') if m in sys.modules))")
     run = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120)
     assert run.stdout.strip().splitlines()[-1] == "[]", run.stdout + run.stderr
+
+
+def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsys):
+    """A person reads three significant digits, and a dict with `<key>_units` beside it carries
+    them, the units themselves not printed as a line of their own."""
+    from gecgen.cli.human import print_human
+
+    print_human({"rms_mm": 0.123456, "max_correction": {"slide": 1.23456e-4, "turn": 0.0123456},
+                 "max_correction_units": {"slide": "m", "turn": "rad"}})
+    assert capsys.readouterr().out.splitlines() == ["rms_mm: 0.123", "max_correction: slide 0.000123 m, turn 0.0123 rad"]

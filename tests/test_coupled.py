@@ -233,8 +233,9 @@ def test_a_term_naming_a_passive_joint_says_how_to_write_it(torso):
         error_model_from_dict({"frames": {3: {"er": ["1", "t4"]}}}, torso, "m.yaml")
 
 
-def test_simulate_identify_and_compensate_through_the_cli(tmp_path):
-    """The commands take and return the controller's readings."""
+def test_simulate_identify_and_compensate_through_the_cli(tmp_path, capsys):
+    """The commands take and return the controller's readings; the summary gives each joint's largest
+    correction with its unit."""
     from gecgen.cli import main
 
     robot, out = str(ROBOTS / "fanuc.yaml"), tmp_path
@@ -244,6 +245,8 @@ def test_simulate_identify_and_compensate_through_the_cli(tmp_path):
     assert main(["compensate", str(out / "c.json"), str(out / "cmd.csv"), "-o", str(out / "fixed.csv")]) == 0
     fixed = np.loadtxt(out / "fixed.csv", delimiter=",", skiprows=1, usecols=range(6))
     assert 1e-5 < np.abs(fixed - [0.1, 0.3, -0.2, 0.4, 0.5, -0.3]).max() < 0.02
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("max_correction")]
+    assert len(line) == 1 and line[0].count(" rad") == 6, line
 
 
 def test_the_table_gives_the_readings_zero_offsets_through_the_couplings(fanuc):

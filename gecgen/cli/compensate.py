@@ -33,4 +33,5 @@ def run(args) -> dict:
               f"{' ...' if len(outside) > 10 else ''}", file=sys.stderr)
     return {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "output": str(args.output),
             "n_poses": len(done.q), "outside_limits_rows": outside, "extrapolation": done.extrapolation,
-            "max_correction": done.max_correction}
+            "max_correction": done.max_correction,
+            "max_correction_units": {j.name: "rad" if j.kind == "R" else "m" for j in cal.robot_.joints}}

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 
 def scalar(value) -> str:
+    """A value as a person reads it: three significant digits, as the reports print them."""
     if isinstance(value, list):  # an interval: [low, high]
         return "[" + ", ".join(map(scalar, value)) + "]"
-    return f"{value:.4g}" if isinstance(value, float) else str(value)
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
 
 
 def _interval(value) -> bool:
@@ -17,10 +18,12 @@ MAX_LISTED = 20
 
 
 def print_human(result: dict):
-    """A short summary for a person; the full record (every list entry) is what --json prints."""
+    """A short summary for a person; the full record (every list entry) is what --json prints. A
+    dict whose units are given beside it (`<key>_units`, one per entry) is printed with them."""
     for key, value in result.items():
-        if key in ("identifiable", "training_ranges"):
+        if key in ("identifiable", "training_ranges") or (key.endswith("_units") and key[:-6] in result):
             continue
+        units = result.get(f"{key}_units", {})
         if key == "outliers":
             print(f"outliers: {len(value)}" + (" (file row, pose, target, residual)" if value else ""))
             for o in value[:MAX_LISTED]:
@@ -54,7 +57,8 @@ def print_human(result: dict):
                 print(f"{key}: {len(value)} (use --json for them)")
                 continue
             more = " (more with --json)" if len(scalars) < len(value) else ""
-            print(f"{key}: " + ", ".join(f"{k} {scalar(v)}" for k, v in scalars.items()) + more)
+            print(f"{key}: " + ", ".join(f"{k} {scalar(v)}{' ' + units[k] if k in units else ''}"
+                                         for k, v in scalars.items()) + more)
         else:
             print(f"{key}: {scalar(value)}")
 
@@ -62,7 +66,7 @@ def print_human(result: dict):
 def _cell(value, std) -> str:
     if value is None:
         return "-"
-    return f"{value:.4g}" + (f" +-{std:.2g}" if std is not None else "")
+    return f"{value:.3g}" + (f" +-{std:.2g}" if std is not None else "")
 
 
 def print_error_table(table: dict):
