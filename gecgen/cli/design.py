@@ -5,6 +5,11 @@ of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/runtim
 chooses N of the rest (`--criterion`: D- or I-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
 of the pose, `fx..mz` and `payload_kg`: the commands to send, and the measurement file's joint
 columns once `target x y z` are filled in.
+
+With `--fixtures FILE.csv` (sockets and planes, `model/fixture_file.py`) the configurations are chosen
+for calibration without a tracker instead (`gecgen/runtime/fixture_design.py`): POSES.csv is then a
+measurement file's rows, `point` or `plane` named and `x y z` empty, to be recorded with the joints
+read once the ball is seated or the probe touches.
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ from gecgen.model.robot import WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime import design as D
+from gecgen.runtime import fixture_design as FD
 
 DEFAULT_CANDIDATES = 5000
 
@@ -32,7 +38,8 @@ def add_parser(command):
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
     p.add_argument("--candidates", type=whole(1, MAX_POSES),
-                   help=f"uniform samples within the joint limits to choose from (default {DEFAULT_CANDIDATES})")
+                   help=f"uniform samples within the joint limits to choose from (default {DEFAULT_CANDIDATES}); with "
+                        f"--fixtures, configurations tried per fixture (default {FD.CANDIDATES})")
     p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
                                                     "aux columns) instead of uniform samples")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
@@ -53,8 +60,16 @@ def add_parser(command):
                    help="D: maximise log det of the information (the coefficients' joint confidence region); I: "
                         "minimise the mean predicted variance of the measured positions over the candidates "
                         "(default %(default)s)")
-    p.add_argument("--noise-mm", type=float, default=1e3 * D.NOISE_M,
-                   help="measurement noise per coordinate (mm) for the predicted uncertainty (default %(default)s)")
+    p.add_argument("--noise-mm", type=float, default=None,
+                   help=f"measurement noise per coordinate (mm) for the predicted uncertainty (default {1e3 * D.NOISE_M:g}; "
+                        f"with --fixtures, the seating noise, default {1e3 * FD.NOISE_M:g})")
+    p.add_argument("--fixtures", help="CSV of sockets and planes (name, x, y, z[, nx, ny, nz], m in the robot's world "
+                                      "frame): choose configurations for calibration without a tracker")
+    p.add_argument("--target", help="with --fixtures: the target that sits in the sockets or touches the planes "
+                                    "(default: the robot's only target)")
+    p.add_argument("--patch-mm", type=number(0, 10_000, above=True),
+                   help=f"with --fixtures: half-width of the square of each plane the touches are planned in (mm, "
+                        f"default {1e3 * FD.PATCH_M:g})")
 
 
 def _numbers(text: str, option: str, count: int | None, unit: str) -> list[float]:
@@ -97,8 +112,15 @@ def run(args) -> dict:
 
     require(1 <= args.poses <= MAX_POSES,
             f"--poses {args.poses}: give at least 1 pose to design (at most {MAX_POSES:,})")
+    if args.noise_mm is None:
+        args.noise_mm = 1e3 * (FD.NOISE_M if args.fixtures else D.NOISE_M)
     require(math.isfinite(args.noise_mm) and args.noise_mm > 0,
             f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
+    if args.fixtures:
+        return _run_fixtures(args)
+    for option in ("target", "patch_mm"):
+        require(getattr(args, option) is None, f"--{option.replace('_', '-')} goes with --fixtures; give the "
+                                               f"fixtures file or drop it")
     require((args.tracker is None) == (args.max_incidence_deg is None),
             "--tracker and --max-incidence-deg go together: give the tracker position x,y,z (m) and the "
             "reflector's largest incidence angle (deg)")
@@ -144,3 +166,43 @@ def run(args) -> dict:
     return {"robot": robot.name, "error_model": model.source, "output": str(args.output), **result.to_dict(),
             "targets": [robot.target_names[t] for t in targets], "constraints": constraints,
             "n_sampled": len(ok), "seed": args.seed, "given": args.given}
+
+
+#: options of a tracker design that a fixture design has no use for: refused, never ignored
+NOT_WITH_FIXTURES = {"from_csv": "--from", "targets": "--targets", "payload_kg": "--payload-kg", "min_z": "--min-z",
+                     "tracker": "--tracker", "given": "--given"}
+
+
+def _run_fixtures(args) -> dict:
+    from gecgen.model.fixture_file import read_fixtures
+    from gecgen.runtime.compiled import CompiledModel
+
+    for option, flag in NOT_WITH_FIXTURES.items():
+        require(getattr(args, option) is None, f"{flag} does not apply to a design for --fixtures (the target sits "
+                                               f"in the sockets or on the planes); drop it")
+    require(args.criterion == "D", f"--criterion {args.criterion}: a design for --fixtures is D-optimal; drop it")
+    robot, model = robot_and_model(args.robot, args.errors)
+    require(not model.aux, f"the error model uses auxiliary signals ({', '.join(model.aux)}) that a fixture design "
+                           f"cannot plan; use a model without them")
+    names = robot.target_names
+    if args.target is None:
+        require(len(names) == 1, f"{robot.name} has {len(names)} targets ({', '.join(names)}): name the one that sits "
+                                 f"in the sockets or touches with --target")
+        target = 0
+    else:
+        require(args.target in names, f"--target {args.target}: not a target of {robot.name} ({', '.join(names)})")
+        target = names.index(args.target)
+    fixtures = read_fixtures(args.fixtures)
+    n = FD.CANDIDATES if args.candidates is None else args.candidates
+    patch = FD.PATCH_M if args.patch_mm is None else args.patch_mm / 1e3
+    cands = FD.fixture_candidates(robot, fixtures, target, n, np.random.default_rng(args.seed), patch)
+    result = FD.design_fixtures(CompiledModel(robot, model), cands, args.poses, target, args.seed, args.noise_mm / 1e3)
+    header = ["pose", *(f"q{i + 1}" for i in range(robot.n)), "target", "x", "y", "z", "point", "plane"]
+    rows = []
+    for f, q, chosen in zip(fixtures, cands.q, result.chosen):
+        for i in chosen:
+            where = ["", f.name] if f.is_plane else [f.name, ""]
+            rows.append([len(rows), *map(repr, q[i].tolist()), names[target], "", "", "", *where])
+    write_csv(args.output, header, rows)
+    return {"robot": robot.name, "error_model": model.source, "output": str(args.output),
+            **result.to_dict(fixtures), "target": names[target], "seed": args.seed}

@@ -135,8 +135,8 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
             q_true, eps = true_state(built, truth, q, np.zeros(N), np.zeros(3), aux, approach_directions(q))
             return target_positions(built, q_true, eps)[:, t]
 
-        q = _inverse(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
-        if q is not None:
+        q, ok = reach(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
+        if ok.all():
             break
     else:
         raise ModelError(f"no placement of the fixtures in {PLACEMENTS} tries puts every socket and touch within the "
@@ -153,10 +153,10 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
     return data, measures(relative, reached(recorded))
 
 
-def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+def reach(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Joint readings (N, n) at which `reached` (readings -> true target positions, (N, 3)) meets each
     goal (N, 3) within REACHED_M, within the joint limits: damped Newton steps from random starts,
-    restarted where a start does not get there; None when some goal stays out of reach. The steps take
+    restarted where a start does not get there; and which goals were reached (N,). The steps take
     the Jacobian of the `nominal` kinematics (readings -> positions): a robot's errors change it by a
     part in a thousand, which slows no step noticeably, and it is far cheaper than the truth's
     (gravity, compliance)."""
@@ -171,11 +171,11 @@ def _inverse(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.G
             err = goals - x
             todo = np.linalg.norm(err, axis=1) > REACHED_M
             if not todo.any():
-                return q
+                return q, ~todo
             x0 = nominal(q)
             J = np.stack([(nominal(q + h * np.eye(robot.n)[j]) - x0) / h for j in range(robot.n)], axis=2)
             JJ = np.einsum("nij,nkj->nik", J, J) + 1e-8 * np.eye(3)
             step = np.einsum("nji,nj->ni", J, np.linalg.solve(JJ, err[..., None])[..., 0])
             q = np.where(todo[:, None], np.clip(q + step, full_lo, full_hi), q)
         q[todo] = rng.uniform(lo, hi, (int(todo.sum()), robot.n))
-    return None
+    return q, np.linalg.norm(goals - reached(q), axis=1) <= REACHED_M

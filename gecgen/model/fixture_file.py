@@ -1,0 +1,68 @@
+"""The fixtures a tracker-free design plans for (`gecgen design --fixtures FILE.csv`).
+
+One row per fixture, where it stands in the robot's world frame, as well as it is known before
+measuring (a few millimetres is plenty: the design only needs configurations that reach it):
+
+| column | meaning |
+|---|---|
+| `name` | the socket's or plane's id, as the measurement file will name it (`point` or `plane`) |
+| `x, y, z` | a socket's centre, or a point of a plane near where it will be touched (m) |
+| `nx, ny, nz` | a plane's normal (any length); empty on a socket's row |
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gecgen.model.table import at, read_table
+from gecgen.model.validation import excerpt, require
+
+NORMAL = ("nx", "ny", "nz")
+#: coordinates beyond this (m) are millimetres or an export error: no robot reaches that far
+MAX_COORDINATE_M = 100.0
+
+
+@dataclass(frozen=True)
+class Fixture:
+    """A socket (normal None) or a plane through `point` (3,) m with unit `normal` (3,)."""
+
+    name: str
+    point: np.ndarray
+    normal: np.ndarray | None = None
+
+    @property
+    def is_plane(self) -> bool:
+        return self.normal is not None
+
+
+def read_fixtures(path) -> tuple[Fixture, ...]:
+    """The fixtures of a CSV (see the module docstring); each bad cell refused with its row."""
+    table = read_table(path, "fixtures file", "name, x, y, z[, nx, ny, nz]", text=("name", *NORMAL))
+    missing = [c for c in ("name", "x", "y", "z") if c not in table.header]
+    require(not missing, f"{table.where}: no column {missing[0] if missing else ''}; the header needs name, x, y, z "
+                         f"(and nx, ny, nz for planes)")
+    names = [str(n).strip() for n in table.cells("name")]
+    xyz = np.column_stack([table.numbers(c, "give the position in m", MAX_COORDINATE_M) for c in "xyz"])
+    has_normal = all(c in table.header for c in NORMAL)
+    require(has_normal or not any(c in table.header for c in NORMAL),
+            f"{table.where}: a plane's normal needs all of nx, ny, nz; add the missing columns")
+    out = []
+    for r, name in enumerate(names):
+        require(name, f"{at(table.where, r + 2, 'name')}: empty; give the socket's or plane's id")
+        require(name not in names[:r], f"{at(table.where, r + 2, 'name')}: {excerpt(name)} is already the name of "
+                                       f"row {names.index(name) + 2}; give every fixture its own id")
+        normal = None
+        if has_normal:
+            cells = [str(table.cells(c)[r]).strip() for c in NORMAL]
+            if any(cells):
+                try:
+                    normal = np.array([float(c) for c in cells])
+                except ValueError:
+                    normal = np.full(3, np.nan)
+                ok = np.isfinite(normal).all() and np.linalg.norm(normal) > 0
+                require(ok, f"{at(table.where, r + 2, 'nx')}: the normal ({', '.join(cells)}) is not a nonzero "
+                            f"direction; give three numbers, or leave all three empty for a socket")
+                normal = normal / np.linalg.norm(normal)
+        out.append(Fixture(name, xyz[r], normal))
+    return tuple(out)
