@@ -113,6 +113,8 @@ def test_design_through_the_command_line(fixture_design, tmp_path):
     rel = data.relative
     assert rel.names == ("s1", "s2", "table") and list(rel.is_plane()) == [False, False, True]
     assert np.bincount(rel.group).tolist() == [f["poses"] for f in out["fixtures"]]
+    by = out["by_fixtures"]
+    assert [b["fixtures"] for b in by][-1] == 3 and by[-1]["predicted_rms_mm"] == out["predicted"]["rms_mm"]
 
 
 @pytest.mark.parametrize("text, options, message", [

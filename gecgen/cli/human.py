@@ -38,6 +38,15 @@ def print_human(result: dict):
                 print(f"  {c['model']}: {score}")
         elif key == "table":
             print_error_table(value)
+        elif key == "fixtures" and value and "poses" in value[0]:
+            print(f"fixtures: {len(value)} (configurations chosen, of the candidates that reach it)")
+            for f in value:
+                print(f"  {f['name']} ({f['kind']}): {f['poses']} of {f['candidates']}")
+        elif key == "by_fixtures":
+            print("the same poses over the first k fixtures (predicted held-out error the coefficients add):")
+            for b in value:
+                v = b["predicted_rms_mm"]
+                print(f"  {b['fixtures']}: " + (f"{v:.3g} mm" if v is not None else "leaves coefficients undetermined"))
         elif key == "effects":
             print(f"effects: {len(value)}")
             for e in value:

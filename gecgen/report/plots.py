@@ -100,13 +100,17 @@ def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
 
 def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     """Signed residual per axis (rows: x, y, z in mm, then orientation about x, y, z in mrad when
-    measured) against each joint the data moves (columns; one held still shows nothing), names and
-    units on every axis."""
+    measured) against each joint the data moves (columns; one held still shows nothing): a grid of
+    small multiples, each row on one residual scale and each column on one joint's, named with
+    units on the outer panels."""
     rows = [(f"{a} residual (mm)", st.position_mm[:, k]) for k, a in enumerate("xyz")]
     if st.rotation_mrad is not None:
         rows += [(f"rot. about {a} (mrad)", st.rotation_mrad[:, k]) for k, a in enumerate("xyz")]
     moving = [k for k in range(robot.n) if np.ptp(ds.data.q[:, k]) > 0] or list(range(robot.n))
-    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
+    # shared scales, labelled once per row and column: the tick labels of every panel were most of
+    # the report's time on small data, and say nothing a shared scale does not
+    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False,
+                             sharex="col", sharey="row")
     colour = COLOURS[min(len(COLOURS) - 1, [s.stage for s in ds.stages].index(st.stage))]
     for r, (ylabel, values) in enumerate(rows):
         finite = values[np.isfinite(values)]
@@ -117,16 +121,18 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
             ax.axhline(0, color="0.5", lw=0.6)
             _binned_mean(ax, joint_values(robot, ds.data, k)[st.pose], values)
             ax.set_ylim(-limit, limit)
-            ax.set_xlabel(joint_label(robot, k), fontsize=7, labelpad=1)
-            ax.set_ylabel(ylabel, fontsize=7, labelpad=1)
+            if r == len(rows) - 1:
+                ax.set_xlabel(joint_label(robot, k), fontsize=7, labelpad=1)
+            if col == 0:
+                ax.set_ylabel(ylabel, fontsize=7, labelpad=1)
             ax.tick_params(labelsize=6, pad=1)
-            ax.locator_params(nbins=4)  # fewer ticks: drawing them is most of the figure's time
+            ax.locator_params(nbins=4)
             ax.grid(alpha=0.3)
     fig.suptitle(f"{robot.name}, {ds.name} data, {st.stage}: signed residuals against each joint", fontsize=10)
     # fixed margins: tight_layout on this many axes costs a second per figure
     height = fig.get_figheight()
-    fig.subplots_adjust(left=0.05, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, wspace=0.42,
-                        hspace=0.55)
+    fig.subplots_adjust(left=0.06, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, wspace=0.08,
+                        hspace=0.1)
     still = [joint_label(robot, k) for k in range(robot.n) if k not in moving]
     return _figure(fig, f"residuals_{ds.name}_{_slug(st.stage)}",
                    f"Signed residuals, {st.stage} model, {ds.name} data"

@@ -223,7 +223,9 @@ class FixtureDesign:
     random}: the RMS over the candidates of the position error (mm) the coefficients' uncertainty
     adds to a configuration's residual about its fixture (refitted on all candidates, as held-out rows
     are), at noise_mm per coordinate: what held-out consistency or flatness gains above the noise; `n_identifiable` the directions the criterion
-    works in and `unseen` those no configuration shows."""
+    works in and `unseen` those no configuration shows; `by_count` ((k, predicted_mm), ...) the design of
+    the same number of poses over the first k fixtures only, scored on the candidates of all of them
+    (None: k fixtures leave a direction undetermined that all of them determine), the last k all."""
 
     chosen: tuple[np.ndarray, ...]
     random: tuple[np.ndarray, ...]
@@ -235,6 +237,7 @@ class FixtureDesign:
     n_candidates: tuple[int, ...]
     swaps: int
     passes: int
+    by_count: tuple = ()
 
     def to_dict(self, fixtures: tuple[Fixture, ...]) -> dict:
         return {"n_poses": int(sum(len(c) for c in self.chosen)), "criterion": "D",
@@ -244,7 +247,8 @@ class FixtureDesign:
                 "fixtures": [{"name": f.name, "kind": "plane" if f.is_plane else "point", "poses": len(c),
                               "candidates": K} for f, c, K in zip(fixtures, self.chosen, self.n_candidates)],
                 "n_identifiable": self.n_identifiable, "unseen": self.unseen, "swaps": self.swaps,
-                "passes": self.passes}
+                "passes": self.passes,
+                "by_fixtures": [{"fixtures": k, "predicted_rms_mm": v} for k, v in self.by_count]}
 
 
 def _predicted_rms(rows, chosen, noise_m: float) -> float:
@@ -284,8 +288,28 @@ def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, t
     T = vectors[:, seen] / np.sqrt(values[seen])
     rows = [(a @ T, b) for a, b in rows]
 
-    rng = np.random.default_rng(seed)
-    share = np.full(len(fixtures), n_poses // len(fixtures)) + (np.arange(len(fixtures)) < n_poses % len(fixtures))
+    start, chosen, swaps, passes = _search(rows, minimum, n_poses, np.random.default_rng(seed), max_passes)
+    out = {name: _figures(rows, c, noise_m) for name, c in (("design", chosen), ("random", start))}
+    if out["design"][1] is None:
+        raise ModelError(f"{n_poses} configurations leave some coefficient undetermined over these fixtures; give "
+                         f"more poses or more fixtures")
+    # how many fixtures: the same number of poses over the first k of them, scored on all
+    by_count = []
+    for k in range(1, len(fixtures)):
+        if sum(minimum[:k]) <= n_poses <= sum(len(a) for a, _ in rows[:k]):
+            sub = _search(rows[:k], minimum[:k], n_poses, np.random.default_rng(seed), max_passes)[1]
+            by_count.append((k, _figures(rows, sub + [[] for _ in rows[k:]], noise_m)[1]))
+    by_count.append((len(fixtures), out["design"][1]))
+    return FixtureDesign(tuple(np.array(sorted(c), int) for c in chosen), tuple(np.array(c, int) for c in start),
+                         {k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()}, 1e3 * noise_m,
+                         int(seen.sum()), int((~seen).sum()), tuple(len(q) for q in cands.q), swaps, passes,
+                         tuple(by_count))
+
+
+def _search(rows, minimum: list[int], n_poses: int, rng: np.random.Generator, max_passes: int):
+    """(start, chosen, swaps, passes): the even random start over the fixtures of `rows` and the
+    exchange's choice from it, per fixture lists of candidate indices."""
+    share = np.full(len(rows), n_poses // len(rows)) + (np.arange(len(rows)) < n_poses % len(rows))
     share = np.minimum(np.maximum(share, minimum), [len(a) for a, _ in rows])
     while share.sum() < n_poses:  # a fixture with few reachable candidates leaves its share to the others
         share[np.argmax([len(a) - s for (a, _), s in zip(rows, share)])] += 1
@@ -294,14 +318,14 @@ def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, t
     start = [sorted(rng.choice(len(a), s, replace=False).tolist()) for (a, _), s in zip(rows, share)]
     search = _Exchange(rows, start, minimum)
     swaps, passes = search.passes(max_passes)
-    out = {}
-    for name, chosen in (("design", search.chosen), ("random", start)):
-        M = sum(_nuisance(a, b, c)[2] for (a, b), c in zip(rows, chosen))
-        out[name] = (logdet(M), 1e3 * _predicted_rms(rows, chosen, noise_m))
-    if not np.isfinite(out["design"][0]):
-        raise ModelError(f"{n_poses} configurations leave some coefficient undetermined over these fixtures; give "
-                         f"more poses or more fixtures")
-    return FixtureDesign(tuple(np.array(sorted(c), int) for c in search.chosen), tuple(np.array(c, int) for c in start),
-                         {k: v[0] if np.isfinite(v[0]) else None for k, v in out.items()},
-                         {k: v[1] if np.isfinite(v[1]) else None for k, v in out.items()}, 1e3 * noise_m,
-                         int(seen.sum()), int((~seen).sum()), tuple(len(q) for q in cands.q), swaps, passes)
+    return start, search.chosen, swaps, passes
+
+
+def _figures(rows, chosen, noise_m: float) -> tuple[float | None, float | None]:
+    """(log det of the whitened information, predicted RMS in mm) of chosen rows per fixture; None
+    for both when they leave a direction every candidate together informs undetermined."""
+    M = sum(_nuisance(a, b, c)[2] for (a, b), c in zip(rows, chosen))
+    values = np.linalg.eigvalsh(M)
+    if values.min() <= UNSEEN_TOL * values.max():
+        return None, None
+    return float(np.sum(np.log(values))), 1e3 * _predicted_rms(rows, chosen, noise_m)
