@@ -152,7 +152,7 @@ def designed(args, robot, truth, errors, lines):
     lines += ["", "Largest ratio, designed against random: " + "; ".join(
         f"{kind} {max(worst[(kind, 'design')]):.3f} against {max(worst[(kind, 'random')]):.3f} (mean "
         f"{np.mean(worst[(kind, 'design')]):.3f} against {np.mean(worst[(kind, 'random')]):.3f})"
-        for kind in ("planes", "sockets")) + ".", ""]
+        for kind in ("planes", "sockets")) + " (the acceptance: 1.3).", ""]
 
 
 def blunder(robot, train, seed, errors, lines):
