@@ -64,6 +64,35 @@ def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):
     assert {"rms_mm", "max_mm"} <= set(out["train"]) and {"rms_mm", "max_mm"} <= set(out["val"])
 
 
+def test_the_same_choice_and_report_in_one_process_or_two(payload_data, capsys, monkeypatch):
+    """The folds and the report's figures run side by side (`runtime.processes`); one process gives
+    the same candidates' scores, the same choice and the same report, byte for byte."""
+    d = payload_data
+    outs = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("GECGEN_WORKERS", n)
+        out = run(capsys, "calibrate", ROBOT, d / "val.csv", "--models", "geometric,diagnosed", "--holdout", "0.25",
+                  "-o", d / f"workers{n}")
+        outs[n] = (out["candidates"], out["model"], (d / f"workers{n}" / "report.md").read_text(),
+                   sorted((f.name, f.read_bytes()) for f in (d / f"workers{n}").glob("*.png")))
+    assert outs["1"] == outs["2"] and len(outs["1"][3]) >= 6
+
+
+def test_mapped_keeps_the_order_and_refuses_a_bad_worker_count(monkeypatch):
+    from gecgen.model.validation import ModelError
+    from gecgen.runtime.processes import mapped
+
+    calls = [(divmod, (k * 7, 3)) for k in range(9)]
+    for n in ("1", "3"):
+        monkeypatch.setenv("GECGEN_WORKERS", n)
+        with mapped(calls) as results:
+            assert list(results) == [divmod(k * 7, 3) for k in range(9)]
+    monkeypatch.setenv("GECGEN_WORKERS", "two")
+    with pytest.raises(ModelError, match="GECGEN_WORKERS='two': give a whole number of processes"):
+        with mapped(calls) as results:
+            list(results)
+
+
 def test_hold_out_splits_by_pose_and_is_seeded(payload_data):
     data = read_measurements(payload_data / "train.csv", load_robot(ROBOT))
     train, val = hold_out(data, 0.25, seed=5)

@@ -31,6 +31,7 @@ from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, identify, squared_error
+from gecgen.runtime.processes import mapped
 
 FOLDS = 5
 #: cross-validated RMS this close (relative) counts as a tie, won by the smaller model
@@ -105,23 +106,28 @@ def run_pipeline(robot: Robot, pipeline: Pipeline, data: Measurements,
     return pipeline.model, cm, identify(cm, data, registration_mode=registration_mode), None
 
 
-def pipeline_cv(robot: Robot, pipeline: Pipeline, data: Measurements, seed: int = 0,
-                registration_mode: str = "auto") -> float:
-    """Cross-validated RMS (mm) over all measured points of the held-out poses (a measured frame
-    counting as two, `identify.squared_error`), the pipeline run whole on the other folds. Raises
-    RuntimeError when a fold's fit cannot be trusted."""
-    fold = np.random.default_rng(seed).permutation(data.n_poses) % FOLDS
-    sq, n = 0.0, 0
-    for f in range(FOLDS):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # conditioning warnings of the fold fits; the score says it all
-            _, cm, fit, _ = run_pipeline(robot, pipeline, data.subset(np.nonzero(fold != f)[0]), registration_mode)
-        if fit.failures:
-            raise RuntimeError(f"fold {f + 1}: {fit.failures[0]}")
-        test = data.subset(np.nonzero(fold == f)[0])
-        sq_f, n_f = squared_error(cm, test, fit.to_world(test), fit.c)
-        sq, n = sq + sq_f, n + n_f
-    return 1e3 * float(np.sqrt(sq / n))
+def fold_score(robot: Robot, pipeline: Pipeline, data: Measurements, fold: np.ndarray, f: int,
+               registration_mode: str = "auto") -> tuple[float, float]:
+    """(sum of squared errors (m^2), the points they count for) over all measured points of the poses
+    of fold f (fold (P,) each pose's fold), a measured frame counting as two
+    (`identify.squared_error`), the pipeline run whole on the other folds. Raises RuntimeError when
+    the fold's fit cannot be trusted."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # conditioning warnings of the fold fits; the score says it all
+        _, cm, fit, _ = run_pipeline(robot, pipeline, data.subset(np.nonzero(fold != f)[0]), registration_mode)
+    if fit.failures:
+        raise RuntimeError(f"fold {f + 1}: {fit.failures[0]}")
+    test = data.subset(np.nonzero(fold == f)[0])
+    return squared_error(cm, test, fit.to_world(test), fit.c)
+
+
+def _scored(*task) -> tuple[float, float] | str:
+    """fold_score of one task, or why it was refused (returned, not raised, as a worker process
+    would: a fold too small, an untrustworthy fit)."""
+    try:
+        return fold_score(*task)
+    except (RuntimeError, ModelError) as exc:
+        return str(exc).splitlines()[0]
 
 
 def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
@@ -137,17 +143,22 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     if not candidates:
         raise RuntimeError(f"none of the models {', '.join(names)} applies to this robot and data (default: the robot "
                            f"has no error-model file; elastic: neither URDF masses nor a wrench that varies)")
-    for p in candidates:
-        if progress:
-            progress(p.name)
-        try:
-            cv = pipeline_cv(robot, p, data, seed, registration_mode)
-            scored.append((cv, len(p.model.coefficients), p))
+    fold = np.random.default_rng(seed).permutation(data.n_poses) % FOLDS
+    tasks = [(robot, p, data, fold, f, registration_mode) for p in candidates for f in range(FOLDS)]
+    # the folds are independent fits, scored side by side (`runtime.processes`); the sums below add
+    # them in fold order, so the figures do not depend on how many processes ran them
+    with mapped([(_scored, task) for task in tasks]) as results:
+        for p in candidates:
+            if progress:
+                progress(p.name)
+            folds = [next(results) for _ in range(FOLDS)]
+            refused = next((r for r in folds if isinstance(r, str)), None)
+            cv = None if refused is not None else 1e3 * float(np.sqrt(sum(sq for sq, _ in folds) /
+                                                                    sum(m for _, m in folds)))
             table.append({"model": p.name, "cv_rms_mm": cv, "n_params": len(p.model.coefficients),
-                          "diagnose": p.diagnose})
-        except (RuntimeError, ModelError) as exc:  # too few poses for it, or an untrustworthy fold fit
-            table.append({"model": p.name, "cv_rms_mm": None, "n_params": len(p.model.coefficients),
-                          "diagnose": p.diagnose, "refused": str(exc).splitlines()[0]})
+                          "diagnose": p.diagnose, **({"refused": refused} if refused is not None else {})})
+            if cv is not None:  # else too few poses for it, or an untrustworthy fold fit
+                scored.append((cv, len(p.model.coefficients), p))
     if not scored:
         raise RuntimeError(f"no candidate model could be fitted in every fold ({table[0]['refused']})")
     best = min(cv for cv, _, _ in scored)

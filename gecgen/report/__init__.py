@@ -8,13 +8,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.report.content import Report
+from gecgen.report.content import Report, drawn
 
 
 def write(report: Report, outdir: str | Path) -> dict[str, str]:
-    """report.md (its figures as PNG files beside it) and report.html (figures embedded) in outdir;
-    returns {report: markdown path, report_html: html path}."""
+    """report.md (its figures as PNG files beside it) and report.html (figures embedded) in outdir,
+    its figures drawn first; returns {report: markdown path, report_html: html path}."""
     from gecgen.report import html, markdown
 
+    report = drawn(report)
     outdir = Path(outdir)
     return {"report": str(markdown.write(report, outdir)), "report_html": str(html.write(report, outdir))}

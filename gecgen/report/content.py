@@ -6,12 +6,14 @@ residuals are the modelled points at coefficients already fitted, never a new fi
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.runtime.identify import filled, fit_frames, summary, to_world
+from gecgen.runtime.processes import mapped
 from gecgen.runtime.significance import rms_interval
 
 
@@ -30,13 +32,23 @@ class Figure:
 
 
 @dataclass(frozen=True)
+class Drawing:
+    """A figure still to draw: a `plots` function and its arguments. A report's figures are most of its
+    time, and independent, so they are drawn together, side by side, as it is written (`drawn`)."""
+
+    fn: Callable[..., Figure]
+    args: tuple
+
+
+@dataclass(frozen=True)
 class Bullets:
     items: list[str]
 
 
 @dataclass
 class Section:
-    """A titled part of a report; blocks are paragraphs (str, `code` in backticks), Bullets, Table or Figure."""
+    """A titled part of a report; blocks are paragraphs (str, `code` in backticks), Bullets, Table, Figure or
+    a Drawing, a Figure to come."""
 
     title: str
     blocks: list = field(default_factory=list)
@@ -47,6 +59,16 @@ class Report:
     title: str
     intro: list[str]
     sections: list[Section]
+
+
+def drawn(report: Report) -> Report:
+    """The report with every Drawing drawn (`runtime.processes`: side by side, each exactly as alone)."""
+    sections = [Section(section.title, list(section.blocks)) for section in report.sections]
+    at = [(section, k) for section in sections for k, block in enumerate(section.blocks) if isinstance(block, Drawing)]
+    with mapped([(section.blocks[k].fn, section.blocks[k].args) for section, k in at]) as figures:
+        for (section, k), figure in zip(at, figures):
+            section.blocks[k] = figure
+    return Report(report.title, report.intro, sections)
 
 
 @dataclass(frozen=True)
@@ -202,7 +224,7 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
             by += [(f"force about {LOAD_STEP_N * loads[c]:g} N", *(_rms_max(st.position_mm[case == c])
                                                                    for st in ds.stages)) for c in range(len(loads))]
         blocks.append(Table(("rows", *(f"{st.stage}: RMS / max (mm)" for st in ds.stages)), by))
-        blocks.append(plots.per_pose(robot, ds))
+        blocks.append(Drawing(plots.per_pose, (robot, ds)))
     return Section("What was measured", blocks)
 
 
@@ -248,11 +270,10 @@ def residual_sections(robot: Robot, sets: list[DataSet], compare: int = 2) -> li
                         "a scale or compliance error. The figures of one data set share no scale between "
                         "models: compare shapes, and read the size on the axes."])
     for ds in sets:
-        dist.blocks.append(plots.error_distribution(robot, ds))
+        dist.blocks.append(Drawing(plots.error_distribution, (robot, ds)))
         if any(s.rotation_mrad is not None for s in ds.stages):
-            dist.blocks.append(plots.error_distribution(robot, ds, orientation=True))
-        for st in ds.stages[-compare:]:
-            joints.blocks.append(plots.residuals_per_joint(robot, ds, st))
+            dist.blocks.append(Drawing(plots.error_distribution, (robot, ds, True)))
+        joints.blocks += [Drawing(plots.residuals_per_joint, (robot, ds, st)) for st in ds.stages[-compare:]]
     return [dist, joints]
 
 
@@ -368,7 +389,8 @@ def effect_sections(robot: Robot, effects, cm, fit, y: np.ndarray, after: Residu
                        Bullets([f"{alt['error']}: {', '.join(alt['terms'])} (similarity {alt['similarity']:.3f})"
                                 for alt in eff.alternatives])]
         still = [v for v in eff.variables if np.ptp(variable(data, v)) == 0]
-        blocks += [plots.effect(robot, eff, size, v, without, after, data) for v in eff.variables if v not in still]
+        blocks += [Drawing(plots.effect, (robot, eff, size, v, without, after, data)) for v in eff.variables
+                   if v not in still]
         if still:
             blocks.append(f"Not plotted against {', '.join(still)}: constant over the training data.")
         out.append(Section(f"Effect {k}: {eff.error} in {', '.join(eff.variables)} ({eff.family})", blocks))
