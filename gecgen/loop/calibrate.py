@@ -31,7 +31,7 @@ from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, identify, squared_error
-from gecgen.runtime.processes import mapped
+from gecgen.runtime.processes import mapped, side_by_side
 
 FOLDS = 5
 #: cross-validated RMS this close (relative) counts as a tie, won by the smaller model
@@ -144,14 +144,24 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
         raise RuntimeError(f"none of the models {', '.join(names)} applies to this robot and data (default: the robot "
                            f"has no error-model file; elastic: neither URDF masses nor a wrench that varies)")
     fold = np.random.default_rng(seed).permutation(data.n_poses) % FOLDS
-    tasks = [(robot, p, data, fold, f, registration_mode) for p in candidates for f in range(FOLDS)]
-    # the folds are independent fits, scored side by side (`runtime.processes`); the sums below add
-    # them in fold order, so the figures do not depend on how many processes ran them
-    with mapped([(_scored, task) for task in tasks]) as results:
-        for p in candidates:
+    # the folds are independent fits, scored side by side (`runtime.processes`), diagnose's (the long
+    # ones) first so that the quick ones fill in around them; the sums below add each candidate's folds
+    # in fold order, so the figures do not depend on how many processes ran them
+    order = sorted(range(len(candidates)), key=lambda i: not candidates[i].diagnose)
+    tasks = [(i, f) for i in order for f in range(FOLDS)]
+    ahead = None
+    with mapped([(_scored, (robot, candidates[i], data, fold, f, registration_mode)) for i, f in tasks]) as results:
+        if side_by_side(len(tasks)) > 1 and candidates[order[0]].diagnose:
+            # while the workers score the folds, this process fits the longest candidate on all the data:
+            # it is most often the choice, and otherwise the time would have been spent waiting
+            ahead = candidates[order[0]], run_pipeline(robot, candidates[order[0]], data, registration_mode)
+        scores = {}
+        for i in order:  # as the pool takes them: a candidate's name while its first fold is scored
             if progress:
-                progress(p.name)
-            folds = [next(results) for _ in range(FOLDS)]
+                progress(candidates[i].name)
+            scores.update({(i, f): next(results) for f in range(FOLDS)})
+        for i, p in enumerate(candidates):
+            folds = [scores[i, f] for f in range(FOLDS)]
             refused = next((r for r in folds if isinstance(r, str)), None)
             cv = None if refused is not None else 1e3 * float(np.sqrt(sum(sq for sq, _ in folds) /
                                                                     sum(m for _, m in folds)))
@@ -164,7 +174,8 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     best = min(cv for cv, _, _ in scored)
     # diagnose only ever adds to its start model: in a tie it counts as the larger one
     chosen = min((s for s in scored if s[0] <= best * (1 + TIE)), key=lambda s: (s[1] + s[2].diagnose / 2, s[0]))[2]
-    model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
+    model, cm, fit, diag = ahead[1] if ahead and ahead[0] is chosen else run_pipeline(robot, chosen, data,
+                                                                                       registration_mode)
     if fit.failures:
         raise RuntimeError(f"the chosen model ({chosen.name}) cannot be trusted on all the data: {fit.failures[0]}")
     return Choice(table, chosen, model, cm, fit, diag)

@@ -35,6 +35,11 @@ class Fixture:
     def is_plane(self) -> bool:
         return self.normal is not None
 
+    @property
+    def tangents(self) -> np.ndarray:
+        """(2, 3) two unit vectors across a plane's normal, at right angles."""
+        return np.linalg.svd(self.normal[None, :])[2][1:]
+
 
 def read_fixtures(path) -> tuple[Fixture, ...]:
     """The fixtures of a CSV (see the module docstring); each bad cell refused with its row."""

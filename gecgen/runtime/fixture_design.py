@@ -77,14 +77,16 @@ def fixture_candidates(robot: Robot, fixtures: tuple[Fixture, ...], target: int,
     range inside its limits; a fixture too few starts reach is refused, naming it."""
     lo, hi = (np.array(v) for v in robot.sampling_box())
     lo, hi = lo + LIMIT_MARGIN * (hi - lo), hi - LIMIT_MARGIN * (hi - lo)
+
+    def position(q: np.ndarray) -> np.ndarray:
+        return target_positions(robot, q)[:, target]
+
     qs, goals = [], []
     for f in fixtures:
         goal = np.tile(f.point, (n, 1))
         if f.is_plane:
-            tangents = np.linalg.svd(f.normal[None, :])[2][1:]
-            goal = goal + rng.uniform(-patch_m, patch_m, (n, 2)) @ tangents
-        position = lambda q: target_positions(robot, q)[:, target]  # noqa: E731 - the nominal robot is the truth here
-        q, ok = reach(robot, position, position, goal, rng)
+            goal = goal + rng.uniform(-patch_m, patch_m, (n, 2)) @ f.tangents
+        q, ok = reach(robot, position, position, goal, rng)  # the nominal robot is the truth here
         ok &= ((q >= lo) & (q <= hi)).all(axis=1)
         require(ok.sum() >= MINIMUM[f.is_plane],
                 f"fixture {f.name}: the {robot.target_names[target]} reaches it in {int(ok.sum())} of {n} tries; "
@@ -122,9 +124,8 @@ def _rows(cm: CompiledModel, cands: FixtureCandidates, target: int, columns: np.
         _, H = cm.model_targets(q, np.zeros((K, 6)), np.zeros((K, 0)), np.zeros(cm.dims.nc), with_H=True)
         H = H[:, 3 * target:3 * target + 3][:, :, columns]
         if f.is_plane:
-            tangents = np.linalg.svd(f.normal[None, :])[2][1:]
             a = np.einsum("i,nik->nk", f.normal, H)[:, None, :]
-            b = np.column_stack([np.ones(K), (goal - f.point) @ tangents.T])[:, None, :]
+            b = np.column_stack([np.ones(K), (goal - f.point) @ f.tangents.T])[:, None, :]
         else:
             a, b = H, np.tile(np.eye(3), (K, 1, 1))
         out.append((a, b))

@@ -31,14 +31,23 @@ def workers() -> int:
     return int(text)
 
 
+def side_by_side(n_calls: int) -> int:
+    """How many processes `mapped` runs n_calls in: 1 (this one) for a single call, with
+    GECGEN_WORKERS=1, in a daemon process (a Dask worker of a fleet, which already runs robots side by
+    side, may not fork) or where processes cannot be forked."""
+    n = min(workers(), n_calls)
+    if multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+        return 1
+    return max(n, 1)
+
+
 @contextmanager
 def mapped(calls: list[tuple[Callable, tuple]]) -> Iterator[Iterable]:
     """fn(*args) of every (fn, args) of calls (fn module-level, args picklable), in their order, as an
-    iterator valid inside the `with`; in up to `workers()` forked processes when there is more than
-    one call."""
-    n = min(workers(), len(calls))
-    # a daemon process (a Dask worker of a fleet, which already runs robots side by side) may not fork
-    if n <= 1 or multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+    iterator valid inside the `with`; in `side_by_side(len(calls))` forked processes, whose tasks are
+    all handed out on entry (this process is free meanwhile)."""
+    n = side_by_side(len(calls))
+    if n <= 1:
         yield (_call(fn, args) for fn, args in calls)
         return
     with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork")) as pool:
