@@ -93,6 +93,24 @@ def test_mapped_keeps_the_order_and_refuses_a_bad_worker_count(monkeypatch):
             list(results)
 
 
+@pytest.mark.parametrize("n", ["1", "2"])
+def test_a_worker_s_warnings_and_errors_reach_the_caller(monkeypatch, n):
+    """What a task says (a warning) and how it fails (an exception) are the same in one process or two."""
+    import warnings
+
+    from gecgen.runtime.processes import mapped
+
+    monkeypatch.setenv("GECGEN_WORKERS", n)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with mapped([(warnings.warn, (f"task {k}",)) for k in range(3)]) as results:
+            assert list(results) == [None] * 3
+    assert [str(w.message) for w in caught] == ["task 0", "task 1", "task 2"]
+    with pytest.raises(ZeroDivisionError):
+        with mapped([(divmod, (1, 1)), (divmod, (1, 0)), (divmod, (2, 1))]) as results:
+            list(results)
+
+
 def test_hold_out_splits_by_pose_and_is_seeded(payload_data):
     data = read_measurements(payload_data / "train.csv", load_robot(ROBOT))
     train, val = hold_out(data, 0.25, seed=5)

@@ -82,3 +82,5 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     print_human({"rms_mm": 0.123456, "max_correction": {"slide": 1.23456e-4, "turn": 0.0123456},
                  "max_correction_units": {"slide": "m", "turn": "rad"}})
     assert capsys.readouterr().out.splitlines() == ["rms_mm: 0.123", "max_correction: slide 0.000123 m, turn 0.0123 rad"]
+    print_human({"seconds": 1234.56, "log_det": 312.44})
+    assert capsys.readouterr().out.splitlines() == ["seconds: 1235", "log_det: 312"]

@@ -115,6 +115,7 @@ def test_design_through_the_command_line(fixture_design, tmp_path):
     assert np.bincount(rel.group).tolist() == [f["poses"] for f in out["fixtures"]]
     by = out["by_fixtures"]
     assert [b["fixtures"] for b in by][-1] == 3 and by[-1]["predicted_rms_mm"] == out["predicted"]["rms_mm"]
+    assert by[-1]["log_det"] == pytest.approx(out["log_det"], rel=1e-12)
 
 
 @pytest.mark.parametrize("text, options, message", [
@@ -122,6 +123,9 @@ def test_design_through_the_command_line(fixture_design, tmp_path):
     ("name,x,y,z,nx,ny,nz\np,0.5,0,0.2,0,0,0\n", [], "row 2, column 'nx': the normal (0, 0, 0) is not a nonzero"),
     ("name,x,y\ns1,0.5,0\n", [], "no column z"),
     ("name,x,y,z\ns1,0.5,0,0.2\n", ["--min-z", "0"], "--min-z does not apply to a design for --fixtures"),
+    ("name,x,y,z\ns1,0.5,0,0.2\n", ["--tracker", "2,0,1", "--max-incidence-deg", "30"],
+     "--tracker does not apply to a design for --fixtures"),
+    ("name,x,y,z,nx,ny,nz\np,0.5,0,0.2,0,nan,1\n", [], "row 2, column 'ny': the normal (0, nan, 1) is not a"),
     ("name,x,y,z\ns1,0.5,0,0.2\ns2,5,0,0.2\n", [], "fixture s2: the ball reaches it in 0 of"),
 ])
 def test_bad_fixture_designs_are_refused(tmp_path, capsys, text, options, message):

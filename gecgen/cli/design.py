@@ -170,7 +170,7 @@ def run(args) -> dict:
 
 #: options of a tracker design that a fixture design has no use for: refused, never ignored
 NOT_WITH_FIXTURES = {"from_csv": "--from", "targets": "--targets", "payload_kg": "--payload-kg", "min_z": "--min-z",
-                     "tracker": "--tracker", "given": "--given"}
+                     "tracker": "--tracker", "max_incidence_deg": "--max-incidence-deg", "given": "--given"}
 
 
 def _run_fixtures(args) -> dict:

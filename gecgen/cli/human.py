@@ -3,10 +3,13 @@ from __future__ import annotations
 
 
 def scalar(value) -> str:
-    """A value as a person reads it: three significant digits, as the reports print them."""
+    """A value as a person reads it: three significant digits, as the reports print them, and every
+    digit before the point of a number of 1000 or more (a time in seconds, a log det)."""
     if isinstance(value, list):  # an interval: [low, high]
         return "[" + ", ".join(map(scalar, value)) + "]"
-    return f"{value:.3g}" if isinstance(value, float) else str(value)
+    if not isinstance(value, float):
+        return str(value)
+    return f"{value:.0f}" if abs(value) >= 1e3 else f"{value:.3g}"
 
 
 def _interval(value) -> bool:
@@ -43,10 +46,11 @@ def print_human(result: dict):
             for f in value:
                 print(f"  {f['name']} ({f['kind']}): {f['poses']} of {f['candidates']}")
         elif key == "by_fixtures":
-            print("the same poses over the first k fixtures (predicted held-out error the coefficients add):")
+            print("the same poses over the first k fixtures (log det; predicted held-out error the coefficients add):")
             for b in value:
                 v = b["predicted_rms_mm"]
-                print(f"  {b['fixtures']}: " + (f"{v:.3g} mm" if v is not None else "leaves coefficients undetermined"))
+                print(f"  {b['fixtures']}: " + (f"{b['log_det']:.1f}; {v:.3g} mm" if v is not None
+                                                else "leaves coefficients undetermined"))
         elif key == "effects":
             print(f"effects: {len(value)}")
             for e in value:

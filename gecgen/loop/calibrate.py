@@ -153,10 +153,16 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     with mapped([(_scored, (robot, candidates[i], data, fold, f, registration_mode)) for i, f in tasks]) as results:
         if side_by_side(len(tasks)) > 1 and candidates[order[0]].diagnose:
             # while the workers score the folds, this process fits the longest candidate on all the data:
-            # it is most often the choice, and otherwise the time would have been spent waiting
-            ahead = candidates[order[0]], run_pipeline(robot, candidates[order[0]], data, registration_mode)
+            # it is most often the choice, and otherwise the time would have been spent waiting. Its
+            # failure matters only if it is chosen, and is raised then, as it would be after the choice.
+            if progress:
+                progress(candidates[order[0]].name)
+            try:
+                ahead = candidates[order[0]], run_pipeline(robot, candidates[order[0]], data, registration_mode)
+            except (RuntimeError, ModelError) as exc:
+                ahead = candidates[order[0]], exc
         scores = {}
-        for i in order:  # as the pool takes them: a candidate's name while its first fold is scored
+        for i in order:  # a candidate's name while its folds are awaited
             if progress:
                 progress(candidates[i].name)
             scores.update({(i, f): next(results) for f in range(FOLDS)})
@@ -174,6 +180,8 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     best = min(cv for cv, _, _ in scored)
     # diagnose only ever adds to its start model: in a tie it counts as the larger one
     chosen = min((s for s in scored if s[0] <= best * (1 + TIE)), key=lambda s: (s[1] + s[2].diagnose / 2, s[0]))[2]
+    if ahead and ahead[0] is chosen and isinstance(ahead[1], Exception):
+        raise ahead[1]
     model, cm, fit, diag = ahead[1] if ahead and ahead[0] is chosen else run_pipeline(robot, chosen, data,
                                                                                        registration_mode)
     if fit.failures:

@@ -252,9 +252,8 @@ def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot 
     """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
     given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
     wrench and aux, measuring the same target; with the robot, revolute joints 2 pi apart count as
-    identical), else None (unknown). With the robot the data is
-    fitted on, a measured frame's vertices count with their weight and degrees of freedom
-    (`model.pose_targets`), so the noise is per degree of freedom as the fit's sigma is."""
+    identical), else None (unknown). A measured frame's vertices count with their weight and degrees
+    of freedom (`Measurements.rows`), so the noise is per degree of freedom as the fit's sigma is."""
     if noise_mm is not None:
         return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
     if data.relative is not None:  # a socket's or plane's rows have no position to repeat

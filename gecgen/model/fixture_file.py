@@ -65,8 +65,9 @@ def read_fixtures(path) -> tuple[Fixture, ...]:
                     normal = np.array([float(c) for c in cells])
                 except ValueError:
                     normal = np.full(3, np.nan)
+                bad = next((c for c, v in zip(NORMAL, normal) if not np.isfinite(v)), "nx")
                 ok = np.isfinite(normal).all() and np.linalg.norm(normal) > 0
-                require(ok, f"{at(table.where, r + 2, 'nx')}: the normal ({', '.join(cells)}) is not a nonzero "
+                require(ok, f"{at(table.where, r + 2, bad)}: the normal ({', '.join(cells)}) is not a nonzero "
                             f"direction; give three numbers, or leave all three empty for a socket")
                 normal = normal / np.linalg.norm(normal)
         out.append(Fixture(name, xyz[r], normal))

@@ -27,8 +27,9 @@ of its rows the fixture's current nuisance fit does not predict (P_g = (B^T B)^-
   the comparison reported beside the design): each chosen configuration is taken out in turn and the
   candidate of largest gain, of any fixture, put in when that raises log det M by more than SWAP_TOL
   (a fixture keeps at least the configurations that make it say anything: 2 in a socket, 4 on a
-  plane). So the design also chooses how many configurations each fixture gets. Passes stop when one
-  gains less than PASS_TOL, or after MAX_PASSES.
+  plane). So the design chooses how many configurations each listed fixture gets beyond that minimum;
+  whether a fixture is worth placing at all is what `by_count` answers (the same poses designed over
+  the first k fixtures only). Passes stop when one gains less than PASS_TOL, or after MAX_PASSES.
 """
 from __future__ import annotations
 
@@ -107,6 +108,9 @@ def recorded_candidates(robot: Robot, data: Measurements, target: int) -> tuple[
     fixtures, qs, goals, poses = [], [], [], []
     for g, name in enumerate(rel.names):
         on = np.nonzero((rel.group == g) & (data.target == target))[0]
+        need = MINIMUM[bool(rel.is_plane()[g])]
+        require(len(on) >= need, f"{data.source}: {name} has {len(on)} rows of {robot.target_names[target]}; a design "
+                                 f"needs at least {need} to choose from")
         centre = p[on].mean(axis=0)
         normal = np.linalg.svd(p[on] - centre)[2][2] if rel.is_plane()[g] else None
         fixtures.append(Fixture(name, centre, normal))
@@ -224,9 +228,9 @@ class FixtureDesign:
     random}: the RMS over the candidates of the position error (mm) the coefficients' uncertainty
     adds to a configuration's residual about its fixture (refitted on all candidates, as held-out rows
     are), at noise_mm per coordinate: what held-out consistency or flatness gains above the noise; `n_identifiable` the directions the criterion
-    works in and `unseen` those no configuration shows; `by_count` ((k, predicted_mm), ...) the design of
-    the same number of poses over the first k fixtures only, scored on the candidates of all of them
-    (None: k fixtures leave a direction undetermined that all of them determine), the last k all."""
+    works in and `unseen` those no configuration shows; `by_count` ((k, log_det, predicted_mm), ...) the
+    design of the same number of poses over the first k fixtures only, scored on the candidates of all of
+    them (None: k fixtures leave a direction undetermined that all of them determine), the last k all."""
 
     chosen: tuple[np.ndarray, ...]
     random: tuple[np.ndarray, ...]
@@ -249,13 +253,14 @@ class FixtureDesign:
                               "candidates": K} for f, c, K in zip(fixtures, self.chosen, self.n_candidates)],
                 "n_identifiable": self.n_identifiable, "unseen": self.unseen, "swaps": self.swaps,
                 "passes": self.passes,
-                "by_fixtures": [{"fixtures": k, "predicted_rms_mm": v} for k, v in self.by_count]}
+                "by_fixtures": [{"fixtures": k, "log_det": d, "predicted_rms_mm": v} for k, d, v in self.by_count]}
 
 
 def _predicted_rms(rows, chosen, noise_m: float) -> float:
-    """RMS (m) over every candidate of the position error the coefficients' covariance noise^2 M^-1
-    (M from the chosen rows) adds to its residual about its fixture, the fixture refitted on all of
-    its candidates as a held-out set would be: the rows projected off the nuisance, A - B P."""
+    """RMS (m) over every candidate of the error the coefficients' covariance noise^2 M^-1 (M from
+    the chosen rows) adds to its residual about its fixture (a seat's 3-D distance, a touch's along
+    the normal), the fixture refitted on all of its candidates as a held-out set would be: the rows
+    projected off the nuisance, A - B P."""
     Minv = np.linalg.pinv(sum(_nuisance(a, b, c)[2] for (a, b), c in zip(rows, chosen)))
     var = count = 0
     for a, b in rows:
@@ -299,8 +304,8 @@ def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, t
     for k in range(1, len(fixtures)):
         if sum(minimum[:k]) <= n_poses <= sum(len(a) for a, _ in rows[:k]):
             sub = _search(rows[:k], minimum[:k], n_poses, np.random.default_rng(seed), max_passes)[1]
-            by_count.append((k, _figures(rows, sub + [[] for _ in rows[k:]], noise_m)[1]))
-    by_count.append((len(fixtures), out["design"][1]))
+            by_count.append((k, *_figures(rows, sub + [[] for _ in rows[k:]], noise_m)))
+    by_count.append((len(fixtures), *out["design"]))
     return FixtureDesign(tuple(np.array(sorted(c), int) for c in chosen), tuple(np.array(c, int) for c in start),
                          {k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()}, 1e3 * noise_m,
                          int(seen.sum()), int((~seen).sum()), tuple(len(q) for q in cands.q), swaps, passes,

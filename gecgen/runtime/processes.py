@@ -1,17 +1,24 @@
 """Independent tasks in worker processes: calibrate's folds, a report's figures.
 
 Python runs one thread of Python at a time, and most of a fold's fit or a figure's drawing is
-Python, so the cores are used by processes. They are forked: each starts with what the parent has
-loaded (compiled models, matplotlib, the imports), so a task pays only for pickling its arguments
-and result. Each task computes exactly what it would in the parent, and results come back in task
-order, so nothing a task returns depends on how many processes ran it. GECGEN_WORKERS (environment)
-sets how many (default: the cores this process may run on; 1 runs every task here, in order; a
-daemon process, such as a Dask worker, runs them here too).
+Python, so the cores are used by processes. They are forked (on Linux): each starts with what the
+parent has loaded (compiled models, matplotlib, the imports), so a task pays only for pickling its
+arguments and result. Each task computes exactly what it would in the parent, its warnings are
+issued again in the parent, and results come back in task order, so nothing a task returns or says
+depends on how many processes ran it. GECGEN_WORKERS (environment) sets how many (default: the cores
+this process may run on; 1 runs every task here, in order; so does a daemon process, such as a Dask
+worker of a fleet, which already runs robots side by side and may not fork).
+
+A forked worker inherits the parent's locks as they were at the fork: a terminal's progress spinner
+writing to stderr at that moment would leave the worker's stderr locked for good. Workers therefore
+write to fresh streams of their own (`_own_streams`), never to the inherited ones.
 """
 from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Callable, Iterable, Iterator
@@ -33,26 +40,48 @@ def workers() -> int:
 
 def side_by_side(n_calls: int) -> int:
     """How many processes `mapped` runs n_calls in: 1 (this one) for a single call, with
-    GECGEN_WORKERS=1, in a daemon process (a Dask worker of a fleet, which already runs robots side by
-    side, may not fork) or where processes cannot be forked."""
-    n = min(workers(), n_calls)
-    if multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+    GECGEN_WORKERS=1, in a daemon process, or off Linux (where forking a process that has loaded the
+    system's BLAS is not safe)."""
+    if n_calls <= 1 or multiprocessing.current_process().daemon or not sys.platform.startswith("linux"):
         return 1
-    return max(n, 1)
+    return min(workers(), n_calls)
 
 
 @contextmanager
 def mapped(calls: list[tuple[Callable, tuple]]) -> Iterator[Iterable]:
     """fn(*args) of every (fn, args) of calls (fn module-level, args picklable), in their order, as an
     iterator valid inside the `with`; in `side_by_side(len(calls))` forked processes, whose tasks are
-    all handed out on entry (this process is free meanwhile)."""
+    all handed out on entry (this process is free meanwhile). Leaving the `with` early (an error, an
+    interrupt) cancels the tasks not yet started."""
     n = side_by_side(len(calls))
     if n <= 1:
-        yield (_call(fn, args) for fn, args in calls)
+        yield (fn(*args) for fn, args in calls)
         return
-    with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork")) as pool:
-        yield pool.map(_call, *zip(*calls))
+    pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_own_streams)
+    try:
+        yield (_reissued(*out) for out in pool.map(_call, *zip(*calls)))
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _own_streams():
+    """A worker's stdout and stderr: new file objects on the same descriptors (see the module docstring)."""
+    sys.stdout = open(os.dup(1), "w", buffering=1)  # noqa: SIM115 - the worker's for its whole life
+    sys.stderr = open(os.dup(2), "w", buffering=1)  # noqa: SIM115
 
 
 def _call(fn: Callable, args: tuple):
-    return fn(*args)
+    """fn(*args) in a worker, with the warnings it issued."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn(*args)
+    return out, [(w.message, w.category, w.filename, w.lineno) for w in caught]
+
+
+def _reissued(out, caught: list):
+    """A worker's result, its warnings issued again here, under this process's filters."""
+    for message, category, filename, lineno in caught:
+        warnings.warn_explicit(message, category, filename, lineno)
+    return out
