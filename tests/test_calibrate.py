@@ -66,16 +66,19 @@ def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):
 
 def test_the_same_choice_and_report_in_one_process_or_two(payload_data, capsys, monkeypatch):
     """The folds and the report's figures run side by side (`runtime.processes`); one process gives
-    the same candidates' scores, the same choice and the same report, byte for byte."""
+    the same candidates' scores, the same choice, the same warnings and the same report, byte for byte."""
     d = payload_data
     outs = {}
     for n in ("1", "2"):
         monkeypatch.setenv("GECGEN_WORKERS", n)
-        out = run(capsys, "calibrate", ROBOT, d / "val.csv", "--models", "geometric,diagnosed", "--holdout", "0.25",
-                  "-o", d / f"workers{n}")
-        outs[n] = (out["candidates"], out["model"], (d / f"workers{n}" / "report.md").read_text(),
+        capsys.readouterr()
+        assert main(["calibrate", str(ROBOT), str(d / "val.csv"), "--models", "geometric,diagnosed", "--holdout",
+                     "0.25", "-o", str(d / f"workers{n}"), "--json"]) == 0
+        printed = capsys.readouterr()
+        out = json.loads(printed.out)
+        outs[n] = (out["candidates"], out["model"], printed.err, (d / f"workers{n}" / "report.md").read_text(),
                    sorted((f.name, f.read_bytes()) for f in (d / f"workers{n}").glob("*.png")))
-    assert outs["1"] == outs["2"] and len(outs["1"][3]) >= 6
+    assert outs["1"] == outs["2"] and len(outs["1"][4]) >= 6
 
 
 def test_mapped_keeps_the_order_and_refuses_a_bad_worker_count(monkeypatch):

@@ -130,6 +130,17 @@ def _scored(*task) -> tuple[float, float] | str:
         return str(exc).splitlines()[0]
 
 
+def _fitted_ahead(robot: Robot, pipeline: Pipeline, data: Measurements, registration_mode: str):
+    """run_pipeline before the choice: (its result, or the RuntimeError or ModelError it raised; the
+    warnings it issued), held until it is known to be the choice's."""
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        try:
+            return run_pipeline(robot, pipeline, data, registration_mode), said
+        except (RuntimeError, ModelError) as exc:
+            return exc, said
+
+
 def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
            registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES) -> Choice:
     """Score the named pipelines that apply (see the module docstring) on the training data, fit
@@ -157,10 +168,7 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
             # failure matters only if it is chosen, and is raised then, as it would be after the choice.
             if progress:
                 progress(candidates[order[0]].name)
-            try:
-                ahead = candidates[order[0]], run_pipeline(robot, candidates[order[0]], data, registration_mode)
-            except (RuntimeError, ModelError) as exc:
-                ahead = candidates[order[0]], exc
+            ahead = candidates[order[0]], *_fitted_ahead(robot, candidates[order[0]], data, registration_mode)
         scores = {}
         for i in order:  # a candidate's name while its folds are awaited
             if progress:
@@ -180,10 +188,15 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     best = min(cv for cv, _, _ in scored)
     # diagnose only ever adds to its start model: in a tie it counts as the larger one
     chosen = min((s for s in scored if s[0] <= best * (1 + TIE)), key=lambda s: (s[1] + s[2].diagnose / 2, s[0]))[2]
-    if ahead and ahead[0] is chosen and isinstance(ahead[1], Exception):
-        raise ahead[1]
-    model, cm, fit, diag = ahead[1] if ahead and ahead[0] is chosen else run_pipeline(robot, chosen, data,
-                                                                                       registration_mode)
+    if ahead and ahead[0] is chosen:
+        _, fitted, said = ahead
+        for w in said:  # what the fit says, said now that it is the choice's
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if isinstance(fitted, Exception):
+            raise fitted
+        model, cm, fit, diag = fitted
+    else:
+        model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
     if fit.failures:
         raise RuntimeError(f"the chosen model ({chosen.name}) cannot be trusted on all the data: {fit.failures[0]}")
     return Choice(table, chosen, model, cm, fit, diag)
