@@ -141,3 +141,22 @@ def test_urdf_names_cannot_end_the_header_comments(tmp_path):
     build = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-c", "arm.c", "-o", "arm.o"],
                            cwd=tmp_path / "out", capture_output=True, text=True)
     assert build.returncode == 0, build.stderr
+
+
+def test_a_new_model_of_a_robot_prints_only_its_own_terms(tmp_path, monkeypatch):
+    """The chain's printed code is kept per robot: a second error model of the same robot builds no
+    chain function again, and its files are those a fresh `render` writes, byte for byte."""
+    import gecgen.emit as emit
+    from gecgen.model.errors import error_model_from_dict
+    from gecgen.runtime.compiled import rendered
+
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path))
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    built = []
+    original = emit.printed_chain
+    monkeypatch.setattr(emit, "printed_chain", lambda r: built.append(r.name) or original(r))
+    models = [error_model_from_dict({"default": terms}, robot, "<test>") for terms in (["1"], ["1", "q2"], ["1", "q3"])]
+    files = [rendered(robot, m) for m in models]
+    assert built == ["puma560"]
+    monkeypatch.setattr(emit, "printed_chain", original)
+    assert all(f == emit.render(robot, m) for f, m in zip(files, models))

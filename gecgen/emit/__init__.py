@@ -22,7 +22,7 @@ from gecgen.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot
-from gecgen.symbolic.functions import all_functions
+from gecgen.symbolic.functions import chain_functions, model_functions
 from gecgen.symbolic.program import Function
 
 HERE = Path(__file__).parent
@@ -105,15 +105,27 @@ def _printed(fn: Function, printer, element, signature: bool) -> dict:
                 signature=sig if signature else "")
 
 
-def printed(robot: Robot, model: ErrorModel) -> dict[str, list[dict]]:
+def _printed_all(functions) -> dict[str, list[dict]]:
+    return {"c": [_printed(f, CPrinter(), c_element, True) for f in functions],
+            "casadi": [_printed(f, CasadiPrinter(), casadi_element, False) for f in functions]}
+
+
+def printed_chain(robot: Robot) -> dict[str, list[dict]]:
+    """`printed` of the robot's own functions (`symbolic.functions.chain_functions`), which no error
+    model changes: nearly all of the symbolic work."""
+    robot.require_placed()
+    return _printed_all(chain_functions(robot))
+
+
+def printed(robot: Robot, model: ErrorModel, chain: dict[str, list[dict]] | None = None) -> dict[str, list[dict]]:
     """Every function's straight-line code as the C and the CasADi templates print it ({"c": [...],
     "casadi": [...]}, plain lists and strings): the symbolic build and its printing, the slow part of
     `render`, which depends on the robot's and the model's content alone (runtime.compiled keeps it
-    in the code cache)."""
+    in the code cache). `chain`: `printed_chain(robot)`, when already at hand."""
     robot.require_placed()
-    functions = all_functions(robot, model)
-    return {"c": [_printed(f, CPrinter(), c_element, True) for f in functions],
-            "casadi": [_printed(f, CasadiPrinter(), casadi_element, False) for f in functions]}
+    chain = chain or printed_chain(robot)
+    own = _printed_all(model_functions(robot, model))
+    return {k: chain[k] + own[k] for k in ("c", "casadi")}
 
 
 def render(robot: Robot, model: ErrorModel, code: dict[str, list[dict]] | None = None) -> dict[str, str]:

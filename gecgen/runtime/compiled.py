@@ -94,6 +94,13 @@ def toolchain() -> tuple[str, ...]:
     return platform.machine(), platform.system(), cc, (version.splitlines() or [""])[0]
 
 
+def chain_key(robot: Robot) -> str:
+    """Cache key of the printed code of a robot's own functions (`emit.printed_chain`): the robot's
+    content (its files and targets) and the code that prints it."""
+    spec = json.dumps([robot.source_hashes, robot.targets, _emitter_hash()], sort_keys=True)
+    return hashlib.sha256(spec.encode()).hexdigest()[:24]
+
+
 def model_key(robot: Robot, model: ErrorModel) -> str:
     """Cache key of the generated code for a robot and error model (content, not file names) on this
     toolchain. The targets are content beyond the files: a derived robot (the virtual targets of
@@ -121,17 +128,25 @@ def printed_code(robot: Robot, model: ErrorModel, key: str | None = None) -> dic
     """`emit.printed` for a robot and error model (cache key `model_key`), kept in the cache beside
     its library: the symbolic build and its printing run once per model content, not again for the
     files that export, diagnose and calibrate write (3 s of an 18-pose UR10 calibrate)."""
-    path = cache_dir() / f"{robot.name}-{key or model_key(robot, model)}.code.json"
-    if _intact(path):
-        try:
-            return json.loads(path.read_text())
-        except ValueError:
-            pass  # written by another version of this code: built again below
-    from gecgen.emit import printed  # the symbolic build and its printers: needed on a cache miss only
+    def cached(path: Path, build):
+        if _intact(path):
+            try:
+                return json.loads(path.read_text())
+            except ValueError:
+                pass  # written by another version of this code: built again below
+        code = build()
+        _store(path, json.dumps(code).encode())  # key order kept: a function's outputs are in it
+        return code
 
-    code = printed(robot, model)
-    _store(path, json.dumps(code).encode())  # key order kept: a function's outputs are in it
-    return code
+    # the chain's functions are the same for every model of a robot and nearly all of the work: a new
+    # model (each round of diagnose, each candidate of calibrate) prints only its own basis terms
+    def build():
+        from gecgen.emit import printed, printed_chain  # the symbolic build: needed on a cache miss only
+
+        chain = cache_dir() / f"{robot.name}-{chain_key(robot)}.chain.json"
+        return printed(robot, model, cached(chain, lambda: printed_chain(robot)))
+
+    return cached(cache_dir() / f"{robot.name}-{key or model_key(robot, model)}.code.json", build)
 
 
 def rendered(robot: Robot, model: ErrorModel, key: str | None = None) -> dict[str, str]:

@@ -35,9 +35,21 @@ def basis_function(robot: Robot, model: ErrorModel, loads_given: bool = False) -
                       "(fx fy fz mx my mz) and auxiliary signals aux.", {"q": q, "w": w, "aux": aux}, {"f": f})
 
 
-def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
-    """On a tree, fk and tool_jacobian once per branch (`fk_left`, ...)."""
+def chain_functions(robot: Robot) -> list[Function]:
+    """The robot's own functions, the same for every error model: fk, the targets, J_e and the tool
+    Jacobian (on a tree, fk and tool_jacobian once per branch: `fk_left`, ...). They are nearly all
+    of the symbolic work, which is why `runtime.compiled` keeps their printed code per robot."""
     branches = range(len(robot.tips()))
     return [*(fk_function(robot, b) for b in branches), targets_function(robot), jacobian_function(robot),
-            *(tool_jacobian_function(robot, b) for b in branches), basis_function(robot, model),
-            loads_function(robot, model.load_signals(robot)), basis_function(robot, model, loads_given=True)]
+            *(tool_jacobian_function(robot, b) for b in branches)]
+
+
+def model_functions(robot: Robot, model: ErrorModel) -> list[Function]:
+    """The error model's functions: its basis terms, and the load signals its terms use."""
+    return [basis_function(robot, model), loads_function(robot, model.load_signals(robot)),
+            basis_function(robot, model, loads_given=True)]
+
+
+def all_functions(robot: Robot, model: ErrorModel) -> list[Function]:
+    """Every generated function, the chain's first."""
+    return [*chain_functions(robot), *model_functions(robot, model)]
