@@ -170,3 +170,11 @@ def test_a_fixture_must_be_a_point_or_a_plane():
         robot = load_robot(ROBOT)
         cands = FD.FixtureCandidates((Fixture("s", np.zeros(3)),), (np.zeros((5, 7)),), (np.zeros((5, 3)),))
         FD.design_fixtures(CompiledModel(robot, load_error_model(CONSTANT, robot)), cands, 1, 0)
+
+
+@pytest.mark.parametrize("option", [["--patch-mm", "50"], ["--target", "ball"]])
+def test_fixture_options_without_fixtures_are_refused(tmp_path, capsys, option):
+    from gecgen.cli import main
+
+    assert main(["design", str(ROBOT), "--poses", "10", "-o", str(tmp_path / "d.csv"), *option]) == 2
+    assert f"{option[0]} goes with --fixtures" in capsys.readouterr().err

@@ -61,8 +61,8 @@ def add_parser(command):
                         "minimise the mean predicted variance of the measured positions over the candidates "
                         "(default %(default)s)")
     p.add_argument("--noise-mm", type=float, default=None,
-                   help=f"measurement noise per coordinate (mm) for the predicted uncertainty (default {1e3 * D.NOISE_M:g}; "
-                        f"with --fixtures, the seating noise, default {1e3 * FD.NOISE_M:g})")
+                   help=f"measurement noise per coordinate (mm) for the predicted uncertainty (default "
+                        f"{1e3 * D.NOISE_M:g}; with --fixtures, the seating noise, default {1e3 * FD.NOISE_M:g})")
     p.add_argument("--fixtures", help="CSV of sockets and planes (name, x, y, z[, nx, ny, nz], m in the robot's world "
                                       "frame): choose configurations for calibration without a tracker")
     p.add_argument("--target", help="with --fixtures: the target that sits in the sockets or touches the planes "

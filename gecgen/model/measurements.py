@@ -95,7 +95,8 @@ class Measurements:
     @cached_property
     def rows(self) -> Rows:
         """The measured rows (`model.rows.Rows`): one per pose and measured frame or point."""
-        return point_rows(self.pose, self.target, self.vertices, None if self.relative is None else self.relative.row_dof())
+        relative_dof = None if self.relative is None else self.relative.row_dof()
+        return point_rows(self.pose, self.target, self.vertices, relative_dof)
 
     def subset(self, poses: np.ndarray) -> "Measurements":
         """The measurements of the given pose indices (rows follow their poses)."""
