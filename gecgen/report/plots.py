@@ -18,6 +18,8 @@ from gecgen.report.content import DataSet, Figure, Residuals, joint_label, joint
 #: one colour per stage, in order: uncalibrated, calibrated, diagnosed
 COLOURS = ("tab:red", "tab:blue", "tab:green")
 DPI = 100
+#: fixed margins of the one-row figures (a share of the figure): tight_layout would draw each figure twice
+MARGINS = {"left": 0.065, "right": 0.99, "bottom": 0.16, "top": 0.9}
 
 
 def _figure(fig, name: str, caption: str) -> Figure:
@@ -63,7 +65,7 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
     cx.set_ylabel("share of them at or below" if orientation else "share of rows at or below")
     ax.set_title(f"{robot.name}, {ds.name} data: histogram of {what}s")
     cx.set_title(f"{robot.name}, {ds.name} data: cumulative distribution")
-    fig.tight_layout()
+    fig.subplots_adjust(**MARGINS, wspace=0.18)
     return _figure(fig, name, f"{what.capitalize()}s on the {ds.name} data, each model")
 
 
@@ -83,7 +85,7 @@ def per_pose(robot: Robot, ds: DataSet) -> Figure:
     ax.set_title(f"{robot.name}, {ds.name} data: error per pose")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    fig.subplots_adjust(**MARGINS)
     return _figure(fig, f"poses_{ds.name}", f"RMS point error of each pose, {ds.name} data, each model")
 
 
@@ -163,7 +165,7 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
         ax.set_xlabel(label, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    fig.tight_layout(w_pad=0.6)
+    fig.subplots_adjust(**MARGINS, wspace=0.38)
     return _figure(fig, f"effect_{_slug(eff.error)}_{_slug(eff.terms[0])}_{_slug(name)}",
                    f"{eff.error} ({', '.join(eff.terms)}) against {label}: the fitted effect, and the residual "
                    "without it and with it")
