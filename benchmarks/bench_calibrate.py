@@ -59,8 +59,9 @@ So on small data calibrate is its report, and on a diagnosed model it is diagnos
 (last column) is 1.4 to 3.5 s of it. Since then the folds and the report's figures run side by side in two
 forked processes, and the parent fits the diagnosed candidate on all the data meanwhile (`runtime.processes`;
 the same figures and report byte for byte), and a new error model of a known robot prints only its basis
-terms (the chain's printed code is cached per robot: the cold run's 22 models). Before those changes, warm,
-UR10 7.7 s, industrial6r 9.6 s (cold 34.8 s), PPS 17.8 s, TALOS 11.8 s."""
+terms (the chain's printed code is cached per robot: the cold run's 22 models), and the one-row figures take
+fixed margins instead of tight_layout (which drew each twice). Before those changes, warm, UR10 7.7 s,
+industrial6r 9.6 s (cold 34.8 s), PPS 17.8 s, TALOS 11.8 s."""
 
 def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
     """(case, robot file, calibrate's data arguments, diagnose's data arguments) of every case."""
