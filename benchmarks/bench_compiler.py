@@ -112,9 +112,9 @@ int main(void) {
 
 
 def floor_source(c_text: str, name: str) -> str:
-    """A C function that does only what NAME_J_e cannot avoid: the sine and cosine of every angle it
-    takes them of (one sincos each, as the compiler merges them) and its stores, straight-line, each
-    of a trig value: the floor the issue measures J_e against."""
+    """(C source, number of angles, number of stores) of a function that does only what NAME_J_e
+    cannot avoid: the sine and cosine of every angle it takes them of (one sincos each, as the compiler
+    merges them) and its stores, straight-line, each of a trig value: the floor J_e is measured against."""
     body = c_text[c_text.index(f"void {name}_J_e("):]
     body = body[:body.index("\n}\n")]
     angles = list(dict.fromkeys(re.findall(r"\bcos\((\w+\[\d+\])\)", body)))

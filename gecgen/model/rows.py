@@ -104,7 +104,8 @@ def _sums(group: np.ndarray, values: np.ndarray, G: int) -> np.ndarray:
     return np.column_stack([np.bincount(group, values[:, k], G) for k in range(values.shape[1])])
 
 
-def point_rows(pose: np.ndarray, target: np.ndarray, vertices: Vertices | None, relative_dof: np.ndarray | None) -> Rows:
+def point_rows(pose: np.ndarray, target: np.ndarray, vertices: Vertices | None,
+               relative_dof: np.ndarray | None) -> Rows:
     """The rows of points measured at pose (R,) of target (R,): one per pose and frame when
     `vertices` says which points are a frame's vertices, else one per pose and target; relative_dof
     (R,) the degrees of freedom a relative point keeps once its socket or plane is fitted (NaN for an

@@ -205,19 +205,20 @@ class _Exchange:
         gain, h, i = best
         if h is None or base + gain <= self.value + SWAP_TOL:
             return False
-        self.chosen[g] = without
-        self.chosen[h] = self.chosen[h] + [i]
-        for f in {g, h}:
-            self.state[f] = _nuisance(*self.rows[f], self.chosen[f])
+        self._move(g, j, h, i)
         value = self._objective()
         if value <= self.value:  # rounding made a swap that is no gain: undo it
-            self.chosen[h].remove(i)
-            self.chosen[g] = self.chosen[g] + [j]
-            for f in {g, h}:
-                self.state[f] = _nuisance(*self.rows[f], self.chosen[f])
+            self._move(h, i, g, j)
             return False
         self.value = value
         return True
+
+    def _move(self, g: int, j: int, h: int, i: int):
+        """Candidate j of fixture g out, candidate i of fixture h in, their nuisance fits redone."""
+        self.chosen[g] = [c for c in self.chosen[g] if c != j]
+        self.chosen[h] = self.chosen[h] + [i]
+        for f in {g, h}:
+            self.state[f] = _nuisance(*self.rows[f], self.chosen[f])
 
 
 @dataclass(frozen=True)
@@ -225,10 +226,10 @@ class FixtureDesign:
     """A design: `chosen` per fixture the candidate indices (into its configurations), `random` the
     seeded even start it was exchanged from; `log_det` {design, random} of the whitened information
     (no ridge; nats, higher is better, only the difference means something); `predicted_mm` {design,
-    random}: the RMS over the candidates of the position error (mm) the coefficients' uncertainty
-    adds to a configuration's residual about its fixture (refitted on all candidates, as held-out rows
-    are), at noise_mm per coordinate: what held-out consistency or flatness gains above the noise; `n_identifiable` the directions the criterion
-    works in and `unseen` those no configuration shows; `by_count` ((k, log_det, predicted_mm), ...) the
+    random}: the RMS over the candidates of the error (mm) the coefficients' uncertainty adds to a
+    configuration's residual about its fixture (refitted on all candidates, as held-out rows are), at
+    noise_mm per coordinate: what held-out consistency or flatness gains above the noise;
+    `n_identifiable` the directions the criterion works in and `unseen` those no configuration shows; `by_count` ((k, log_det, predicted_mm), ...) the
     design of the same number of poses over the first k fixtures only, scored on the candidates of all of
     them (None: k fixtures leave a direction undetermined that all of them determine), the last k all."""
 
@@ -256,18 +257,14 @@ class FixtureDesign:
                 "by_fixtures": [{"fixtures": k, "log_det": d, "predicted_rms_mm": v} for k, d, v in self.by_count]}
 
 
-def _predicted_rms(rows, chosen, noise_m: float) -> float:
-    """RMS (m) over every candidate of the error the coefficients' covariance noise^2 M^-1 (M from
-    the chosen rows) adds to its residual about its fixture (a seat's 3-D distance, a touch's along
-    the normal), the fixture refitted on all of its candidates as a held-out set would be: the rows
-    projected off the nuisance, A - B P."""
-    Minv = np.linalg.pinv(sum(_nuisance(a, b, c)[2] for (a, b), c in zip(rows, chosen)))
-    var = count = 0
-    for a, b in rows:
-        resid = a - b @ _nuisance(a, b, list(range(len(a))))[1]
-        var += float(np.einsum("nik,kl,nil->", resid, Minv, resid))
-        count += len(a)
-    return noise_m * float(np.sqrt(var / count))
+def _predicted_rms(chosen_information: np.ndarray, held: list[np.ndarray], noise_m: float) -> float:
+    """RMS (m) over every candidate of the error the coefficients' covariance noise^2 M^-1 (M the
+    chosen rows' information) adds to its residual about its fixture (a seat's 3-D distance, a
+    touch's along the normal): `held` per fixture its candidates' rows projected off the nuisance of
+    all of them (K_g, r, k), as a held-out set's fixture is refitted on its own rows."""
+    Minv = np.linalg.pinv(chosen_information)
+    var = sum(float(np.einsum("nik,kl,nil->", h, Minv, h)) for h in held)
+    return noise_m * float(np.sqrt(var / sum(len(h) for h in held)))
 
 
 def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, target: int, seed: int = 0,
@@ -284,18 +281,22 @@ def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, t
             f"--poses {n_poses}: only {sum(len(q) for q in cands.q)} candidate configurations; raise --candidates")
     columns = np.array(structural_analysis(cm, np.array([target])).kept, int)
     rows = _rows(cm, cands, target, columns)
-    scale = np.sqrt(sum(np.einsum("nrk,nrk->k", a, a) for a, _ in rows) / sum(a.shape[0] * a.shape[1] for a, _ in rows))
+    n_rows = sum(a.shape[0] * a.shape[1] for a, _ in rows)
+    scale = np.sqrt(sum(np.einsum("nrk,nrk->k", a, a) for a, _ in rows) / n_rows)
     scale = np.where(scale > 0, scale, 1.0)
     rows = [(a / scale, b) for a, b in rows]
-    total = sum(len(a) for a, _ in rows)
-    values, vectors = np.linalg.eigh(sum(_nuisance(a, b, list(range(len(a))))[2] for a, b in rows) / total)
+    # every candidate's rows projected off its fixture's nuisance fitted on all of them: their
+    # information (the projection is idempotent, so A^T (A - B P) = (A - B P)^T (A - B P)) decides what
+    # is seen and the whitening, and they are the held-out rows the predicted figure is scored on
+    held = [a - b @ _nuisance(a, b, list(range(len(a))))[1] for a, b in rows]
+    values, vectors = np.linalg.eigh(sum(np.einsum("nri,nrj->ij", h, h) for h in held) / sum(len(h) for h in held))
     seen = values > UNSEEN_TOL * values.max()
     require(seen.any(), "no candidate configuration informs any coefficient: check the fixtures and the error model")
     T = vectors[:, seen] / np.sqrt(values[seen])
-    rows = [(a @ T, b) for a, b in rows]
+    rows, held = [(a @ T, b) for a, b in rows], [h @ T for h in held]
 
     start, chosen, swaps, passes = _search(rows, minimum, n_poses, np.random.default_rng(seed), max_passes)
-    out = {name: _figures(rows, c, noise_m) for name, c in (("design", chosen), ("random", start))}
+    out = {name: _figures(rows, c, held, noise_m) for name, c in (("design", chosen), ("random", start))}
     if out["design"][1] is None:
         raise ModelError(f"{n_poses} configurations leave some coefficient undetermined over these fixtures; give "
                          f"more poses or more fixtures")
@@ -304,7 +305,7 @@ def design_fixtures(cm: CompiledModel, cands: FixtureCandidates, n_poses: int, t
     for k in range(1, len(fixtures)):
         if sum(minimum[:k]) <= n_poses <= sum(len(a) for a, _ in rows[:k]):
             sub = _search(rows[:k], minimum[:k], n_poses, np.random.default_rng(seed), max_passes)[1]
-            by_count.append((k, *_figures(rows, sub + [[] for _ in rows[k:]], noise_m)))
+            by_count.append((k, *_figures(rows, sub + [[] for _ in rows[k:]], held, noise_m)))
     by_count.append((len(fixtures), *out["design"]))
     return FixtureDesign(tuple(np.array(sorted(c), int) for c in chosen), tuple(np.array(c, int) for c in start),
                          {k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()}, 1e3 * noise_m,
@@ -327,11 +328,12 @@ def _search(rows, minimum: list[int], n_poses: int, rng: np.random.Generator, ma
     return start, search.chosen, swaps, passes
 
 
-def _figures(rows, chosen, noise_m: float) -> tuple[float | None, float | None]:
-    """(log det of the whitened information, predicted RMS in mm) of chosen rows per fixture; None
-    for both when they leave a direction every candidate together informs undetermined."""
+def _figures(rows, chosen, held, noise_m: float) -> tuple[float | None, float | None]:
+    """(log det of the whitened information, predicted RMS in mm, `_predicted_rms` on `held`) of chosen
+    rows per fixture; None for both when they leave a direction every candidate together informs
+    undetermined."""
     M = sum(_nuisance(a, b, c)[2] for (a, b), c in zip(rows, chosen))
     values = np.linalg.eigvalsh(M)
     if values.min() <= UNSEEN_TOL * values.max():
         return None, None
-    return float(np.sum(np.log(values))), 1e3 * _predicted_rms(rows, chosen, noise_m)
+    return float(np.sum(np.log(values))), 1e3 * _predicted_rms(M, held, noise_m)
