@@ -117,3 +117,32 @@ def test_screen_batches_many_candidates_and_breaks_exact_ties_in_candidate_order
             X = _projected(Q, columns(J, offered[h.candidate], h.error, rows_pose))
             beta = np.linalg.lstsq(X, r, rcond=None)[0]
             assert h.drop == pytest.approx(float(np.sum((X @ beta) ** 2)), rel=1e-9)
+
+
+def test_the_chi_square_tail_is_scipy_stats_to_the_last_bit():
+    # chi2_logsf stands in for scipy.stats.chi2.logsf (an import of 0.4 s): the same numbers, so
+    # diagnose's significance order and choices cannot move
+    from scipy import stats
+
+    from gecgen.loop.screening import chi2_logsf
+
+    dof = np.arange(1, 61)[:, None]
+    x = np.concatenate([[0.0, 1e-300, np.inf, np.nan], np.geomspace(1e-8, 1e4, 400)])[None, :] * np.ones_like(dof)
+    dof = dof * np.ones_like(x)
+    ours, theirs = chi2_logsf(x, dof), stats.chi2.logsf(x, dof)
+    assert np.array_equal(ours, theirs, equal_nan=True)
+    assert np.isnan(ours[:, 3]).all() and (ours[:, 0] == 0).all() and (ours[:, 2] == -np.inf).all()
+    # near the median both branches are exercised: the switch sits where scipy's does
+    median = stats.chi2.median(dof[:, 0])
+    for d, m in zip(dof[:, 0], median):
+        at = np.nextafter(m, [-np.inf, np.inf])
+        assert np.array_equal(chi2_logsf(at, d), stats.chi2.logsf(at, d))
+
+
+def test_the_noise_tests_tails_are_scipy_stats():
+    # diagnose's noise p-value calls scipy.special's tails directly, as scipy.stats does for x > 0
+    from scipy import special, stats
+
+    ratio, dof, noise_dof = np.geomspace(0.05, 20, 200), np.arange(1, 201), 37
+    assert np.array_equal(special.chdtrc(dof, ratio * dof), stats.chi2.sf(ratio * dof, dof))
+    assert np.array_equal(special.fdtrc(dof, noise_dof, ratio), stats.f.sf(ratio, dof, noise_dof))

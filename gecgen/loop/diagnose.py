@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from scipy import stats
+from scipy import special
 
 from gecgen.files import write_atomically
 from gecgen.loop.dictionary import candidates, refine_period, shown_family
@@ -312,8 +312,8 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
     if noise is not None and noise["noise_mm"] > 0:
         ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
         dof_fit = max(fit.measured_dof - len(fit.redundancy.kept), 1)
-        p = float(stats.chi2.sf(ratio * dof_fit, dof_fit) if noise["dof"] is None
-                  else stats.f.sf(ratio, dof_fit, noise["dof"]))
+        p = float(special.chdtrc(dof_fit, ratio * dof_fit) if noise["dof"] is None
+                  else special.fdtrc(dof_fit, noise["dof"], ratio))  # the chi-square's and the F law's tails
         out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))
     return out
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import linalg, sparse, stats
+from scipy import linalg, sparse, special
 
 #: family-wise false-alarm rate of one screening round
 ALPHA = 1e-3
@@ -29,6 +29,20 @@ TRIES = 8
 #: eigenvalues of a unit-diagonal Gram matrix below this (its rounding level) count as zero
 SINGULAR_GRAM = 1e-13
 
+
+def chi2_logsf(x: np.ndarray, dof: np.ndarray) -> np.ndarray:
+    """log P(chi-square with dof degrees of freedom > x), elementwise, as scipy.stats.chi2.logsf
+    computes it to the last bit: log of the upper tail above the median, log1p of minus the lower
+    tail below it (each accurate where it is small). From scipy.special, whose import is a tenth
+    of scipy.stats's (about 0.4 s of every diagnose and calibrate)."""
+    x, dof = np.broadcast_arrays(np.asarray(x, float), np.asarray(dof, float))
+    out = np.zeros(x.shape)  # x <= 0: the whole law lies above
+    above = x > 2 * special.gammaincinv(dof / 2, 0.5)  # the median
+    below = ~above & (x > 0) | np.isnan(x)
+    with np.errstate(divide="ignore"):
+        out[above] = np.log(special.chdtrc(dof[above], x[above]))
+        out[below] = np.log1p(-special.chdtr(dof[below], x[below]))
+    return out
 
 @dataclass(frozen=True)
 class Candidate:
@@ -165,7 +179,7 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     if not found:
         return []
     drops, dofs = np.array([h[0] for h in found]), np.array([h[1] for h in found])
-    log_p = stats.chi2.logsf(drops / max(sigma2, 1e-300), dofs)
+    log_p = chi2_logsf(drops / max(sigma2, 1e-300), dofs)
     # the fitted effect, projected off the model: J_e (F v) - Q (Q^T X v), R x (c + k)
     hits = [Hit(drop, float(lp), ci, e, (J[:, e], F[:, bounds[ci]:bounds[ci + 1]] @ v, group, base, qv))
             for (drop, _, ci, e, v, qv), lp in zip(found, log_p)]

@@ -100,6 +100,22 @@ def _binned_mean(ax, x: np.ndarray, y: np.ndarray, bins: int = 12):
     ax.plot(centre[count >= 3], mean[count >= 3], "-", color="black", lw=1.0)
 
 
+def _ticks(lo: float, hi: float) -> np.ndarray:
+    """The tick values a panel from lo to hi gets (matplotlib's default locator, at most 4 intervals)."""
+    values = matplotlib.ticker.MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi)
+    span = hi - lo
+    return values[(values >= lo - 1e-10 * span) & (values <= hi + 1e-10 * span)]
+
+
+def _panel_grid(ax, x: np.ndarray, y: np.ndarray):
+    """Grid lines at x and y (data units) as the axes' own grid draws them, in two artists: the
+    grid of every tick of 36 panels was most of a residual grid's time."""
+    style = {"colors": matplotlib.rcParams["grid.color"], "linewidths": matplotlib.rcParams["grid.linewidth"],
+             "alpha": 0.3, "zorder": 1.5}  # under the data, as axes.axisbelow "line" puts the grid
+    ax.vlines(x, 0, 1, transform=ax.get_xaxis_transform(), **style)
+    ax.hlines(y, 0, 1, transform=ax.get_yaxis_transform(), **style)
+
+
 def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     """Signed residual per axis (rows: x, y, z in mm, then orientation about x, y, z in mrad when
     measured) against each joint the data moves (columns; one held still shows nothing): a grid of
@@ -109,27 +125,34 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     if st.rotation_mrad is not None:
         rows += [(f"rot. about {a} (mrad)", st.rotation_mrad[:, k]) for k, a in enumerate("xyz")]
     moving = [k for k in range(robot.n) if np.ptp(ds.data.q[:, k]) > 0] or list(range(robot.n))
-    # shared scales, labelled once per row and column: the tick labels of every panel were most of
-    # the report's time on small data, and say nothing a shared scale does not
-    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False,
-                             sharex="col", sharey="row")
+    # one scale per row and per column, its ticks and labels on the outer panels only (the inner
+    # ones carry its grid lines): the ticks of every panel were most of the report's time on small data
+    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
     colour = COLOURS[min(len(COLOURS) - 1, [s.stage for s in ds.stages].index(st.stage))]
+    xs = [joint_values(robot, ds.data, k)[st.pose] for k in moving]
     for r, (ylabel, values) in enumerate(rows):
         finite = values[np.isfinite(values)]
         limit = 1.08 * np.abs(finite).max() if len(finite) and np.abs(finite).max() > 0 else 1.0
-        for col, k in enumerate(moving):
+        for col, x in enumerate(xs):
             ax = axes[r, col]
-            ax.plot(joint_values(robot, ds.data, k)[st.pose], values, ".", ms=3, alpha=0.7, color=colour)
+            ax.plot(x, values, ".", ms=3, alpha=0.7, color=colour)
             ax.axhline(0, color="0.5", lw=0.6)
-            _binned_mean(ax, joint_values(robot, ds.data, k)[st.pose], values)
+            _binned_mean(ax, x, values)
             ax.set_ylim(-limit, limit)
+    for col, k in enumerate(moving):
+        xlim = axes[-1, col].get_xlim()  # the data's span and margins; every row holds the same x
+        for r in range(len(rows)):
+            ax = axes[r, col]
+            ax.set_xlim(xlim)
+            x_ticks, y_ticks = _ticks(*xlim), _ticks(*ax.get_ylim())
+            _panel_grid(ax, x_ticks, y_ticks)
+            ax.set_xticks(x_ticks if r == len(rows) - 1 else [])
+            ax.set_yticks(y_ticks if col == 0 else [])
+            ax.tick_params(labelsize=6, pad=1)
             if r == len(rows) - 1:
                 ax.set_xlabel(joint_label(robot, k), fontsize=7, labelpad=1)
             if col == 0:
-                ax.set_ylabel(ylabel, fontsize=7, labelpad=1)
-            ax.tick_params(labelsize=6, pad=1)
-            ax.locator_params(nbins=4)
-            ax.grid(alpha=0.3)
+                ax.set_ylabel(rows[r][0], fontsize=7, labelpad=1)
     fig.suptitle(f"{robot.name}, {ds.name} data, {st.stage}: signed residuals against each joint", fontsize=10)
     # fixed margins: tight_layout on this many axes costs a second per figure
     height = fig.get_figheight()
