@@ -95,3 +95,34 @@ def test_the_residual_is_judged_against_the_stated_noise():
     assert low["beyond_noise"] and low["unexplained_mm"] > 0.1
     with pytest.raises(ModelError, match="noise_mm"):
         Calibrator(noise_mm=-1)
+
+
+def test_the_refit_begins_from_the_fits_own_analysis_and_finds_the_same():
+    """The refit without the insignificant coefficients starts from the first fit's data analysis
+    (Fit.analysis) rather than computing it again: the same coefficients to the last bit as a refit
+    from scratch; an analysis at another rank tolerance, or of other data, is not taken."""
+    import warnings
+
+    from gecgen.model import load_error_model, load_robot
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.identify import identify
+    from gecgen.model.validation import read_yaml
+    from gecgen.simulate import load_truth, random_design, simulate
+
+    robot = load_robot("robots/industrial6r.yaml")
+    truth = load_truth(read_yaml("robots/industrial6r.truth.yaml", "truth"), robot)
+    data = simulate(robot, truth, random_design(robot, 60, np.random.default_rng(5)), np.random.default_rng(6))
+    cm = CompiledModel(robot, load_error_model("robots/industrial6r.errors.yaml", robot))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = identify(cm, data)
+        _, hold = significance.judge(cm.model.coefficient_names(robot), fit.c, fit.std, fit.redundancy.kept,
+                                     fit.cov, fit.sigma_m, fit.measured_dof)
+        assert hold  # the case the reuse is for
+        again = identify(cm, data, hold=hold, analysis=fit.analysis)
+        fresh = identify(cm, data, hold=hold)
+    assert np.array_equal(again.c, fresh.c) and np.array_equal(again.std, fresh.std, equal_nan=True)
+    assert again.redundancy == fresh.redundancy
+    assert again.analysis is fit.analysis and fresh.analysis is not fit.analysis  # taken, not recomputed
+    assert not fit.analysis.serves(fit.analysis.y, 1e-3)
+    assert not fit.analysis.serves(fit.analysis.y[:-1], fit.analysis.rank_tol)

@@ -14,7 +14,7 @@ import hashlib
 import itertools
 import json
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +97,22 @@ class Suspect:
 
 
 @dataclass(frozen=True)
+class Analysis:
+    """The data analysis a fit's first round begins from (`_data_analysis`): the redundancy red and
+    A0, [H | r] over its kept columns up to an orthogonal factor, for the measured points y (R, 3)
+    in the robot world (m) at rank tolerance rank_tol, before any coefficient is held."""
+
+    red: Redundancy
+    A0: np.ndarray
+    y: np.ndarray
+    rank_tol: float
+
+    def serves(self, y: np.ndarray, rank_tol: float) -> bool:
+        """Whether a fit of the same compiled model and data at y and rank_tol would find the same."""
+        return rank_tol == self.rank_tol and np.array_equal(y, self.y)
+
+
+@dataclass(frozen=True)
 class Fit:
     """Result of `identify`. c (nc,) all coefficients (eliminated ones 0); std (nc,) with NaN for
     eliminated; cov (k, k) over `redundancy.kept`; sigma_m the residual standard deviation per
@@ -109,7 +125,8 @@ class Fit:
     a frame's limit is sqrt(2) times as long, for its six degrees of freedom); ranges the span of
     each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with `failures`
     must not be used: each says why. suspects: the poses the other poses do not predict, each
-    named in `warnings` (and in `failures`, when the fit has any)."""
+    named in `warnings` (and in `failures`, when the fit has any). analysis: the data analysis its
+    first round began from, which a refit of the same data begins from too (`Analysis`)."""
 
     c: np.ndarray
     std: np.ndarray
@@ -134,6 +151,7 @@ class Fit:
     registrations: dict[int, Registration] | None = None  # per station id; `registration` is the first's
     measured_dof: float | None = None
     suspects: tuple[Suspect, ...] = ()
+    analysis: Analysis | None = field(default=None, repr=False, compare=False)
 
     @property
     def trustworthy(self) -> bool:
@@ -527,7 +545,8 @@ STATION_TOL_M = 1e-6  # a micrometre: a fiftieth of a good tracker's noise
 @one_blas_thread
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
              step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
-             loss: str = "cauchy", hold: dict[int, str] | None = None) -> Fit:
+             loss: str = "cauchy", hold: dict[int, str] | None = None,
+             analysis: Analysis | None = None) -> Fit:
     """Fit the error model of `cm` to `data`.
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms) or
@@ -542,7 +561,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
     `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
     `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
-    being insignificant (`runtime.significance`).
+    being insignificant (`runtime.significance`); `analysis`, the `Fit.analysis` of an earlier fit
+    of the same compiled model and data, spares the first round's analysis where it would repeat it.
 
     Stations (`data.station`): each is registered onto the nominal model on its own. With more
     than one, what the nominal model leaves of each frame differs between stations, and frame 0's
@@ -555,7 +575,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     robust.check_loss(loss)
     frames = fit_frames(cm, data, None, loss, registration_mode)
     hold = hold or {}
-    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold)
+    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, analysis=analysis)
+    first = fit.analysis
     if data.relative is not None:
         # at c = 0 the rows of a socket scatter by the model's whole error, which lets a rigid motion
         # of the set look visible; at the fit they scatter by the noise: analysed again there
@@ -581,13 +602,14 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                                          f"spread wider, from each station"))
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
-    return fit
+    return replace(fit, analysis=first)
 
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
-         progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], at: np.ndarray | None = None) -> Fit:
+         progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], at: np.ndarray | None = None,
+         analysis: Analysis | None = None) -> Fit:
     """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted,
-    from c = 0, the redundancy analysed at coefficients `at` (default 0).
+    from c = 0, the redundancy analysed at coefficients `at` (default 0; at 0, `analysis` where it serves).
     The robust unit is the measured row (`model.rows.Rows`): a point, or a frame whose
     residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
     notes = []
@@ -596,7 +618,9 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     c = np.zeros(nc)
     rows = data.rows
     row_dof = rows.row_dof
-    red, A0, _ = _data_analysis(cm, data, y, rank_tol, rows.weight, at)
+    if at is not None or analysis is None or not analysis.serves(y, rank_tol):
+        analysis = Analysis(*_data_analysis(cm, data, y, rank_tol, rows.weight, at)[:2], y, rank_tol)
+    red, A0 = analysis.red, analysis.A0
     if hold:
         stay = [i for i, j in enumerate(red.kept) if j not in hold]
         names = cm.model.coefficient_names(cm.robot)
@@ -733,7 +757,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                before=before, train=train, warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
                train_inliers=train_inliers,
-               ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects)
+               ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects, analysis=analysis)
 
 
 @dataclass(frozen=True)

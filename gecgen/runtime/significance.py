@@ -112,7 +112,7 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
                       f"/ std < {T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
                       f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
                       f"(--keep-insignificant carries them)", stacklevel=3)
-        fit = identify(cm, data, **options, hold=hold)
+        fit = identify(cm, data, **options, hold=hold, analysis=fit.analysis)
         if fit.failures:
             raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
                                f"calibration made or written: {'; '.join(fit.failures)}")
