@@ -576,7 +576,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     frames = fit_frames(cm, data, None, loss, registration_mode)
     hold = hold or {}
     fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, analysis=analysis)
-    first = fit.analysis
+    begun = fit.analysis
     if data.relative is not None:
         # at c = 0 the rows of a socket scatter by the model's whole error, which lets a rigid motion
         # of the set look visible; at the fit they scatter by the noise: analysed again there
@@ -602,7 +602,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                                          f"spread wider, from each station"))
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
-    return replace(fit, analysis=first)
+    return replace(fit, analysis=begun)
 
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
