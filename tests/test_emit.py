@@ -160,3 +160,32 @@ def test_a_new_model_of_a_robot_prints_only_its_own_terms(tmp_path, monkeypatch)
     assert built == ["puma560"]
     monkeypatch.setattr(emit, "printed_chain", original)
     assert all(f == emit.render(robot, m) for f, m in zip(files, models))
+
+
+def test_each_model_links_to_the_robots_chain_compiled_once(tmp_path, monkeypatch, rng):
+    """The runtime compiles a robot's chain (kinematics, J_e) once, as an object file, and links each
+    model's own code to it: three models, one chain object. The linked library computes what the
+    one-file build of the same model (`render`, what export writes) computes, bit for bit."""
+    import gecgen.runtime.compiled as compiled
+    from gecgen.model.errors import error_model_from_dict
+
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    models = [error_model_from_dict({"default": terms}, robot, "<test>") for terms in (["1"], ["1", "q2"], ["1", "q3"])]
+    linked = [CompiledModel(robot, m) for m in models]
+    assert len(list((tmp_path / "cache").glob("puma560-*.chain.o"))) == 1
+    for fname, text in render(robot, models[-1]).items():
+        (tmp_path / fname).write_text(text)
+    subprocess.run([compiled.compiler(), *compiled.CFLAGS, "puma560.c", "-o", "one.so", "-lm"], cwd=tmp_path,
+                   check=True)
+    monkeypatch.setattr(compiled, "shared_library", lambda *args: tmp_path / "one.so")
+    one = CompiledModel(robot, models[-1])
+    q, eps = random_q(robot, rng, 20), rng.normal(0, 1e-3, (20, robot.n_errors))
+    c = rng.normal(0, 1e-3, len(models[-1].coefficients))
+    for a, b in zip(linked[-1].J_e(q, eps), one.J_e(q, eps)):
+        assert np.array_equal(a, b)
+    for a, b in zip(linked[-1].model_targets(q, None, None, c, with_H=True),
+                    one.model_targets(q, None, None, c, with_H=True)):
+        assert np.array_equal(a, b)
+    for a, b in zip(linked[-1].compensate(q, None, None, c), one.compensate(q, None, None, c)):
+        assert np.array_equal(a, b)

@@ -134,13 +134,9 @@ def render(robot: Robot, model: ErrorModel, code: dict[str, list[dict]] | None =
     robot.require_placed()
     code = code or printed(robot, model)
     ctx = context(robot, model)
-    c_env, ca_env = _env("c"), _env("casadi")
-    c_fns, ca_fns = code["c"], code["casadi"]
-    files = {
-        f"{robot.name}.h": c_env.get_template("header.h.j2").render(functions=c_fns, **ctx),
-        f"{robot.name}.c": c_env.get_template("source.c.j2").render(functions=c_fns, **ctx),
-        f"{robot.name}_casadi.py": ca_env.get_template("module.py.j2").render(functions=ca_fns, **ctx),
-    }
+    files = {**_c_files(robot.name, ctx, code["c"]),
+             f"{robot.name}_casadi.py": _env("casadi").get_template("module.py.j2").render(functions=code["casadi"],
+                                                                                          **ctx)}
     manifest = dict(
         gecgen_version=__version__, robot=robot.name, robot_files=robot.source_hashes,
         error_model={Path(model.source).name: model.source_hash} if model.source_hash else {"<constant>": ""},
@@ -154,6 +150,26 @@ def render(robot: Robot, model: ErrorModel, code: dict[str, list[dict]] | None =
     )
     files["manifest.json"] = json.dumps(manifest, indent=1, sort_keys=True, allow_nan=True) + "\n"
     return files
+
+
+def _c_files(name: str, ctx: dict, functions: list[dict], n_chain: int = 0) -> dict[str, str]:
+    """NAME.h and NAME.c of the printed C functions; with n_chain, the first n_chain of them (the
+    chain's) in NAME_chain.c of their own instead, which NAME.c then calls through NAME.h."""
+    env = _env("c")
+    files = {f"{name}.h": env.get_template("header.h.j2").render(functions=functions, **ctx),
+             f"{name}.c": env.get_template("source.c.j2").render(functions=functions[n_chain:], **ctx)}
+    if n_chain:
+        files[f"{name}_chain.c"] = env.get_template("chain.c.j2").render(functions=functions[:n_chain], **ctx)
+    return files
+
+
+def render_c_parts(robot: Robot, model: ErrorModel, code: dict[str, list[dict]], n_chain: int) -> dict[str, str]:
+    """The C of `render` as two translation units that link into the same functions: NAME_chain.c,
+    the chain's functions (the first n_chain of `code`, `printed_chain`), which no error model
+    changes and which the runtime therefore compiles once per robot, and NAME.c with the rest, the
+    model's own code, beside NAME.h."""
+    robot.require_placed()
+    return _c_files(robot.name, context(robot, model), code["c"], n_chain)
 
 
 def generate(robot: Robot, model: ErrorModel, outdir: str | Path,

@@ -1,7 +1,11 @@
 """Load the generated code of a robot and error model, and call it on many poses at once.
 
 The C source is built once per content hash with the system compiler into a cache folder
-(`$GECGEN_CACHE`, default `~/.cache/gecgen`) and loaded with ctypes. Without a C compiler the
+(`$GECGEN_CACHE`, default `~/.cache/gecgen`) and loaded with ctypes. Its chain (the kinematics and
+J_e, two thirds of the compiler's time) is the same for every error model of a robot: it is compiled
+once per robot into an object file that each model's own code is linked to, so a new model (each
+round of diagnose, each candidate of calibrate) compiles only its own part. Two processes that want
+the same entry build it once: the second waits for the first. Without a C compiler the
 same functions come from the generated CasADi module, and a warning says so. Every cache entry is
 checked against its content hash before it is used: a truncated or corrupt entry is rebuilt,
 never loaded. A cache folder that cannot be written is replaced, with a warning, by a fresh
@@ -10,6 +14,7 @@ temporary folder for the rest of the run.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import ctypes
 import functools
 import hashlib
@@ -32,7 +37,10 @@ from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
 
-CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror"]
+#: how every translation unit of the generated C is compiled
+COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror"]
+#: and linked into a shared library
+CFLAGS = [*COMPILE_FLAGS, "-shared"]
 
 #: status codes of `CompiledModel.compensate`: the generated C's GECGEN_ codes
 OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE = range(5)
@@ -124,29 +132,64 @@ def _store(path: Path, data: bytes):
     write_atomically(path.with_name(path.name + ".sha256"), hashlib.sha256(data).hexdigest() + "\n")
 
 
+@contextlib.contextmanager
+def _building(path: Path):
+    """Held while the cache entry at path is built: a second process building the same entry waits
+    for the first, then finds it built (`_intact`), rather than building it too (the forked workers
+    of calibrate start on the same models). Where no file lock exists, each builds its own."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: the writes stay atomic, only the work is repeated
+        yield
+        return
+    with open(path.with_name(path.name + ".lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _cached_json(path: Path, build):
+    """The JSON at path in the cache, built and stored there on a miss."""
+    def read():
+        try:
+            return json.loads(path.read_text()) if _intact(path) else None
+        except ValueError:
+            return None  # written by another version of this code: built again
+
+    code = read()
+    if code is None:
+        with _building(path):
+            code = read()
+            if code is None:
+                code = build()
+                _store(path, json.dumps(code).encode())  # key order kept: a function's outputs are in it
+    return code
+
+
+def chain_code(robot: Robot) -> dict[str, list[dict]]:
+    """`emit.printed_chain` of a robot (cache key `chain_key`): its functions that no error model
+    changes, nearly all of the symbolic work, built once per robot."""
+    def build():
+        from gecgen.emit import printed_chain  # the symbolic build: needed on a cache miss only
+
+        return printed_chain(robot)
+
+    return _cached_json(cache_dir() / f"{robot.name}-{chain_key(robot)}.chain.json", build)
+
+
 def printed_code(robot: Robot, model: ErrorModel, key: str | None = None) -> dict[str, list[dict]]:
     """`emit.printed` for a robot and error model (cache key `model_key`), kept in the cache beside
     its library: the symbolic build and its printing run once per model content, not again for the
-    files that export, diagnose and calibrate write (3 s of an 18-pose UR10 calibrate)."""
-    def cached(path: Path, build):
-        if _intact(path):
-            try:
-                return json.loads(path.read_text())
-            except ValueError:
-                pass  # written by another version of this code: built again below
-        code = build()
-        _store(path, json.dumps(code).encode())  # key order kept: a function's outputs are in it
-        return code
-
-    # the chain's functions are the same for every model of a robot and nearly all of the work: a new
-    # model (each round of diagnose, each candidate of calibrate) prints only its own basis terms
+    files that export, diagnose and calibrate write (3 s of an 18-pose UR10 calibrate). A new model
+    of a known robot prints only its own basis terms (`chain_code`)."""
     def build():
-        from gecgen.emit import printed, printed_chain  # the symbolic build: needed on a cache miss only
+        from gecgen.emit import printed
 
-        chain = cache_dir() / f"{robot.name}-{chain_key(robot)}.chain.json"
-        return printed(robot, model, cached(chain, lambda: printed_chain(robot)))
+        return printed(robot, model, chain_code(robot))
 
-    return cached(cache_dir() / f"{robot.name}-{key or model_key(robot, model)}.code.json", build)
+    return _cached_json(cache_dir() / f"{robot.name}-{key or model_key(robot, model)}.code.json", build)
 
 
 def rendered(robot: Robot, model: ErrorModel, key: str | None = None) -> dict[str, str]:
@@ -156,23 +199,45 @@ def rendered(robot: Robot, model: ErrorModel, key: str | None = None) -> dict[st
     return render(robot, model, printed_code(robot, model, key))
 
 
-def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
-    """The compiled generated C of a robot and error model (cache key `model_key`); rendered and
-    built only on a cache miss (`_intact`)."""
-    lib = cache_dir() / f"{robot.name}-{key}.so"
-    if _intact(lib):
-        return lib
-    files = rendered(robot, model, key)
+def _compiled(robot: Robot, files: dict[str, str | bytes], args: list[str]) -> bytes:
+    """What the C compiler makes (its output `out`) of `files` (name -> text or bytes, written to a
+    fresh folder) with `args`: flags, then the sources and objects."""
     with tempfile.TemporaryDirectory() as tmp:
-        for fname in (f"{robot.name}.c", f"{robot.name}.h"):
-            Path(tmp, fname).write_text(files[fname])
-        out = Path(tmp) / "lib.so"
-        run = subprocess.run([compiler(), *CFLAGS, f"{robot.name}.c", "-o", str(out), "-lm"], cwd=tmp,
-                             capture_output=True, text=True)
+        for fname, content in files.items():
+            (Path(tmp, fname).write_bytes if isinstance(content, bytes) else Path(tmp, fname).write_text)(content)
+        run = subprocess.run([compiler(), *args, "-o", "out"], cwd=tmp, capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"compiling the generated C for {robot.name} failed: {run.stderr.strip()}")
-        _store(lib, out.read_bytes())
-    return lib
+        return Path(tmp, "out").read_bytes()
+
+
+def _built(path: Path, build) -> Path:
+    """The cache entry at path, its bytes built (`build()`) and stored on a miss, once across processes."""
+    if not _intact(path):
+        with _building(path):
+            if not _intact(path):
+                _store(path, build())
+    return path
+
+
+def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
+    """The compiled generated C of a robot and error model (cache key `model_key`): the model's own
+    code (`emit.render_c_parts`) compiled and linked to the robot's chain object (compiled once per
+    robot and toolchain), each rendered and built only on a cache miss (`_intact`)."""
+    from gecgen.emit import render_c_parts
+
+    name = robot.name
+    spec = json.dumps([chain_key(robot), COMPILE_FLAGS, toolchain()], sort_keys=True)
+    chain = cache_dir() / f"{name}-{hashlib.sha256(spec.encode()).hexdigest()[:24]}.chain.o"
+
+    def library() -> bytes:
+        files = render_c_parts(robot, model, printed_code(robot, model, key), len(chain_code(robot)["c"]))
+        source = f"{name}_chain.c"
+        obj = _built(chain, lambda: _compiled(robot, {source: files[source]}, [*COMPILE_FLAGS, "-c", source]))
+        return _compiled(robot, {f"{name}.c": files[f"{name}.c"], f"{name}.h": files[f"{name}.h"],
+                                 "chain.o": obj.read_bytes()}, [*CFLAGS, f"{name}.c", "chain.o", "-lm"])
+
+    return _built(cache_dir() / f"{name}-{key}.so", library)
 
 
 def _ptr(a: np.ndarray | None):
