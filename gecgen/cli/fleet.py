@@ -130,6 +130,7 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
     uses one BLAS thread). Returns `calibrate_one`'s results in manifest order, and writes
     out/fleet.json and out/fleet.csv."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster
     except ImportError:
         raise ModelError("gecgen fleet runs on Dask: pip install 'gecgen[fleet]' (dask[distributed])") from None
@@ -146,6 +147,9 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
                 raise ModelError(f"--scheduler {scheduler}: no Dask scheduler answers there ({exc.__class__.__name__});"
                                  f" start one (dask scheduler) or leave --scheduler out for a local cluster") from None
         else:
+            # no dashboard, so no use for the workers' statistical profiler, which samples the task's
+            # stack every 10 ms, holding the interpreter the task runs in
+            stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                        dashboard_address=None))
             client = stack.enter_context(Client(cluster))
