@@ -46,22 +46,24 @@ targets:
   probe: estimate
 """
 
-#: where the time goes: cProfile of one warm run each (2026-11-25; the profiler slows it about 1.6x)
-PROFILE = """Where the time goes (cProfile, warm, before the generated code was cached by content):
-- UR10, 18 poses, 18.2 s under the profiler: the report 12.0 s (its figures 8.5 s, matplotlib drawing the
-  residual-per-joint grids), rendering the generated C again for the output folder 3.0 s (now read from the
-  cache: `runtime.compiled.printed_code`), imports and the parser 2.2 s, and the choice itself, every candidate in
-  every fold, 0.85 s.
-- PPS paper design, 29.4 s under the profiler: the choice 15.9 s (diagnose in the five folds and on all the data
-  15.0 s: screening 11.1 s, of which the choice's own cross-validation 6.6 s), the report 10.7 s (figures 5.7 s,
-  the effects' 4.9 s), imports 2.0 s.
-So on small data calibrate is its report, and on a diagnosed model it is diagnose run six times: one diagnose
-(last column) is 1.4 to 3.5 s of it. Since then the folds and the report's figures run side by side in two
-forked processes, and the parent fits the diagnosed candidate on all the data meanwhile (`runtime.processes`;
-the same figures and report byte for byte), and a new error model of a known robot prints only its basis
-terms (the chain's printed code is cached per robot: the cold run's 22 models), and the one-row figures take
-fixed margins instead of tight_layout (which drew each twice). Before those changes, warm, UR10 7.7 s,
-industrial6r 9.6 s (cold 34.8 s), PPS 17.8 s, TALOS 11.8 s."""
+#: where the time goes: marks in one warm run each (2026-11-26), and what was done about it
+PROFILE = """Where the time goes (warm unless said; marks in the process, 2026-11-26):
+- UR10, 18 poses, 3.6 s: imports 1.0 s (sympy 0.23 s for the robot and error model, scipy 0.3 s,
+  matplotlib 0.32 s), the choice (every candidate in every fold) 0.45 s, the report 1.65 s: ten
+  figures, 3.3 s of matplotlib drawing shared by two processes, four of them residual grids of 36
+  panels at 0.54 s each.
+- PPS paper design, 9.2 s: imports 1.0 s, reading and target placement 0.3 s, the choice 5.9 s (diagnose
+  in five folds and on all the data beside the other candidates' folds, on two processes), the report 1.8 s.
+- industrial6r with an empty code cache: 22 models compiled (its candidates and every round of diagnose
+  in every fold), 0.2 s each.
+What was done (issue 23): the folds and the report's figures run side by side in forked processes and
+the parent fits the diagnosed candidate on all the data meanwhile (`runtime.processes`; the same
+figures and report byte for byte); the chain's printed code is cached per robot, and its compiled
+object too, so a new model prints and compiles only its own terms (0.55 -> 0.2 s a model); diagnose's
+chi-square tails come from scipy.special (scipy.stats was 0.3-0.45 s of imports); the figures take
+fixed margins (tight_layout drew each twice), and the residual grids carry ticks on their outer
+panels only. Before, warm: UR10 7.7 s, industrial6r 9.6 s (cold 34.8 s), PPS 17.8 s, TALOS 11.8 s
+(2026-11-25); when the issue was filed, with an empty cache, UR10 41 s and industrial6r about 100 s."""
 
 def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
     """(case, robot file, calibrate's data arguments, diagnose's data arguments) of every case."""

@@ -28,7 +28,7 @@ from gecgen.model import load_error_model, load_robot  # noqa: E402
 from gecgen.model.errors import error_model_from_dict  # noqa: E402
 from gecgen.model.loads import catalog  # noqa: E402
 from gecgen.model.kinematics import target_positions  # noqa: E402
-from gecgen.runtime.compiled import CFLAGS, CompiledModel, compiler  # noqa: E402
+from gecgen.runtime.compiled import CFLAGS, COMPILE_FLAGS, CompiledModel, compiler  # noqa: E402
 
 ROBOTS = ("pps", "industrial6r", "puma560")
 
@@ -58,6 +58,28 @@ def compile_seconds(files: dict, name: str) -> float:
         t = time.perf_counter()
         subprocess.run([compiler(), *CFLAGS, f"{name}.c", "-o", "lib.so", "-lm"], cwd=tmp, check=True)
         return time.perf_counter() - t
+
+
+def runtime_compile_seconds(robot, model) -> tuple[float, float]:
+    """The runtime's build (`runtime.compiled.shared_library`), best of 3 each: the robot's chain compiled
+    to an object file (once per robot), and a model's own code compiled and linked to it (each model)."""
+    from gecgen.emit import printed, printed_chain, render_c_parts
+
+    chain = printed_chain(robot)
+    files = render_c_parts(robot, model, printed(robot, model, chain), len(chain["c"]))
+    with tempfile.TemporaryDirectory() as tmp:
+        for fname, text in files.items():
+            Path(tmp, fname).write_text(text)
+
+        def cc(*args: str) -> float:
+            t = time.perf_counter()
+            subprocess.run([compiler(), *args], cwd=tmp, check=True)
+            return time.perf_counter() - t
+
+        name = robot.name
+        chain_s = min(cc(*COMPILE_FLAGS, "-c", f"{name}_chain.c", "-o", "chain.o") for _ in range(3))
+        model_s = min(cc(*CFLAGS, f"{name}.c", "chain.o", "-o", "lib.so", "-lm") for _ in range(3))
+    return chain_s, model_s
 
 
 DRIVER = r"""
@@ -164,6 +186,7 @@ def main():
         files = render(robot, model)
         symbolic = time.perf_counter() - t
         comp = compile_seconds(files, name)
+        chain_cc, model_cc = runtime_compile_seconds(robot, model)
         c_model, ca_model = CompiledModel(robot, model, "c"), CompiledModel(robot, model, "casadi")
         lo = np.array([max(j.lower, -np.pi) for j in robot.joints])
         hi = np.array([min(j.upper, np.pi) for j in robot.joints])
@@ -184,10 +207,11 @@ def main():
         qT, eT = q[:n_ca].T.copy(), eps[:n_ca].T.copy()
         ca_je = best(lambda: mapped(qT, eT), 3) / n_ca
         fd = best(lambda: fd_jacobian(robot, q[:n_fd]), 3) / n_fd
-        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, c_loop, c_je, c_h, ca_je,
-                     fd, n_loads, c_loads, c_floor, n_trig, n_stores))
+        rows.append((name, len(robot.targets), len(model.coefficients), gen, symbolic, comp, chain_cc, model_cc, c_loop,
+                     c_je, c_h, ca_je, fd, n_loads, c_loads, c_floor, n_trig, n_stores))
         print(f"{name:13s} targets {len(robot.targets)} coefficients {len(model.coefficients):4d} | generate "
-              f"{gen:5.2f} s (symbolic+render {symbolic:4.2f} s) | cc {comp:5.2f} s | J_e C loop {1e6 * c_loop:6.3f} us, "
+              f"{gen:5.2f} s (symbolic+render {symbolic:4.2f} s) | cc {comp:5.2f} s (runtime: chain {chain_cc:4.2f} s, "
+              f"model + link {model_cc:4.2f} s) | J_e C loop {1e6 * c_loop:6.3f} us, "
               f"C batch {1e6 * c_je:6.3f} us, "
               f"CasADi {1e6 * ca_je:6.2f} us, numpy FD {1e6 * fd:8.1f} us | H_e C {1e6 * c_h:6.2f} us | "
               f"{n_loads} loads C loop {1e6 * c_loads:6.3f} us ({c_loads / c_loop:.2f} x J_e) | floor "
@@ -199,7 +223,9 @@ def main():
              "Regenerate: `python benchmarks/bench_compiler.py`. "
              "Each robot with its default error model (`robots/NAME.errors.yaml`). `generate` = a fresh "
              "`gecgen generate` process (imports, parsing, symbolic build, rendering, writing), best of 3; cc = "
-             f"compiling the generated C with `{' '.join(CFLAGS)}`. C loop = a C driver calling NAME_J_e on one pose's "
+             f"compiling the generated C with `{' '.join(CFLAGS)}`; the runtime instead compiles the robot's chain (its "
+             "kinematics and J_e, `NAME_chain.c`) once to an object file (chain cc) and each model's own code linked "
+             "to it (model cc), best of 3 each. C loop = a C driver calling NAME_J_e on one pose's "
              "arrays 200,000 times (what a controller sees), best of 5. The other per-pose times are the best of "
              "several batched calls: C through ctypes over 20,000 poses (J_e; the batch writes 3 nt x 6(n+1) doubles "
              "per pose to memory) and 2,000 poses (H_e, at eps(c), wrench included), "
@@ -209,13 +235,16 @@ def main():
              "use), in the same C loop as J_e. Floor = J_e's own trig and stores alone (`floor_source`: one sin and "
              "cos of each angle J_e takes them of, merged into sincos by the compiler, and its stores, straight-line), "
              "in the same loop.", "",
-             "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | J_e C loop (us) | "
+             "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | runtime: chain cc (s) | "
+             "runtime: model cc (s) | J_e C loop (us) | "
              "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | "
              "H_e C batch (us) | load signals | loads C loop (us) | loads / J_e (C loop) | J_e floor: sincos + stores "
              "| floor (us) | J_e / floor |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, nt, nc, gen, sym, comp, c_loop, c_je, c_h, ca_je, fd, n_loads, c_loads, c_floor, n_trig, n_st in rows:
-        lines.append(f"| {name} | {nt} | {nc} | {gen:.2f} | {sym:.2f} | {comp:.2f} | {1e6 * c_loop:.3f} | "
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for (name, nt, nc, gen, sym, comp, chain_cc, model_cc, c_loop, c_je, c_h, ca_je, fd, n_loads, c_loads, c_floor,
+         n_trig, n_st) in rows:
+        lines.append(f"| {name} | {nt} | {nc} | {gen:.2f} | {sym:.2f} | {comp:.2f} | {chain_cc:.2f} | {model_cc:.2f} | "
+                     f"{1e6 * c_loop:.3f} | "
                      f"{1e6 * c_je:.3f} | {1e6 * ca_je:.2f} | {1e6 * fd:.1f} | {ca_je / c_je:.0f} | {fd / c_je:.0f} | "
                      f"{1e6 * c_h:.2f} | {n_loads} | {1e6 * c_loads:.3f} | {c_loads / c_loop:.2f} | "
                      f"{n_trig} + {n_st} | {1e6 * c_floor:.3f} | {c_loop / c_floor:.2f} |")
