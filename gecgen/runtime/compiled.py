@@ -224,13 +224,13 @@ def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
     """The compiled generated C of a robot and error model (cache key `model_key`): the model's own
     code (`emit.render_c_parts`) compiled and linked to the robot's chain object (compiled once per
     robot and toolchain), each rendered and built only on a cache miss (`_intact`)."""
-    from gecgen.emit import render_c_parts
-
     name = robot.name
     spec = json.dumps([chain_key(robot), COMPILE_FLAGS, toolchain()], sort_keys=True)
     chain = cache_dir() / f"{name}-{hashlib.sha256(spec.encode()).hexdigest()[:24]}.chain.o"
 
     def library() -> bytes:
+        from gecgen.emit import render_c_parts  # jinja2 and the symbolic layer: needed on a cache miss only
+
         files = render_c_parts(robot, model, printed_code(robot, model, key), len(chain_code(robot)["c"]))
         source = f"{name}_chain.c"
         obj = _built(chain, lambda: _compiled(robot, {source: files[source]}, [*COMPILE_FLAGS, "-c", source]))

@@ -208,7 +208,8 @@ def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c:
                 Hr = relative.project(rel, Hr, pr, wr)
         if weights is not None:
             root = np.sqrt(weights[rows])[:, None]
-            Hr, r = Hr * root[:, :, None], r * root
+            Hr *= root[:, :, None]  # a copy already (the rows' selection): scaled in place
+            r = r * root
         yield Hr.reshape(-1, H.shape[-1]), r.ravel()
         if extra is not None:
             yield extra
@@ -218,10 +219,16 @@ def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray |
     """R factor of [H | r] over streamed blocks, (k+1, k+1), and the number of rows m."""
     R, m = None, 0
     for H, r in blocks:
-        A = H if columns is None else H[:, columns]
+        # [R; A | r] assembled in one array: these blocks are megabytes, and each copy of them shows
+        k0 = 0 if R is None else len(R)
+        k = H.shape[1] if columns is None else len(columns)
+        M = np.empty((k0 + len(r), k + 1))
+        if R is not None:
+            M[:k0] = R
+        M[k0:, :k] = H if columns is None else H[:, columns]
         if scale is not None:
-            A = A / scale
-        M = np.column_stack([A, r]) if R is None else np.vstack([R, np.column_stack([A, r])])
+            M[k0:, :k] /= scale
+        M[k0:, k] = r
         R = np.linalg.qr(M, mode="r")
         m += len(r)
     k1 = R.shape[1]
