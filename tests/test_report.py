@@ -147,3 +147,41 @@ def test_what_was_measured_counts_the_data_and_scores_each_target(reports):
     assert f"| target `smr` | {reports['identify']['before']['rms_mm']:.3g} / " in section
     assert f" / {train['max_mm']:.3g} |" in section
     assert "poses_training.png" in section
+
+
+def test_the_residual_grid_names_each_joint_under_its_panel_at_its_scale(monkeypatch):
+    """A row of the residual grid is one Axes holding a panel per joint: each panel's ticks are its
+    joint's values where they fall on it, and its joint's name stands under it, also when the panel's
+    centre is one of its ticks (a span symmetric about 0, which matplotlib would drop as a minor tick)."""
+    import gecgen.report.plots as plots
+    from gecgen.model import load_robot
+    from gecgen.model.measurements import Measurements
+    from gecgen.report.content import DataSet, Residuals, joint_label
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    P = 20
+    q = np.tile(np.linspace(-1.0, 1.0, P)[:, None], (1, robot.n)) * np.arange(1, robot.n + 1) / robot.n
+    data = Measurements(q, np.zeros((P, 6)), np.zeros((P, 0)), (), np.arange(P), np.arange(P), np.zeros(P, int),
+                        np.zeros((P, 3)))
+    stage = Residuals("calibrated", np.arange(P), np.random.default_rng(0).normal(size=(P, 3)), None)
+    drawn = {}
+
+    def keep(fig, *args):
+        fig.canvas.draw()
+        bottom = fig.axes[-1]
+        drawn["joints"] = [t.get_text() for t in bottom.xaxis.get_ticklabels(minor=True) if t.get_text()]
+        drawn["ticks"] = [(tick.get_loc(), tick.label1.get_text()) for tick in bottom.xaxis.get_major_ticks()
+                          if tick.label1.get_text()]
+        return real(fig, *args)
+
+    real = plots._figure
+    monkeypatch.setattr(plots, "_figure", keep)
+    figure = plots.residuals_per_joint(robot, DataSet("training", data, [stage]), stage)
+    assert drawn["joints"] == [joint_label(robot, k) for k in range(robot.n)]
+    assert all(name in figure.axes for name in drawn["joints"]) and "x residual (mm)" in figure.axes
+    # panel j spans [j (1 + GAP), j (1 + GAP) + 1]: a tick's place there gives back its joint value
+    for loc, text in drawn["ticks"]:
+        j = int(loc // (1 + plots.GAP))
+        degrees = np.degrees(q[:, j])
+        lo, hi = degrees.min() - 0.05 * np.ptp(degrees), degrees.max() + 0.05 * np.ptp(degrees)
+        assert float(text.replace("\u2212", "-")) == pytest.approx(lo + (loc - j * (1 + plots.GAP)) * (hi - lo))

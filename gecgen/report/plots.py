@@ -8,9 +8,11 @@ import re
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.patches  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
 
 from gecgen.model.robot import Robot  # noqa: E402
 from gecgen.report.content import DataSet, Figure, Residuals, joint_label, joint_values, variable  # noqa: E402
@@ -22,9 +24,10 @@ DPI = 100
 MARGINS = {"left": 0.065, "right": 0.99, "bottom": 0.16, "top": 0.9}
 
 
-def _figure(fig, name: str, caption: str) -> Figure:
-    """The figure as PNG, with the labels of its axes (the page's alt text names them)."""
-    labels = tuple(dict.fromkeys(t for ax in fig.axes for t in (ax.get_xlabel(), ax.get_ylabel()) if t))
+def _figure(fig, name: str, caption: str, named: tuple[str, ...] = ()) -> Figure:
+    """The figure as PNG, with the labels of its axes and what else `named` names on them (the page's
+    alt text names them)."""
+    labels = tuple(dict.fromkeys([*(t for ax in fig.axes for t in (ax.get_xlabel(), ax.get_ylabel()) if t), *named]))
     out = io.BytesIO()
     fig.savefig(out, format="png", dpi=DPI)
     plt.close(fig)
@@ -107,61 +110,87 @@ def _ticks(lo: float, hi: float) -> np.ndarray:
     return values[(values >= lo - 1e-10 * span) & (values <= hi + 1e-10 * span)]
 
 
-def _panel_grid(ax, x: np.ndarray, y: np.ndarray):
-    """Grid lines at x and y (data units) as the axes' own grid draws them, in two artists: the
-    grid of every tick of 36 panels was most of a residual grid's time."""
-    style = {"colors": matplotlib.rcParams["grid.color"], "linewidths": matplotlib.rcParams["grid.linewidth"],
-             "alpha": 0.3, "zorder": 1.5}  # under the data, as axes.axisbelow "line" puts the grid
-    ax.vlines(x, 0, 1, transform=ax.get_xaxis_transform(), **style)
-    ax.hlines(y, 0, 1, transform=ax.get_yaxis_transform(), **style)
+def _tick_labels(values: np.ndarray) -> list[str]:
+    """Tick labels as an axis of its own would print them, in full (no offset)."""
+    formatter = matplotlib.ticker.ScalarFormatter(useOffset=False)
+    formatter.create_dummy_axis()
+    return formatter.format_ticks(values)
+
+
+def _span(x: np.ndarray) -> tuple[float, float]:
+    """The span of a panel showing x: its range with matplotlib's margins of 5 %; one unit either
+    side of a value held still (every joint still: the panels show them all)."""
+    lo, hi = float(x.min()), float(x.max())
+    return (lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)) if hi > lo else (lo - 1.0, hi + 1.0)
+
+
+#: the gap between the panels of a residual grid's row, a share of a panel's width
+GAP = 0.08  # as subplots_adjust(wspace=0.08) spaced them when each was an Axes
 
 
 def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     """Signed residual per axis (rows: x, y, z in mm, then orientation about x, y, z in mrad when
     measured) against each joint the data moves (columns; one held still shows nothing): a grid of
     small multiples, each row on one residual scale and each column on one joint's, named with
-    units on the outer panels."""
+    units on the outer panels. A row is one Axes whose x holds its panels side by side, panel j
+    from j (1 + GAP) to that plus 1, its joint's span (with matplotlib's margins of 5 %) mapped onto
+    it: 36 Axes of their own took most of a report's time on small data."""
     rows = [(f"{a} residual (mm)", st.position_mm[:, k]) for k, a in enumerate("xyz")]
     if st.rotation_mrad is not None:
         rows += [(f"rot. about {a} (mrad)", st.rotation_mrad[:, k]) for k, a in enumerate("xyz")]
     moving = [k for k in range(robot.n) if np.ptp(ds.data.q[:, k]) > 0] or list(range(robot.n))
-    # one scale per row and per column, its ticks and labels on the outer panels only (the inner
-    # ones carry its grid lines): the ticks of every panel were most of the report's time on small data
-    fig, axes = plt.subplots(len(rows), len(moving), figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
     colour = COLOURS[min(len(COLOURS) - 1, [s.stage for s in ds.stages].index(st.stage))]
     xs = [joint_values(robot, ds.data, k)[st.pose] for k in moving]
+    spans = [_span(x) for x in xs]
+    starts = np.arange(len(moving)) * (1 + GAP)
+
+    def placed(col: int, values):
+        lo, hi = spans[col]
+        return starts[col] + (np.asarray(values, float) - lo) / (hi - lo)
+
+    x_ticks = [_ticks(*span) for span in spans]
+    grid = {"colors": matplotlib.rcParams["grid.color"], "linewidths": matplotlib.rcParams["grid.linewidth"],
+            "alpha": 0.3, "zorder": 1.5}  # under the data, as axes.axisbelow "line" puts an axes' grid
+    frame = {"fill": False, "linewidth": matplotlib.rcParams["axes.linewidth"],
+             "edgecolor": matplotlib.rcParams["axes.edgecolor"], "zorder": 2.5, "clip_on": False}  # as spines are
+    fig, axes = plt.subplots(len(rows), 1, figsize=(12, 1.75 * len(rows) + 0.7), squeeze=False)
     for r, (ylabel, values) in enumerate(rows):
+        ax = axes[r, 0]
         finite = values[np.isfinite(values)]
         limit = 1.08 * np.abs(finite).max() if len(finite) and np.abs(finite).max() > 0 else 1.0
+        y_ticks = _ticks(-limit, limit)
+        lines = []  # every panel's grid lines
         for col, x in enumerate(xs):
-            ax = axes[r, col]
-            ax.plot(x, values, ".", ms=3, alpha=0.7, color=colour)
-            ax.axhline(0, color="0.5", lw=0.6)
-            _binned_mean(ax, x, values)
-            ax.set_ylim(-limit, limit)
-    for col, k in enumerate(moving):
-        xlim = axes[-1, col].get_xlim()  # the data's span and margins; every row holds the same x
-        for r in range(len(rows)):
-            ax = axes[r, col]
-            ax.set_xlim(xlim)
-            x_ticks, y_ticks = _ticks(*xlim), _ticks(*ax.get_ylim())
-            _panel_grid(ax, x_ticks, y_ticks)
-            ax.set_xticks(x_ticks if r == len(rows) - 1 else [])
-            ax.set_yticks(y_ticks if col == 0 else [])
-            ax.tick_params(labelsize=6, pad=1)
-            if r == len(rows) - 1:
-                ax.set_xlabel(joint_label(robot, k), fontsize=7, labelpad=1)
-            if col == 0:
-                ax.set_ylabel(rows[r][0], fontsize=7, labelpad=1)
+            u, a = placed(col, x), starts[col]
+            ax.plot(u, values, ".", ms=3, alpha=0.7, color=colour)
+            _binned_mean(ax, u, values)
+            ax.add_patch(matplotlib.patches.Rectangle((a, -limit), 1.0, 2 * limit, **frame))
+            lines += [[(v, -limit), (v, limit)] for v in placed(col, x_ticks[col])]
+            lines += [[(a, v), (a + 1.0, v)] for v in y_ticks]
+        ax.add_collection(LineCollection(lines, **grid))
+        ax.hlines(np.zeros(len(xs)), starts, starts + 1.0, color="0.5", lw=0.6)
+        ax.set_xlim(0.0, starts[-1] + 1.0)
+        ax.set_ylim(-limit, limit)
+        ax.set_yticks(y_ticks)
+        ax.set_ylabel(ylabel, fontsize=7, labelpad=1)
+        ax.tick_params(labelsize=6, pad=1)
+        ax.set_frame_on(False)
+        ax.set_xticks([])
+    bottom = axes[-1, 0]
+    bottom.set_xticks(np.concatenate([placed(col, t) for col, t in enumerate(x_ticks)]),
+                      sum((_tick_labels(t) for t in x_ticks), []))
+    joints = [joint_label(robot, k) for k in moving]
+    bottom.set_xticks(starts + 0.5, joints, minor=True)  # each panel's joint under its tick labels
+    bottom.xaxis.remove_overlapping_locs = False  # a panel's centre may also be one of its ticks
+    bottom.tick_params(axis="x", which="minor", length=0, pad=12, labelsize=7)
     fig.suptitle(f"{robot.name}, {ds.name} data, {st.stage}: signed residuals against each joint", fontsize=10)
-    # fixed margins: tight_layout on this many axes costs a second per figure
+    # fixed margins: tight_layout costs a second per figure
     height = fig.get_figheight()
-    fig.subplots_adjust(left=0.06, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, wspace=0.08,
-                        hspace=0.1)
+    fig.subplots_adjust(left=0.06, right=0.995, bottom=0.45 / height, top=1 - 0.45 / height, hspace=0.1)
     still = [joint_label(robot, k) for k in range(robot.n) if k not in moving]
     return _figure(fig, f"residuals_{ds.name}_{_slug(st.stage)}",
                    f"Signed residuals, {st.stage} model, {ds.name} data"
-                   + (f" (not shown: {', '.join(still)}, constant over the data)" if still else ""))
+                   + (f" (not shown: {', '.join(still)}, constant over the data)" if still else ""), tuple(joints))
 
 
 def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, after: Residuals, data) -> Figure:
