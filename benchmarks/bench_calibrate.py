@@ -37,6 +37,9 @@ sources:
 noise: {repeatability: 3.0e-5, tracker: 5.0e-5}
 """
 
+#: warm runs of each case, the best of them reported
+WARM_RUNS = 3
+
 README_UR10 = """name: ur10
 angle_unit: rad
 urdf: {urdf}
@@ -114,14 +117,16 @@ def main():
             if label.startswith("industrial6r"):
                 cold, _ = calibrate({"GECGEN_CACHE": str(tmp / "cold-cache")})
             calibrate({"GECGEN_CACHE": str(cache)})  # builds every model's code
-            warm, result = calibrate({"GECGEN_CACHE": str(cache)})
+            # best of 3: this machine's speed varies by a third over minutes (other tenants)
+            runs = [calibrate({"GECGEN_CACHE": str(cache)}) for _ in range(WARM_RUNS)]
+            warm, result = min(runs, key=lambda run: run[0]["s"])
             def diagnose():
                 return timed(*gecgen("diagnose", str(robot), *diag_data, "--errors", str(ROOT / "robots" /
                                      "constant.errors.yaml"), "-o", str(tmp / "d.errors.yaml")),
                              env={"GECGEN_CACHE": str(cache)})
 
             diagnose()  # its rounds' models built
-            diag = diagnose()
+            diag = min((diagnose() for _ in range(WARM_RUNS)), key=lambda run: run["s"])
             if diag["rc"] != 0:
                 raise SystemExit(f"{label}: diagnose exit {diag['rc']}: {diag['stderr']}")
             candidates = ", ".join(f"{c['model']} {c['cv_rms_mm']:.3g}" if c.get("cv_rms_mm") is not None
@@ -134,8 +139,9 @@ def main():
     lines = ["## calibrate end to end (every candidate model)", "",
              f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average "
              f"{os.getloadavg()[0]:.1f} when the benchmark ended. Regenerate: `python benchmarks/bench_calibrate.py`. "
-             "`gecgen calibrate` in a fresh process; warm: every model's code already compiled; cold: an empty "
-             "code cache. One `gecgen diagnose` of the same data from the constant model (warm) beside it.", "",
+             f"`gecgen calibrate` in a fresh process; warm: every model's code already compiled, best of {WARM_RUNS}; "
+             "cold: an empty "
+             "code cache. One `gecgen diagnose` of the same data from the constant model (warm, best of as many) beside it.", "",
              "| case | calibrate warm (s) | calibrate cold (s) | one diagnose (s) | chosen | candidates (cv RMS, mm) |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {model} | {cands} |"

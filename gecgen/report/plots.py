@@ -178,7 +178,7 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
         ax.set_xticks([])
     bottom = axes[-1, 0]
     bottom.set_xticks(np.concatenate([placed(col, t) for col, t in enumerate(x_ticks)]),
-                      sum((_tick_labels(t) for t in x_ticks), []))
+                      [label for t in x_ticks for label in _tick_labels(t)])
     joints = [joint_label(robot, k) for k in moving]
     bottom.set_xticks(starts + 0.5, joints, minor=True)  # each panel's joint under its tick labels
     bottom.xaxis.remove_overlapping_locs = False  # a panel's centre may also be one of its ticks
