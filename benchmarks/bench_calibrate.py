@@ -6,10 +6,11 @@ Cases (issue 23's): the README walk-through's UR10 (23 real poses, 18 for traini
 --holdout 0.2); industrial6r, 150 simulated poses and 50 for validation (the README's); the PPS
 paper design (396 poses); TALOS's torso and left arm (9 joints, URDF masses), 400 poses with a
 bending torso and shoulder; TALOS's upper body as a tree, torso and both arms (16 joints, beyond the
-issue's 11-joint arm), 400 poses, its shipped truth (tests/data/talos/talos.truth.yaml). Each is the `gecgen calibrate` command in a fresh process, timed with
-the code of every model it builds already compiled (warm: the second of two runs) and, for
-industrial6r, with an empty cache (cold). The time of one `gecgen diagnose` of the same data
-(warm) stands beside it: calibrate runs diagnose once per fold for its diagnosed candidate.
+issue's 11-joint arm), 400 poses, its shipped truth (tests/data/talos/talos.truth.yaml). Each is
+the `gecgen calibrate` command in a fresh process, timed with the code of every model it builds
+already compiled (warm: the best of WARM_RUNS runs after one that builds it) and, for industrial6r,
+with an empty cache (cold). The time of one `gecgen diagnose` of the same data (warm) stands beside
+it: calibrate runs diagnose once per fold for its diagnosed candidate.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_large import gecgen, timed  # noqa: E402
-from bench_runtime import cpu_model, write_section  # noqa: E402
+from bench_runtime import cpu_model, reference_s, write_section  # noqa: E402
 
 TALOS_TRUTH = """seed: 5
 gravity: [0, 0, -9.81]
@@ -113,6 +114,7 @@ def main():
                     raise SystemExit(f"{label}: calibrate exit {r['rc']}: {r['stderr']}")
                 return r, json.loads(r["stdout"])
 
+            reference = reference_s()
             cold = None
             if label.startswith("industrial6r"):
                 cold, _ = calibrate({"GECGEN_CACHE": str(tmp / "cold-cache")})
@@ -131,21 +133,25 @@ def main():
                 raise SystemExit(f"{label}: diagnose exit {diag['rc']}: {diag['stderr']}")
             candidates = ", ".join(f"{c['model']} {c['cv_rms_mm']:.3g}" if c.get("cv_rms_mm") is not None
                                    else f"{c['model']} refused" for c in result["candidates"])
-            rows.append((label, warm["s"], cold["s"] if cold else None, diag["s"], result["model"], candidates))
+            rows.append((label, warm["s"], cold["s"] if cold else None, diag["s"], reference, result["model"],
+                         candidates))
             print(f"{label:48s} warm {warm['s']:7.1f} s  cold {cold['s'] if cold else float('nan'):7.1f} s  "
-                  f"diagnose {diag['s']:6.1f} s  chose {result['model']}  ({candidates})")
+                  f"diagnose {diag['s']:6.1f} s  machine {reference:.2f} s  chose {result['model']}  ({candidates})")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     lines = ["## calibrate end to end (every candidate model)", "",
              f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average "
              f"{os.getloadavg()[0]:.1f} when the benchmark ended. Regenerate: `python benchmarks/bench_calibrate.py`. "
              f"`gecgen calibrate` in a fresh process; warm: every model's code already compiled, best of {WARM_RUNS}; "
-             "cold: an empty "
-             "code cache. One `gecgen diagnose` of the same data from the constant model (warm, best of as many) beside it.", "",
-             "| case | calibrate warm (s) | calibrate cold (s) | one diagnose (s) | chosen | candidates (cv RMS, mm) |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {model} | {cands} |"
-              for label, warm, cold, diag, model, cands in rows]
+             "cold: an empty code cache. One `gecgen diagnose` of the same data from the constant model (warm, best "
+             "of as many) beside it. Machine = the machine's speed when the case began (`bench_runtime.reference_s`: "
+             "a pure-Python loop of 10^7 additions, best of 3; 0.89 s at its quickest): this shared machine's speed "
+             "varies by a third over minutes, and the times with it.", "",
+             "| case | calibrate warm (s) | calibrate cold (s) | one diagnose (s) | machine (s) | chosen | "
+             "candidates (cv RMS, mm) |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {ref:.2f} | {model} | "
+              f"{cands} |" for label, warm, cold, diag, ref, model, cands in rows]
     lines += ["", "Targets (issue 23), warm: industrial6r 150 poses <= 10 s, PPS paper design <= 10 s, an 11-joint arm "
                   "with 400 poses <= 60 s (here TALOS's 16 joints), 18 poses <= 3 s; cold, 6 joints, <= 15 s.",
               "", PROFILE]

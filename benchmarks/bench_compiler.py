@@ -223,9 +223,9 @@ def main():
              "Regenerate: `python benchmarks/bench_compiler.py`. "
              "Each robot with its default error model (`robots/NAME.errors.yaml`). `generate` = a fresh "
              "`gecgen generate` process (imports, parsing, symbolic build, rendering, writing), best of 3; cc = "
-             f"compiling the generated C with `{' '.join(CFLAGS)}`; the runtime instead compiles the robot's chain (its "
-             "kinematics and J_e, `NAME_chain.c`) once to an object file (chain cc) and each model's own code linked "
-             "to it (model cc), best of 3 each. C loop = a C driver calling NAME_J_e on one pose's "
+             f"compiling the generated C with `{' '.join(CFLAGS)}`; the runtime instead compiles the robot's chain "
+             "(its kinematics and J_e, `NAME_chain.c`) once to an object file (chain cc) and each model's own code "
+             "linked to it (model cc), best of 3 each. C loop = a C driver calling NAME_J_e on one pose's "
              "arrays 200,000 times (what a controller sees), best of 5. The other per-pose times are the best of "
              "several batched calls: C through ctypes over 20,000 poses (J_e; the batch writes 3 nt x 6(n+1) doubles "
              "per pose to memory) and 2,000 poses (H_e, at eps(c), wrench included), "
@@ -235,8 +235,8 @@ def main():
              "use), in the same C loop as J_e. Floor = J_e's own trig and stores alone (`floor_source`: one sin and "
              "cos of each angle J_e takes them of, merged into sincos by the compiler, and its stores, straight-line), "
              "in the same loop.", "",
-             "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | runtime: chain cc (s) | "
-             "runtime: model cc (s) | J_e C loop (us) | "
+             "| robot | targets | coefficients | generate (s) | symbolic + render (s) | cc (s) | "
+             "runtime: chain cc (s) | runtime: model cc (s) | J_e C loop (us) | "
              "J_e C batch (us) | J_e CasADi (us) | J_e numpy FD (us) | CasADi / C batch | FD / C batch | "
              "H_e C batch (us) | load signals | loads C loop (us) | loads / J_e (C loop) | J_e floor: sincos + stores "
              "| floor (us) | J_e / floor |",

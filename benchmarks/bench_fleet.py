@@ -90,7 +90,8 @@ def main():
              "| robots | one after another, one process each (s) | one after another, as calibrate runs alone (s) | "
              "on Dask (s) | workers | speed-up over one process each | over calibrate alone | identical coefficients |",
              "|---|---|---|---|---|---|---|---|",
-             f"| {args.robots} | {t_seq:.1f} | {t_alone:.1f} | {t_fleet:.1f} | {args.workers} | {t_seq / t_fleet:.2f}x | "
+             f"| {args.robots} | {t_seq:.1f} | {t_alone:.1f} | {t_fleet:.1f} | {args.workers} | "
+             f"{t_seq / t_fleet:.2f}x | "
              f"{t_alone / t_fleet:.2f}x | {'yes' if same else 'NO'} |", "",
              "Target (issue 23): at least 1.7x with 2 workers over one robot after another, identical results. "
              "calibrate alone now runs its own folds and figures side by side, so a robot alone already uses "

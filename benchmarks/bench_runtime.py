@@ -12,6 +12,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +95,19 @@ def run_case(kind: str, errors: str, data: Path, loss: str, robot: str = "pps") 
     out = subprocess.run([sys.executable, "-c", CASE, kind, str(ROOT / "robots" / f"{robot}.yaml"), errors, str(data), loss],
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def reference_s() -> float:
+    """The machine's speed at the moment (s): the best of 3 runs of a fixed pure-Python loop (10^7
+    additions). A shared machine's speed varies over minutes (here 0.89 to 1.17 s within an hour),
+    so figures taken at different moments compare through it."""
+    times = []
+    for _ in range(3):
+        t, total = time.perf_counter(), 0
+        for i in range(10_000_000):
+            total += i
+        times.append(time.perf_counter() - t)
+    return min(times)
 
 
 def cpu_model() -> str:

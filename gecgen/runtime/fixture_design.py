@@ -229,9 +229,10 @@ class FixtureDesign:
     random}: the RMS over the candidates of the error (mm) the coefficients' uncertainty adds to a
     configuration's residual about its fixture (refitted on all candidates, as held-out rows are), at
     noise_mm per coordinate: what held-out consistency or flatness gains above the noise;
-    `n_identifiable` the directions the criterion works in and `unseen` those no configuration shows; `by_count` ((k, log_det, predicted_mm), ...) the
-    design of the same number of poses over the first k fixtures only, scored on the candidates of all of
-    them (None: k fixtures leave a direction undetermined that all of them determine), the last k all."""
+    `n_identifiable` the directions the criterion works in and `unseen` those no configuration shows;
+    `by_count` ((k, log_det, predicted_mm), ...) the design of the same number of poses over the first k
+    fixtures only, scored on the candidates of all of them (None: k fixtures leave a direction
+    undetermined that all of them determine), the last k all."""
 
     chosen: tuple[np.ndarray, ...]
     random: tuple[np.ndarray, ...]
