@@ -53,12 +53,13 @@ targets:
 
 #: where the time goes: marks in one warm run each (2026-11-26), and what was done about it
 PROFILE = """Where the time goes (warm unless said; marks in the process, 2026-11-26):
-- UR10, 18 poses, 3.6 s: imports 1.0 s (sympy 0.23 s for the robot and error model, scipy 0.3 s,
-  matplotlib 0.32 s), the choice (every candidate in every fold) 0.45 s, the report 1.65 s: ten
-  figures, 3.3 s of matplotlib drawing shared by two processes, four of them residual grids of 36
-  panels at 0.54 s each.
-- PPS paper design, 9.2 s: imports 1.0 s, reading and target placement 0.3 s, the choice 5.9 s (diagnose
-  in five folds and on all the data beside the other candidates' folds, on two processes), the report 1.8 s.
+- UR10, 18 poses: 2.96 to 2.99 s in three runs at 01:38 with the machine quick, 4.1 to 4.3 s at 02:17
+  with the reference at 0.49 s. Quick: imports 1.0 s (sympy 0.23 s for the robot and error model, scipy
+  0.3 s, matplotlib 0.32 s), the choice (every candidate in every fold) 0.45 s, the report 1.1 s: ten
+  figures drawn by two processes, four of them residual grids (0.25 s each).
+- PPS paper design, 9.2 s at 01:37: imports 1.0 s, reading and target placement 0.3 s, the choice 5.9 s
+  (diagnose in five folds and on all the data beside the other candidates' folds, on two processes),
+  the report 1.8 s (before the residual grids took one Axes a row).
 - industrial6r with an empty code cache: 22 models compiled (its candidates and every round of diagnose
   in every fold), 0.2 s each.
 What was done (issue 23): the folds and the report's figures run side by side in forked processes and
@@ -66,9 +67,10 @@ the parent fits the diagnosed candidate on all the data meanwhile (`runtime.proc
 figures and report byte for byte); the chain's printed code is cached per robot, and its compiled
 object too, so a new model prints and compiles only its own terms (0.55 -> 0.2 s a model); diagnose's
 chi-square tails come from scipy.special (scipy.stats was 0.3-0.45 s of imports); the figures take
-fixed margins (tight_layout drew each twice), and the residual grids carry ticks on their outer
-panels only. Before, warm: UR10 7.7 s, industrial6r 9.6 s (cold 34.8 s), PPS 17.8 s, TALOS 11.8 s
-(2026-11-25); when the issue was filed, with an empty cache, UR10 41 s and industrial6r about 100 s."""
+fixed margins (tight_layout drew each twice), and a residual grid's row is one Axes holding its
+joints' panels (36 Axes took 0.75 s a grid). Before, warm: UR10 7.7 s, industrial6r 9.6 s (cold
+34.8 s), PPS 17.8 s, TALOS 11.8 s (2026-11-25); when the issue was filed, with an empty cache, UR10
+41 s and industrial6r about 100 s."""
 
 def inputs(tmp: Path) -> list[tuple[str, Path, list[str], list[str]]]:
     """(case, robot file, calibrate's data arguments, diagnose's data arguments) of every case."""
@@ -145,7 +147,7 @@ def main():
              f"`gecgen calibrate` in a fresh process; warm: every model's code already compiled, best of {WARM_RUNS}; "
              "cold: an empty code cache. One `gecgen diagnose` of the same data from the constant model (warm, best "
              "of as many) beside it. Machine = the machine's speed when the case began (`bench_runtime.reference_s`: "
-             "a pure-Python loop of 10^7 additions, best of 3; 0.89 s at its quickest): this shared machine's speed "
+             "a pure-Python loop of 10^7 additions, best of 3; 0.36 s at its quickest): this shared machine's speed "
              "varies by a third over minutes, and the times with it.", "",
              "| case | calibrate warm (s) | calibrate cold (s) | one diagnose (s) | machine (s) | chosen | "
              "candidates (cv RMS, mm) |",

@@ -99,8 +99,8 @@ def run_case(kind: str, errors: str, data: Path, loss: str, robot: str = "pps") 
 
 def reference_s() -> float:
     """The machine's speed at the moment (s): the best of 3 runs of a fixed pure-Python loop (10^7
-    additions). A shared machine's speed varies over minutes (here 0.89 to 1.17 s within an hour),
-    so figures taken at different moments compare through it."""
+    additions). A shared machine's speed varies over minutes (here 0.36 to 0.52 s within an hour,
+    2026-11-26), so figures taken at different moments compare through it."""
     times = []
     for _ in range(3):
         t, total = time.perf_counter(), 0

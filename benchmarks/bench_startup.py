@@ -6,13 +6,12 @@ Each case is a fresh `gecgen` process (the installed entry point), best of 7 wal
 parser imports only the chosen command's module, so `--version` and `--help` load no numerical
 library; a command's `--help` loads what that command computes with. The last case is a whole
 command: `identify` of 450 simulated PPS poses with the default error model, its code compiled
-(warm), next to the time its imports alone take (`python -X importtime` of the same run).
+(warm).
 """
 from __future__ import annotations
 
 import os
 import shutil
-import re
 import subprocess
 import sys
 import time
@@ -34,13 +33,6 @@ def wall_s(args: list[str]) -> float:
     return best
 
 
-def imports_s(args: list[str]) -> float:
-    """The imports of one `gecgen` run (s): the sum of `python -X importtime`'s outermost imports."""
-    err = subprocess.run([sys.executable, "-X", "importtime", shutil.which("gecgen"), *args], capture_output=True,
-                         text=True, check=True).stderr
-    return 1e-6 * sum(int(m.group(1)) for m in re.finditer(r"^import time:\s+\d+ \|\s+(\d+) \| \S", err, re.M))
-
-
 def main():
     load_average = os.getloadavg()[0]
     rows = [(" ".join(["gecgen", *args]), wall_s(args)) for args in CASES]
@@ -50,10 +42,8 @@ def main():
     identify = ["identify", str(ROOT / "robots" / "pps.yaml"), str(data), "-o", str(data.with_suffix(".json"))]
     subprocess.run([shutil.which("gecgen"), *identify], capture_output=True, check=True)  # its code compiled
     rows.append(("gecgen identify pps.yaml 450 poses", wall_s(identify)))
-    imported = min(imports_s(identify) for _ in range(3))
     for command, seconds in rows:
         print(f"{command:36s} {seconds:.3f} s")
-    print(f"{'  of which imports':36s} {imported:.3f} s")
     lines = ["## Start-up: a command before its work", "",
              f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average {load_average:.1f} when the "
              "benchmark started. Regenerate: `python benchmarks/bench_startup.py`. A fresh `gecgen` process each, "
@@ -62,8 +52,7 @@ def main():
              "machine, every command's imports paid).",
              "", "| command | wall time (s) |", "|---|---|"]
     lines += [f"| `{command}` | {seconds:.3f} |" for command, seconds in rows]
-    lines += [f"| of which its imports (`-X importtime`, best of 3) | {imported:.3f} |",
-              "", "Targets (issue 23): `gecgen --version` <= 0.3 s; `gecgen identify` of 450 PPS poses, warm, <= 1 s."]
+    lines += ["", "Targets (issue 23): `gecgen --version` <= 0.3 s; `gecgen identify` of 450 PPS poses, warm, <= 1 s."]
     write_section("startup", "\n".join(lines))
 
 
