@@ -56,10 +56,11 @@ def main():
         for copy in ("cache-side", "cache-dask"):
             shutil.copytree(tmp / "cache", tmp / copy)
 
-        def one_after_another(out: str, processes: str | None) -> tuple[list[dict], float]:
+        def one_after_another(out: str, gecgen_workers: str | None) -> tuple[list[dict], float]:
+            """Every robot calibrated here, with GECGEN_WORKERS set to gecgen_workers (None: unset)."""
             os.environ.pop("GECGEN_WORKERS", None)
-            if processes:
-                os.environ["GECGEN_WORKERS"] = processes
+            if gecgen_workers:
+                os.environ["GECGEN_WORKERS"] = gecgen_workers
             t0 = time.perf_counter()
             results = [calibrate_one(row, str(tmp / out)) for row in read_manifest(tmp / "fleet.csv")]
             os.environ.pop("GECGEN_WORKERS", None)
@@ -83,7 +84,8 @@ def main():
              f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average {load_average:.1f} when the "
              "benchmark started. Regenerate: `python benchmarks/bench_fleet.py`. "
              f"{args.robots} industrial6r robots, each its own truth draw and 60 random poses (20 % held out), "
-             "calibrate as a user runs it (every candidate model); the compiled code built before timing. One after "
+             "calibrate as a user runs it (every candidate model); the first robot's models compiled before timing, "
+             "each run from a copy of that cache. One after "
              "another in this process: each calibrate in one process (GECGEN_WORKERS=1, what the fleet's workers "
              "run), and as `gecgen calibrate` runs alone (its folds and figures side by side on the cores); then "
              "`gecgen fleet` on a local cluster (its start-up counted).", "",
@@ -93,9 +95,12 @@ def main():
              f"| {args.robots} | {t_seq:.1f} | {t_alone:.1f} | {t_fleet:.1f} | {args.workers} | "
              f"{t_seq / t_fleet:.2f}x | "
              f"{t_alone / t_fleet:.2f}x | {'yes' if same else 'NO'} |", "",
-             "Target (issue 23): at least 1.7x with 2 workers over one robot after another, identical results. "
-             "calibrate alone now runs its own folds and figures side by side, so a robot alone already uses "
-             "both cores for part of its time: the fleet's gain over that is the smaller figure."]
+             f"Target (issue 23): at least 1.7x with 2 workers over one robot after another, identical results: "
+             f"{'met' if t_seq / t_fleet >= 1.7 else 'not met'} against the robots one after another in one "
+             "process each, the baseline the target was set on (calibrate then ran in one process). calibrate "
+             "alone now runs its own folds and figures side by side, so a robot alone already keeps both cores "
+             "busy for much of its time, and on this 2-core machine the fleet cannot be 1.7x faster than that: "
+             "its gain there is the column over calibrate alone. A fleet's gain is a cluster's machines."]
     write_section("fleet", "\n".join(lines))
 
 

@@ -49,10 +49,13 @@ def main():
              "benchmark started. Regenerate: `python benchmarks/bench_startup.py`. A fresh `gecgen` process each, "
              f"best of {REPEATS} wall times. The parser imports only the module of the command named, so `--version` "
              "and `--help` load no numerical library (before this change: 1.22 s for `--version` on this "
-             "machine, every command's imports paid).",
+             "machine, every command's imports paid). The last row is a whole command, its work included: "
+             "`identify` of 450 simulated PPS poses with the default error model, its code compiled.",
              "", "| command | wall time (s) |", "|---|---|"]
     lines += [f"| `{command}` | {seconds:.3f} |" for command, seconds in rows]
-    lines += ["", "Targets (issue 23): `gecgen --version` <= 0.3 s; `gecgen identify` of 450 PPS poses, warm, <= 1 s."]
+    version, identify_s = rows[0][1], rows[-1][1]
+    lines += ["", f"Targets (issue 23): `gecgen --version` <= 0.3 s ({'met' if version <= 0.3 else 'not met'}); "
+                  f"`gecgen identify` of 450 PPS poses, warm, <= 1 s ({'met' if identify_s <= 1 else 'not met'})."]
     write_section("startup", "\n".join(lines))
 
 

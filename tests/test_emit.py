@@ -189,3 +189,5 @@ def test_each_model_links_to_the_robots_chain_compiled_once(tmp_path, monkeypatc
         assert np.array_equal(a, b)
     for a, b in zip(linked[-1].compensate(q, None, None, c), one.compensate(q, None, None, c)):
         assert np.array_equal(a, b)
+    assert np.array_equal(linked[-1].nominal_targets(q), one.nominal_targets(q))
+    assert np.array_equal(linked[-1].eps(q, None, None, c), one.eps(q, None, None, c))

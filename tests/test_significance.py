@@ -124,5 +124,7 @@ def test_the_refit_begins_from_the_fits_own_analysis_and_finds_the_same():
     assert np.array_equal(again.c, fresh.c) and np.array_equal(again.std, fresh.std, equal_nan=True)
     assert again.redundancy == fresh.redundancy
     assert again.analysis is fit.analysis and fresh.analysis is not fit.analysis  # taken, not recomputed
-    assert not fit.analysis.serves(fit.analysis.y, 1e-3)
-    assert not fit.analysis.serves(fit.analysis.y[:-1], fit.analysis.rank_tol)
+    a = fit.analysis
+    assert a.serves(cm, a.y, a.rank_tol) and not a.serves(cm, a.y, 1e-3) and not a.serves(cm, a.y[:-1], a.rank_tol)
+    other = CompiledModel(robot, load_error_model("robots/constant.errors.yaml", robot))
+    assert not a.serves(other, a.y, a.rank_tol)  # another model's analysis of the same data

@@ -134,9 +134,8 @@ def render(robot: Robot, model: ErrorModel, code: dict[str, list[dict]] | None =
     robot.require_placed()
     code = code or printed(robot, model)
     ctx = context(robot, model)
-    files = {**_c_files(robot.name, ctx, code["c"]),
-             f"{robot.name}_casadi.py": _env("casadi").get_template("module.py.j2").render(functions=code["casadi"],
-                                                                                          **ctx)}
+    casadi = _env("casadi").get_template("module.py.j2").render(functions=code["casadi"], **ctx)
+    files = {**_c_files(robot.name, ctx, code["c"]), f"{robot.name}_casadi.py": casadi}
     manifest = dict(
         gecgen_version=__version__, robot=robot.name, robot_files=robot.source_hashes,
         error_model={Path(model.source).name: model.source_hash} if model.source_hash else {"<constant>": ""},

@@ -313,7 +313,7 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
         ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
         dof_fit = max(fit.measured_dof - len(fit.redundancy.kept), 1)
         p = float(special.chdtrc(dof_fit, ratio * dof_fit) if noise["dof"] is None
-                  else special.fdtrc(dof_fit, noise["dof"], ratio))  # the chi-square's and the F law's tails
+                  else special.fdtrc(dof_fit, noise["dof"], ratio))  # scipy.stats's sf, without its import
         out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))
     return out
 

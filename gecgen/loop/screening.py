@@ -44,6 +44,7 @@ def chi2_logsf(x: np.ndarray, dof: np.ndarray) -> np.ndarray:
         out[below] = np.log1p(-special.chdtr(dof[below], x[below]))
     return out
 
+
 @dataclass(frozen=True)
 class Candidate:
     """A group of new terms, all in the variables `variables`, tested as one: its columns together,

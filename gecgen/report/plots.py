@@ -159,7 +159,7 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
         finite = values[np.isfinite(values)]
         limit = 1.08 * np.abs(finite).max() if len(finite) and np.abs(finite).max() > 0 else 1.0
         y_ticks = _ticks(-limit, limit)
-        lines = []  # every panel's grid lines
+        lines = []  # the row's grid lines, drawn as one artist
         for col, x in enumerate(xs):
             u, a = placed(col, x), starts[col]
             ax.plot(u, values, ".", ms=3, alpha=0.7, color=colour)
@@ -180,7 +180,7 @@ def residuals_per_joint(robot: Robot, ds: DataSet, st: Residuals) -> Figure:
     bottom.set_xticks(np.concatenate([placed(col, t) for col, t in enumerate(x_ticks)]),
                       [label for t in x_ticks for label in _tick_labels(t)])
     joints = [joint_label(robot, k) for k in moving]
-    bottom.set_xticks(starts + 0.5, joints, minor=True)  # each panel's joint under its tick labels
+    bottom.set_xticks(starts + 0.5, joints, minor=True)  # minor ticks: a joint's name, below its values
     bottom.xaxis.remove_overlapping_locs = False  # a panel's centre may also be one of its ticks
     bottom.tick_params(axis="x", which="minor", length=0, pad=12, labelsize=7)
     fig.suptitle(f"{robot.name}, {ds.name} data, {st.stage}: signed residuals against each joint", fontsize=10)

@@ -78,8 +78,10 @@ def compiler() -> str | None:
     return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 
 
+@functools.cache
 def _emitter_hash() -> str:
-    """Hash of the code that decides what is generated: a change to it invalidates the cache."""
+    """Hash of the code that decides what is generated: a change to it invalidates the cache (read
+    once per process: every model's key and every robot's chain key use it)."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     model = [root / "model" / f for f in ("errors.py", "robot.py", "robot_file.py", "urdf.py", "loads.py",
@@ -136,36 +138,46 @@ def _store(path: Path, data: bytes):
 def _building(path: Path):
     """Held while the cache entry at path is built: a second process building the same entry waits
     for the first, then finds it built (`_intact`), rather than building it too (the forked workers
-    of calibrate start on the same models). Where no file lock exists, each builds its own."""
+    of calibrate start on the same models). Where no lock can be taken (not POSIX, a lock file of
+    another user, a file system without locks), each builds its own: the writes stay atomic, only
+    the work is repeated."""
     try:
         import fcntl
-    except ImportError:  # not POSIX: the writes stay atomic, only the work is repeated
+
+        fd = os.open(path.with_name(path.name + ".lock"), os.O_RDONLY | os.O_CREAT, 0o666)
+    except (ImportError, OSError):
         yield
         return
-    with open(path.with_name(path.name + ".lock"), "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    try:
         try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            pass  # no locks here: built unguarded
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _built(path: Path, build) -> Path:
+    """The cache entry at path, its bytes built (`build()`) and stored on a miss, once across processes."""
+    if not _intact(path):
+        with _building(path):
+            if not _intact(path):
+                _store(path, build())
+    return path
 
 
 def _cached_json(path: Path, build):
-    """The JSON at path in the cache, built and stored there on a miss."""
-    def read():
-        try:
-            return json.loads(path.read_text()) if _intact(path) else None
-        except ValueError:
-            return None  # written by another version of this code: built again
+    """The JSON at path in the cache (`build()` on a miss, stored with its key order: a function's
+    outputs are in it)."""
+    def stored() -> bytes:
+        return json.dumps(build()).encode()
 
-    code = read()
-    if code is None:
-        with _building(path):
-            code = read()
-            if code is None:
-                code = build()
-                _store(path, json.dumps(code).encode())  # key order kept: a function's outputs are in it
-    return code
+    try:
+        return json.loads(_built(path, stored).read_text())
+    except ValueError:  # written by another version of this code: built again
+        path.unlink(missing_ok=True)
+        return json.loads(_built(path, stored).read_text())
 
 
 def chain_code(robot: Robot) -> dict[str, list[dict]]:
@@ -199,25 +211,16 @@ def rendered(robot: Robot, model: ErrorModel, key: str | None = None) -> dict[st
     return render(robot, model, printed_code(robot, model, key))
 
 
-def _compiled(robot: Robot, files: dict[str, str | bytes], args: list[str]) -> bytes:
+def _compiler_output(robot: Robot, files: dict[str, str | bytes], args: list[str]) -> bytes:
     """What the C compiler makes (its output `out`) of `files` (name -> text or bytes, written to a
     fresh folder) with `args`: flags, then the sources and objects."""
     with tempfile.TemporaryDirectory() as tmp:
         for fname, content in files.items():
-            (Path(tmp, fname).write_bytes if isinstance(content, bytes) else Path(tmp, fname).write_text)(content)
+            Path(tmp, fname).write_bytes(content if isinstance(content, bytes) else content.encode())
         run = subprocess.run([compiler(), *args, "-o", "out"], cwd=tmp, capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"compiling the generated C for {robot.name} failed: {run.stderr.strip()}")
         return Path(tmp, "out").read_bytes()
-
-
-def _built(path: Path, build) -> Path:
-    """The cache entry at path, its bytes built (`build()`) and stored on a miss, once across processes."""
-    if not _intact(path):
-        with _building(path):
-            if not _intact(path):
-                _store(path, build())
-    return path
 
 
 def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
@@ -225,17 +228,17 @@ def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
     code (`emit.render_c_parts`) compiled and linked to the robot's chain object (compiled once per
     robot and toolchain), each rendered and built only on a cache miss (`_intact`)."""
     name = robot.name
-    spec = json.dumps([chain_key(robot), COMPILE_FLAGS, toolchain()], sort_keys=True)
-    chain = cache_dir() / f"{name}-{hashlib.sha256(spec.encode()).hexdigest()[:24]}.chain.o"
 
     def library() -> bytes:
         from gecgen.emit import render_c_parts  # jinja2 and the symbolic layer: needed on a cache miss only
 
         files = render_c_parts(robot, model, printed_code(robot, model, key), len(chain_code(robot)["c"]))
         source = f"{name}_chain.c"
-        obj = _built(chain, lambda: _compiled(robot, {source: files[source]}, [*COMPILE_FLAGS, "-c", source]))
-        return _compiled(robot, {f"{name}.c": files[f"{name}.c"], f"{name}.h": files[f"{name}.h"],
-                                 "chain.o": obj.read_bytes()}, [*CFLAGS, f"{name}.c", "chain.o", "-lm"])
+        spec = json.dumps([chain_key(robot), COMPILE_FLAGS, toolchain()], sort_keys=True)
+        chain = cache_dir() / f"{name}-{hashlib.sha256(spec.encode()).hexdigest()[:24]}.chain.o"
+        obj = _built(chain, lambda: _compiler_output(robot, {source: files[source]}, [*COMPILE_FLAGS, "-c", source]))
+        return _compiler_output(robot, {f"{name}.c": files[f"{name}.c"], f"{name}.h": files[f"{name}.h"],
+                                        "chain.o": obj.read_bytes()}, [*CFLAGS, f"{name}.c", "chain.o", "-lm"])
 
     return _built(cache_dir() / f"{name}-{key}.so", library)
 

@@ -99,17 +99,20 @@ class Suspect:
 @dataclass(frozen=True)
 class Analysis:
     """The data analysis a fit's first round begins from (`_data_analysis`): the redundancy red and
-    A0, [H | r] over its kept columns up to an orthogonal factor, for the measured points y (R, 3)
-    in the robot world (m) at rank tolerance rank_tol, before any coefficient is held."""
+    A0, [H | r] over its kept columns up to an orthogonal factor, of the compiled model with cache
+    key `key` for the measured points y (R, 3) in the robot world (m) at rank tolerance rank_tol,
+    before any coefficient is held."""
 
     red: Redundancy
     A0: np.ndarray
+    key: str
     y: np.ndarray
     rank_tol: float
 
-    def serves(self, y: np.ndarray, rank_tol: float) -> bool:
-        """Whether a fit of the same compiled model and data at y and rank_tol would find the same."""
-        return rank_tol == self.rank_tol and np.array_equal(y, self.y)
+    def serves(self, cm: CompiledModel, y: np.ndarray, rank_tol: float) -> bool:
+        """Whether a fit of the same data by cm at y and rank_tol would find the same. Relative rows
+        (NaN in y) are analysed again."""
+        return cm.key == self.key and rank_tol == self.rank_tol and np.array_equal(y, self.y)
 
 
 @dataclass(frozen=True)
@@ -219,7 +222,8 @@ def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray |
     """R factor of [H | r] over streamed blocks, (k+1, k+1), and the number of rows m."""
     R, m = None, 0
     for H, r in blocks:
-        # [R; A | r] assembled in one array: these blocks are megabytes, and each copy of them shows
+        # [R; A | r] filled in place rather than stacked in steps: these blocks are megabytes, and each
+        # copy of them shows
         k0 = 0 if R is None else len(R)
         k = H.shape[1] if columns is None else len(columns)
         M = np.empty((k0 + len(r), k + 1))
@@ -625,8 +629,8 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     c = np.zeros(nc)
     rows = data.rows
     row_dof = rows.row_dof
-    if at is not None or analysis is None or not analysis.serves(y, rank_tol):
-        analysis = Analysis(*_data_analysis(cm, data, y, rank_tol, rows.weight, at)[:2], y, rank_tol)
+    if at is not None or analysis is None or not analysis.serves(cm, y, rank_tol):
+        analysis = Analysis(*_data_analysis(cm, data, y, rank_tol, rows.weight, at)[:2], cm.key, y, rank_tol)
     red, A0 = analysis.red, analysis.A0
     if hold:
         stay = [i for i, j in enumerate(red.kept) if j not in hold]
