@@ -222,3 +222,25 @@ def test_a_library_built_for_another_machine_or_compiler_is_never_reused(puma, m
         assert model_key(robot, model) != here
     monkeypatch.undo()
     assert model_key(robot, model) == here
+
+
+def test_a_cache_lock_that_cannot_be_taken_does_not_fail_the_build(tmp_path, monkeypatch):
+    """The lock beside a cache entry only spares repeated work: a lock file another user owns, or a
+    file system without locks, leaves each process to build its own entry, never a failure."""
+    import fcntl
+
+    import gecgen.runtime.compiled as compiled
+
+    real_open = os.open
+
+    def refuse_locks(path, *args, **kwargs):
+        if str(path).endswith(".lock"):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(compiled.os, "open", refuse_locks)
+    assert compiled._built(tmp_path / "a.bin", lambda: b"built").read_bytes() == b"built"
+    monkeypatch.setattr(compiled.os, "open", real_open)
+    monkeypatch.setattr(fcntl, "flock", lambda *args: (_ for _ in ()).throw(OSError(37, "No locks available")))
+    assert compiled._built(tmp_path / "b.bin", lambda: b"built too").read_bytes() == b"built too"
+    assert compiled._built(tmp_path / "b.bin", lambda: b"not again").read_bytes() == b"built too"  # an entry is kept

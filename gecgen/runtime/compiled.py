@@ -146,6 +146,8 @@ def _building(path: Path):
 
         fd = os.open(path.with_name(path.name + ".lock"), os.O_RDONLY | os.O_CREAT, 0o666)
     except (ImportError, OSError):
+        fd = None
+    if fd is None:
         yield
         return
     try:
