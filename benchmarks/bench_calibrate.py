@@ -57,9 +57,10 @@ targets:
 #: where the time goes: marks in one warm run each (2026-11-26), and what was done about it
 PROFILE = """Where the time goes (warm unless said; marks in the process, 2026-11-26):
 - UR10, 18 poses: 2.96 to 2.99 s in three runs at 01:38 with the machine quick, 4.1 to 4.3 s at 02:17
-  with the reference at 0.49 s. Quick: imports 1.0 s (sympy 0.23 s for the robot and error model, scipy
-  0.3 s, matplotlib 0.32 s), the choice (every candidate in every fold) 0.45 s, the report 1.1 s: ten
-  figures drawn by two processes, four of them residual grids (0.25 s each).
+  with the reference at 0.49 s. Quick (marks at 01:10): imports 1.0 s (sympy 0.23 s for the robot and
+  error model, scipy 0.3 s, matplotlib 0.32 s), the choice (every candidate in every fold) 0.45 s; most
+  of the rest is the report, ten figures drawn by two processes, four of them residual grids (0.25 s
+  each).
 - PPS paper design, 9.2 s at 01:37: imports 1.0 s, reading and target placement 0.3 s, the choice 5.9 s
   (diagnose in five folds and on all the data beside the other candidates' folds, on two processes),
   the report 1.8 s (before the residual grids took one Axes a row).
