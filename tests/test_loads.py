@@ -191,6 +191,15 @@ def test_spellings_canonical_text_labels_and_round_trip():
     ("panda", "gravity_torque(q2, 1)", "gravity_torque takes one joint"),
     ("panda", "wrench_torque(q=q2)", "keyword arguments"),
     ("panda", "sign(q1, q2)", "sign takes one argument"),
+    ("pps", "gravity_load(q5, mx)", "needs link masses, which"),
+    ("humanoid", "wrench_load(arm_right_1_joint, mx)", "which frame 10 (arm_right_1_joint) does not carry"),
+    ("humanoid", "gravity_load(torso_4_joint, tx)", "'tx' is not a wrench component; use one of fx fy fz mx my mz"),
+    ("humanoid", "gravity_load(99, mx)", "'99' is not a frame of humanoid"),
+    ("humanoid", "gravity_load(elbow, mx)", "'elbow' is not a frame of humanoid"),
+    ("humanoid", "sign(gravity(torso_2_joint, mx))", "must stand alone"),
+    ("humanoid", "gravity(torso_2_joint, mx, 999)", "frame 2 mx has"),
+    ("humanoid", "gravity_load(torso_2_joint)", "gravity_load takes (frame, component)"),
+    ("humanoid", "gravity_load(torso_1_joint, fx)", "gravity puts no fx on frame 1 (torso_1_joint) in any posture"),
 ])
 def test_load_terms_are_refused_in_one_line(robot, term, expect):
     with pytest.raises(ModelError) as err:
@@ -204,7 +213,10 @@ def test_a_wrench_measured_upstream_loads_only_the_joints_before_it(tmp_path):
     path = tmp_path / "puma560.yaml"
     path.write_text(text + "\nwrench_frame: 3\n")
     robot = load_robot(path)
-    assert [n for n in catalog(robot).names if n.startswith("wrench")] == [f"wrench_torque(q{j})" for j in (1, 2, 3)]
+    assert [n for n in catalog(robot).names if n.startswith("wrench_torque")] == [f"wrench_torque(q{j})"
+                                                                                  for j in (1, 2, 3)]
+    assert {n.split(",")[0] for n in catalog(robot).names if n.startswith("wrench_load")} == {
+        f"wrench_load({f}" for f in (0, 1, 2, 3)}  # the frames that carry the sensor
     with pytest.raises(ModelError, match=r"measured in frame 3, which joint q4 does not move; use wrench_torque\(q1\)"):
         error_model_from_dict({"default": ["wrench_torque(q4)"]}, robot, "m")
 

@@ -1,7 +1,8 @@
 """`gecgen gravity ROBOT TABLE.csv -o OUT.csv [--joints a,b] [--gravity gx,gy,gz] [--json]`.
 
-Appends the static gravity torque of chosen joints (gecgen/model/gravity.py) to any CSV with the
-joint columns q1..qn: a measurement file (before identify or diagnose) or a file of joint commands
+Appends the static gravity torque of chosen joints (gecgen/model/gravity.py), and with --wrench the
+whole wrench every frame carries, to any CSV with the joint columns q1..qn: a measurement file
+(before identify or diagnose) or a file of joint commands
 (before compensate, which needs the same signals as the fit). Every other cell is copied as read.
 """
 from __future__ import annotations
@@ -9,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from gecgen.model import load_robot
-from gecgen.model.gravity import robot_gravity_torques
+from gecgen.model.gravity import robot_frame_wrenches, robot_gravity_torques
+from gecgen.model.robot import WRENCH
 from gecgen.model.measurements import write_csv
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
@@ -22,6 +24,9 @@ def add_parser(command):
     p.add_argument("table", help="CSV with q1..qn: measurements or joint commands")
     p.add_argument("-o", "--output", required=True, help="the table with tau_<joint> columns appended")
     p.add_argument("--joints", help="comma-separated joint names (default: every joint of the robot)")
+    p.add_argument("--wrench", action="store_true",
+                   help="also the whole static wrench every frame carries (passive joints' too): columns "
+                        "fx_<joint> .. mz_<joint>, N and N m about the frame's origin in its axes")
     p.add_argument("--gravity", help="gravity in the base link's frame, m/s^2 (default: the robot file's `gravity`, "
                                      "which is 0,0,-9.80665 in its world unless it says otherwise)")
 
@@ -38,10 +43,6 @@ def _gravity(text: str) -> tuple[float, float, float]:
 def run(args) -> dict:
     robot = load_robot(args.robot)
     joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
-    declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
-    require(not declared, f"{args.robot}: couplings: gecgen gravity walks the URDF's own joints, not the robot file's "
-                          f"couplings of {', '.join(declared)}; use the error terms gravity_torque(J), which follow "
-                          f"them")
     mimics = {m.name: m.coupling.terms[0][0] for m in robot.chain if m.coupling and not m.coupling.own}
     for j in joints:
         followed = mimics.get(j)
@@ -55,15 +56,21 @@ def run(args) -> dict:
     header = table.header
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
-    new = [f"tau_{j}" for j in joints]
+    chain = [j.name for j in robot.chain]
+    new = [f"tau_{j}" for j in joints] + [f"{c}_{j}" for j in (chain if args.wrench else ()) for c in WRENCH]
     clash = [c for c in new if c in header]
     require(not clash, f"{where}: row 1: column '{clash[0] if clash else ''}' is already there; "
                        f"drop it or write from the table without it")
     q = np.column_stack([table.numbers(c) for c in qcols])
-    tau = robot_gravity_torques(robot, q, joints, _gravity(args.gravity) if args.gravity else None)
+    gravity = _gravity(args.gravity) if args.gravity else None
+    tau = robot_gravity_torques(robot, q, joints, gravity)
+    if args.wrench:
+        wrenches = robot_frame_wrenches(robot, q, list(range(1, len(chain) + 1)), gravity)
+        tau = np.hstack([tau, wrenches.reshape(len(q), -1)])
     write_csv(args.output, header + new,
               (row + [repr(v) for v in t] for row, t in zip(table.rows(), tau.tolist())))
     units = {c: "N" if robot.joints[robot.joint_names.index(j)].kind == "P" else "N m" for c, j in zip(new, joints)}
+    units.update({c: "N" if c[1] == "_" and c[0] == "f" else "N m" for c in new[len(joints):]})
     return {"robot": robot.name, "output": str(args.output), "rows": len(table), "columns": new,
             "min": {c: float(v) for c, v in zip(new, tau.min(0))}, "max": {c: float(v) for c, v in zip(new, tau.max(0))},
             "unit": units}

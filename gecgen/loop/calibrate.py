@@ -5,9 +5,9 @@ The candidates are ways of fitting a model, not just models:
 * geometric: six constant generalized errors per frame (classical calibration, any robot);
 * default: the robot's own error model (robots/NAME.errors.yaml), when it has one;
 * elastic: geometric plus joint compliance, each joint's own angle error (the generalized error
-  that turns or slides about its axis, `loop.dictionary.own_errors`) times the loads it carries:
-  the gravity torque from the URDF's masses when the robot has them, the torque of the measured
-  wrench when the data has one;
+  that turns or slides about its axis, `loop.dictionary.frame_own_errors`) times the loads it
+  carries: the gravity torque from the URDF's masses when the robot has them, the torque of the
+  measured wrench when the data has one (a coupled or passive joint: its own frame's moment);
 * diagnosed: diagnose run from the geometric model (its terms chosen on the data).
 
 The rule (docs/real-data-tiago.md used it first): every candidate is run whole inside each of 5
@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.loop.diagnose import Diagnosis, diagnose
-from gecgen.loop.dictionary import loads_by_joint, own_errors
+from gecgen.loop.dictionary import MATCHING, frame_own_errors, loads_by_joint
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
-from gecgen.model.robot import ERROR_NAMES, Robot
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, identify, squared_error
@@ -62,18 +62,26 @@ class Choice:
 
 def elastic_spec(robot: Robot, data: Measurements, seed: int = 0) -> dict | None:
     """Error-model spec of geometric + joint compliance under the loads the robot and the data
-    give (gravity torque from known masses, wrench torque), for every joint whose own error exists
-    and whose load varies over the data; None when no joint has one."""
+    give (gravity from known masses, the measured wrench), for every joint whose own error exists
+    and whose load varies over the data; None when no joint has one. A joint that is its reading's
+    only frame takes the reading's torques; a coupled or passive one its own frame's moment about
+    that error's axis (`gravity_load`, `wrench_load`: what its reading feels is summed over frames)."""
     geometric = error_model_from_dict({"default": ["1"]}, robot, "<geometric>")
     names, values = CompiledModel(robot, geometric).load_signals(data.q, data.w)
     by_joint = loads_by_joint(names, values)
+    varies = {n for n, v in zip(names, values.T) if np.ptp(v) > 1e-12 * max(1.0, float(np.abs(v).max()))}
+    alone = {robot.frame_of(i): i for i in range(robot.n) if len(robot.driven(i)) == 1}
     frames: dict[int, dict[str, list[str]]] = {}
-    for joint, error in own_errors(robot, np.random.default_rng(seed)).items():
-        loads = by_joint.get(joint, {})
-        terms = [names[k] for k in loads.get("gravity_torque", []) + loads.get("wrench_torque", [])]
+    for frame, error in frame_own_errors(robot, np.random.default_rng(seed)).items():
+        f, e = divmod(error, 6)
+        if frame in alone:
+            loads = by_joint.get(alone[frame], {})
+            terms = [names[k] for k in loads.get("gravity_torque", []) + loads.get("wrench_torque", [])]
+        else:
+            terms = [n for n in (f"{kind}({f},{WRENCH[MATCHING[e]]})" for kind in ("gravity_load", "wrench_load"))
+                     if n in varies]
         if terms:
-            frame, e = divmod(error, 6)
-            frames.setdefault(frame, {})[ERROR_NAMES[e]] = ["1", *terms]
+            frames.setdefault(f, {})[ERROR_NAMES[e]] = ["1", *terms]
     return {"default": ["1"], "frames": frames} if frames else None
 
 

@@ -12,6 +12,13 @@ base columns, the torque of the measured wrench, the gravity torque from known m
 * link bending: the other five errors of that frame times the same loads;
 * free play: the sign of the load on the joint's own error (the joint sits against the side of its
   play that the load pushes it to).
+
+Those are the loads a reading feels, offered where the reading turns one frame (a reading that a
+coupling ties to other joints feels their loads by virtual work, which no one frame's errors do).
+Every frame, besides,
+carries a whole wrench (`frame_load_candidates`): passive joints and the base too, and the moments
+across a joint's axis (a bearing that tilts, a link that bends) as well as about it, each offered
+to the frame's errors it acts on.
 """
 from __future__ import annotations
 
@@ -30,6 +37,8 @@ from gecgen.runtime.compiled import CompiledModel
 PERIODS = 40
 #: a load signal's name: function(joint[, column])
 SIGNAL = re.compile(r"^(\w+)\((q\d+)\s*(?:,\s*(\d+))?\)$")
+#: a frame load's name: function(frame,component[,column])
+FRAME_SIGNAL = re.compile(r"^(gravity|gravity_load|wrench_load)\((\d+),(\w+)(?:,(\d+))?\)$")
 
 
 def _range(v: np.ndarray) -> float:
@@ -163,16 +172,15 @@ def kinematic_candidates(robot: Robot, model: ErrorModel, data: Measurements,
 
 
 
-def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
-    """Joint index (0-based) -> the generalized error (eps index) that moves exactly as the joint
-    does: a rotation about (revolute) or translation along (prismatic) the joint's axis, through a
-    point on it, at the frame after the joint or, failing that, the frame before it. Decided at
-    generic poses on the nominal chain; a joint with neither has no entry."""
+def frame_own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
+    """Frame (1..m, passive joints' too) -> the generalized error (eps index) that moves exactly as
+    its joint does: a rotation about (revolute) or translation along (prismatic) the joint's axis,
+    through a point on it, at the frame after the joint or, failing that, the frame before it.
+    Decided at generic poses on the nominal chain; a joint with neither has no entry."""
     lo, hi = map(np.array, robot.sampling_box())
     F = frames(robot, rng.uniform(lo, hi, (8, robot.n)))
     out = {}
-    for i, joint in enumerate(robot.joints):
-        frame = robot.frame_of(i)
+    for frame, joint in enumerate(robot.chain, start=1):
         J = F[robot.parent(frame)] @ constant(joint.pre)
         axis = J[:, :3, :3] @ np.array([float(a) for a in joint.axis])
         for f in (frame, robot.parent(frame)):
@@ -183,11 +191,17 @@ def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
                 through = joint.kind == "P" or np.allclose(np.cross(W[:, :3, 3] - J[:, :3, 3], axis), 0, atol=1e-9)
                 if parallel and through:
                     name = ("ex", "ey", "ez")[k] if joint.kind == "P" else ("ep", "es", "er")[k]
-                    out[i] = 6 * f + ERROR_NAMES.index(name)
+                    out[frame] = 6 * f + ERROR_NAMES.index(name)
                     break
-            if i in out:
+            if frame in out:
                 break
     return out
+
+
+def own_errors(robot: Robot, rng: np.random.Generator) -> dict[int, int]:
+    """Joint index (0-based, a reading) -> its own joint's error (`frame_own_errors`)."""
+    by_frame = frame_own_errors(robot, rng)
+    return {i: by_frame[robot.frame_of(i)] for i in range(robot.n) if robot.frame_of(i) in by_frame}
 
 
 def loads_by_joint(names: list[str], values: np.ndarray) -> dict[int, dict[str, list[int]]]:
@@ -207,8 +221,11 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
     names, values = cm.load_signals(data.q, data.w)
     by_joint = loads_by_joint(names, values)
     out: list[Candidate] = []
-    for i, e in own_errors(cm.robot, rng).items():
-        loads = by_joint.get(i, {})
+    by_frame = frame_own_errors(cm.robot, rng)
+    for i, e in ((i, by_frame[cm.robot.frame_of(i)]) for i in range(cm.robot.n) if cm.robot.frame_of(i) in by_frame):
+        # a reading that turns several frames (couplings) feels their loads summed by virtual work,
+        # which acts on no one frame's errors: each frame's own loads are offered below instead
+        loads = by_joint.get(i, {}) if len(cm.robot.driven(i)) == 1 else {}
         frame = e // 6
         others = tuple(6 * frame + k for k in range(6) if 6 * frame + k != e)
         joint = (f"q{i + 1}",)
@@ -220,6 +237,54 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
             out.append(Candidate("link bending", joint, terms, v, others))
         for k in loads.get("gravity_torque") or loads.get("gravity", []):
             out.append(Candidate("free play", joint, (f"sign({names[k]})",), np.sign(values[:, [k]]), (e,)))
+    return out + frame_load_candidates(cm, names, values, set(by_frame.values()), out)
+
+
+#: the wrench component that acts on each generalized error of a frame (in ERROR_NAMES order ex..ep):
+#: a translation with the force along it, a rotation with the moment about its axis
+MATCHING = (0, 1, 2, 4, 5, 3)
+
+
+def frame_load_candidates(cm: CompiledModel, names: list[str], values: np.ndarray, own: set[int],
+                          taken: list[Candidate]) -> list[Candidate]:
+    """For every frame (actuated, coupled or passive joint, or the base) and each of its six errors,
+    the loads that act there: the matching component of the wrench the frame carries (the moment
+    about the error's axis: about the joint's own axis a joint compliance, across it a bearing that
+    tilts; the force along a translation), and a beam's coupling (a link bending under a force
+    across it turns, under a moment it moves: the moments about the other two axes for a
+    translation, the forces along them for a rotation). Each load as the regressor's columns with the
+    measured wrench's component (unknown masses), and from the URDF's masses; a group equal to one
+    of the joint loads already offered on that error (`taken`) is left out. own: the joints' own
+    errors (`frame_own_errors`)."""
+    by: dict[tuple[int, str, int], list[int]] = {}
+    for k, name in enumerate(names):
+        m = FRAME_SIGNAL.match(name)
+        if m and _range(values[:, k]) > 1e-12 * max(1.0, float(np.abs(values[:, k]).max())):
+            form = "masses" if m.group(1) == "gravity_load" else "regressor"
+            by.setdefault((int(m.group(2)), form, WRENCH.index(m.group(3))), []).append(k)
+    robot, out = cm.robot, []
+    drives = robot.drives()
+    for f in range(robot.n_frames + 1):
+        # what a person plots the effect against: the reading that turns the frame's joint (the first
+        # it follows, for a passive joint; joint 1's for the base)
+        reading = f"q{drives[max(f, 1) - 1][0][0][0] + 1}"
+        for k in range(6):
+            e, matched = 6 * f + k, MATCHING[k]
+            axis = MATCHING[k] % 3
+            across = [b + 3 * (k < 3) for b in range(3) if b != axis]
+            for c, family in [(matched, "joint compliance" if e in own else
+                               "lateral compliance" if k >= 3 else "frame compliance")] + \
+                             [(c, "link bending") for c in across]:
+                for form in ("regressor", "masses"):
+                    cols = by.get((f, form, c), [])
+                    if not cols:
+                        continue
+                    v = values[:, cols]
+                    if any(e in t.errors and t.values.shape == v.shape and np.allclose(t.values, v, rtol=1e-9,
+                                                                                        atol=1e-12)
+                           for t in taken if t.errors):
+                        continue
+                    out.append(Candidate(family, (reading,), tuple(names[k] for k in cols), v, (e,)))
     return out
 
 

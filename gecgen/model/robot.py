@@ -44,7 +44,8 @@ GRAVITY = (0, 0, -9.80665)
 #: names of the term language (functions, pi) and of the generated code's variables: neither a joint
 #: nor an auxiliary signal may take them
 RESERVED = {"pi", "sqrt", "sin", "cos", "sign", "abs", "poly", "fourier", "wrench_torque", "gravity",
-            "gravity_torque", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq", "H", "ca", "np"}
+            "gravity_torque", "gravity_load", "wrench_load", "q", "eps", "w", "aux", "c", "f", "p", "J", "T", "Jq",
+            "H", "ca", "np"}
 
 
 @dataclass(frozen=True)

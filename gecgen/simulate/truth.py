@@ -24,6 +24,14 @@ A truth file (YAML) looks like
       - {type: backlash, joint: 2, width: 2.0e-4}    # half the width, on the side of the last motion
       - {type: play, joint: 6, width: 1.0e-3}        # free play: half the width, on the side the load pushes
       - {type: thermal, error: "1.ez", per_kelvin: 3.6e-5, reference: 20, start: 20, end: 26}
+      - {type: frame_compliance, frame: torso_2, compliance: {ep: 4.0e-5, es: 4.0e-5}}
+                                             # frame torso_2's errors give under the wrench it carries:
+                                             # error -> per matching component (ep: mx, es: my, er: mz,
+                                             # ex: fx, ...; rad per N m, m per N), or {component: value}
+      - {type: beam, frame: 3, axis: x, length: 0.6, flexibility: 2.0e-6}
+                                             # a compliant link: a cantilever from frame 3's origin along
+                                             # its x axis, 1/EI in 1/(N m^2), loaded at its tip by the
+                                             # wrench frame 3 carries
     couplings: {J3: "1.003*J2 + J3"}        # the robot as built: coupled joints' true values in the
                                             # readings (the robot file's syntax and units)
     noise: {repeatability: 5.0e-5, tracker: 4.0e-5, orientation: 2.0e-4}
@@ -36,9 +44,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gecgen.model.gravity import robot_gravity_torques
+from gecgen.model.gravity import robot_frame_wrenches, robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
-from gecgen.model.robot import Robot
+from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.robot_file import with_couplings
 from gecgen.model.validation import require, require_keys
 
@@ -77,7 +85,63 @@ _SOURCE_KEYS = {
     "backlash": ({"joint", "width"}, set()),
     "play": ({"joint", "width"}, set()),
     "thermal": ({"error", "per_kelvin"}, {"reference", "start", "end", "column"}),
+    "frame_compliance": ({"frame", "compliance"}, set()),
+    "beam": ({"frame", "axis", "length", "flexibility"}, set()),
 }
+#: the wrench component that turns (or moves) each generalized error of a frame: ex <- fx, ..., es <- my
+MATCHING = {"ex": "fx", "ey": "fy", "ez": "fz", "es": "my", "er": "mz", "ep": "mx"}
+#: the generalized error of a small rotation about a frame's x, y and z axes
+ROTATION = ("ep", "es", "er")
+
+
+def _frame(robot: Robot, value, where: str) -> int:
+    """A frame given by its joint's name (passive joints too) or number 0..m."""
+    names = [j.name for j in robot.chain]
+    if isinstance(value, str) and value in names:
+        return names.index(value) + 1
+    require(isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= robot.n_frames,
+            f"{where}: {value!r} is not a frame; give a joint's name ({', '.join(names)}) or 0..{robot.n_frames}")
+    return value
+
+
+def _compliance(spec, where: str) -> np.ndarray:
+    """error -> number (its matching component) or {component: number} as a (6, 6) matrix C: the
+    frame's errors (ex..ep) are C times the wrench it carries (fx..mz)."""
+    require(isinstance(spec, dict) and spec, f"{where}: expected a mapping such as {{ep: 4.0e-5}} (error -> rad "
+                                             f"per N m or m per N)")
+    C = np.zeros((6, 6))
+    for error, value in spec.items():
+        require(error in ERROR_NAMES, f"{where}: {error!r} is not a generalized error; use {' '.join(ERROR_NAMES)}")
+        per = value if isinstance(value, dict) else {MATCHING[error]: value}
+        for component, c in per.items():
+            require(component in WRENCH, f"{where}.{error}: {component!r} is not a wrench component; use "
+                                         f"{' '.join(WRENCH)}")
+            require(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c),
+                    f"{where}.{error}.{component}: expected a number")
+            C[ERROR_NAMES.index(error), WRENCH.index(component)] = c
+    return C
+
+
+def beam_compliance(axis: str, length: float, flexibility: float) -> np.ndarray:
+    """The (6, 6) compliance of a cantilever clamped at a frame's origin along its `axis` (x, y or z),
+    `length` m, 1/EI `flexibility` (1/(N m^2)), loaded at its tip by the wrench W (about the
+    origin; about the tip the moment is M - L u x F): the tip turns by theta = (F_v L^2/2 + M_w L)/EI
+    about w = u x v and moves by delta = (F_v L^3/3 + M_w L^2/2)/EI along v, for each v across u;
+    as the frame's errors, the turn theta w and the move (delta - theta L) v at its origin."""
+    u = np.eye(3)["xyz".index(axis)]
+    L, C = length, np.zeros((6, 6))
+    to_tip = np.zeros((6, 6))  # W -> (F, M about the tip)
+    to_tip[:3, :3] = to_tip[3:, 3:] = np.eye(3)
+    to_tip[3:, :3] = -L * np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    for v in (e for e in np.eye(3) if abs(e @ u) < 0.5):
+        w = np.cross(u, v)
+        load = np.concatenate([v, np.zeros(3)]), np.concatenate([np.zeros(3), w])  # F_v and M_w at the tip
+        theta = (L ** 2 / 2 * load[0] + L * load[1]) * flexibility
+        delta = (L ** 3 / 3 * load[0] + L ** 2 / 2 * load[1]) * flexibility
+        C[:3] += np.outer(v, delta - L * theta)
+        for k, name in enumerate(ROTATION):
+            C[ERROR_NAMES.index(name)] += w[k] * theta
+    return C @ to_tip
 
 
 def _error_index(robot: Robot, text, where: str) -> tuple[int, float]:
@@ -139,6 +203,15 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
             for key in ("deflection", "slope"):
                 if key in s:
                     p[key] = _error_index(robot, s[key], f"{sw}.{key}")
+        elif s["type"] in ("frame_compliance", "beam"):
+            p["frame"] = _frame(robot, s["frame"], f"{sw}.frame")
+            if s["type"] == "beam":
+                require(s["axis"] in ("x", "y", "z"), f"{sw}.axis: x, y or z (the frame's axis the link runs along)")
+                for key in ("length", "flexibility"):
+                    require(isinstance(s[key], (int, float)) and s[key] > 0, f"{sw}.{key}: expected a positive number")
+                p["matrix"] = beam_compliance(s["axis"], float(s["length"]), float(s["flexibility"]))
+            else:
+                p["matrix"] = _compliance(s["compliance"], f"{sw}.compliance")
         elif s["type"] in ("compliance", "backlash", "play"):
             p["joint"] = _joint(robot, s["joint"], f"{sw}.joint")
             require(robot.joints[p["joint"]].kind == "R", f"{sw}.joint: {s['type']} needs a revolute joint")
@@ -167,10 +240,6 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
                                                         f"joints as {robot.source or 'the robot file'} "
                                                         f"({', '.join(robot.joint_names)}); keep each joint's own name "
                                                         f"in its value exactly where the robot file does")
-    declared = [j.name for j in (built or robot).chain if j.coupling and j.coupling.declared]
-    require(masses != "urdf" or not declared, f"{where}: masses: urdf walks the URDF's own joints, not the couplings "
-                                              f"of {', '.join(declared)}; give the masses as a list of "
-                                              f"{{frame, mass, at}}")
     resolved = dict(spec)
     resolved["constant"] = {"values": {n: float(v) for n, v in zip(robot.error_names(), const)}}
     resolved["joint_offsets"] = {"values": offsets.tolist()}
@@ -213,6 +282,33 @@ def gravity_torques(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.nd
     return tau
 
 
+def frame_wrenches(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray,
+                   payload_at: np.ndarray) -> np.ndarray:
+    """The static wrench every frame 0..m carries (N, m+1, 6): the weight of the links (the truth's
+    masses) and of the payload at the first branch's tool, as force (N) and moment about the frame's
+    origin (N m) in its axes, on the nominal chain. With `masses: urdf` the links' part comes from a
+    walk down the URDF (`model.gravity`), independent of the load signals the fit uses."""
+    F = frames(robot, q)
+    N, m = len(q), robot.n_frames
+    out = np.zeros((N, m + 1, 6))
+    if truth.masses == "urdf":
+        out += robot_frame_wrenches(robot, q, list(range(m + 1)), truth.gravity)
+    tip, _ = robot.tips()[0]
+    tool = F[m + 1]
+    points = [(np.full(N, float(p["mass"])), F[p["frame"]][:, :3, :3] @ np.array(p.get("at", [0, 0, 0]), float)
+               + F[p["frame"]][:, :3, 3], p["frame"]) for p in (() if truth.masses == "urdf" else truth.masses)]
+    points.append((payload_kg, tool[:, :3, :3] @ payload_at + tool[:, :3, 3], tip))
+    for f in range(m + 1):
+        R, o = F[f][:, :3, :3], F[f][:, :3, 3]
+        carried = set(robot.subtree(f))
+        for mass, pos, frame in points:
+            if frame in carried:
+                weight = mass[:, None] * truth.gravity
+                out[:, f, :3] += np.einsum("nji,nj->ni", R, weight)
+                out[:, f, 3:] += np.einsum("nji,nj->ni", R, np.cross(pos - o, weight))
+    return out
+
+
 def true_state(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray, payload_at: np.ndarray,
                aux: dict[str, np.ndarray], approach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """True joints (N, n) and generalized errors (N, 6(n+1)) at read joints q.
@@ -221,7 +317,7 @@ def true_state(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray
     N = len(q)
     dq = np.tile(truth.joint_offsets, (N, 1))
     eps = np.tile(truth.constant, (N, 1))
-    tau = None
+    tau = wrench = None
     for s in truth.sources:
         p = s.params
         if s.kind == "sinusoid":
@@ -242,6 +338,11 @@ def true_state(robot: Robot, truth: Truth, q: np.ndarray, payload_kg: np.ndarray
                 tau = gravity_torques(robot, truth, q, payload_kg, payload_at)
             load = tau[:, p["joint"]]
             dq[:, p["joint"]] += p["compliance"] * load if s.kind == "compliance" else 0.5 * p["width"] * np.sign(load)
+        elif s.kind in ("frame_compliance", "beam"):
+            if wrench is None:
+                wrench = frame_wrenches(robot, truth, q, payload_kg, payload_at)
+            f = p["frame"]
+            eps[:, 6 * f:6 * f + 6] += wrench[:, f] @ p["matrix"].T
         elif s.kind == "backlash":
             dq[:, p["joint"]] += 0.5 * p["width"] * approach[:, p["joint"]]
         elif s.kind == "thermal":
