@@ -195,6 +195,12 @@ def branch_index(robot: Robot, branch: str | None) -> int:
     return names.index(branch)
 
 
+def branch_targets(robot: Robot, branch: str) -> list[str]:
+    """The targets on the named branch's tool."""
+    k = [b.name for b in robot.branches].index(branch)
+    return [t for t in robot.target_names if robot.branch_of(t) == k]
+
+
 # -- the calibrator --------------------------------------------------------------------------
 
 class Calibrator:
@@ -281,6 +287,11 @@ class Calibrator:
 
             calib.report["branches"] = by_branch(cm, data, to_world(fit.registrations, data),
                                                  {"before": None, "train": fit.c})
+            for b in robot.branches:
+                if b.name not in calib.report["branches"]:
+                    warnings.warn(f"branch {b.name!r}: the data measures none of its targets, so its own joints' "
+                                  f"errors are not calibrated and compensating it is refused; measure "
+                                  f"{', '.join(branch_targets(robot, b.name))} to calibrate it", stacklevel=2)
         if fitted.vertex_of:
             calib.report["orientation_length_m"] = fitted.pose_length
         if data.relative is not None:  # the errors "relative" in `eliminated` are those it cannot see
@@ -379,6 +390,12 @@ class Calibrator:
         other reading (the trunk's, the other branches') is held at its command."""
         calib = self._fitted()
         index = branch_index(calib.robot, branch)
+        measured = calib.report.get("branches")  # the branches the data measured (older files: unknown)
+        if calib.robot.branches and isinstance(measured, dict) and branch not in measured:
+            raise ModelError(f"branch={excerpt(branch)}: the calibration's data measured no target of this branch "
+                             f"(only of {', '.join(measured)}), so its own joints' errors were not calibrated and the "
+                             f"correction would rest on the other branches' fit alone; measure "
+                             f"{', '.join(branch_targets(calib.robot, branch))} and calibrate again")
         require(isinstance(max_iter, int) and max_iter >= 0,
                 f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
         if isinstance(q_cmd, Commands):

@@ -298,9 +298,28 @@ def _branch_specs(spec: dict, where: str, urdf: bool) -> list[tuple[str, dict, s
         require(is_name(name), f"{bwhere}: branch names must be identifiers")
         require(isinstance(b, dict), f"{bwhere}: expected a mapping with {tip}, tool and targets")
         require_keys(b, bwhere, required={tip, "targets"}, optional={"tool"})
-        require(isinstance(b[tip], str), f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}")
+        require(isinstance(b[tip], str) and b[tip],
+                f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}, got {excerpt(b[tip])}")
         out.append((name, b, bwhere))
+    _check_branch_identifiers(spec["name"], [n for n, _, _ in out], where)
     return out
+
+
+#: the generated C's functions of each branch, named <robot>_<function>_<branch> (gecgen/emit)
+BRANCH_FUNCTIONS = ("fk", "tool_jacobian", "compensate", "compensate_batch")
+
+
+def _check_branch_identifiers(robot: str, names: list[str], where: str) -> None:
+    """Branch names whose generated functions coincide ('left' and 'batch_left' both give
+    compensate_batch_left) would define one C function twice: the code would not compile."""
+    seen: dict[str, tuple[str, str]] = {}
+    for name in names:
+        for fn in BRANCH_FUNCTIONS:
+            ident = f"{fn}_{name}"
+            other = seen.setdefault(ident, (name, fn))
+            require(other[0] == name, f"{where}: branches {excerpt(other[0])} and {excerpt(name)}: the generated C "
+                                      f"would define {robot}_{ident} twice ({other[1]} of {excerpt(other[0])}, {fn} "
+                                      f"of {excerpt(name)}); rename one of them")
 
 
 def _urdf_tree(path: Path, base_link: str, branches):
@@ -348,6 +367,8 @@ def _dh_tree(rows: list, joints: tuple[Joint, ...], branches, where: str):
             continue
         require(branches[0][0], f"{where}: joints[{k}].parent: only a robot with branches may have one; add "
                                 f"'branches' with each tip")
+        require(isinstance(parent, str), f"{where}: joints[{k}].parent: expected an earlier row's joint name or "
+                                         f"'base', got {excerpt(parent)}")
         require(parent == "base" or frame.get(parent, k + 1) <= k,
                 f"{where}: joints[{k}].parent: {excerpt(parent)} is not an earlier row's joint name or 'base'")
         parents.append(0 if parent == "base" else frame[parent])
