@@ -80,6 +80,8 @@ def calibrated(tmp, terms: str):
 
 
 LOOP = '<joint name="loop" type="fixed"><parent link="arm_7_link"/><child link="base_footprint"/></joint></robot>'
+#: arm_1_joint's origin and axis (the axis alone is written alike on many joints)
+ARM_1_AXIS = '<origin rpy="0 0 -1.57079632679" xyz="0.15505 0.014 -0.151"/>\n    <axis xyz="0 0 1"/>'
 SECOND_PARENT = '<joint name="extra" type="fixed"><parent link="base_footprint"/><child link="arm_3_link"/></joint></robot>'
 
 # case: (arguments given the test's folder, the file the message must name, a phrase it must hold)
@@ -118,6 +120,9 @@ CASES = {
                                               write(t, "q.csv", "q1,q2,q3,q4,q5,q6,q7,q8\n" + "0.1," * 7 + "0.1\n"),
                                               "-o", t / "out.csv"],
                                    "tiago_48_schunk.urdf", "is its own ancestor (the joints form a loop)"),
+    "URDF axis of 1.7e308 (its length overflows)": (lambda t: ["redundancy", tiago(t, edit(URDF, ARM_1_AXIS, ARM_1_AXIS.replace('"0 0 1"',
+                                                                                                  '"1.7e308 1.7e308 0"')))],
+                           "tiago_48_schunk.urdf", "'arm_1_joint' axis xyz: length inf; a joint axis is a unit vector"),
     "URDF link with two parents": (lambda t: ["redundancy", tiago(t, edit(URDF, "</robot>", SECOND_PARENT))],
                                    "tiago_48_schunk.urdf", "link 'arm_3_link' is already the child of joint"),
     "robot file not UTF-8": (lambda t: ["redundancy", pps(t, edit(PPS, "description: Patient",
@@ -154,6 +159,9 @@ CASES = {
     "pose id 2**53 + 1": (lambda t: ["identify", ROBOTS / "pps.yaml",
                                      write(t, "data.csv", table().replace("\n2,", "\n9007199254740993,"))],
                           "data.csv", "column 'pose': not an integer pose id within +-2**53"),
+    "a term's factor of 1e300": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                            write(t, "m.errors.yaml", 'frames:\n  1: ["1", "1e300*q1"]\n')],
+                                 "m.errors.yaml", "term '1e300*q1': holds the number 1e+300, outside 1e-12..1e+12"),
     "nested powers": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
                                  write(t, "m.errors.yaml", 'frames:\n  1: ["((q1**16)**16)**16"]\n')],
                       "m.errors.yaml", "a variable appears to the power 256"),
