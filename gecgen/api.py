@@ -195,6 +195,16 @@ def branch_index(robot: Robot, branch: str | None) -> int:
     return names.index(branch)
 
 
+def moved_joints(robot: Robot, branch: int) -> list[str]:
+    """The names of the joints whose readings compensation moves to place branch `branch`'s tool:
+    those that turn a frame on its path alone (symbolic.chain.tool_jacobian_function)."""
+    tips = [tip for tip, _ in robot.tips()]
+    shared = {f for k, tip in enumerate(tips) if k != branch for f in robot.path(tip)}
+    drives = robot.drives()
+    readings = {k for i in set(robot.path(tips[branch])) - shared - {0} for k, _ in drives[i - 1][0]}
+    return [robot.joint_names[k] for k in sorted(readings)]
+
+
 def branch_targets(robot: Robot, branch: str) -> list[str]:
     """The targets on the named branch's tool."""
     k = [b.name for b in robot.branches].index(branch)
@@ -411,9 +421,12 @@ class Calibrator:
         failed = np.nonzero(np.isin(status, FAILED))[0]
         if len(failed):
             k = failed[0]
+            moved = moved_joints(calib.robot, index)
             why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
                    if status[k] == NONFINITE else
-                   "the correction did not converge; the command may be near a singularity")
+                   "the correction did not converge; the command may be near a singularity" if len(moved) >= 6 else
+                   f"the correction did not converge: the {len(moved)} joints it moves ({', '.join(moved)}) cannot "
+                   f"place the tool's position and orientation (6 degrees of freedom)")
             raise RuntimeError(f"{row(k)}: {why} ({len(failed)} rows failed)")
         dq = np.abs(q - cmds.q)
         return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),

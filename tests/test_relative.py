@@ -248,6 +248,26 @@ def test_one_recording_given_as_both_sockets_is_refused(tmp_path, capsys):
             f"configuration cannot seat the ball in two sockets") in capsys.readouterr().err
 
 
+def test_socket_files_of_one_id_and_a_distance_in_millimetres_are_refused(tmp_path, capsys):
+    """Two folders of one name give one socket id twice: said as such, not as a file given twice; a
+    distance of 50 (mm meant) is far from where the nominal model puts the sockets (57 mm apart)."""
+    from gecgen.cli import main
+
+    for place, side in (("a", "front"), ("b", "left")):
+        shutil.copytree(MUKCA / side, tmp_path / place / "front")
+    for files, options, message in (
+            ([tmp_path / "a" / "front" / "hole_0.csv", tmp_path / "b" / "front" / "hole_0.csv"], [],
+             f"{tmp_path / 'a' / 'front' / 'hole_0.csv'} and {tmp_path / 'b' / 'front' / 'hole_0.csv'} both make the "
+             f"socket id front/hole_0"),
+            ([MUKCA / "front" / "hole_0.csv", MUKCA / "front" / "hole_1.csv"], ["--socket-distance", 50],
+             "front: the socket distance 50 m is far from the 0.0569 m at which the robot's nominal model puts the "
+             "folder's two sockets; give the distance in metres (50 mm is 0.05)")):
+        capsys.readouterr()
+        assert main([str(a) for a in ["import", ROBOT, *files, "--sockets", *options, "-o", tmp_path / "x.csv"]]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and message in err[0], err
+
+
 def test_mukca_panda6_held_out_placements(tmp_path):
     """The MUKCa project's real Panda (tests/data/mukca_panda6): calibrated on `front` through the command
     line, scored on the held-out `left` and `right` next to that project's own calibrated URDF (trained

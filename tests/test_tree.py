@@ -389,3 +389,28 @@ def test_calibrate_chooses_for_the_whole_tree_and_scores_each_hand(talos):
     assert set(sel.val_branches) == {"left", "right"}
     for hand in sel.val_branches.values():
         assert hand["after"]["rms_mm"] < 1.3 * floor < 5 * floor < hand["before"]["rms_mm"], (hand, floor)
+
+
+def test_compensate_names_its_option_and_why_a_two_joint_arm_cannot_place_its_tool(tmp_path, capsys):
+    """Without --branch, or with one misspelled, the refusal speaks of --branch (not the API's
+    branch=None) and names the branches; the DH tree's 2-joint arms cannot place a 6-DOF tool pose,
+    which is said instead of "near a singularity"."""
+    from gecgen.cli import main
+
+    dh_tree(tmp_path)
+    (tmp_path / "truth.yaml").write_text("constant:\n  values: {'5.ex': 1.0e-3, '2.ey': 1.0e-3, '6.ez': 1.0e-3}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    robot, t = str(tmp_path / "tree.yaml"), tmp_path
+    assert main(["simulate", robot, "--truth", str(t / "truth.yaml"), "--poses", "60", "-o", str(t / "d.csv")]) == 0
+    assert main(["identify", robot, str(t / "d.csv"), "-o", str(t / "c.json")]) == 0
+    (t / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,0.2,0.3,0.2,0.1,0.2\n")
+    for branch, message in (([], "--branch: robot dhtree has branches; name the one whose tool to place: the "
+                                 "choices: right, left"),
+                            (["--branch", "lef"], "--branch lef: robot dhtree has branches; name the one whose tool "
+                                                  "to place: did you mean 'left'?"),
+                            (["--branch", "left"], "cmd.csv: row 2: the correction did not converge: the 2 joints it "
+                                                   "moves (l1, l2) cannot place the tool's position and orientation")):
+        capsys.readouterr()
+        code = main(["compensate", str(t / "c.json"), str(t / "cmd.csv"), "-o", str(t / "out.csv"), *branch])
+        err = capsys.readouterr().err.splitlines()
+        assert code != 0 and len(err) == 1 and message in err[0], err
