@@ -60,6 +60,13 @@ def telescope(tmp):
     return tmp / "telescope.yaml"
 
 
+def ur10_estimate(tmp):
+    """The UR10 of tests/data/ur10 with its probe left to estimate, copied into tmp: the robot file's path."""
+    write(tmp, "ur10_robot.urdf", (ROBOTS.parent / "tests" / "data" / "ur10" / "ur10_robot.urdf").read_text())
+    return write(tmp, "ur10.yaml", "name: ur10\nangle_unit: rad\nurdf: ur10_robot.urdf\nbase_link: base_link\n"
+                                   "tip_link: wrist_3_link\ntargets:\n  probe: estimate\n")
+
+
 def pps(tmp, text=PPS):
     return write(tmp, "robot.yaml", text)
 
@@ -227,6 +234,10 @@ IN_PROCESS = {
                                 "/dev/null", "is not a regular file (a device, pipe or socket)"),
     "an output name over 255 bytes": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / ("x" * 252 + ".csv")],
                                       "xxxx.csv", "the file name is longer than 255 bytes"),
+    "design for a target left to estimate": (
+        lambda t: ["design", ur10_estimate(t), "--poses", "10", "-o", t / "d.csv"], "ur10.yaml",
+        "target 'probe' is left to estimate, so this needs measured data (identify, diagnose and calibrate place it "
+        "from theirs); to plan before measuring, write a rough guess instead, targets: {probe: [x, y, z]}"),
     "a key twice in a robot file": (lambda t: ["redundancy", pps(t, PPS + "angle_unit: rad\n")],
                                     "robot.yaml", "key 'angle_unit' appears twice in one mapping; keep one"),
     "a full-width joint name": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pitch,", "name: \uff51\uff15,"))],
