@@ -38,7 +38,8 @@ def _gravity(text: str) -> tuple[float, float, float]:
 def run(args) -> dict:
     robot = load_robot(args.robot)
     joints = [j.strip() for j in args.joints.split(",")] if args.joints else list(robot.joint_names)
-    declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared]
+    # a DH robot file has no masses at all: that, not its couplings, is what it lacks (said below)
+    declared = [j.name for j in robot.chain if j.coupling and j.coupling.declared and robot.urdf]
     require(not declared, f"{args.robot}: couplings: gecgen gravity walks the URDF's own joints, not the robot file's "
                           f"couplings of {', '.join(declared)}; use the error terms gravity_torque(J), which follow "
                           f"them")
