@@ -195,6 +195,22 @@ def branch_index(robot: Robot, branch: str | None) -> int:
     return names.index(branch)
 
 
+def moved_joints(robot: Robot, branch: int) -> list[str]:
+    """The names of the joints whose readings compensation moves to place branch `branch`'s tool:
+    those that turn a frame on its path alone (symbolic.chain.tool_jacobian_function)."""
+    tips = [tip for tip, _ in robot.tips()]
+    shared = {f for k, tip in enumerate(tips) if k != branch for f in robot.path(tip)}
+    drives = robot.drives()
+    readings = {k for i in set(robot.path(tips[branch])) - shared - {0} for k, _ in drives[i - 1][0]}
+    return [robot.joint_names[k] for k in sorted(readings)]
+
+
+def branch_targets(robot: Robot, branch: str) -> list[str]:
+    """The targets on the named branch's tool."""
+    k = [b.name for b in robot.branches].index(branch)
+    return [t for t in robot.target_names if robot.branch_of(t) == k]
+
+
 # -- the calibrator --------------------------------------------------------------------------
 
 class Calibrator:
@@ -281,6 +297,11 @@ class Calibrator:
 
             calib.report["branches"] = by_branch(cm, data, to_world(fit.registrations, data),
                                                  {"before": None, "train": fit.c})
+            for b in robot.branches:
+                if b.name not in calib.report["branches"]:
+                    warnings.warn(f"branch {b.name!r}: the data measures none of its targets, so its own joints' "
+                                  f"errors are not calibrated and compensating it is refused; measure "
+                                  f"{', '.join(branch_targets(robot, b.name))} to calibrate it", stacklevel=2)
         if fitted.vertex_of:
             calib.report["orientation_length_m"] = fitted.pose_length
         if data.relative is not None:  # the errors "relative" in `eliminated` are those it cannot see
@@ -379,6 +400,12 @@ class Calibrator:
         other reading (the trunk's, the other branches') is held at its command."""
         calib = self._fitted()
         index = branch_index(calib.robot, branch)
+        measured = calib.report.get("branches")  # the branches the data measured (older files: unknown)
+        if calib.robot.branches and isinstance(measured, dict) and branch not in measured:
+            raise ModelError(f"branch={excerpt(branch)}: the calibration's data measured no target of this branch "
+                             f"(only of {', '.join(measured)}), so its own joints' errors were not calibrated and the "
+                             f"correction would rest on the other branches' fit alone; measure "
+                             f"{', '.join(branch_targets(calib.robot, branch))} and calibrate again")
         require(isinstance(max_iter, int) and max_iter >= 0,
                 f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
         if isinstance(q_cmd, Commands):
@@ -394,9 +421,12 @@ class Calibrator:
         failed = np.nonzero(np.isin(status, FAILED))[0]
         if len(failed):
             k = failed[0]
+            moved = moved_joints(calib.robot, index)
             why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
                    if status[k] == NONFINITE else
-                   "the correction did not converge; the command may be near a singularity")
+                   "the correction did not converge; the command may be near a singularity" if len(moved) >= 6 else
+                   f"the correction did not converge: the {len(moved)} joints it moves ({', '.join(moved)}) cannot "
+                   f"place the tool's position and orientation (6 degrees of freedom)")
             raise RuntimeError(f"{row(k)}: {why} ({len(failed)} rows failed)")
         dq = np.abs(q - cmds.q)
         return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),

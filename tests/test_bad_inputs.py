@@ -60,6 +60,13 @@ def telescope(tmp):
     return tmp / "telescope.yaml"
 
 
+def ur10_estimate(tmp):
+    """The UR10 of tests/data/ur10 with its probe left to estimate, copied into tmp: the robot file's path."""
+    write(tmp, "ur10_robot.urdf", (ROBOTS.parent / "tests" / "data" / "ur10" / "ur10_robot.urdf").read_text())
+    return write(tmp, "ur10.yaml", "name: ur10\nangle_unit: rad\nurdf: ur10_robot.urdf\nbase_link: base_link\n"
+                                   "tip_link: wrist_3_link\ntargets:\n  probe: estimate\n")
+
+
 def pps(tmp, text=PPS):
     return write(tmp, "robot.yaml", text)
 
@@ -80,6 +87,8 @@ def calibrated(tmp, terms: str):
 
 
 LOOP = '<joint name="loop" type="fixed"><parent link="arm_7_link"/><child link="base_footprint"/></joint></robot>'
+#: arm_1_joint's origin and axis (the axis alone is written alike on many joints)
+ARM_1_AXIS = '<origin rpy="0 0 -1.57079632679" xyz="0.15505 0.014 -0.151"/>\n    <axis xyz="0 0 1"/>'
 SECOND_PARENT = '<joint name="extra" type="fixed"><parent link="base_footprint"/><child link="arm_3_link"/></joint></robot>'
 
 # case: (arguments given the test's folder, the file the message must name, a phrase it must hold)
@@ -118,6 +127,9 @@ CASES = {
                                               write(t, "q.csv", "q1,q2,q3,q4,q5,q6,q7,q8\n" + "0.1," * 7 + "0.1\n"),
                                               "-o", t / "out.csv"],
                                    "tiago_48_schunk.urdf", "is its own ancestor (the joints form a loop)"),
+    "URDF axis of 1.7e308 (its length overflows)": (lambda t: ["redundancy", tiago(t, edit(URDF, ARM_1_AXIS, ARM_1_AXIS.replace('"0 0 1"',
+                                                                                                  '"1.7e308 1.7e308 0"')))],
+                           "tiago_48_schunk.urdf", "'arm_1_joint' axis xyz: length inf; a joint axis is a unit vector"),
     "URDF link with two parents": (lambda t: ["redundancy", tiago(t, edit(URDF, "</robot>", SECOND_PARENT))],
                                    "tiago_48_schunk.urdf", "link 'arm_3_link' is already the child of joint"),
     "robot file not UTF-8": (lambda t: ["redundancy", pps(t, edit(PPS, "description: Patient",
@@ -154,6 +166,9 @@ CASES = {
     "pose id 2**53 + 1": (lambda t: ["identify", ROBOTS / "pps.yaml",
                                      write(t, "data.csv", table().replace("\n2,", "\n9007199254740993,"))],
                           "data.csv", "column 'pose': not an integer pose id within +-2**53"),
+    "a term's factor of 1e300": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
+                                            write(t, "m.errors.yaml", 'frames:\n  1: ["1", "1e300*q1"]\n')],
+                                 "m.errors.yaml", "term '1e300*q1': holds the number 1e+300, outside 1e-12..1e+12"),
     "nested powers": (lambda t: ["redundancy", ROBOTS / "pps.yaml", "--errors",
                                  write(t, "m.errors.yaml", 'frames:\n  1: ["((q1**16)**16)**16"]\n')],
                       "m.errors.yaml", "a variable appears to the power 256"),
@@ -219,6 +234,10 @@ IN_PROCESS = {
                                 "/dev/null", "is not a regular file (a device, pipe or socket)"),
     "an output name over 255 bytes": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / ("x" * 252 + ".csv")],
                                       "xxxx.csv", "the file name is longer than 255 bytes"),
+    "design for a target left to estimate": (
+        lambda t: ["design", ur10_estimate(t), "--poses", "10", "-o", t / "d.csv"], "ur10.yaml",
+        "target 'probe' is left to estimate, so this needs measured data (identify, diagnose and calibrate place it "
+        "from theirs); to plan before measuring, write a rough guess instead, targets: {probe: [x, y, z]}"),
     "a key twice in a robot file": (lambda t: ["redundancy", pps(t, PPS + "angle_unit: rad\n")],
                                     "robot.yaml", "key 'angle_unit' appears twice in one mapping; keep one"),
     "a full-width joint name": (lambda t: ["redundancy", pps(t, edit(PPS, "name: pitch,", "name: \uff51\uff15,"))],

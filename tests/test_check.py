@@ -93,3 +93,53 @@ def test_against_a_baseline_the_models_misfit_cancels(calibrated, tmp_path):
     found = run_json("check", t / "c.json", day, "--baseline", base, "--noise-mm", noise)
     assert found["beyond_noise"] and found["looks_like"]["kind"] == "joint" and found["looks_like"]["joint"] == "q3"
     assert run_json("check", t / "c.json", day)["looks_like"]["kind"] != "joint"
+
+
+def _refused(capsys, *args) -> str:
+    """The one line a refused check prints (exit 2)."""
+    from gecgen.cli import main
+
+    capsys.readouterr()
+    assert main([str(a) for a in args]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def test_a_baseline_of_other_joints_is_refused_and_a_near_one_carried_across(calibrated, tmp_path, capsys):
+    """A baseline whose pose ids are the check's but whose joints are 0.05 rad off is not the same pose
+    (it was "as at the baseline"); one read 2e-4 rad apart, as a servo may stand, is carried to the
+    check's readings by the model and compares like for like."""
+    t, robot, truth = calibrated
+    noise = str(1e3 * np.hypot(3e-5, 3e-5))
+    day = _check_data(tmp_path / "day.csv", robot, truth, 40, noise_seed=100)
+    for offset, name in ((0.05, "far.csv"), (2e-4, "near.csv")):
+        design = random_design(robot, 8, np.random.default_rng(40))
+        design = replace(design, q=design.q + np.array([0, offset, 0, 0, 0, 0]))
+        write_measurements(tmp_path / name, robot, simulate(robot, truth, design, np.random.default_rng(41)))
+    line = _refused(capsys, "check", t / "c.json", day, "--baseline", tmp_path / "far.csv", "--noise-mm", noise)
+    assert "day.csv: row 2: pose 0 has q2 = " in line and "(0.05 apart, more than 0.001 rad or m): not the same pose" \
+        in line, line
+    near = run_json("check", t / "c.json", day, "--baseline", tmp_path / "near.csv", "--noise-mm", noise)
+    assert not near["beyond_noise"] and near["looks_like"]["kind"] == "as at the baseline", near
+
+
+def test_a_history_is_a_csv_of_checks_and_a_failed_check_is_not_in_it(calibrated, tmp_path, capsys):
+    """--history H.png would be replaced by its own plot; a history that is not UTF-8 is one line; a
+    check that fails on the way (its plot cannot be written) leaves the history as it was."""
+    t, robot, truth = calibrated
+    data = _check_data(tmp_path / "same.csv", robot, truth, 10)
+    line = _refused(capsys, "check", t / "c.json", data, "--history", tmp_path / "H.png")
+    assert "--history" in line and "give a .csv file" in line and not (tmp_path / "H.png").exists()
+    (tmp_path / "latin.csv").write_bytes(b"caf\xe9\n")
+    line = _refused(capsys, "check", t / "c.json", data, "--history", tmp_path / "latin.csv")
+    assert "latin.csv" in line and "not UTF-8" in line, line
+    run_json("check", t / "c.json", data, "--history", tmp_path / "h.csv")
+    before = (tmp_path / "h.csv").read_text()
+    (tmp_path / "h.png").unlink()
+    (tmp_path / "h.png").mkdir()  # the plot cannot be written
+    _refused(capsys, "check", t / "c.json", data, "--history", tmp_path / "h.csv")
+    assert (tmp_path / "h.csv").read_text() == before
+    (tmp_path / "h.csv").write_text(before + "2026-11-27T10:00:00+00:00,x,8,abc,1,,pass,false,0.5,as calibrated\n")
+    line = _refused(capsys, "check", t / "c.json", data, "--history", tmp_path / "h.csv")
+    assert "h.csv: row 3: not a check as gecgen check writes it" in line, line

@@ -98,6 +98,15 @@ def test_a_coupling_is_an_affine_map_of_the_readings(fanuc):
     ({"J9": "J2"}, r"couplings: 'J9' is not a joint on the chain; couple one of J1, J2"),
     ({"J4": "-J3", "J5": "J4 + J5"}, r"couplings: joint 'J5' follows 'J4', which has no reading of its own"),
     ([1, 2], r"couplings: expected a mapping from joint names"),
+    ({"J2": "J2 + J3", "J3": "J2 + J3"}, r"couplings: J2, J3: the joints' values do not determine their readings"),
+    ({"J2": "J2 + J3", "J3": "J2 + 1.000001*J3"}, r"couplings: J2, J3: these couplings can hardly be inverted "
+                                                  r"\(condition number .*, beyond 1e\+06\)"),
+    ({"J3": "1e300*J2 + J3"}, r"couplings.J3: '1e300\*J2 \+ J3': the multiplier of J2, rad per rad, is 1e\+300, "
+                              r"beyond \+-1000"),
+    ({"J3": "J2 + J3 + 1e300"}, r"couplings.J3: .*the offset, rad, is 1.75e\+298, beyond \+-1000"),
+    ({"J3": "-" * 100_000 + "J2"}, r"couplings.J3: '----.* is longer than 1000 characters"),
+    ({"J3": "0*J3 + J2"}, r"couplings.J3: '0\*J3 \+ J2': the multiplier of J3's own reading cancels to 0"),
+    ({"J3": "J3 - J3 + J2"}, r"couplings.J3: 'J3 - J3 \+ J2': the multiplier of J3's own reading cancels to 0"),
 ])
 def test_bad_couplings_are_refused_by_name(tmp_path, couplings, message):
     import yaml

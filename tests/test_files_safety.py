@@ -56,6 +56,22 @@ def test_a_truncated_library_in_the_cache_is_rebuilt_not_loaded(puma, own_cache,
     assert lib.with_name(lib.name + ".sha256").read_text().strip() == hashlib.sha256(lib.read_bytes()).hexdigest()
 
 
+def test_a_truncated_library_whose_checksum_matches_is_rebuilt_not_loaded(puma, own_cache):
+    """The sidecar rewritten to match the truncated bytes (a copy or restore of both): the library's
+    own headers tell it is not whole. Run in a subprocess: loading it is a SIGBUS."""
+    import subprocess
+    import sys
+
+    (lib,) = own_cache.glob("puma560-*.so")
+    truncate(lib)
+    lib.with_name(lib.name + ".sha256").write_text(hashlib.sha256(lib.read_bytes()).hexdigest() + "\n")
+    run = subprocess.run([sys.executable, "-m", "gecgen.cli", "redundancy", str(ROBOTS / "puma560.yaml"), "--errors",
+                          str(ROBOTS / "constant.errors.yaml"), "--json"], capture_output=True, text=True,
+                         env={**os.environ, "GECGEN_CACHE": str(own_cache)})
+    assert run.returncode == 0, (run.returncode, run.stderr[-2000:])
+    assert json.loads(run.stdout)["n_params"] == 42
+
+
 def test_broken_casadi_module_and_structural_analysis_are_recomputed(puma, own_cache):
     robot, model = puma
     files = render(robot, model)

@@ -127,6 +127,9 @@ def test_design_through_the_command_line(fixture_design, tmp_path):
      "--tracker does not apply to a design for --fixtures"),
     ("name,x,y,z,nx,ny,nz\np,0.5,0,0.2,0,nan,1\n", [], "row 2, column 'ny': the normal (0, nan, 1) is not a"),
     ("name,x,y,z\ns1,0.5,0,0.2\ns2,5,0,0.2\n", [], "fixture s2: the ball reaches it in 0 of"),
+    ("name,x,y,z\ns1,0.5,0,0.2\ns2,0.5,0,0.2\n", [], "fx.csv: rows 2 and 3: 's1' and 's2' are sockets 0 mm apart; "
+                                                     "give each fixture its own position"),
+    ("name,x,y,z,nx,ny,nz\np,0.5,0,0.2,0,0,1\nq,0.4,0.1,0.2,0,0,-2\n", [], "rows 2 and 3: 'p' and 'q' are the same plane"),
 ])
 def test_bad_fixture_designs_are_refused(tmp_path, capsys, text, options, message):
     """One line naming the file, row and column or the option, and the fix; no output written."""
@@ -138,6 +141,14 @@ def test_bad_fixture_designs_are_refused(tmp_path, capsys, text, options, messag
     assert main([str(a) for a in args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0] and not (tmp_path / "d.csv").exists(), err
+
+
+def test_a_huge_normal_is_a_direction(tmp_path):
+    """A normal of finite but huge components is a direction like any other (its norm overflows)."""
+    from gecgen.model.fixture_file import read_fixtures
+
+    (tmp_path / "fx.csv").write_text("name,x,y,z,nx,ny,nz\np,0.45,0.25,0.05,1e300,1e300,0\n")
+    np.testing.assert_allclose(read_fixtures(tmp_path / "fx.csv")[0].normal, [0.5 ** 0.5, 0.5 ** 0.5, 0], atol=1e-15)
 
 
 def test_designed_touches_flatten_held_out_planes(tmp_path):

@@ -129,18 +129,19 @@ def test_gravity_command_appends_columns_and_copies_every_cell(tmp_path, capsys)
 
 @pytest.mark.parametrize("case, expect", [
     ("dh", "gravity torques need the link masses of a URDF"),
+    ("coupled dh", "gravity torques need the link masses of a URDF"),  # not its couplings
     ("joint", "--joints: 'elbow' is not a joint of tiago"),
     ("clash", "column 'tau_arm_2_joint' is already there"),
     ("gravity", "--gravity 0,-9.8: expected three finite numbers"),
 ])
 def test_gravity_command_refuses_in_one_line(case, expect, tmp_path, capsys):
-    robot = "pps.yaml" if case == "dh" else "tiago.yaml"
+    robot = {"dh": "pps.yaml", "coupled dh": "fanuc.yaml"}.get(case, "tiago.yaml")
     n = load_robot(ROBOTS / robot).n
     table = tmp_path / "t.csv"
     header = [f"q{i + 1}" for i in range(n)] + (["tau_arm_2_joint"] if case == "clash" else [])
     table.write_text(",".join(header) + "\n" + ",".join(["0.1"] * len(header)) + "\n")
     args = ["gravity", str(ROBOTS / robot), str(table), "-o", str(tmp_path / "o.csv"),
-            "--joints", {"joint": "elbow"}.get(case, "arm_2_joint" if robot == "tiago.yaml" else "theta")]
+            "--joints", {"joint": "elbow", "dh": "theta", "coupled dh": "J2"}.get(case, "arm_2_joint")]
     if case == "gravity":
         args += ["--gravity", "0,-9.8"]
     assert main(args) != 0

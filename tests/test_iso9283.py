@@ -159,6 +159,19 @@ def test_refusals(puma):
         plan_cube(puma, TOOL_DOWN, plane="C1-C2-C3-C4")
 
 
+def test_a_cube_out_of_reach_of_four_joints_says_why(tmp_path):
+    """PUMA's first four joints alone cannot hold the tool in one orientation over a cube: the refusal
+    counts the joints (once it only suggested another orientation, in the API's words)."""
+    import yaml
+
+    spec = yaml.safe_load((ROBOTS / "puma560.yaml").read_text())
+    spec["joints"] = spec["joints"][:4]
+    (tmp_path / "arm4.yaml").write_text(yaml.safe_dump(spec))
+    with pytest.raises(ModelError, match=r"none of 32 candidate centres is reached with the tool \(moved by 4 joints: "
+                                         r"fewer than 6 hold one orientation over a cube only by design\)"):
+        plan_cube(load_robot(tmp_path / "arm4.yaml"), TOOL_DOWN)
+
+
 def test_perfect_robot_with_repeatability_noise(puma, plan):
     """The commanded joints of every cycle, the tool where the nominal chain puts it plus Gaussian noise:
     sigma per coordinate in position, per axis (a small world-frame turn) in orientation."""

@@ -3,6 +3,8 @@ cycles (gecgen/cli/iso9283.py), against the standard's formulas computed here wi
 from __future__ import annotations
 
 
+from dataclasses import replace
+
 import numpy as np
 from conftest import run_json
 
@@ -62,3 +64,43 @@ def test_a_planned_test_measured_gives_the_standards_figures(tmp_path):
     text = (tmp_path / "report" / "report.md").read_text()
     assert "After compensation" in text and f"{out['worst']['AP_p']:.3g}" in text and "P2-P4" in text
     assert (tmp_path / "report" / "report.html").stat().st_size > 0 and reported["report"].endswith("report.md")
+
+
+def test_a_run_or_plan_that_is_not_the_test_is_refused(tmp_path, capsys):
+    """Too few cycles, P1 alone, a run with q1 0.2 rad off the plan's (another plan), and plan cells
+    that are no integer or no point of the test: one line each, never figures."""
+    from gecgen.cli import main
+
+    robot = load_robot("robots/puma560.yaml")
+    run_json("iso9283", "robots/puma560.yaml", "-o", tmp_path / "plan.csv", "--tool-rpy", "180,0,0", "--cycles", 3)
+    plan = (tmp_path / "plan.csv").read_text().splitlines()
+    table = np.genfromtxt(tmp_path / "plan.csv", delimiter=",", names=True)
+    q = np.column_stack([table[f"q{j}"] for j in range(1, 7)])
+    truth = load_truth({"noise": {"repeatability": 5e-5, "tracker": 0.0}}, robot)
+
+    def run(name, rows, offset=0.0):
+        rows = np.flatnonzero(rows)  # the plan's rows measured: their pose ids are their row numbers
+        design = Design(q[rows] + offset, np.zeros(len(rows)), np.zeros(3), ("t1",), np.array(["iso"] * len(rows)))
+        data = simulate(robot, truth, design, np.random.default_rng(0))
+        write_measurements(tmp_path / name, robot, replace(data, pose_ids=rows))
+        return tmp_path / name
+
+    def refused(plan_file, measured) -> str:
+        capsys.readouterr()
+        assert main(["iso9283", "robots/puma560.yaml", "--plan", str(plan_file), "--measured", str(measured)]) == 2
+        lines = capsys.readouterr().err.splitlines()
+        assert len(lines) == 1, lines
+        return lines[0]
+
+    everything = run("all.csv", np.ones(len(q), bool))
+    assert "target t1 is measured at 10 of the plan's 15 rows (pose 10 is missing)" in \
+        refused(tmp_path / "plan.csv", run("two.csv", table["cycle"] <= 2))
+    assert "target t1 is measured at 3 of the plan's 15 rows (pose 1 is missing)" in \
+        refused(tmp_path / "plan.csv", run("p1.csv", table["point"] == 1))
+    assert "(0.2 apart, more than 0.05 rad or m): not a run of this plan" in \
+        refused(tmp_path / "plan.csv", run("off.csv", np.ones(len(q), bool), np.array([0.2, 0, 0, 0, 0, 0])))
+    for old, new, message in ((",1,5,", ",1,2.7,", "row 3, column 'point': not an integer point number"),
+                              ("\n0,", "\n0.5,", "row 2, column 'pose': not an integer pose id"),
+                              (",1,5,", ",1,9,", "row 3, column 'point': 9 is not a point of the test (1..5)")):
+        (tmp_path / "bad.csv").write_text("\n".join(plan).replace(old, new, 1) + "\n")
+        assert message in refused(tmp_path / "bad.csv", everything)

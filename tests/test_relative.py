@@ -199,14 +199,16 @@ def _concat(a, b):
     ({"point": "c"}, "row 2, column 'point': point 'a' has 1 row: it says nothing about the robot below 2"),
     ({"plane_to": "p"}, "row 3, column 'plane_to': a relation on a row without a plane"),
     ({"distance_std_m": "0.001"}, "row 3, column 'distance_std_m': a distance without distance_to"),
+    ({"q1": "0.12"}, "rows 3 and 4: the same joint readings seat target 'ball' at point 'a' and at point 'b', which "
+                     "one configuration cannot do"),
 ])
 def test_bad_relative_rows_are_refused(panda, tmp_path, cells, message):
     robot, _ = panda
     header = ["pose", *[f"q{j}" for j in range(1, 8)], "target", "x", "y", "z", "point", "plane", "distance_to",
               "distance_m", "distance_std_m", "plane_to", "relation"]
     q = ["0.1", "0.2", "0.1", "-1.5", "0.1", "1.5", "0.3"]
-    rows = [dict(zip(header, [str(k), *q, "ball", "", "", "", "ab"[k // 2], "", "", "", "", "", ""]))
-            for k in range(4)]
+    rows = [dict(zip(header, [str(k), f"{0.1 + 0.01 * k:.2f}", *q[1:], "ball", "", "", "", "ab"[k // 2], "", "", "",
+                              "", "", ""])) for k in range(4)]
     rows[0].update(distance_to="b", distance_m="0.05")
     rows[1].update(cells)
     path = tmp_path / "bad.csv"
@@ -229,6 +231,41 @@ def test_simulate_and_import_through_the_command_line(tmp_path):
     data = read_measurements(tmp_path / "front.csv", load_robot(ROBOT))
     assert data.relative.names == ("front/hole_0", "front/hole_1")
     np.testing.assert_array_equal(data.q[:31], np.loadtxt(MUKCA / "front" / "hole_0.csv", delimiter=","))
+
+
+def test_one_recording_given_as_both_sockets_is_refused(tmp_path, capsys):
+    """A plate's two sockets from one file copied (a header added to the copy): import names the two
+    lines, where the fit would have been asked for a 50 mm distance between one socket and itself."""
+    from gecgen.cli import main
+
+    recording = (MUKCA / "front" / "hole_0.csv").read_text()
+    (tmp_path / "hole_0.csv").write_text(recording)
+    (tmp_path / "hole_1.csv").write_text("q1,q2,q3,q4,q5,q6,q7\n" + recording)
+    args = ["import", ROBOT, tmp_path / "hole_0.csv", tmp_path / "hole_1.csv", "--sockets", "--socket-distance", 0.05,
+            "-o", tmp_path / "both.csv"]
+    assert main([str(a) for a in args]) == 2 and not (tmp_path / "both.csv").exists()
+    assert (f"hole_0.csv: line 1 and {tmp_path / 'hole_1.csv'}: line 2 hold the same joint readings, but one "
+            f"configuration cannot seat the ball in two sockets") in capsys.readouterr().err
+
+
+def test_socket_files_of_one_id_and_a_distance_in_millimetres_are_refused(tmp_path, capsys):
+    """Two folders of one name give one socket id twice: said as such, not as a file given twice; a
+    distance of 50 (mm meant) is far from where the nominal model puts the sockets (57 mm apart)."""
+    from gecgen.cli import main
+
+    for place, side in (("a", "front"), ("b", "left")):
+        shutil.copytree(MUKCA / side, tmp_path / place / "front")
+    for files, options, message in (
+            ([tmp_path / "a" / "front" / "hole_0.csv", tmp_path / "b" / "front" / "hole_0.csv"], [],
+             f"{tmp_path / 'a' / 'front' / 'hole_0.csv'} and {tmp_path / 'b' / 'front' / 'hole_0.csv'} both make the "
+             f"socket id front/hole_0"),
+            ([MUKCA / "front" / "hole_0.csv", MUKCA / "front" / "hole_1.csv"], ["--socket-distance", 50],
+             "front: the socket distance 50 m is far from the 0.0569 m at which the robot's nominal model puts the "
+             "folder's two sockets; give the distance in metres (50 mm is 0.05)")):
+        capsys.readouterr()
+        assert main([str(a) for a in ["import", ROBOT, *files, "--sockets", *options, "-o", tmp_path / "x.csv"]]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and message in err[0], err
 
 
 def test_mukca_panda6_held_out_placements(tmp_path):

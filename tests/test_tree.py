@@ -192,14 +192,57 @@ ROWS = {"t1": "{name: t1, type: R, d: 0.3, a: 0.0, alpha: 90, limits: [-90, 90]}
         "l2": "{name: l2, type: R, d: 0.1, a: 0.2, alpha: 0, limits: [-90, 90]}"}
 
 
+DH_TREE = ("name: dhtree\nangle_unit: deg\njoints:\n" + "".join(f"  - {ROWS[n]}\n" for n in ("t1", "t2", "r1", "r2"))
+           + "  - {name: l1, parent: t2, type: R, a: 0.3, alpha: -90, limits: [-90, 90]}\n"
+           + f"  - {ROWS['l2']}\nbranches:\n  right: {{tip: r2, targets: {{a: [0.1, 0, 0]}}}}\n"
+           + "  left: {tip: l2, tool: {origin: [0, 0, 0.05]}, targets: {b: [0, 0.1, 0]}}\n")
+
+
 def dh_tree(folder):
     """A DH torso (t1, t2) with two 2-joint arms, the left one hanging from t2 by `parent`."""
-    (folder / "tree.yaml").write_text(
-        "name: dhtree\nangle_unit: deg\njoints:\n" + "".join(f"  - {ROWS[n]}\n" for n in ("t1", "t2", "r1", "r2"))
-        + "  - {name: l1, parent: t2, type: R, a: 0.3, alpha: -90, limits: [-90, 90]}\n"
-        + f"  - {ROWS['l2']}\nbranches:\n  right: {{tip: r2, targets: {{a: [0.1, 0, 0]}}}}\n"
-        + "  left: {tip: l2, tool: {origin: [0, 0, 0.05]}, targets: {b: [0, 0.1, 0]}}\n")
+    (folder / "tree.yaml").write_text(DH_TREE)
     return load_robot(folder / "tree.yaml")
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("parent: t2", "parent: [t2]", r"joints\[4\].parent: expected an earlier row's joint name or 'base', got \['t2'\]"),
+    ("tip: l2", "tip: ''", r"branches.'left': tip: expected the name of a joint, got ''"),
+    ("left:", "batch_right:", r"branches 'right' and 'batch_right': the generated C would define "
+                              r"dhtree_compensate_batch_right twice \(compensate_batch of 'right', compensate of "
+                              r"'batch_right'\); rename one"),
+])
+def test_bad_dh_branches_are_refused_by_name(tmp_path, old, new, message):
+    assert old in DH_TREE
+    (tmp_path / "tree.yaml").write_text(DH_TREE.replace(old, new, 1))
+    with pytest.raises(ModelError, match=message) as err:
+        load_robot(tmp_path / "tree.yaml")
+    assert str(tmp_path / "tree.yaml") in str(err.value)
+
+
+def test_a_branch_without_measured_targets_is_named_and_not_compensated(tmp_path, capsys):
+    """Data of the right arm alone: identify says the left arm has no data (its frames' errors are
+    eliminated for that, not for a lever arm of 0 m), and compensating the left arm is refused."""
+    import json
+
+    from gecgen.cli import main
+
+    dh_tree(tmp_path)
+    robot = str(tmp_path / "tree.yaml")
+    assert main(["simulate", robot, "--poses", "60", "--seed", "2", "-o", str(tmp_path / "t.csv")]) == 0
+    rows = (tmp_path / "t.csv").read_text().splitlines(keepends=True)
+    (tmp_path / "right.csv").write_text("".join(r for r in rows if ",b," not in r))
+    capsys.readouterr()
+    assert main(["identify", robot, str(tmp_path / "right.csv"), "-o", str(tmp_path / "c.json")]) == 0
+    assert "branch 'left': the data measures none of its targets" in capsys.readouterr().err
+    reasons = {e["param"]: e["detail"] for e in json.loads((tmp_path / "c.json").read_text())["eliminated"]}
+    for frame in (5, 6):  # l1's and l2's frames
+        assert reasons[f"{frame}.ex:1"].startswith(f"frame {frame} moves only branch 'left', of which the data "
+                                                   f"measures no target (b)"), reasons[f"{frame}.ex:1"]
+    (tmp_path / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,0.2,0.3,0.2,0.1,0.2\n")
+    out = ["-o", str(tmp_path / "out.csv")]
+    assert main(["compensate", str(tmp_path / "c.json"), str(tmp_path / "cmd.csv"), "--branch", "left", *out]) == 2
+    assert "the calibration's data measured no target of this branch (only of right)" in capsys.readouterr().err
+    assert main(["compensate", str(tmp_path / "c.json"), str(tmp_path / "cmd.csv"), "--branch", "right", *out]) == 0
 
 
 def test_a_dh_tree_is_its_branches_chains(tmp_path, rng):
@@ -352,3 +395,28 @@ def test_calibrate_chooses_for_the_whole_tree_and_scores_each_hand(talos):
     assert set(sel.val_branches) == {"left", "right"}
     for hand in sel.val_branches.values():
         assert hand["after"]["rms_mm"] < 1.3 * floor < 5 * floor < hand["before"]["rms_mm"], (hand, floor)
+
+
+def test_compensate_names_its_option_and_why_a_two_joint_arm_cannot_place_its_tool(tmp_path, capsys):
+    """Without --branch, or with one misspelled, the refusal speaks of --branch (not the API's
+    branch=None) and names the branches; the DH tree's 2-joint arms cannot place a 6-DOF tool pose,
+    which is said instead of "near a singularity"."""
+    from gecgen.cli import main
+
+    dh_tree(tmp_path)
+    (tmp_path / "truth.yaml").write_text("constant:\n  values: {'5.ex': 1.0e-3, '2.ey': 1.0e-3, '6.ez': 1.0e-3}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    robot, t = str(tmp_path / "tree.yaml"), tmp_path
+    assert main(["simulate", robot, "--truth", str(t / "truth.yaml"), "--poses", "60", "-o", str(t / "d.csv")]) == 0
+    assert main(["identify", robot, str(t / "d.csv"), "-o", str(t / "c.json")]) == 0
+    (t / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,0.2,0.3,0.2,0.1,0.2\n")
+    for branch, message in (([], "--branch: robot dhtree has branches; name the one whose tool to place: the "
+                                 "choices: right, left"),
+                            (["--branch", "lef"], "--branch lef: robot dhtree has branches; name the one whose tool "
+                                                  "to place: did you mean 'left'?"),
+                            (["--branch", "left"], "cmd.csv: row 2: the correction did not converge: the 2 joints it "
+                                                   "moves (l1, l2) cannot place the tool's position and orientation")):
+        capsys.readouterr()
+        code = main(["compensate", str(t / "c.json"), str(t / "cmd.csv"), "-o", str(t / "out.csv"), *branch])
+        err = capsys.readouterr().err.splitlines()
+        assert code != 0 and len(err) == 1 and message in err[0], err

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 from datetime import datetime, timezone
 from pathlib import Path
 
 from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, number
 
+#: rad or m: a baseline's reading of a pose may differ from the check's by this much (a servo's
+#: standstill error is a few 1e-5); the calibrated model carries the points across the difference
+JOINT_MATCH = 1e-3
 HISTORY = ["time_utc", "label", "n_points", "rms_mm", "max_mm", "tolerance_mm", "verdict", "beyond_noise",
            "p_value", "looks_like"]
 
@@ -41,7 +45,7 @@ def run(args) -> dict:
     from gecgen.api import load_calibration
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
-    from gecgen.runtime.drift import check
+    from gecgen.runtime.drift import at_check_joints, check
     from gecgen.runtime.identify import to_world
     from gecgen.runtime.inputs import checked
 
@@ -57,7 +61,14 @@ def run(args) -> dict:
     y = to_world(calib.frames, data, "measure the check from the calibration's tracker stationing")
     require(args.noise_mm is None or args.baseline, "--noise-mm goes with --baseline: without one the change is "
                                                     "judged against the calibration's own sigma")
-    baseline = _baseline(args.baseline, calib, data) if args.baseline else None
+    if args.history:
+        # the plot is written beside the history as H.png: a history of that name would be replaced by it
+        require(Path(args.history).suffix.lower() != ".png", f"--history {args.history}: the history is a CSV of "
+                f"checks (its plot is written beside it as .png); give a .csv file")
+    baseline = None
+    if args.baseline:
+        points, q_base = _baseline(args.baseline, calib, data)
+        baseline = at_check_joints(cm, data, calib.c, points, q_base)
     noise_m = sigma_m if args.noise_mm is None else 1e-3 * args.noise_mm
     verdict = check(cm, data, y, calib.c, noise_m if baseline is not None else sigma_m, args.tolerance_mm, baseline)
     result = {"robot": calib.robot.name, "data": str(args.data), "n_points": len(data.xyz),
@@ -70,11 +81,14 @@ def run(args) -> dict:
 
 
 def _baseline(path: str, calib, data):
-    """The baseline's points (R, 3, world) in the order of data's rows, matched by pose id and target."""
+    """The baseline's points (R, 3, world) in the order of data's rows, matched by pose id and target,
+    and the baseline's joint readings at each of data's poses (P, n). Readings further from the
+    check's than JOINT_MATCH are not the same pose: another run's poses with the check's pose ids
+    would be compared point by point with points elsewhere."""
     import numpy as np
 
     from gecgen.model.measurements import read_measurements
-    from gecgen.model.validation import require
+    from gecgen.model.validation import ModelError, require
     from gecgen.runtime.identify import to_world
 
     base = read_measurements(path, calib.robot)
@@ -87,20 +101,35 @@ def _baseline(path: str, calib, data):
         require(k is not None, f"{data.source}: row {data.file_rows[r]}: pose {data.pose_ids[data.pose[r]]} target "
                                f"{calib.robot.target_names[data.target[r]]} is not in the baseline {path}; measure "
                                f"the baseline's poses and targets")
-    return y[np.array(rows)]
+    rows = np.array(rows, int)
+    q_base = np.empty_like(data.q)
+    q_base[data.pose] = base.q[base.pose[rows]]
+    far = np.abs(q_base - data.q)
+    if far.max(initial=0.0) > JOINT_MATCH:
+        k, j = np.unravel_index(int(np.argmax(far)), far.shape)
+        r = int(np.argmax(data.pose == k))
+        raise ModelError(f"{data.source}: row {data.file_rows[r]}: pose {data.pose_ids[k]} has q{j + 1} = "
+                         f"{data.q[k, j]:.6g} but the baseline {path} has {q_base[k, j]:.6g} ({far[k, j]:.3g} apart, "
+                         f"more than {JOINT_MATCH:g} rad or m): not the same pose; measure the baseline's poses")
+    return y[rows], q_base
 
 
 def _append(path: Path, label: str, result: dict) -> dict:
     """Append the check to the history CSV at path and plot the history beside it (path.png)."""
     from gecgen.files import write_atomically
-    from gecgen.model.validation import require
+    from gecgen.model.validation import read_text, require
 
     rows = []
     if path.exists():
-        rows = list(csv.reader(io.StringIO(path.read_text())))
+        rows = list(csv.reader(io.StringIO(read_text(path, "history of checks"))))
         require(rows and rows[0] == HISTORY, f"{path}: not a history of gecgen check (its header should be "
                                              f"{','.join(HISTORY)}); give a new file or that history")
         rows = rows[1:]
+        for k, row in enumerate(rows):
+            numbers = [row[3], row[4], *([row[5]] if row[5] else [])] if len(row) == len(HISTORY) else ["-"]
+            require(all(map(_number, numbers)),
+                    f"{path}: row {k + 2}: not a check as gecgen check writes it ({len(HISTORY)} columns, rms_mm, "
+                    f"max_mm and tolerance_mm numbers); restore the row or remove it")
     looks = result["looks_like"]
     rows.append([datetime.now(timezone.utc).isoformat(timespec="seconds"), label, str(result["n_points"]),
                  f"{result['rms_mm']:.4g}", f"{result['max_mm']:.4g}",
@@ -109,10 +138,19 @@ def _append(path: Path, label: str, result: dict) -> dict:
                  looks["kind"] + (f" {looks['joint']}" if looks["kind"] == "joint" else "")])
     text = io.StringIO()
     csv.writer(text, lineterminator="\n").writerows([HISTORY, *rows])
-    write_atomically(path, text.getvalue())
+    # the plot first and the history last: a check that fails on the way is not left in the history,
+    # where a rerun would record it twice
     plot = path.with_suffix(".png")
     _plot(rows, plot)
+    write_atomically(path, text.getvalue())
     return {"file": str(path), "checks": len(rows), "plot": str(plot)}
+
+
+def _number(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
 
 
 def _plot(rows: list[list[str]], path: Path):

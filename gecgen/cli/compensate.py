@@ -22,8 +22,15 @@ def add_parser(command):
 def run(args) -> dict:
     from gecgen.api import load_calibration
     from gecgen.model.measurements import read_commands, write_commands
+    from gecgen.model.validation import nearest, require
 
     cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
+    names = [b.name for b in cal.robot_.branches]
+    # said here in the option's words: the API's own refusal speaks of its keyword, branch=
+    require(args.branch is None if not names else args.branch in names,
+            f"--branch: robot {cal.robot_.name} is a serial chain with one tool; leave --branch out" if not names else
+            f"--branch{' ' + args.branch if args.branch else ''}: robot {cal.robot_.name} has branches; name the one whose tool to place: "
+            f"{nearest(args.branch, names)}")
     cmds = read_commands(args.poses, cal.robot_, cal.calibration_.model.aux)
     done = cal.compensate(cmds, max_iter=args.max_iter, branch=args.branch)
     write_commands(args.output, cal.robot_, cmds, done.q)

@@ -16,6 +16,10 @@ import numpy as np
 
 from gecgen.cli.common import MAX_SEED, whole
 
+#: rad or m: a measured run's readings may differ from the plan's by this much (the compensated
+#: commands of the "after" run differ by the corrections, a few mrad); beyond it, it ran another plan
+JOINT_MATCH = 0.05
+
 
 def add_parser(command):
     """Register `iso9283` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
@@ -83,15 +87,26 @@ def _plan(robot, args) -> dict:
 
 
 def _characteristics(robot, args) -> dict:
-    from gecgen.model.table import read_table
-    from gecgen.model.validation import require
+    from gecgen.model.measurements import pose_id_column
+    from gecgen.model.table import at, read_table
+    from gecgen.model.validation import ModelError, require
+    from gecgen.runtime.iso9283 import ORDER
 
     table = read_table(args.plan, "ISO 9283 plan", "pose, cycle, point, q1..qn")
     for col in ("pose", "cycle", "point", *(f"q{j + 1}" for j in range(robot.n))):
         require(col in table.header, f"{table.where}: row 1: missing column '{col}'; give the plan "
                                      f"`gecgen iso9283 -o` wrote")
-    pose, point = table.numbers("pose").astype(int), table.numbers("point").astype(int)
-    cycle = table.numbers("cycle").astype(int)
+    fix = "give the plan `gecgen iso9283 -o` wrote"
+    pose = pose_id_column(table, "pose", fix=fix)
+    cycle = pose_id_column(table, "cycle", "cycle number", fix)
+    point = pose_id_column(table, "point", "point number", fix)
+    for col, values, highest in (("cycle", cycle, np.inf), ("point", point, len(ORDER))):
+        bad = np.flatnonzero((values < 1) | (values > highest))
+        if len(bad):
+            raise ModelError(f"{at(table.where, bad[0] + 2, col)}: {values[bad[0]]} is not a {col} of the test "
+                             f"(1..{highest if col == 'point' else 'the cycles'}); {fix}")
+    twice = np.flatnonzero(np.diff(np.sort(pose)) == 0)
+    require(not len(twice), f"{table.where}: pose {np.sort(pose)[twice[0]] if len(twice) else ''} is on two rows; {fix}")
     q = np.column_stack([table.numbers(f"q{j + 1}") for j in range(robot.n)])
     out = {"robot": robot.name, "plan": str(args.plan), "measured": str(args.measured),
            "frame": "the calibration's tracker frame" if args.calibration else "the robot's world frame",
@@ -111,7 +126,7 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
     the cycles that measured the target at both."""
     from gecgen.model.kinematics import target_positions, tool_poses
     from gecgen.model.measurements import read_measurements
-    from gecgen.model.validation import require
+    from gecgen.model.validation import ModelError, require
     from gecgen.runtime.iso9283 import distance_characteristics, pose_characteristics
 
     data = read_measurements(measured, robot)
@@ -120,13 +135,26 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
     unknown = np.setdiff1d(data.pose_ids, pose)
     require(not len(unknown), f"{data.source}: pose {unknown[0] if len(unknown) else ''} is no row of the plan "
                               f"{plan_where}; the test's pose ids are the plan's")
+    names = np.array(robot.target_names)
+    for t in np.unique(data.target):  # the standard's figures need every cycle of every point
+        missing = np.setdiff1d(pose, data.pose_ids[data.pose[data.target == t]])
+        require(not len(missing), f"{data.source}: target {names[t]} is measured at {len(pose) - len(missing)} of the "
+                                  f"plan's {len(pose)} rows (pose {missing[0] if len(missing) else ''} is missing); "
+                                  f"the test needs every cycle of every point: measure the whole plan, or plan fewer "
+                                  f"cycles (--cycles)")
+    plan_row = {int(p): k for k, p in enumerate(pose)}
+    apart = np.abs(data.q - q[[plan_row[int(p)] for p in data.pose_ids]])
+    if apart.max(initial=0.0) > JOINT_MATCH:
+        k, j = np.unravel_index(int(np.argmax(apart)), apart.shape)
+        raise ModelError(f"{data.source}: pose {data.pose_ids[k]}: q{j + 1} is {data.q[k, j]:.6g} but the plan "
+                         f"{plan_where} has {q[plan_row[int(data.pose_ids[k])], j]:.6g} ({apart[k, j]:.3g} apart, more "
+                         f"than {JOINT_MATCH:g} rad or m): not a run of this plan; give the plan the test ran")
     y = data.xyz
     if calibration:
         from gecgen.api import load_calibration
         from gecgen.runtime.identify import to_world
 
         y = to_world(load_calibration(calibration).calibration_.frames, data)
-    plan_row = {int(p): k for k, p in enumerate(pose)}
     row = np.array([plan_row[int(p)] for p in data.pose_ids])[data.pose]  # the plan row of every measured point
     commanded = target_positions(robot, q)[row, data.target]
     R_cmd = tool_poses(robot, q)[0][row, :3, :3]

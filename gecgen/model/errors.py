@@ -25,6 +25,9 @@ MAX_TERM_LENGTH = 200
 MAX_EXPONENT = 16
 #: constants in terms stay within 2**+-MAX_LOG2, inside double precision with room for products
 MAX_LOG2 = 1000
+#: a term's numbers stay within 1/MAX_SCALE..MAX_SCALE in magnitude: scale factors and periods of
+#: any unit fit, and products of the fit's columns stay well inside double precision
+MAX_SCALE = 1e12
 FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sign": sp.sign, "abs": sp.Abs}  # and sqrt, a power
 ALLOWED = "use numbers, variables, + - * / **, sin, cos, sqrt, sign, abs, poly, fourier and the load signals"
 
@@ -139,6 +142,12 @@ class _TermParser:
             self.fail(text, "complex (a root of a negative number); rewrite the term")
         if any(abs(_log2(n)) > MAX_LOG2 for n in expr.atoms(sp.Number) if n != 0):
             self.fail(text, "holds a number beyond floating point; rewrite the term")
+        # a factor only rescales the term's coefficient (fitted in any unit), but one of 1e300 puts
+        # the fit's sums of squares beyond double precision: its figures come out as inf or 0
+        odd = [n for n in expr.atoms(sp.Number) if n != 0 and abs(_log2(n)) > math.log2(MAX_SCALE)]
+        if odd:
+            self.fail(text, f"holds the number {float(odd[0]):.3g}, outside {1 / MAX_SCALE:g}..{MAX_SCALE:g} in "
+                            f"magnitude: a term's scale is its coefficient's (fitted in any unit); drop the factor")
         for x in sorted(expr.free_symbols, key=str):
             if _degree(expr, x) > MAX_EXPONENT:
                 self.fail(text, f"{x} appears to the power {_degree(expr, x):g} (nested powers and products "

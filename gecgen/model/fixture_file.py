@@ -66,9 +66,33 @@ def read_fixtures(path) -> tuple[Fixture, ...]:
                 except ValueError:
                     normal = np.full(3, np.nan)
                 bad = next((c for c, v in zip(NORMAL, normal) if not np.isfinite(v)), "nx")
-                ok = np.isfinite(normal).all() and np.linalg.norm(normal) > 0
+                ok = np.isfinite(normal).all() and np.abs(normal).max() > 0
                 require(ok, f"{at(table.where, r + 2, bad)}: the normal ({', '.join(cells)}) is not a nonzero "
                             f"direction; give three numbers, or leave all three empty for a socket")
+                # scaled to its largest component first: the norm of (1e300, 1e300, 0) overflows
+                normal = normal / np.abs(normal).max()
                 normal = normal / np.linalg.norm(normal)
         out.append(Fixture(name, xyz[r], normal))
+    _check_apart(out, table.where)
     return tuple(out)
+
+
+#: two sockets closer than this (m), or two planes, one within this of the other, are one fixture
+SAME_PLACE_M = 1e-3
+
+
+def _check_apart(fixtures: list[Fixture], where: str) -> None:
+    """Two rows that describe one socket or one plane would have the design plan one fixture twice
+    and say nothing; a copied row is the usual cause."""
+    for k, f in enumerate(fixtures):
+        for j, g in enumerate(fixtures[:k]):
+            if f.is_plane != g.is_plane:
+                continue
+            if f.is_plane:
+                same = abs(f.normal @ g.normal) > 1 - 1e-9 and abs(f.normal @ (f.point - g.point)) < SAME_PLACE_M
+                what = "the same plane"
+            else:
+                same = np.linalg.norm(f.point - g.point) < SAME_PLACE_M
+                what = f"sockets {1e3 * np.linalg.norm(f.point - g.point):.3g} mm apart"
+            require(not same, f"{where}: rows {j + 2} and {k + 2}: {excerpt(g.name)} and {excerpt(f.name)} are {what}; "
+                              f"give each fixture its own position (m), or drop one of the rows")

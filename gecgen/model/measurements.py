@@ -186,6 +186,13 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     state_cols = [*qcols, *wcols, *aux_names]
     state = np.column_stack([column(c) for c in state_cols])
     relative = rel.read_relative(table)
+    twice = None if relative is None else relative.seated_twice(state[:, :robot.n], target)
+    if twice is not None:
+        a, b = twice
+        raise ModelError(f"{where}: rows {a + 2} and {b + 2}: the same joint readings seat target "
+                         f"{excerpt(names[a].strip())} at point {excerpt(relative.names[relative.group[a]])} and at "
+                         f"point {excerpt(relative.names[relative.group[b]])}, which one configuration cannot do: "
+                         f"give each point its own recording (was one copied?)")
     xyz = _positions(table, column, relative)
     within_limits(state[:, :robot.n], robot, where, limit_tolerance)
     mm = np.nonzero(np.abs(xyz).max(axis=1) >= MM_SUSPECT)[0]

@@ -108,6 +108,20 @@ class Relative:
                              3 * np.maximum(n - 1, 0) / np.maximum(n, 1))
         return np.where(self.rows, per_group[np.maximum(self.group, 0)], np.nan)
 
+    def seated_twice(self, q: np.ndarray, target: np.ndarray) -> tuple[int, int] | None:
+        """The first two rows (indices) that seat one target at two points with the same joint
+        readings, q (R, n) and target (R,) per row; None when there are none. One configuration
+        cannot put a ball in two sockets: such rows are one recording given as two sockets, whose
+        distance the fit would then be asked to make of nothing."""
+        rows = np.nonzero(self.rows & ~self.is_plane()[np.maximum(self.group, 0)])[0]
+        if not len(rows):
+            return None
+        _, first, same = np.unique(np.column_stack([q[rows], target[rows]]), axis=0, return_index=True,
+                                   return_inverse=True)
+        same = same.ravel()
+        clash = np.nonzero(self.group[rows] != self.group[rows[first[same]]])[0]
+        return (int(rows[first[same[clash[0]]]]), int(rows[clash[0]])) if len(clash) else None
+
     def summary(self) -> dict:
         """What the file holds: {points, planes, distances, rows}, and relations when it has any."""
         plane = self.is_plane()

@@ -271,9 +271,11 @@ class Robot:
 
     def require_placed(self):
         """Refuse (one line) to build anything on targets that still wait for measured data."""
-        require(not self.estimated, f"{self.source}: target '{self.estimated[0] if self.estimated else ''}' is left "
-                                    f"to estimate: place it from measured data first (identify, diagnose and calibrate "
-                                    f"do; runtime.placement.place_targets)")
+        name = self.estimated[0] if self.estimated else ""
+        require(not self.estimated, f"{self.source}: target '{name}' is left to estimate, so this needs measured data "
+                                    f"(identify, diagnose and calibrate place it from theirs); to plan before "
+                                    f"measuring, write a rough guess instead, targets: {{{name}: [x, y, z]}} in the "
+                                    f"tool frame (m; a rough guess serves to plan the poses)")
 
     def error_names(self) -> list[str]:
         """Names like '3.ey' in the order of the generalized error vector eps."""

@@ -14,6 +14,7 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 
 from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
@@ -97,6 +98,13 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
                  tuple(op for op in post if op[1] != 0), lo, hi)
 
 
+#: characters of a coupling's value at most (a sum of a few number * joint terms)
+MAX_COUPLING_LENGTH = 1000
+#: a coupling's multipliers and offset at most, in SI units (rad or m per rad or m of reading; rad or m)
+MAX_RATIO = 1e3
+#: condition number of the readings-to-joints map at most
+MAX_CONDITION = 1e6
+
 #: the value of a target whose position on the tool the data is to give
 ESTIMATE = "estimate"
 
@@ -113,11 +121,15 @@ def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], t
     return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
 
 
-def _affine(text, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.Expr]:
-    """A coupling's value `text` ("J2 + J3", "-(t2 + t3)", "0.5*j4 + j5 - 10") as multipliers by
-    joint name and an offset, exact; only numbers, joint names, + - * / and parentheses."""
+def _affine(text, own: str, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.Expr]:
+    """Joint `own`'s coupling value `text` ("J2 + J3", "-(t2 + t3)", "0.5*j4 + j5 - 10") as
+    multipliers by joint name and an offset, exact; only numbers, joint names, + - * / and parentheses."""
     require(isinstance(text, str) and text.strip(), f"{where}: expected the joint's value in the readings as a "
                                                     f"text such as \"J2 + J3\", got {excerpt(text)}")
+    # the parser and the walk below recurse once per nested sign or bracket: a long text would end
+    # in a MemoryError or RecursionError, and no coupling of a robot's joints needs this many
+    require(len(text) <= MAX_COUPLING_LENGTH, f"{where}: {excerpt(text)} is longer than {MAX_COUPLING_LENGTH} "
+                                              f"characters; a coupling is a short sum such as \"J2 + J3\"")
     symbols = {n: sp.Symbol(f"_{n}") for n in names}
 
     def walk(node):
@@ -141,14 +153,23 @@ def _affine(text, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.
 
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        value = sp.expand(walk(tree.body))
     except SyntaxError:
         raise ModelError(f"{where}: {excerpt(text)} is not an expression; write e.g. \"J2 + J3\"") from None
-    value = sp.expand(walk(tree.body))
+    except (RecursionError, MemoryError):
+        raise ModelError(f"{where}: {excerpt(text)} nests its signs or brackets too deeply; write the sum "
+                         f"plainly, such as \"-J2 + J3\"") from None
     poly = sp.Poly(value, *symbols.values())
     require(poly.total_degree() <= 1, f"{where}: {excerpt(text)} is not affine in the readings (a product or power "
                                       f"of joints); a coupling is a sum of number * joint plus a number")
     multipliers = {n: value.coeff(x) for n, x in symbols.items() if value.coeff(x) != 0}
     require(multipliers, f"{where}: {excerpt(text)} depends on no joint; a joint that never moves is a fixed transform")
+    # a joint's own name whose multiplier cancels (0*J3, J3 - J3) would make the joint passive and
+    # drop its reading, which shifts every later column of the data: the text says otherwise
+    named = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
+    require(own in multipliers or own not in named, f"{where}: {excerpt(text)}: the multiplier of "
+            f"{own}'s own reading cancels to 0; write {own}'s value without {own} to make it passive (no reading), "
+            f"or give its reading a nonzero multiplier")
     return multipliers, value.subs({x: 0 for x in symbols.values()})
 
 
@@ -171,7 +192,7 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
                                f"{', '.join(names)}")
         require(name not in mimics, f"{where}: {excerpt(name)} is a <mimic> joint of the URDF, whose limits already "
                                     f"narrowed the joint it follows; change its <mimic> in the URDF instead")
-        values[name] = _affine(text, names, f"{where}.{name}")
+        values[name] = _affine(text, name, names, f"{where}.{name}")
     kinds = {j.name: j.kind for j in chain}
 
     def scale(kind: str) -> sp.Expr:  # rad (or m) per unit of the file
@@ -184,6 +205,13 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
             continue
         multipliers, offset = values[j.name]
         terms = tuple((n, multipliers[n] * scale(j.kind) / scale(kinds[n])) for n in names if n in multipliers)
+        unit = {"R": "rad", "P": "m"}
+        for size, what in [(m, f"the multiplier of {n}, {unit[j.kind]} per {unit[kinds[n]]},") for n, m in terms] + \
+                [(offset * scale(j.kind), f"the offset, {unit[j.kind]},")]:
+            # gears, belts and four-bar linkages couple joints by ratios of a few; 1e300 is a typing
+            # error that would fit and print as inf
+            require(abs(float(size)) <= MAX_RATIO, f"{where}.{j.name}: {excerpt(spec[j.name])}: {what} is "
+                    f"{float(size):.3g}, beyond +-{MAX_RATIO:g}; check the number (a coupling's ratios are a few)")
         out.append(replace(j, coupling=Coupling(terms, offset * scale(j.kind), own=j.name in multipliers,
                                                 declared=True)))
     readings = {j.name for j in out if j.reads}
@@ -192,7 +220,35 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
             require(n in readings, f"{where}: joint {excerpt(j.name)} follows {excerpt(n)}, which has no reading "
                                    f"of its own (it is coupled without naming itself); write {excerpt(j.name)}'s "
                                    f"value in the joints the controller reads")
+    _check_invertible(out, where)
     return tuple(out)
+
+
+def _check_invertible(chain, where: str) -> None:
+    """The joints that keep a reading must give back their readings: the controller's readings are
+    what a calibration corrects, so a map of them that has no inverse (J2: J2 + J3, J3: J2 + J3)
+    cannot be compensated, and one nearly without an inverse multiplies every error."""
+    readers = [j for j in chain if j.reads]
+    coupled = [j for j in readers if j.coupling is not None]
+    if not coupled:
+        return
+    index = {j.name: k for k, j in enumerate(readers)}
+    A = sp.eye(len(readers))
+    for j in coupled:
+        A[index[j.name], index[j.name]] = 0
+        for n, m in j.coupling.terms:
+            A[index[j.name], index[n]] = m
+    # rows of uncoupled readers are unit rows, so the determinant is that of the coupled joints' block
+    rows = [index[j.name] for j in coupled]
+    named = ", ".join(j.name for j in coupled)
+    require(A.extract(rows, rows).det() != 0,
+            f"{where}: {named}: the joints' values do not determine their readings (the map from the readings to "
+            f"these joints cannot be inverted), so no correction of the readings exists; give each joint that keeps "
+            f"its reading a map of its own, such as J3: J2 + J3 with J2 left uncoupled")
+    cond = np.linalg.cond(np.array(A.evalf(), dtype=float))
+    require(cond <= MAX_CONDITION, f"{where}: {named}: these couplings can hardly be inverted (condition number "
+                                   f"{cond:.3g}, beyond {MAX_CONDITION:g}): a reading's error would be magnified as "
+                                   f"much; check the multipliers")
 
 
 def _check_joint_names(joints, place):
@@ -242,9 +298,28 @@ def _branch_specs(spec: dict, where: str, urdf: bool) -> list[tuple[str, dict, s
         require(is_name(name), f"{bwhere}: branch names must be identifiers")
         require(isinstance(b, dict), f"{bwhere}: expected a mapping with {tip}, tool and targets")
         require_keys(b, bwhere, required={tip, "targets"}, optional={"tool"})
-        require(isinstance(b[tip], str), f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}")
+        require(isinstance(b[tip], str) and b[tip],
+                f"{bwhere}: {tip}: expected the name of a {'URDF link' if urdf else 'joint'}, got {excerpt(b[tip])}")
         out.append((name, b, bwhere))
+    _check_branch_identifiers(spec["name"], [n for n, _, _ in out], where)
     return out
+
+
+#: the generated C's functions of each branch, named <robot>_<function>_<branch> (gecgen/emit)
+BRANCH_FUNCTIONS = ("fk", "tool_jacobian", "compensate", "compensate_batch")
+
+
+def _check_branch_identifiers(robot: str, names: list[str], where: str) -> None:
+    """Branch names whose generated functions coincide ('left' and 'batch_left' both give
+    compensate_batch_left) would define one C function twice: the code would not compile."""
+    seen: dict[str, tuple[str, str]] = {}
+    for name in names:
+        for fn in BRANCH_FUNCTIONS:
+            ident = f"{fn}_{name}"
+            other = seen.setdefault(ident, (name, fn))
+            require(other[0] == name, f"{where}: branches {excerpt(other[0])} and {excerpt(name)}: the generated C "
+                                      f"would define {robot}_{ident} twice ({other[1]} of {excerpt(other[0])}, {fn} "
+                                      f"of {excerpt(name)}); rename one of them")
 
 
 def _urdf_tree(path: Path, base_link: str, branches):
@@ -292,6 +367,8 @@ def _dh_tree(rows: list, joints: tuple[Joint, ...], branches, where: str):
             continue
         require(branches[0][0], f"{where}: joints[{k}].parent: only a robot with branches may have one; add "
                                 f"'branches' with each tip")
+        require(isinstance(parent, str), f"{where}: joints[{k}].parent: expected an earlier row's joint name or "
+                                         f"'base', got {excerpt(parent)}")
         require(parent == "base" or frame.get(parent, k + 1) <= k,
                 f"{where}: joints[{k}].parent: {excerpt(parent)} is not an earlier row's joint name or 'base'")
         parents.append(0 if parent == "base" else frame[parent])

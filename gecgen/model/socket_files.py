@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements
 from gecgen.model.relative import POINT, Distance, Relative
 from gecgen.model.robot import Robot
@@ -22,9 +23,14 @@ from gecgen.model.table import parse_float
 from gecgen.model.validation import ModelError, excerpt, require
 
 
-def _readings(path: Path, robot: Robot, sep: str, decimal: str) -> np.ndarray:
-    """(rows, n) joint readings of one socket file; a row with another count of columns or a cell
-    that is not a number is refused with its file line and column."""
+#: m: a stated socket distance may differ from the nominal model's by half of it and this much
+DISTANCE_SLACK_M = 0.01
+
+
+def _readings(path: Path, robot: Robot, sep: str, decimal: str) -> tuple[np.ndarray, int]:
+    """(rows, n) joint readings of one socket file, and the line number of its first row; a row
+    with another count of columns or a cell that is not a number is refused with its file line and
+    column."""
     try:
         lines = path.read_text().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
@@ -61,7 +67,7 @@ def _readings(path: Path, robot: Robot, sep: str, decimal: str) -> np.ndarray:
                 q[r, j] = np.nan
             require(np.isfinite(q[r, j]), f"{path}: line {r + 1 + headed}, column {k + 1} ({names[j]}): "
                                           f"{excerpt(row[k].strip())} is not a finite number; fix or remove the row")
-    return q
+    return q, 1 + headed
 
 
 def read_socket_files(paths, robot: Robot, target: str | None = None, distance_m: float | None = None,
@@ -77,9 +83,15 @@ def read_socket_files(paths, robot: Robot, target: str | None = None, distance_m
         target = targets[0]
     require(target in targets, f"--target {excerpt(target)}: not a target of {robot.name} ({', '.join(targets)})")
     names = [f"{p.parent.name}/{p.stem}" if p.parent.name else p.stem for p in paths]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    require(not twice, f"socket {twice[0] if twice else ''} is given twice; give each socket file once")
-    q = [_readings(p, robot, sep, decimal) for p in paths]
+    for k, name in enumerate(names):
+        if name in names[:k]:
+            first = paths[names.index(name)]
+            same = first.resolve() == paths[k].resolve()
+            raise ModelError(f"socket {name} is given twice; give each socket file once" if same else
+                             f"{first} and {paths[k]} both make the socket id {name} (its folder's name and its "
+                             f"own); rename one folder or file")
+    loaded = [_readings(p, robot, sep, decimal) for p in paths]
+    q, first_line = [qk for qk, _ in loaded], [line for _, line in loaded]
     for p, qk in zip(paths, q):
         require(len(qk) >= 2, f"{p}: one configuration: a socket seen once says nothing; record more")
     distances = []
@@ -93,7 +105,23 @@ def read_socket_files(paths, robot: Robot, target: str | None = None, distance_m
             distances.append(Distance(members[0], members[1], distance_m, distance_std_m))
     N = sum(len(qk) for qk in q)
     group = np.repeat(np.arange(len(paths)), [len(qk) for qk in q])
+    relative = Relative(group, tuple(names), (POINT,) * len(paths), tuple(distances))
+    twice = relative.seated_twice(np.vstack(q), np.zeros(N))
+    if twice is not None:
+        start = np.cumsum([0] + [len(qk) for qk in q])
+        a, b = ((paths[group[r]], r - start[group[r]] + first_line[group[r]]) for r in twice)
+        raise ModelError(f"{a[0]}: line {a[1]} and {b[0]}: line {b[1]} hold the same "
+                         f"joint readings, but one configuration cannot seat the ball in two sockets: give each "
+                         f"socket its own recording (was one file copied?)")
+    for d in distances if target not in robot.estimated else ():  # an estimated target has no nominal place
+        # the nominal model misplaces a socket by millimetres, not by a factor: a distance far from its
+        # nominal one is in another unit (50 for 50 mm) or joins files of other sockets
+        nominal = np.linalg.norm(np.subtract(*(target_positions(robot, q[k])[:, targets.index(target)].mean(axis=0)
+                                               for k in (d.a, d.b))))
+        require(abs(distance_m - nominal) <= 0.5 * nominal + DISTANCE_SLACK_M,
+                f"{paths[d.a].parent}: the socket distance {distance_m:g} m is far from the {nominal:.3g} m at which "
+                f"the robot's nominal model puts the folder's two sockets; give the distance in metres (50 mm is "
+                f"0.05), and the files of one plate's two sockets")
     return Measurements(q=np.vstack(q), w=np.zeros((N, 6)), aux=np.zeros((N, 0)), aux_names=(),
                         pose_ids=np.arange(N), pose=np.arange(N), target=np.full(N, targets.index(target)),
-                        xyz=np.full((N, 3), np.nan), source=", ".join(map(str, paths)),
-                        relative=Relative(group, tuple(names), (POINT,) * len(paths), tuple(distances)))
+                        xyz=np.full((N, 3), np.nan), source=", ".join(map(str, paths)), relative=relative)

@@ -75,12 +75,20 @@ def _origin(joint: ET.Element, where: str) -> tuple[Elementary, ...]:
     return tuple((op, sp.Float(v, 17)) for op, v in ops if v != 0.0)
 
 
+#: a joint axis may be this far from unit length (either way) and still be read as a direction
+MAX_AXIS_SCALE = 1e3
+
+
 def _axis(joint: ET.Element, where: str) -> tuple:
     """The unit joint axis; components that are exactly 0 or +-1 stay exact so the chain prunes them."""
     el = joint.find("axis")
     axis = _triple(None if el is None else el.get("xyz"), "1 0 0", f"{where} axis xyz")
-    norm = math.hypot(*axis)  # no overflow: an axis of 1e200 1e200 0 is a direction like any other
+    norm = math.hypot(*axis)
     require(norm > 0, f"{where}: axis must not be zero; give the direction of motion")
+    # a URDF axis is a unit vector; one of 1e308 (whose length overflows to inf, leaving a zero
+    # axis) or 1e-300 is a broken export, not a direction to guess from
+    require(1 / MAX_AXIS_SCALE <= norm <= MAX_AXIS_SCALE,
+            f"{where} axis xyz: length {norm:.3g}; a joint axis is a unit vector (length 1); fix the URDF")
     unit = [a / norm for a in axis]
     return tuple(sp.Integer(int(u)) if u in (-1.0, 0.0, 1.0) else sp.Float(u, 17) for u in unit)
 

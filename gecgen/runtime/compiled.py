@@ -7,8 +7,8 @@ once per robot into an object file that each model's own code is linked to, so a
 round of diagnose, each candidate of calibrate) compiles only its own part. Two processes that want
 the same entry build it once: the second waits for the first. Without a C compiler the
 same functions come from the generated CasADi module, and a warning says so. Every cache entry is
-checked against its content hash before it is used: a truncated or corrupt entry is rebuilt,
-never loaded. A cache folder that cannot be written is replaced, with a warning, by a fresh
+checked against its content hash before it is used, and a library or object file against its
+own headers (every byte they place is there): a truncated or corrupt entry is rebuilt, never loaded. A cache folder that cannot be written is replaced, with a warning, by a fresh
 temporary folder for the rest of the run.
 """
 from __future__ import annotations
@@ -23,6 +23,7 @@ import json
 import os
 import platform
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
@@ -121,12 +122,43 @@ def model_key(robot: Robot, model: ErrorModel) -> str:
 
 
 def _intact(path: Path) -> bool:
-    """A cache entry is used only when its sidecar `.sha256`, written after it, matches its bytes:
-    loading a truncated library would crash the process."""
+    """A cache entry is used only when its sidecar `.sha256`, written after it, matches its bytes,
+    and a library or object file is whole by its own headers: loading a truncated library crashes
+    the process (SIGBUS), and a sidecar can be rewritten to match a truncated file (a copy, a
+    restore, a user's repair)."""
     try:
-        return _sha256_file(path) == path.with_name(path.name + ".sha256").read_text().strip()
+        data = path.read_bytes()
+        sidecar = path.with_name(path.name + ".sha256").read_text().strip()
     except OSError:
         return False  # no entry, or half of one
+    return hashlib.sha256(data).hexdigest() == sidecar and (path.suffix not in (".so", ".o") or _whole_binary(data))
+
+
+def _whole_binary(data: bytes) -> bool:
+    """Whether an ELF file holds everything its headers place in it: the program and section header
+    tables, every segment's file bytes and every section's (but those that take no room, SHT_NOBITS).
+    Where the platform's libraries are not ELF (macOS, Windows) the sidecar alone is the check."""
+    if sys.platform == "darwin" or os.name == "nt":
+        return True
+    if len(data) < 64 or data[:4] != b"\x7fELF" or data[4] not in (1, 2) or data[5] not in (1, 2):
+        return False
+    wide = data[4] == 2  # ELFCLASS64; the offsets below are the ELF header's and entries' fields
+
+    def unpack(fmt: str, at: int) -> tuple:
+        return struct.unpack_from(("<" if data[5] == 1 else ">") + fmt.replace("W", "Q" if wide else "I"), data, at)
+
+    phoff, shoff = unpack("WW", 0x20 if wide else 0x1C)
+    phentsize, phnum, shentsize, shnum = unpack("HHHH", 0x36 if wide else 0x2A)
+    if phoff + phnum * phentsize > len(data) or shoff + shnum * shentsize > len(data):
+        return False
+    segments = [unpack("WWWW", phoff + k * phentsize + (8 if wide else 4))[0::3] for k in range(phnum)]
+    sections = [unpack("WW", shoff + k * shentsize + (0x18 if wide else 0x10)) for k in range(shnum)
+                if unpack("I", shoff + k * shentsize + 4)[0] != SHT_NOBITS]
+    return all(offset + size <= len(data) for offset, size in segments + sections)
+
+
+#: an ELF section that takes no room in the file (.bss)
+SHT_NOBITS = 8
 
 
 def _store(path: Path, data: bytes):

@@ -86,6 +86,16 @@ def check(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, s
                  looks)
 
 
+def at_check_joints(cm: CompiledModel, data: Measurements, c: np.ndarray, points: np.ndarray,
+                    q_base: np.ndarray) -> np.ndarray:
+    """Baseline points (R, 3) measured at readings q_base (P, n), carried to the check's readings
+    data.q by the calibrated model's difference between the two (the check's wrench and aux for
+    both): a pose read a little apart (a servo's standstill error) then compares like for like."""
+    aux = data.aux_columns(cm.model.aux)
+    at = (data.pose, data.target)
+    return points + cm.model_targets(data.q, data.w, aux, c)[at] - cm.model_targets(q_base, data.w, aux, c)[at]
+
+
 def _joint(cm: CompiledModel, data: Measurements, aux: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
     """The joint whose reading offset best explains the residual e (R, 3), or "unexplained"."""
     n = cm.robot.n

@@ -25,7 +25,8 @@ from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
 from gecgen.runtime import influence, relative, robust
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
-from gecgen.runtime.redundancy import RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited
+from gecgen.runtime.redundancy import (RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited,
+                                      unmeasured_frames)
 from gecgen.runtime.registration import IDENTITY, Registration, register
 from gecgen.runtime.threads import one_blas_thread
 
@@ -372,7 +373,8 @@ def structural_analysis(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
             return red
     except (OSError, ValueError, KeyError, TypeError):
         pass  # no entry, or a truncated or foreign one: recomputed and replaced below
-    red = structural(*structural_matrix(cm, targets), cm.robot, cm.model, len(targets))
+    red = structural(*structural_matrix(cm, targets), cm.robot, cm.model, len(targets),
+                     unmeasured_frames(cm.robot, targets))
     write_atomically(path, red.to_json())
     return red
 

@@ -196,6 +196,13 @@ def plan_cube(robot: Robot, tool_rotation: np.ndarray, *, cube_rotation: np.ndar
     cube_rotation = np.eye(3) if cube_rotation is None else _rotation(cube_rotation, "cube_rotation")
     require(plane in PLANES, f"plane '{plane}': not one of the standard's diagonal planes ({', '.join(PLANES)})")
     require(cycles >= 2, f"cycles {cycles}: repeatability needs at least 2")
+    tip = robot.tips()[branch][0]
+    moving = {k for i in robot.path(tip) if i > 0 for k, _ in robot.drives()[i - 1][0]}
+    which = f" of branch '{robot.branches[branch].name}'" if robot.branches else ""
+    # one orientation at points spread in three directions takes six degrees of freedom, but for
+    # arms built for it (a SCARA's tool pointing down): fewer joints are named when none is found
+    which += f" (moved by {len(moving)} joints: fewer than 6 hold one orientation over a cube only by design)" \
+        if len(moving) < 6 else ""
     search = _Search(robot, tool_rotation, cube_rotation, plane, branch, rng)
 
     lo, hi = (np.array(v) for v in robot.sampling_box())
@@ -204,13 +211,13 @@ def plan_cube(robot: Robot, tool_rotation: np.ndarray, *, cube_rotation: np.ndar
     centres = reach[:candidates] @ cube_rotation.T
     q_centres, reached = search.reach(_poses(centres, tool_rotation), rng.uniform(lo, hi, (len(centres), robot.n)),
                                       CENTRE_STARTS)
-    require(reached.any(), f"{robot.name}: none of {candidates} candidate centres is reached with the tool in the "
-                           f"stated orientation; another tool_rotation, or more candidates")
+    require(reached.any(), f"{robot.name}: none of {candidates} candidate centres is reached with the tool{which} in "
+                           f"the stated orientation; give another tool orientation")
     sides, q = search.bisect(centres[reached], q_centres[reached], upper, max(tolerance_m, COARSE * upper))
     top = np.argsort(-sides)[:SEARCHES]
     centre, side, q_best = centres[reached][top], sides[top], q[top]
-    require(side[0] > 0, f"{robot.name}: no cube around {candidates} candidate centres is reached with the tool in the "
-                         f"stated orientation; another tool_rotation, or more candidates")
+    require(side[0] > 0, f"{robot.name}: no cube around {candidates} candidate centres is reached with the "
+                         f"tool{which} in the stated orientation; give another tool orientation")
 
     move = 0.25 * side
     moves = np.vstack([np.zeros(3), cube_rotation.T, -cube_rotation.T])  # stay first: a tie keeps the centre

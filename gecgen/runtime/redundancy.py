@@ -218,8 +218,26 @@ def generic_design(robot: Robot, n_aux: int, n_poses: int, rng: np.random.Genera
     return q, w, rng.normal(0, 1, (n_poses, n_aux))
 
 
+def unmeasured_frames(robot: Robot, targets) -> dict[int, str]:
+    """On a tree, the frames that move only branches of which no target is measured (`targets`:
+    the measured targets' indices), each with the reason in words: their errors are not seen for
+    want of data, which a lever arm of 0 m does not tell. {} on a serial robot."""
+    measured = {robot.branch_of(robot.target_names[t]) for t in targets}
+    unmeasured = [k for k in range(len(robot.branches)) if k not in measured]
+    on = {k: set(robot.path(robot.branches[k].tip)) for k in range(len(robot.branches))}
+    out = {}
+    for f in range(robot.n_frames + 1):
+        carried = [k for k in on if f in on[k]]
+        if carried and all(k in unmeasured for k in carried):
+            names = [robot.branches[k].name for k in carried]
+            wanted = [t for t in robot.target_names if robot.branch_of(t) in carried]
+            out[f] = (f"frame {f} moves only branch {', '.join(map(repr, names))}, of which the data measures no "
+                      f"target ({', '.join(wanted)}); measure them to calibrate it")
+    return out
+
+
 def structural(A_generic: np.ndarray, lever: np.ndarray, robot: Robot, model: ErrorModel,
-               n_targets_measured: int) -> Redundancy:
+               n_targets_measured: int, unmeasured: dict[int, str] | None = None) -> Redundancy:
     """Structural analysis on A_generic (H_e rows at generic poses, or their R factor; m x nc with
     the model's coefficient columns) and each generalized error's lever arm there (ne,), m per m or
     rad: an error below BLIND_LEVER_M moves no measured point (a rotation about an axis through the
@@ -230,8 +248,9 @@ def structural(A_generic: np.ndarray, lever: np.ndarray, robot: Robot, model: Er
     blind = np.array([lever[c.error] < BLIND_LEVER_M for c in coefs], bool)
     kept, dependent = select_independent(A_generic, preference_order(robot, model, candidates), blind=blind)
     merges = merged_into(A_generic, kept, dependent, names)
+    unmeasured = unmeasured or {}
     eliminated = [Eliminated(names[j], j, "structural",
-                             candidates.get(coefs[j].error,
+                             unmeasured.get(coefs[j].error // 6) or candidates.get(coefs[j].error,
                                             f"the measured points cannot see it (lever arm {lever[coefs[j].error]:.2g} m)"
                                             if blind[j] else "depends on other terms of the model at every pose"),
                              merges[j]) for j in sorted(dependent)]
