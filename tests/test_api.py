@@ -92,7 +92,9 @@ def test_predict_and_compensate_agree_with_the_calibrated_model(fitted, files):
     q = gecgen.read_measurements(files / "train.csv", ROBOT).q[:5]
     done = fitted.compensate(q)
     nominal = CompiledModel(fitted.robot_, fitted.calibration_.model).nominal_targets(q)
-    assert np.abs(fitted.predict(done.q) - nominal).max() < 1e-9
+    ok = done.status == 0  # random poses: one is near J5 = 0 (smallest singular value 0.001), damped there
+    assert ok.sum() >= 4 and set(done.status[~ok]) <= {2}, done.status
+    assert np.abs(fitted.predict(done.q[ok]) - nominal[ok]).max() < 1e-9
     assert np.abs(fitted.predict(q) - nominal).max() > 1e-4  # the calibration moves the tool
 
 

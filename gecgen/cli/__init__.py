@@ -15,6 +15,7 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
+from gecgen.cli.common import Incomplete
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"gecgen {args.command}: interrupted; nothing was written for this command's unfinished step",
                   file=sys.stderr)
             return 130
-    if code:
+    if code and result is None:
         return code
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
@@ -187,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result, allow_nan=False))
     else:
         print_human(result)
-    return 0
+    return code
 
 
 def _run(args) -> tuple[int, dict | None]:
@@ -195,6 +196,9 @@ def _run(args) -> tuple[int, dict | None]:
     try:
         with reading(check_outputs(args)):
             return 0, args.fn(args)
+    except Incomplete as exc:  # the job is done and written, but some of it failed: the result says what
+        print(f"gecgen {args.command}: {exc}", file=sys.stderr)
+        return 1, exc.result
     except ModelError as exc:
         print(f"gecgen {args.command}: {exc}", file=sys.stderr)
         return 2, None
