@@ -2152,7 +2152,7 @@ static int solve(const double *q_cmd, const double *w, const double *aux, const 
                    double *r, double *Jq, double *norm, int *held, int *steps)
 {
     double dq[NQ], d[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], merit, merit_try = 0.0, norm_try = 0.0;
-    int it, j, halvings, stalled = 0;
+    int it, j, halvings, stalled = 0, clipped[NQ];
     memcpy(q, q_cmd, sizeof(double) * NQ);
     for (j = 0; j < NQ; ++j) held[j] = bound && bound[j] == 0.0;
     *norm = pose_residual(q, w, aux, L, c, Tn, r, Jq);
@@ -2169,9 +2169,9 @@ static int solve(const double *q_cmd, const double *w, const double *aux, const 
         for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
             for (j = 0; j < NQ; ++j) {
                 q_try[j] = q[j] + alpha * dq[j];
-                /* a bound clips the trial; the joint is then held (checked below) */
-                if (bound && q_try[j] > q_cmd[j] + bound[j]) q_try[j] = q_cmd[j] + bound[j];
-                if (bound && q_try[j] < q_cmd[j] - bound[j]) q_try[j] = q_cmd[j] - bound[j];
+                /* a bound clips the trial, and holds the joint once the trial is taken */
+                clipped[j] = bound && fabs(q_try[j] - q_cmd[j]) >= bound[j];
+                if (clipped[j]) q_try[j] = q_cmd[j] + (q_try[j] > q_cmd[j] ? bound[j] : -bound[j]);
             }
             norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
             merit_try = norm_try * norm_try + penalty(P, q_try, q_cmd);
@@ -2185,8 +2185,7 @@ static int solve(const double *q_cmd, const double *w, const double *aux, const 
         memcpy(q, q_try, sizeof(q_try));
         memcpy(r, r_try, sizeof(r_try));
         memcpy(Jq, J_try, sizeof(J_try));
-        for (j = 0; j < NQ; ++j)
-            if (bound && fabs(q[j] - q_cmd[j]) >= bound[j]) held[j] = 1;
+        for (j = 0; j < NQ; ++j) held[j] |= clipped[j];
         stalled = merit_try > 0.998001 * merit ? stalled + 1 : 0; /* the residual by under 0.1 % */
         merit = merit_try;
         *norm = norm_try;
