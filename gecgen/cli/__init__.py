@@ -15,7 +15,6 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
-from gecgen.cli.common import Incomplete
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
@@ -165,6 +164,15 @@ def _os_reason(exc: OSError) -> str:
     """`path: reason` of an OSError, as one line."""
     reason = exc.strerror or str(exc)
     return (f"{exc.filename}: {reason}" if exc.filename else reason).splitlines()[0]
+
+
+class Incomplete(Exception):
+    """A command that did its job and wrote its output, with some of it failed: the CLI prints the
+    message (one line) on stderr, the result as usual, and exits 1."""
+
+    def __init__(self, message: str, result: dict):
+        super().__init__(message)
+        self.result = result
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,15 +16,6 @@ DATA_HELP = ("measurement CSV (pose, q1..qn, target, x y z[, wrench, station, or
 CALIBRATION_HELP = "calibration JSON written by gecgen identify or calibrate"
 
 
-class Incomplete(Exception):
-    """A command that did its job and wrote its output, with some of it failed: the CLI prints the
-    message (one line) on stderr, the result as usual, and exits 1."""
-
-    def __init__(self, message: str, result: dict):
-        super().__init__(message)
-        self.result = result
-
-
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
     """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
     from gecgen.runtime.inputs import error_model

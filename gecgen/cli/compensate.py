@@ -3,10 +3,7 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
-
-from gecgen.cli.common import CALIBRATION_HELP, Incomplete, whole
-from gecgen.model import ModelError
+from gecgen.cli.common import CALIBRATION_HELP, whole
 
 
 def add_parser(command):
@@ -18,7 +15,7 @@ def add_parser(command):
                    help="CSV to write: the same rows and columns, q1..qn corrected, and each row's status and "
                         "residual_mm")
     p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50,
-                   help="Newton steps at most per command (default %(default)s)")
+                   help="Newton steps at most per solve (default %(default)s; near a singular posture one solve per damping tried)")
     p.add_argument("--bound", metavar="B[,B...]",
                    help="largest correction per joint, in the joint's unit (rad or m): one value for every joint "
                         "or one per joint, comma-separated (inf leaves a joint free); a joint that reaches it is "
@@ -27,8 +24,10 @@ def add_parser(command):
                                     "corrected, every other reading held)")
 
 
-def parse_bound(text: str | None, n: int) -> np.ndarray | None:
+def parse_bound(text: str | None, n: int) -> list[float] | None:
     """--bound as n values, or a one-line refusal naming the option and the fix."""
+    from gecgen.model import ModelError
+
     if text is None:
         return None
     try:
@@ -38,11 +37,16 @@ def parse_bound(text: str | None, n: int) -> np.ndarray | None:
                          ) from None
     if len(values) not in (1, n):
         raise ModelError(f"--bound {text}: {len(values)} values; give one for every joint or {n}, comma-separated")
-    return np.array(values * n if len(values) == 1 else values)
+    if not all(v >= 0 for v in values):
+        raise ModelError(f"--bound {text}: a bound is negative or nan; give corrections >= 0 (inf leaves a joint free)")
+    return values * n if len(values) == 1 else values
 
 
 def run(args) -> dict:
+    import numpy as np
+
     from gecgen.api import load_calibration
+    from gecgen.cli import Incomplete
     from gecgen.model.measurements import read_commands, write_commands
     from gecgen.runtime.compiled import NONFINITE, STATUS_NAMES
 

@@ -120,10 +120,11 @@ void pps_eps_batch(int n, const double *q, const double *w, const double *aux, c
 void pps_basis_batch(int n, const double *q, const double *w, const double *aux, double *f);
 
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
- * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
- * max_iter steps until the pose residual is below tol (m). The load signals are held at their
+ * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Gauss-Newton with backtracking, at
+ * most max_iter steps per solve, until the pose residual is below tol (m); near a singular posture one
+ * solve per damping tried (at most 11 in all). The load signals are held at their
  * values at q_cmd (so a term such as sign(gravity_torque(q6)) takes the command's sign). Returns a
- * GECGEN_ status code and the number of iterations used in *iterations (may be NULL). q_out is
+ * GECGEN_ status code and the number of steps taken in all in *iterations (may be NULL). q_out is
  * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol
  * (the residual: sqrt(|dp|^2 + a^2) in m, a the sine of the axes' angle up to 90 degrees and
  * 2 minus it beyond, so no tol below 1 passes a tool turned more than 90 degrees).
