@@ -26,7 +26,7 @@ from gecgen.model.measurements import read_measurements as _read_measurements
 from gecgen.model.validation import excerpt, nearest, require
 from gecgen.runtime import calibration as _calibration
 from gecgen.runtime import significance
-from gecgen.runtime.compiled import FAILED, NONFINITE, OUTSIDE_LIMITS, CompiledModel
+from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, STATUS_NAMES, CompiledModel
 from gecgen.runtime.inputs import checked, error_model, measured_counts, on_points, placed
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
@@ -164,15 +164,26 @@ class Score:
 @dataclass(frozen=True)
 class Compensation:
     """`Calibrator.compensate`: corrected joint commands q (N, n) (m or rad) for the nominal ones,
-    and per row its status (N,): OK 0, OUTSIDE_LIMITS 3 (converged outside the joint limits;
-    `outside_limits` lists those rows, 0-based); max_correction the largest |q - q_cmd| per joint
-    name; extrapolation as in `Score`."""
+    and per row its status (N,), the generated C's GECGEN_ codes (`STATUS_NAMES`): OK 0,
+    NOT_CONVERGED 1, SINGULAR 2 (near a singular posture: the least damped correction the model's
+    error justifies), OUTSIDE_LIMITS 3 (converged outside the joint limits; `outside_limits` lists
+    those rows, 0-based), NONFINITE 4 (the row holds its command), BOUNDED 5 (a joint held at its
+    bound); residual (N,) the tool error each row leaves (m, 1 rad of the tool counted as 1 m; inf
+    where NONFINITE); `failed` the rows (0-based) whose tool is not placed (codes 1, 2, 4, 5);
+    max_correction the largest |q - q_cmd| per joint name; extrapolation as in `Score`."""
 
     q: np.ndarray
     status: np.ndarray
     outside_limits: list[int]
     max_correction: dict
     extrapolation: dict
+    residual: np.ndarray | None = None
+    failed: list[int] = field(default_factory=list)
+
+    def counts(self) -> dict[str, int]:
+        """How many rows have each status, by name ("ok", "singular", ...), only those that occur."""
+        found = np.bincount(np.asarray(self.status), minlength=len(STATUS_NAMES))
+        return {name: int(k) for name, k in zip(STATUS_NAMES, found) if k}
 
 
 def _floats(values, what: str, wanted: str) -> np.ndarray:
@@ -181,6 +192,28 @@ def _floats(values, what: str, wanted: str) -> np.ndarray:
         return np.asarray(values, dtype=float)
     except (TypeError, ValueError):
         raise ModelError(f"{what}: {excerpt(values)} is not an array of numbers; give {wanted}") from None
+
+
+def correction_bound(robot: Robot, bound) -> np.ndarray | None:
+    """`Calibrator.compensate`'s bound as n values (m or rad; inf: free), or None for none: one number for
+    every joint, n numbers, or {joint name: value}; each must be >= 0 (a one-line refusal otherwise)."""
+    if bound is None:
+        return None
+    names = list(robot.joint_names)
+    if isinstance(bound, dict):
+        unknown = [k for k in bound if k not in names]
+        require(not unknown, f"bound: no joint {excerpt(unknown[0]) if unknown else ''} in robot {robot.name}; "
+                             f"name joints of {', '.join(names)}")
+        values = _floats([bound.get(name, np.inf) for name in names], "bound", "numbers in the joints' units")
+    else:
+        values = _floats(bound, "bound", f"one number or {len(names)} (m or rad)")
+        require(values.ndim == 0 or values.shape == (len(names),),
+                f"bound: {values.size} values; give one for every joint or {len(names)} ({', '.join(names)})")
+        values = np.broadcast_to(values, (len(names),)).astype(float)
+    bad = [n for n, v in zip(names, values) if not v >= 0]
+    require(not bad, f"bound: {bad[0] if bad else ''} has a negative or NaN bound; give a correction bound >= 0 "
+                     f"(m or rad; inf leaves the joint free)")
+    return np.ascontiguousarray(values)
 
 
 def branch_index(robot: Robot, branch: str | None) -> int:
@@ -391,13 +424,18 @@ class Calibrator:
             raise RuntimeError(f"the calibration's {absurd} at these poses: no real robot is that far from its model; "
                                f"the file was edited or belongs to another robot: identify again")
 
-    def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50, branch: str | None = None) -> Compensation:
-        """Corrected joint commands: the joint values that put the calibrated robot where the nominal
-        one goes at q_cmd. q_cmd: (N, n) m/rad, or a CSV path or DataFrame of commands (q1..qn and
-        optional fx..mz and aux columns; w and aux are then read from it). Raises RuntimeError when a
-        row does not converge (near a singularity) or overflows, naming the row. On a robot with
-        branches, `branch` names the one whose tool is placed: its own joints are corrected, every
-        other reading (the trunk's, the other branches') is held at its command."""
+    def compensate(self, q_cmd, w=None, aux=None, max_iter: int = 50, branch: str | None = None,
+                   bound=None) -> Compensation:
+        """Corrected joint commands: the smallest joint change that puts the calibrated robot where the
+        nominal one goes at q_cmd, with a status per row (`Compensation`): a row that cannot be placed
+        (near a singular posture, bounded, not converged, overflowing) keeps its best correction and
+        says so, and no row stops the others. q_cmd: (N, n) m/rad, or a CSV path or DataFrame of
+        commands (q1..qn and optional fx..mz and aux columns; w and aux are then read from it). bound:
+        the largest correction per joint, in the joint's unit (m or rad): one number for every joint,
+        n numbers, or {joint name: value} (the others free); a joint that reaches it is held there and
+        its row is BOUNDED. On a robot with branches, `branch` names the one whose tool is placed: its
+        own joints are corrected, every other reading (the trunk's, the other branches') is held at its
+        command."""
         calib = self._fitted()
         index = branch_index(calib.robot, branch)
         measured = calib.report.get("branches")  # the branches the data measured (older files: unknown)
@@ -408,30 +446,22 @@ class Calibrator:
                              f"{', '.join(branch_targets(calib.robot, branch))} and calibrate again")
         require(isinstance(max_iter, int) and max_iter >= 0,
                 f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
+        limit = correction_bound(calib.robot, bound)
         if isinstance(q_cmd, Commands):
-            cmds, row = q_cmd, (lambda k: f"{q_cmd.source}: row {k + 2}")
+            cmds = q_cmd
         elif isinstance(q_cmd, (str, Path)) or hasattr(q_cmd, "to_csv"):
             cmds = read_commands(q_cmd, calib.robot, calib.model.aux)
-            row = (lambda k: f"{cmds.source}: row {k + 2}")
         else:
             q, w, aux = self._inputs(q_cmd, w, aux, "q_cmd")
-            cmds, row = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd"), (lambda k: f"q_cmd: row {k} (0-based)")
+            cmds = Commands(q, w, aux, calib.model.aux, [], [], "q_cmd")
         cm = checked(calib.model, calib.robot, cmds)
-        q, status = cm.compensate(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter, branch=index)
-        failed = np.nonzero(np.isin(status, FAILED))[0]
-        if len(failed):
-            k = failed[0]
-            moved = moved_joints(calib.robot, index)
-            why = ("the correction is not finite (the command, wrench or aux values overflow the model)"
-                   if status[k] == NONFINITE else
-                   "the correction did not converge; the command may be near a singularity" if len(moved) >= 6 else
-                   f"the correction did not converge: the {len(moved)} joints it moves ({', '.join(moved)}) cannot "
-                   f"place the tool's position and orientation (6 degrees of freedom)")
-            raise RuntimeError(f"{row(k)}: {why} ({len(failed)} rows failed)")
+        q, status, residual = cm.correct(cmds.q, cmds.w, cmds.aux, calib.c, max_iter=max_iter, branch=index,
+                                         bound=limit)
         dq = np.abs(q - cmds.q)
         return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),
                             {name: float(dq[:, j].max()) for j, name in enumerate(calib.robot.joint_names)},
-                            self._extrapolation(cmds.q, cmds.w, cmds.aux))
+                            self._extrapolation(cmds.q, cmds.w, cmds.aux), residual,
+                            np.nonzero(np.isin(status, FAILED))[0].tolist())
 
     def score(self, data, register: bool = False) -> Score:
         """Errors of new measurements (CSV path, DataFrame or Measurements) before and after the

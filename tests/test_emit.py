@@ -66,7 +66,8 @@ int main(void) {
     double p[3 * %(N)s_NT], J[3 * %(N)s_NT * %(N)s_NE], H[3 * %(N)s_NT * %(N)s_NC], T[16], qo[%(N)s_NQ];
     double L[%(N)s_NL > 0 ? %(N)s_NL : 1];  /* none when the model uses no load signal */
     int k, it, st;
-    for (k = 0; k < %(N)s_NQ; ++k) q[k] = 0.5 * (%(name)s_q_min[k] + %(name)s_q_max[k]) + 0.01 * k;
+    /* 60 %% of each range, away from the middle: the middle of a wrist's range is its singular J5 = 0 */
+    for (k = 0; k < %(N)s_NQ; ++k) q[k] = 0.4 * %(name)s_q_min[k] + 0.6 * %(name)s_q_max[k] + 0.01 * k;
     for (k = 0; k < %(N)s_NC; ++k) c[k] = 1e-5 * ((k %% 7) - 3);
     %(name)s_fk(q, T);
     %(name)s_eps(q, w, NULL, c, eps);

@@ -88,16 +88,18 @@ def test_exported_c_compiles_and_compensates_as_python_does(ur10_calib, tmp_path
     build = subprocess.run(shlex.split(out["compile"]), capture_output=True, text=True)
     assert build.returncode == 0 and "-std=c99 -O2 -Wall -Wextra -Werror" in out["compile"], build.stderr
     run = subprocess.run(shlex.split(out["run"]), capture_output=True, text=True, check=True)
-    printed = [line.split() for line in run.stdout.splitlines()]
+    status, *printed = [line.split() for line in run.stdout.splitlines()]
     calib = calibration.load(ur10_calib)
     assert [name for name, _ in printed] == list(calib.robot.joint_names)
     # the same command through `gecgen compensate`
     q_cmd = out["example_command"]["q"]
     (tmp_path / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(map(repr, q_cmd)) + "\n")
-    gecgen_json("compensate", ur10_calib, tmp_path / "cmd.csv", "-o", tmp_path / "out.csv")
-    python = np.array((tmp_path / "out.csv").read_text().splitlines()[1].split(","), float)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        main(["compensate", str(ur10_calib), str(tmp_path / "cmd.csv"), "-o", str(tmp_path / "out.csv")])
+    *python, code, residual_mm = (tmp_path / "out.csv").read_text().splitlines()[1].split(",")
     c = np.array([float(v) for _, v in printed])
-    assert np.abs(c - python).max() < 1e-9 and np.abs(c - q_cmd).max() > 1e-4  # a real correction
+    assert np.abs(c - np.array(python, float)).max() < 1e-9 and np.abs(c - q_cmd).max() > 1e-4  # a real correction
+    assert int(status[1]) == int(code) and abs(float(status[4]) - 1e-3 * float(residual_mm)) < 1e-3 * float(status[4])
     # the header holds the calibration's coefficients exactly, each named
     header = (tmp_path / "c" / "ur10_calibration.h").read_text()
     rows = [line.split(", /* ") for line in header.splitlines() if line.endswith("*/") and line.startswith("    ")]

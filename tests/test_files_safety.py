@@ -216,14 +216,20 @@ def test_unsound_numbers_in_a_calibration_are_refused(checkout, tmp_path, comman
 
 
 def test_a_calibration_that_overflows_fails_compensate_naming_the_row(checkout, tmp_path):
+    """Every row is written, each holding its command with status 4 (nonfinite); the exit status and one
+    line on stderr say so, naming the first row."""
     d = json.loads((checkout / "out" / "c.json").read_text())
     _edit(d, "coefficient 0.ex:1 value", 1e308)  # finite, so loaded; the tool position overflows
     (tmp_path / "c.json").write_text(json.dumps(d))
     run = gecgen("compensate", tmp_path / "c.json", checkout / "cmd.csv", "-o", tmp_path / "o.csv", "--json")
     lines = run.stderr.strip().splitlines()
-    assert run.returncode != 0 and run.stdout == "" and len(lines) == 1, run.stderr
+    assert run.returncode == 1 and len(lines) == 1, run.stderr
     assert "cmd.csv: row 2: the correction is not finite" in lines[0]
-    assert not (tmp_path / "o.csv").exists()
+    summary = json.loads(run.stdout)
+    written = (tmp_path / "o.csv").read_text().splitlines()
+    commands = (checkout / "cmd.csv").read_text().splitlines()
+    assert len(written) == len(commands) and summary["status_counts"] == {"nonfinite": len(commands) - 1}
+    assert all(row == command + ",4," for row, command in zip(written[1:], commands[1:])), written[:3]
 
 
 def test_a_library_built_for_another_machine_or_compiler_is_never_reused(puma, monkeypatch):

@@ -162,7 +162,8 @@ def test_cli_identify_evaluate_compensate_and_refusal(tmp_path, rng, capsys):
     (tmp_path / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6,note\n0.1,0.0,0.2,0.3,0.01,-0.01,7\n")
     assert main(["compensate", str(calib), str(tmp_path / "cmd.csv"), "-o", str(tmp_path / "o.csv"), "--json"]) == 0
     lines = (tmp_path / "o.csv").read_text().splitlines()
-    assert lines[0] == "q1,q2,q3,q4,q5,q6,note" and lines[1].endswith(",7") and lines[1] != "0.1,0.0,0.2,0.3,0.01,-0.01,7"
+    assert lines[0] == "q1,q2,q3,q4,q5,q6,note,status,residual_mm" and lines[1].split(",")[6:8] == ["7", "0"]
+    assert not lines[1].startswith("0.1,0.0,0.2,0.3,0.01,-0.01,7")
     # a calibration is refused against a changed model
     d = json.loads(calib.read_text())
     d["error_model"]["frames"]["1"] = {"ex": ["1", "q1"]}  # only errors beyond the constant are listed

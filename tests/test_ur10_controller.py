@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gecgen.runtime.compiled import compiler
+from gecgen.runtime.compiled import STATUS_NAMES, compiler
 
 UR10 = ROOT / "tests" / "data" / "ur10"
 
@@ -35,10 +35,13 @@ def test_from_urdf_and_pose_csv_to_a_compiled_compensation(tmp_path):
     c = gecgen("export", tmp_path / "ur10.calib.json", "--c", tmp_path / "controller")["c"]
     assert subprocess.run(shlex.split(c["compile"]), capture_output=True, text=True).returncode == 0
     printed = subprocess.run(shlex.split(c["run"]), capture_output=True, text=True, check=True).stdout
-    corrected = np.array([float(line.split()[1]) for line in printed.splitlines()])
+    status, *joints = printed.splitlines()
+    corrected = np.array([float(line.split()[1]) for line in joints])
     command = c["example_command"]["q"]
     (tmp_path / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(map(repr, command)) + "\n")
-    gecgen("compensate", tmp_path / "ur10.calib.json", tmp_path / "cmd.csv", "-o", tmp_path / "out.csv")
-    python = np.array((tmp_path / "out.csv").read_text().splitlines()[1].split(","), float)
-    assert np.abs(corrected - python).max() < 1e-9
+    subprocess.run([sys.executable, "-m", "gecgen.cli", "compensate", tmp_path / "ur10.calib.json", tmp_path / "cmd.csv",
+                    "-o", tmp_path / "out.csv"], capture_output=True)
+    *python, code, _ = (tmp_path / "out.csv").read_text().splitlines()[1].split(",")
+    assert np.abs(corrected - np.array(python, float)).max() < 1e-9
+    assert status.split()[1:3] == [code, STATUS_NAMES[int(code)]]  # the C and the Python say the same
     assert np.abs(corrected - command).max() > 1e-3  # a real correction, not the command echoed

@@ -166,6 +166,15 @@ def _os_reason(exc: OSError) -> str:
     return (f"{exc.filename}: {reason}" if exc.filename else reason).splitlines()[0]
 
 
+class Incomplete(Exception):
+    """A command that did its job and wrote its output, with some of it failed: the CLI prints the
+    message (one line) on stderr, the result as usual, and exits 1."""
+
+    def __init__(self, message: str, result: dict):
+        super().__init__(message)
+        self.result = result
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
@@ -179,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"gecgen {args.command}: interrupted; nothing was written for this command's unfinished step",
                   file=sys.stderr)
             return 130
-    if code:
+    if code and result is None:
         return code
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
@@ -187,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result, allow_nan=False))
     else:
         print_human(result)
-    return 0
+    return code
 
 
 def _run(args) -> tuple[int, dict | None]:
@@ -195,6 +204,9 @@ def _run(args) -> tuple[int, dict | None]:
     try:
         with reading(check_outputs(args)):
             return 0, args.fn(args)
+    except Incomplete as exc:  # the job is done and written, but some of it failed: the result says what
+        print(f"gecgen {args.command}: {exc}", file=sys.stderr)
+        return 1, exc.result
     except ModelError as exc:
         print(f"gecgen {args.command}: {exc}", file=sys.stderr)
         return 2, None

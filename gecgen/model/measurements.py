@@ -346,16 +346,20 @@ def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Comman
     return Commands(q, w, aux, aux_names, header, table.rows(), where)
 
 
-def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray):
-    """The input rows with q1..qn replaced by q (P, n), full precision."""
-    idx = {h: k for k, h in enumerate(commands.header)}
+def write_commands(path: str | Path, robot: Robot, commands: Commands, q: np.ndarray, columns: dict | None = None):
+    """The input rows with q1..qn replaced by q (P, n), full precision; `columns` (name -> P cells)
+    replace the input's columns of those names or are added after the others."""
+    header = list(commands.header) + [name for name in columns or {} if name not in commands.header]
+    idx = {h: k for k, h in enumerate(header)}
     rows = []
-    for row, qi in zip(commands.rows, q):
-        row = list(row)
+    for p, (row, qi) in enumerate(zip(commands.rows, q)):
+        row = list(row) + [""] * (len(header) - len(row))
         for j in range(robot.n):
             row[idx[f"q{j + 1}"]] = repr(float(qi[j]))
+        for name, cells in (columns or {}).items():
+            row[idx[name]] = cells[p]
         rows.append(row)
-    write_csv(path, commands.header, rows)
+    write_csv(path, header, rows)
 
 
 def hold_out(data: Measurements, fraction: float, seed: int = 0) -> tuple[Measurements, Measurements]:

@@ -44,9 +44,12 @@ COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror"]
 CFLAGS = [*COMPILE_FLAGS, "-shared"]
 
 #: status codes of `CompiledModel.compensate`: the generated C's GECGEN_ codes
-OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE = range(5)
-#: the codes whose q is no correction (OUTSIDE_LIMITS is one, but leaves the joint limits)
-FAILED = (NOT_CONVERGED, SINGULAR, NONFINITE)
+OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE, BOUNDED = range(6)
+#: each code's name in files and messages (the generated header's GECGEN_ codes, in lower case)
+STATUS_NAMES = ("ok", "not_converged", "singular", "outside_limits", "nonfinite", "bounded")
+#: the codes whose tool is not placed within the tolerance (OUTSIDE_LIMITS is placed, but leaves the
+#: joint limits; SINGULAR and BOUNDED hold a correction that may be sent, the tool off by the residual)
+FAILED = (NOT_CONVERGED, SINGULAR, NONFINITE, BOUNDED)
 
 
 def cache_dir() -> Path:
@@ -411,26 +414,36 @@ class CompiledModel:
         return out
 
     def compensate(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0):
-        """Corrected joint commands (N, nq) and status codes (N,) for nominal commands q_cmd (N, nq)
-        (m or rad), residual tolerance tol (m; 1 rad counts as 1 m). The codes, per row:
+        """Corrected joint commands (N, nq) and status codes (N,): `correct` with no bound."""
+        q, status, _ = self.correct(q_cmd, w, aux, c, max_iter, tol, branch)
+        return q, status
+
+    def correct(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0, bound=None):
+        """Corrected joint commands (N, nq), status codes (N,) and residuals (N,) for nominal commands
+        q_cmd (N, nq) (m or rad), residual tolerance tol (m; 1 rad counts as 1 m), bound None or (nq,)
+        the largest |q - q_cmd| per joint (m or rad; inf leaves a joint free). The generated C's
+        NAME_compensate_bounded_batch; the codes (its header's GECGEN_ codes), per row:
         OK (0) converged inside the joint limits; NOT_CONVERGED (1) the last iterate (max_iter steps, or
-        20 in a row that each lowered the residual by under 0.1 %);
-        SINGULAR (2) the joint Jacobian is singular at the returned iterate; OUTSIDE_LIMITS (3)
-        converged, outside the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0,
-        max_iter < 0 or the computation overflowed, and the row holds q_cmd unchanged. On a tree, the
-        tool of `branch` (index) is placed by its own joints, every other reading held."""
+        20 in a row that each lowered the residual by under 0.1 %); SINGULAR (2) near a singular
+        posture: the correction that would place the tool is more than the model's error justifies, and
+        the row holds the least damped correction that is justified; OUTSIDE_LIMITS (3) converged, outside
+        the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0, max_iter < 0 or the
+        computation overflowed, and the row holds q_cmd unchanged (residual inf); BOUNDED (5) a joint's
+        correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
+        as 1 m). On a tree, the tool of `branch` (index) is placed by its own joints, every other reading
+        held."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
         if self.backend == "casadi":
             raise RuntimeError("compensation runs in the generated C; install a C compiler (or set CC)")
-        out, status = np.empty_like(q), np.empty(N, dtype=np.intc)
-        name = "compensate_batch" + (f"_{self.robot.branches[branch].name}" if self.robot.branches else "")
+        out, status, residual = np.empty_like(q), np.empty(N, dtype=np.intc), np.empty(N)
+        limit = None if bound is None else np.ascontiguousarray(np.broadcast_to(np.asarray(bound, float), (self.dims.nq,)))
+        name = "compensate_bounded_batch" + (f"_{self.robot.branches[branch].name}" if self.robot.branches else "")
         self._fn(name).restype = ctypes.c_int
         self._fn(name)(ctypes.c_int(N), _ptr(q), _ptr(w), _ptr(aux), _ptr(c), ctypes.c_int(max_iter),
-                                     ctypes.c_double(tol), _ptr(out),
-                                     status.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
-        return out, status
-
+                       ctypes.c_double(tol), None if limit is None else _ptr(limit), _ptr(out), _ptr(residual),
+                       status.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+        return out, status, residual
 
 def load_casadi_module(files: dict[str, str], name: str):
     """Import the generated CasADi module from its text (written to the cache first; its name

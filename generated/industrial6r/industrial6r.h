@@ -34,13 +34,36 @@ extern "C" {
 #define GECGEN_OK 0             /* converged, inside the joint limits; q_out is the correction */
 #define GECGEN_NOT_CONVERGED 1  /* no convergence in max_iter steps, or 20 steps in a row that each
                                  * lowered the residual by under 0.1 %; q_out holds the last iterate */
-#define GECGEN_SINGULAR 2       /* the joint Jacobian is singular at an iterate; q_out holds that iterate */
+#define GECGEN_SINGULAR 2       /* near a singular posture: the correction that would place the tool is more
+                                 * than the model's error justifies (see GECGEN_NONLINEAR_SHARE), or the
+                                 * joint Jacobian at the command is singular; q_out holds the least damped
+                                 * correction that stays justified, and the tool misses by the residual */
 #define GECGEN_OUTSIDE_LIMITS 3 /* converged, but q_out (the correction) leaves the joint limits */
 #endif
 /* Separately guarded: a header of an older gecgen may already have defined the codes above. */
 #ifndef GECGEN_NONFINITE
-#define GECGEN_NONFINITE 4      /* an input is NaN or infinite, tol is not > 0, max_iter < 0, or the
-                                   computation overflowed; q_out holds a copy of q_cmd */
+#define GECGEN_NONFINITE 4      /* an input is NaN or infinite, tol is not > 0, max_iter < 0, a bound is
+                                   negative or NaN, or the computation overflowed; q_out holds a copy of q_cmd */
+#endif
+#ifndef GECGEN_BOUNDED
+#define GECGEN_BOUNDED 5        /* a joint's correction reached its bound and is held there; q_out is the
+                                   best correction within the bounds, and the tool misses by the residual */
+#endif
+#ifndef GECGEN_NONLINEAR_SHARE
+/* A correction is justified when what it does to the tool is what the first-order model at the command
+ * predicts, to this share of the model's error there: |(r0 - r) - J0 (q_out - q_cmd)| <= 0.25 |r0|
+ * (r0, r the pose residuals at the command and at q_out, J0 the joint Jacobian at the command). Near a
+ * singular posture the exact correction is of second order (an elbow bent by 19 degrees for a 4 mm
+ * error at a stretched arm, a wrist's J4 and J6 turned half a turn each at J5 = 0) and fails this. */
+#define GECGEN_NONLINEAR_SHARE 0.25
+#endif
+#ifndef GECGEN_NEAR_SINGULAR
+/* A direction in which the tool moves by less than this per unit of joint motion (a singular value of
+ * the joint Jacobian at the command, m per rad with 1 rad of the tool counted as 1 m) is near a singular
+ * posture: the correction along it is damped to at most 1 / GECGEN_NEAR_SINGULAR times the error there
+ * (100 rad per m), nothing at a singular posture itself, where the exact correction would swing the
+ * joints without bound. */
+#define GECGEN_NEAR_SINGULAR 0.01
 #endif
 
 /* Joint limits (m or rad). */
@@ -97,20 +120,38 @@ void industrial6r_eps_batch(int n, const double *q, const double *w, const doubl
 void industrial6r_basis_batch(int n, const double *q, const double *w, const double *aux, double *f);
 
 /* Corrected joint command: q_out such that the modelled robot puts the tool (origin and axes,
- * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Damped Newton with at most
- * max_iter steps until the pose residual is below tol (m). The load signals are held at their
+ * 1 rad weighted as 1 m) where the nominal model puts it for q_cmd. Gauss-Newton with backtracking, at
+ * most max_iter steps per solve, until the pose residual is below tol (m); near a singular posture one
+ * solve per damping tried (at most 11 in all). The load signals are held at their
  * values at q_cmd (so a term such as sign(gravity_torque(q6)) takes the command's sign). Returns a
- * GECGEN_ status code and the number of iterations used in *iterations (may be NULL). q_out is
+ * GECGEN_ status code and the number of steps taken in all in *iterations (may be NULL). q_out is
  * always written (see the codes); GECGEN_OK promises finite joints whose residual is at most tol
  * (the residual: sqrt(|dp|^2 + a^2) in m, a the sine of the axes' angle up to 90 degrees and
- * 2 minus it beyond, so no tol below 1 passes a tool turned more than 90 degrees). */
+ * 2 minus it beyond, so no tol below 1 passes a tool turned more than 90 degrees).
+ * Near a singular posture the correction is the least damped one that the model's error justifies
+ * (GECGEN_SINGULAR): the smallest joint change, never a swing of a redundant pair such as J4 and J6 at
+ * J5 = 0. The same as industrial6r_compensate_bounded with no bound and no residual. */
 int industrial6r_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
                           int max_iter, double tol, double *q_out, int *iterations);
+
+/* industrial6r_compensate with each joint's correction bounded: |q_out[j] - q_cmd[j]| <= bound[j] (INDUSTRIAL6R_NQ
+ * values in m or rad, each >= 0; HUGE_VAL leaves a joint free, 0 holds it at its command; bound NULL bounds
+ * none). A joint that reaches its bound is held there and the status is GECGEN_BOUNDED. *residual (may be
+ * NULL) receives the pose residual (m, as above) left at q_out: the tool error that remains. */
+int industrial6r_compensate_bounded(const double *q_cmd, const double *w, const double *aux, const double *c,
+                                  int max_iter, double tol, const double *bound, double *q_out, double *residual,
+                                  int *iterations);
 
 /* n poses of industrial6r_compensate; status (n) receives each pose's code. Returns the number of
  * poses whose status is not GECGEN_OK. */
 int industrial6r_compensate_batch(int n, const double *q_cmd, const double *w, const double *aux,
                                 const double *c, int max_iter, double tol, double *q_out, int *status);
+
+/* n poses of industrial6r_compensate_bounded (one bound for all); residual (n, may be NULL) and status (n)
+ * receive each pose's residual and code. Returns the number of poses whose status is not GECGEN_OK. */
+int industrial6r_compensate_bounded_batch(int n, const double *q_cmd, const double *w, const double *aux,
+                                        const double *c, int max_iter, double tol, const double *bound,
+                                        double *q_out, double *residual, int *status);
 
 #ifdef __cplusplus
 }

@@ -13,8 +13,6 @@
 #define NF PPS_NF
 #define NAUX PPS_NAUX
 #define NL PPS_NL
-/* Rows of the system solved per Newton step: min(6, NQ). */
-#define NS (NQ < 6 ? NQ : 6)
 /* Newton steps in a row that each take less than a thousandth off the residual: a plateau with no
  * solution near (an absurd calibration) or rounding level below tol; compensate then stops rather
  * than run on to a large max_iter (2**31 - 1 steps of such a plateau took days) */
@@ -1937,30 +1935,48 @@ void pps_basis_batch(int n, const double *q, const double *w, const double *aux,
         pps_basis(row(q, i, NQ), row(w, i, 6), row(aux, i, NAUX), f + (size_t)i * NF);
 }
 
-/* Solve the symmetric positive definite m x m system A x = b in place (Cholesky); 0 if singular. */
-static int cholesky_solve(double A[NS][NS], double *b, int m)
+/* Eigen-decomposition of the symmetric NQ x NQ matrix A by cyclic Jacobi rotations: on return A's
+ * diagonal holds the eigenvalues and column i of V the eigenvector of A[i][i]. Jacobi rather than a
+ * Cholesky solve: a redundant or singular direction shows as an eigenvalue near 0 and is left out of a
+ * step instead of being divided by. At most 60 sweeps (convergence is quadratic: a handful suffice). */
+static void eigen_symmetric(double A[NQ][NQ], double V[NQ][NQ])
 {
-    int i, j, k;
-    for (j = 0; j < m; ++j) {
-        double d = A[j][j];
-        for (k = 0; k < j; ++k) d -= A[j][k] * A[j][k];
-        if (!(d > 0.0)) return 0;
-        A[j][j] = sqrt(d);
-        for (i = j + 1; i < m; ++i) {
-            double s = A[i][j];
-            for (k = 0; k < j; ++k) s -= A[i][k] * A[j][k];
-            A[i][j] = s / A[j][j];
-        }
+    int i, j, k, sweep;
+    for (i = 0; i < NQ; ++i)
+        for (j = 0; j < NQ; ++j) V[i][j] = (i == j) ? 1.0 : 0.0;
+    for (sweep = 0; sweep < 60; ++sweep) {
+        double off = 0.0, all = 0.0;
+        for (i = 0; i < NQ; ++i)
+            for (j = 0; j < NQ; ++j) {
+                all += A[i][j] * A[i][j];
+                if (i != j) off += A[i][j] * A[i][j];
+            }
+        if (!(off > 1e-30 * all)) break; /* also on NaN, which no rotation can mend */
+        for (i = 0; i < NQ; ++i)
+            for (j = i + 1; j < NQ; ++j) {
+                double theta, t, cs, sn;
+                if (A[i][j] == 0.0) continue;
+                theta = (A[j][j] - A[i][i]) / (2.0 * A[i][j]);
+                t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                cs = 1.0 / sqrt(t * t + 1.0);
+                sn = t * cs;
+                for (k = 0; k < NQ; ++k) { /* A <- A R, then R^T A; V <- V R */
+                    double ki = A[k][i], kj = A[k][j];
+                    A[k][i] = cs * ki - sn * kj;
+                    A[k][j] = sn * ki + cs * kj;
+                }
+                for (k = 0; k < NQ; ++k) {
+                    double ik = A[i][k], jk = A[j][k];
+                    A[i][k] = cs * ik - sn * jk;
+                    A[j][k] = sn * ik + cs * jk;
+                }
+                for (k = 0; k < NQ; ++k) {
+                    double ki = V[k][i], kj = V[k][j];
+                    V[k][i] = cs * ki - sn * kj;
+                    V[k][j] = sn * ki + cs * kj;
+                }
+            }
     }
-    for (i = 0; i < m; ++i) {
-        for (k = 0; k < i; ++k) b[i] -= A[i][k] * b[k];
-        b[i] /= A[i][i];
-    }
-    for (i = m - 1; i >= 0; --i) {
-        for (k = i + 1; k < m; ++k) b[i] -= A[k][i] * b[k];
-        b[i] /= A[i][i];
-    }
-    return 1;
 }
 
 /* Pose residual of the modelled robot at q, with the load signals L, against the wanted tool pose
@@ -1992,27 +2008,108 @@ static double pose_residual(const double *q, const double *w, const double *aux,
     return sqrt(position + turn * turn);
 }
 
-/* Least-squares (NQ < 6) or minimum-norm (NQ >= 6) Newton step dq for J dq = r; 0 if singular. */
-static int newton_step(const double *Jq, const double *r, double *dq)
+/* The Gauss-Newton step dq (NQ) of |r - Jq dq|^2 + (d + dq)^T P (d + dq), d = q - q_cmd (P NULL: 0),
+ * held joints not moving: (Jq^T Jq + P) dq = Jq^T r - P d, solved over the eigenvalues above 1e-12 of
+ * the largest. That is the minimum-norm step: a redundant joint takes no part it need not, and a
+ * direction the tool cannot move in (a singular posture) takes none. */
+static void gauss_newton_step(const double *Jq, const double *r, const double *P, const double *d,
+                              const int *held, double *dq)
 {
-    double A[NS][NS], b[NS];
+    double A[NQ][NQ], V[NQ][NQ], g[NQ], top = 0.0;
     int i, j, k;
-    for (i = 0; i < NS; ++i) {
-        for (j = 0; j < NS; ++j) {
-            double s = (i == j) ? 1e-14 : 0.0;
-            if (NQ >= 6) { for (k = 0; k < NQ; ++k) s += Jq[i * NQ + k] * Jq[j * NQ + k]; }
-            else { for (k = 0; k < 6; ++k) s += Jq[k * NQ + i] * Jq[k * NQ + j]; }
-            A[i][j] = s;
+    for (i = 0; i < NQ; ++i) {
+        g[i] = 0.0;
+        for (j = 0; j < NQ; ++j) A[i][j] = 0.0;
+        if (held[i]) continue;
+        for (k = 0; k < 6; ++k) g[i] += Jq[k * NQ + i] * r[k];
+        for (j = 0; j < NQ; ++j) {
+            if (P) g[i] -= P[i * NQ + j] * d[j];
+            if (held[j]) continue;
+            for (k = 0; k < 6; ++k) A[i][j] += Jq[k * NQ + i] * Jq[k * NQ + j];
+            if (P) A[i][j] += P[i * NQ + j];
         }
-        if (NQ >= 6) b[i] = r[i];
-        else { b[i] = 0.0; for (k = 0; k < 6; ++k) b[i] += Jq[k * NQ + i] * r[k]; }
     }
-    if (!cholesky_solve(A, b, NS)) return 0;
+    eigen_symmetric(A, V);
+    for (i = 0; i < NQ; ++i)
+        if (A[i][i] > top) top = A[i][i];
+    for (j = 0; j < NQ; ++j) dq[j] = 0.0;
+    for (i = 0; i < NQ; ++i) {
+        double along = 0.0;
+        if (!(A[i][i] > 1e-12 * top)) continue;
+        for (j = 0; j < NQ; ++j) along += V[j][i] * g[j];
+        along /= A[i][i];
+        for (j = 0; j < NQ; ++j) dq[j] += along * V[j][i];
+    }
+}
+
+/* d^T P d for d = q - q_cmd (0 when P is NULL). */
+static double penalty(const double *P, const double *q, const double *q_cmd)
+{
+    double sum = 0.0;
+    int i, j;
+    if (!P) return 0.0;
+    for (i = 0; i < NQ; ++i)
+        for (j = 0; j < NQ; ++j) sum += (q[i] - q_cmd[i]) * P[i * NQ + j] * (q[j] - q_cmd[j]);
+    return sum;
+}
+
+/* 1 when the correction q - q_cmd is what the first-order model at the command calls for, each to
+ * GECGEN_NONLINEAR_SHARE: what it does to the tool, r0 - r, is J0 (q - q_cmd) to that share of the error
+ * r0; and it is the first-order correction (J0^T J0 + P)^-1 J0^T r0 to that share of the latter's size,
+ * P the damping of sigma (0: none; see damping()) over the eigen-decomposition of J0^T J0 (eigenvalues
+ * lam, order[] largest first, the ntask largest the tool's directions, eigenvectors the columns of V),
+ * without the eigenvalues at or below 1e-12 of the largest. The first fails an exact correction of
+ * second order (an elbow bent far at a stretched arm), the second a correction the descent carried
+ * away from the first-order one. */
+static int justified(const double *r0, const double *J0, const double *lam, double V[NQ][NQ], const int *order,
+                     int ntask, double sigma, const double *r, const double *q, const double *q_cmd)
+{
+    double miss = 0.0, error = 0.0, g[NQ], extra = 0.0, size = 0.0;
+    const double top = lam[order[0]];
+    int i, j, k;
+    for (j = 0; j < NQ; ++j) g[j] = 0.0;
+    for (i = 0; i < 6; ++i) {
+        double m = r0[i] - r[i];
+        for (j = 0; j < NQ; ++j) {
+            g[j] += J0[i * NQ + j] * r0[i]; /* J0^T r0 */
+            m -= J0[i * NQ + j] * (q[j] - q_cmd[j]);
+        }
+        miss += m * m;
+        error += r0[i] * r0[i];
+    }
     for (j = 0; j < NQ; ++j) {
-        if (NQ >= 6) { dq[j] = 0.0; for (k = 0; k < 6; ++k) dq[j] += Jq[k * NQ + j] * b[k]; }
-        else dq[j] = b[j];
+        double first = 0.0; /* component j of the first-order correction */
+        for (k = 0; k < NQ; ++k) {
+            const int e = order[k];
+            const double eig = (k < ntask && lam[e] < sigma * sigma) ? sigma * sigma : lam[e];
+            double along = 0.0;
+            if (!(eig > 1e-12 * top)) continue;
+            for (i = 0; i < NQ; ++i) along += V[i][e] * g[i];
+            first += V[j][e] * along / eig;
+        }
+        extra += (q[j] - q_cmd[j] - first) * (q[j] - q_cmd[j] - first);
+        size += first * first;
     }
-    return 1;
+    return miss <= GECGEN_NONLINEAR_SHARE * GECGEN_NONLINEAR_SHARE * error
+           && extra <= GECGEN_NONLINEAR_SHARE * GECGEN_NONLINEAR_SHARE * size;
+}
+
+/* The damping of one rung: P = sum over the tool's directions (the ntask largest eigenvalues lam of
+ * J0^T J0, order[] largest first, eigenvectors the columns of V) of (sigma^2 - lam) v v^T where
+ * lam < sigma^2. The linearised correction then moves along a direction of singular value s by
+ * s / sigma^2 times the error there instead of 1 / s: at most 1 / sigma, and not at all along a
+ * direction the tool cannot move in. */
+static void damping(const double *lam, double V[NQ][NQ], const int *order, int ntask, double sigma, double *P)
+{
+    int i, j, k;
+    for (i = 0; i < NQ * NQ; ++i) P[i] = 0.0;
+    for (k = 0; k < ntask; ++k) {
+        const int e = order[k];
+        const double weight = sigma * sigma - lam[e];
+        if (!(weight > 0.0)) continue;
+        for (i = 0; i < NQ; ++i)
+            for (j = 0; j < NQ; ++j) P[i * NQ + j] += weight * V[i][e] * V[j][e];
+    }
 }
 
 /* 1 when x is neither infinite nor NaN, read from its bits (IEEE 754: the exponent not all ones):
@@ -2034,73 +2131,167 @@ static int all_finite(const double *a, int n)
     return 1;
 }
 
-/* GECGEN_NONFINITE with q_out reset to q_cmd: the caller never sees a half-computed command. */
-static int nonfinite(const double *q_cmd, double *q_out, int *iterations, int it)
+/* GECGEN_NONFINITE with q_out reset to q_cmd (the caller never sees a half-computed command) and the
+ * residual (unless NULL) HUGE_VAL: the tool error is not known. */
+static int nonfinite(const double *q_cmd, double *q_out, double *residual, int *iterations, int it)
 {
     memcpy(q_out, q_cmd, sizeof(double) * NQ);
+    if (residual) *residual = HUGE_VAL;
     if (iterations) *iterations = it;
     return GECGEN_NONFINITE;
 }
 
-int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
-                          int max_iter, double tol, double *q_out, int *iterations)
+/* One solve from q_cmd: Gauss-Newton steps on the merit |r|^2 + d^T P d (d = q - q_cmd, P NULL: |r|^2
+ * alone), each backtracked until it lowers the merit (the solution stays on the branch of q_cmd), a
+ * joint that reaches its bound held there from then on. Returns 1 when the residual fell to tol, 0 when
+ * it stopped short (max_iter steps, STALL_STEPS steps in a row that each took under 0.2 % off the merit,
+ * or no shorter step lowering it), -1 when it overflowed. q, r, Jq and *norm hold the last iterate, held
+ * the joints at their bound; *steps grows by the steps taken. */
+static int solve(const double *q_cmd, const double *w, const double *aux, const double *L, const double *c,
+                   const double *Tn, const double *P, const double *bound, int max_iter, double tol, double *q,
+                   double *r, double *Jq, double *norm, int *held, int *steps)
 {
-    double Tn[16], Jq[6 * NQ], r[6], dq[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], L[NL > 0 ? NL : 1], norm;
-    int it, j, halvings, stalled = 0;
+    double dq[NQ], d[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], merit, merit_try = 0.0, norm_try = 0.0;
+    int it, j, halvings, stalled = 0, clipped[NQ];
+    memcpy(q, q_cmd, sizeof(double) * NQ);
+    for (j = 0; j < NQ; ++j) held[j] = bound && bound[j] == 0.0;
+    *norm = pose_residual(q, w, aux, L, c, Tn, r, Jq);
+    merit = *norm * *norm;
+    for (it = 0;; ++it) {
+        double alpha = 1.0;
+        if (!finite_bits(*norm)) return -1;
+        if (*norm <= tol || it == max_iter || stalled == STALL_STEPS) {
+            *steps += it;
+            return *norm <= tol;
+        }
+        for (j = 0; j < NQ; ++j) d[j] = q[j] - q_cmd[j];
+        gauss_newton_step(Jq, r, P, d, held, dq);
+        for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
+            for (j = 0; j < NQ; ++j) {
+                q_try[j] = q[j] + alpha * dq[j];
+                /* a bound clips the trial, and holds the joint once the trial is taken */
+                clipped[j] = bound && fabs(q_try[j] - q_cmd[j]) >= bound[j];
+                if (clipped[j]) q_try[j] = q_cmd[j] + (q_try[j] > q_cmd[j] ? bound[j] : -bound[j]);
+            }
+            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
+            merit_try = norm_try * norm_try + penalty(P, q_try, q_cmd);
+            if (merit_try < merit) break;
+        }
+        if (!(merit_try < merit)) {
+            *steps += it;
+            /* even the shortest trial overflowed (a step of NaN or inf): no convergence problem */
+            return finite_bits(merit_try) ? 0 : -1;
+        }
+        memcpy(q, q_try, sizeof(q_try));
+        memcpy(r, r_try, sizeof(r_try));
+        memcpy(Jq, J_try, sizeof(J_try));
+        for (j = 0; j < NQ; ++j) held[j] |= clipped[j];
+        stalled = merit_try > 0.998001 * merit ? stalled + 1 : 0; /* the residual by under 0.1 % */
+        merit = merit_try;
+        *norm = norm_try;
+    }
+}
+
+int pps_compensate_bounded(const double *q_cmd, const double *w, const double *aux, const double *c,
+                                  int max_iter, double tol, const double *bound, double *q_out, double *residual,
+                                  int *iterations)
+{
+    double Tn[16], L[NL > 0 ? NL : 1], r[6], Jq[6 * NQ], r0[6], J0[6 * NQ], norm = 0.0, norm0;
+    double A[NQ][NQ], V[NQ][NQ], lam[NQ], P[NQ * NQ], q[NQ], smallest;
+    int held[NQ], order[NQ], j, k, ntask = 0, rung, got, steps = 0, status = GECGEN_NOT_CONVERGED;
     /* NaN compares false both ways: without these checks a NaN residual would skip the loop and
      * a NaN joint would pass the limit test, reporting GECGEN_OK for garbage */
     if (!all_finite(q_cmd, NQ) || !all_finite(w, 6) || !all_finite(aux, NAUX) || !all_finite(c, NC)
         || !finite_bits(tol) || !(tol > 0.0) || max_iter < 0)
-        return nonfinite(q_cmd, q_out, iterations, 0);
+        return nonfinite(q_cmd, q_out, residual, iterations, 0);
+    for (j = 0; bound && j < NQ; ++j)
+        if (!(bound[j] >= 0.0)) return nonfinite(q_cmd, q_out, residual, iterations, 0);
     pps_fk(q_cmd, Tn);
     /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
      * a sign(load) term would otherwise have no fixed point when the correction crosses its change */
     pps_loads(q_cmd, w, L);
-    memcpy(q_out, q_cmd, sizeof(double) * NQ);
-    norm = pose_residual(q_out, w, aux, L, c, Tn, r, Jq);
-    for (it = 0; finite_bits(norm) && norm > tol; ++it) {
-        double alpha = 1.0, norm_try = norm;
-        if (it == max_iter || stalled == STALL_STEPS) {
-            if (iterations) *iterations = it;
-            return GECGEN_NOT_CONVERGED;
+    norm0 = pose_residual(q_cmd, w, aux, L, c, Tn, r0, J0);
+    if (!finite_bits(norm0)) return nonfinite(q_cmd, q_out, residual, iterations, 0);
+    /* the tool's directions at the command: J0^T J0's ntask largest eigenvalues, ntask the joints that
+     * move the tool (a branch's own) up to 6 */
+    for (j = 0; j < NQ; ++j) {
+        int moves = 0;
+        for (k = 0; k < NQ; ++k) {
+            int i;
+            A[j][k] = 0.0;
+            for (i = 0; i < 6; ++i) A[j][k] += J0[i * NQ + j] * J0[i * NQ + k];
         }
-        if (!newton_step(Jq, r, dq)) {
-            if (iterations) *iterations = it;
-            return GECGEN_SINGULAR;
-        }
-        /* backtrack so every step lowers the residual: the solution stays on the branch of q_cmd */
-        for (halvings = 0; halvings < 30; ++halvings, alpha *= 0.5) {
-            for (j = 0; j < NQ; ++j) q_try[j] = q_out[j] + alpha * dq[j];
-            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
-            if (norm_try < norm) break;
-        }
-        if (!(norm_try < norm)) {
-            /* even the shortest trial overflowed (a step of NaN or inf): no convergence problem */
-            if (!finite_bits(norm_try)) return nonfinite(q_cmd, q_out, iterations, it);
-            if (iterations) *iterations = it;
-            return GECGEN_NOT_CONVERGED;
-        }
-        memcpy(q_out, q_try, sizeof(q_try));
-        memcpy(r, r_try, sizeof(r_try));
-        memcpy(Jq, J_try, sizeof(J_try));
-        stalled = norm_try > 0.999 * norm ? stalled + 1 : 0;
-        norm = norm_try;
+        for (k = 0; k < 6; ++k) moves |= J0[k * NQ + j] != 0.0;
+        ntask += moves;
     }
-    if (!finite_bits(norm) || !all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, iterations, it);
-    if (iterations) *iterations = it;
+    if (ntask > 6) ntask = 6;
+    eigen_symmetric(A, V);
+    for (j = 0; j < NQ; ++j) { /* order: eigenvalues largest first */
+        lam[j] = A[j][j];
+        order[j] = j;
+        for (k = j; k > 0 && lam[order[k]] > lam[order[k - 1]]; --k) {
+            const int swap = order[k];
+            order[k] = order[k - 1];
+            order[k - 1] = swap;
+        }
+    }
+    smallest = ntask ? sqrt(lam[order[ntask - 1]] > 0.0 ? lam[order[ntask - 1]] : 0.0) : 0.0;
+    got = 0;
+    if (smallest >= GECGEN_NEAR_SINGULAR) {
+        got = solve(q_cmd, w, aux, L, c, Tn, NULL, bound, max_iter, tol, q_out, r, Jq, &norm, held, &steps);
+        if (got < 0) return nonfinite(q_cmd, q_out, residual, iterations, steps);
+        status = got ? GECGEN_OK : GECGEN_NOT_CONVERGED;
+    }
+    if (smallest < GECGEN_NEAR_SINGULAR || (max_iter > 0 && !justified(r0, J0, lam, V, order, ntask, 0.0, r, q_out, q_cmd))) {
+        /* damp the directions of small singular value at the command, at GECGEN_NEAR_SINGULAR first and
+         * doubling, and keep the least damped correction that is justified: the smallest joint change the
+         * model's error calls for, never the exact correction of second order nor a swing */
+        status = GECGEN_NOT_CONVERGED;
+        for (rung = 0; rung < 10; ++rung) {
+            const double sigma = GECGEN_NEAR_SINGULAR * (double)(1 << rung);
+            damping(lam, V, order, ntask, sigma, P);
+            got = solve(q_cmd, w, aux, L, c, Tn, P, bound, max_iter, tol, q, r, Jq, &norm, held, &steps);
+            if (got < 0) return nonfinite(q_cmd, q_out, residual, iterations, steps);
+            memcpy(q_out, q, sizeof(q));
+            if (justified(r0, J0, lam, V, order, ntask, sigma, r, q, q_cmd)) {
+                status = got ? GECGEN_OK : GECGEN_SINGULAR;
+                break;
+            }
+        }
+    }
+    if (!all_finite(q_out, NQ)) return nonfinite(q_cmd, q_out, residual, iterations, steps);
+    if (iterations) *iterations = steps;
+    if (residual) *residual = norm;
+    for (j = 0; j < NQ; ++j) /* never silently clipped; a joint bound to 0 only when it kept the tool off */
+        if (held[j] && (bound[j] > 0.0 || status != GECGEN_OK)) return GECGEN_BOUNDED;
+    if (status != GECGEN_OK) return status;
     for (j = 0; j < NQ; ++j)
         if (q_out[j] < pps_q_min[j] || q_out[j] > pps_q_max[j]) return GECGEN_OUTSIDE_LIMITS;
     return GECGEN_OK;
 }
 
-int pps_compensate_batch(int n, const double *q_cmd, const double *w, const double *aux,
-                                const double *c, int max_iter, double tol, double *q_out, int *status)
+int pps_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
+                          int max_iter, double tol, double *q_out, int *iterations)
+{
+    return pps_compensate_bounded(q_cmd, w, aux, c, max_iter, tol, NULL, q_out, NULL, iterations);
+}
+
+int pps_compensate_bounded_batch(int n, const double *q_cmd, const double *w, const double *aux,
+                                        const double *c, int max_iter, double tol, const double *bound,
+                                        double *q_out, double *residual, int *status)
 {
     int i, failed = 0;
     for (i = 0; i < n; ++i) {
-        status[i] = pps_compensate(row(q_cmd, i, NQ), row(w, i, 6), row(aux, i, NAUX), c, max_iter, tol,
-                                          q_out + (size_t)i * NQ, NULL);
+        status[i] = pps_compensate_bounded(row(q_cmd, i, NQ), row(w, i, 6), row(aux, i, NAUX), c, max_iter,
+                                                  tol, bound, q_out + (size_t)i * NQ, residual ? residual + i : NULL,
+                                                  NULL);
         failed += status[i] != GECGEN_OK;
     }
     return failed;
+}
+
+int pps_compensate_batch(int n, const double *q_cmd, const double *w, const double *aux,
+                                const double *c, int max_iter, double tol, double *q_out, int *status)
+{
+    return pps_compensate_bounded_batch(n, q_cmd, w, aux, c, max_iter, tol, NULL, q_out, NULL, status);
 }
