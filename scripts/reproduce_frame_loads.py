@@ -103,6 +103,7 @@ def main():
     ap.add_argument("--null-seeds", type=int, default=20)
     ap.add_argument("--train", type=int, default=400)
     ap.add_argument("--val", type=int, default=100)
+    ap.add_argument("--serial-train", type=int, default=400)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     seeds = range(args.seeds)
@@ -116,9 +117,11 @@ def main():
     arm = load_robot(ROBOTS / "industrial6r.yaml")
     arm_truth = load_truth(SERIAL_TRUTH, arm)
     arm_floor = 1e3 * np.sqrt(3 * (arm_truth.tracker ** 2 + arm_truth.repeatability ** 2))
-    serial = case(arm, arm, arm_truth, seeds, 200, 100, PAYLOADS_KG, PAYLOAD_AT)
+    serial = case(arm, arm, arm_truth, seeds, args.serial_train, 100, PAYLOADS_KG, PAYLOAD_AT)
+    fewer = case(arm, arm, arm_truth, seeds, args.serial_train // 2, 100, PAYLOADS_KG, PAYLOAD_AT, compare=False)
     rigid_arm = load_truth({k: v for k, v in SERIAL_TRUTH.items() if k != "sources"}, arm)
-    null_arm = case(arm, arm, rigid_arm, range(args.null_seeds), 200, 100, PAYLOADS_KG, PAYLOAD_AT, compare=False)
+    null_arm = case(arm, arm, rigid_arm, range(args.null_seeds), args.serial_train, 100, PAYLOADS_KG, PAYLOAD_AT,
+                    compare=False)
     rigid_tree = load_truth({k: v for k, v in read_yaml(ROBOTS / "humanoid.truth.yaml", "truth").items()
                              if k != "sources"}, humanoid)
     null_tree = case(humanoid, humanoid, rigid_tree, range(args.seeds), args.train, args.val, compare=False)
@@ -134,7 +137,7 @@ def main():
         "frame loads taken out of the dictionary: what diagnose could name before (the loads a reading feels",
         "about its own axis). Made by",
         f"`python scripts/reproduce_frame_loads.py --seeds {args.seeds} --null-seeds {args.null_seeds} "
-        f"--train {args.train} --val {args.val}`.",
+        f"--train {args.train} --val {args.val} --serial-train {args.serial_train}`.",
         "",
         "## A humanoid with a passive torso joint",
         "",
@@ -162,9 +165,14 @@ def main():
         "under the payload's moments (frame 1 also about its own axis), and the forearm (frame 3, 1 m along",
         "its z axis) bending as a beam (1/EI = 1e-6 / (N m^2)). Payloads of 0, 60, 120 and 180 kg at",
         f"{list(PAYLOAD_AT)} m in the tool frame, read by the wrench sensor; no link masses; noise 30 um",
-        f"tracker and repeatability, floor {arm_floor:.4f} mm. 200 training and 100 held-out poses per seed.",
+        f"tracker and repeatability, floor {arm_floor:.4f} mm. {args.serial_train} training and 100 held-out",
+        "poses per seed.",
         "",
         *table(serial, arm_floor),
+        "",
+        f"The same with half as many training poses ({args.serial_train // 2}):",
+        "",
+        *table(fewer, arm_floor, compare=False),
         "",
         "## Rigid robots: nothing to find",
         "",

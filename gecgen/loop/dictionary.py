@@ -237,7 +237,7 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
             out.append(Candidate("link bending", joint, terms, v, others))
         for k in loads.get("gravity_torque") or loads.get("gravity", []):
             out.append(Candidate("free play", joint, (f"sign({names[k]})",), np.sign(values[:, [k]]), (e,)))
-    return out + frame_load_candidates(cm, names, values, set(by_frame.values()), out)
+    return out + frame_load_candidates(cm, data, names, values, set(by_frame.values()), out)
 
 
 #: the wrench component that acts on each generalized error of a frame (in ERROR_NAMES order ex..ep):
@@ -245,29 +245,43 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
 MATCHING = (0, 1, 2, 4, 5, 3)
 
 
-def frame_load_candidates(cm: CompiledModel, names: list[str], values: np.ndarray, own: set[int],
-                          taken: list[Candidate]) -> list[Candidate]:
+def moves_with(values: np.ndarray, data: Measurements, wrench: bool) -> tuple[str, ...]:
+    """What a person plots a load against: the reading its largest column follows most closely, and,
+    for a load with the measured wrench in it, the wrench component likewise (|correlation| over the
+    poses). values: (P, k) the load's columns."""
+    v = values[:, np.argmax(values.std(axis=0))]
+    inputs = [(f"q{i + 1}", data.q[:, i]) for i in range(data.q.shape[1])]
+    out = []
+    for group in [inputs] + [[(name, data.w[:, k]) for k, name in enumerate(WRENCH)]] * wrench:
+        moving = [(name, x) for name, x in group if _range(x) > 1e-9]
+        if moving:
+            out.append(max(moving, key=lambda item: abs(np.corrcoef(item[1], v)[0, 1]))[0])
+    return tuple(out)
+
+
+def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str], values: np.ndarray,
+                          own: set[int], taken: list[Candidate]) -> list[Candidate]:
     """For every frame (actuated, coupled or passive joint, or the base) and each of its six errors,
     the loads that act there: the matching component of the wrench the frame carries (the moment
     about the error's axis: about the joint's own axis a joint compliance, across it a bearing that
     tilts; the force along a translation), and a beam's coupling (a link bending under a force
     across it turns, under a moment it moves: the moments about the other two axes for a
-    translation, the forces along them for a rotation). Each load as the regressor's columns with the
-    measured wrench's component (unknown masses), and from the URDF's masses; a group equal to one
-    of the joint loads already offered on that error (`taken`) is left out. own: the joints' own
-    errors (`frame_own_errors`)."""
+    translation, the forces along them for a rotation). Each load as the measured wrench's component
+    alone, as the regressor's columns with it (unknown masses), and from the URDF's masses with it; a
+    group equal to one already offered on that error (the joint loads, `taken`) is left out. own:
+    the joints' own errors (`frame_own_errors`)."""
     by: dict[tuple[int, str, int], list[int]] = {}
     for k, name in enumerate(names):
         m = FRAME_SIGNAL.match(name)
         if m and _range(values[:, k]) > 1e-12 * max(1.0, float(np.abs(values[:, k]).max())):
-            form = "masses" if m.group(1) == "gravity_load" else "regressor"
-            by.setdefault((int(m.group(2)), form, WRENCH.index(m.group(3))), []).append(k)
+            # a measured wrench adds to the weight in both forms, and stands alone too: a payload that
+            # changes from pose to pose is a load no fixed mass explains
+            forms = {"gravity_load": ("masses",), "gravity": ("regressor",),
+                     "wrench_load": ("regressor", "masses", "wrench")}[m.group(1)]
+            for form in forms:
+                by.setdefault((int(m.group(2)), form, WRENCH.index(m.group(3))), []).append(k)
     robot, out = cm.robot, []
-    drives = robot.drives()
     for f in range(robot.n_frames + 1):
-        # what a person plots the effect against: the reading that turns the frame's joint (the first
-        # it follows, for a passive joint; joint 1's for the base)
-        reading = f"q{drives[max(f, 1) - 1][0][0][0] + 1}"
         for k in range(6):
             e, matched = 6 * f + k, MATCHING[k]
             axis = MATCHING[k] % 3
@@ -275,16 +289,14 @@ def frame_load_candidates(cm: CompiledModel, names: list[str], values: np.ndarra
             for c, family in [(matched, "joint compliance" if e in own else
                                "lateral compliance" if k >= 3 else "frame compliance")] + \
                              [(c, "link bending") for c in across]:
-                for form in ("regressor", "masses"):
+                for form in ("wrench", "regressor", "masses"):
                     cols = by.get((f, form, c), [])
-                    if not cols:
-                        continue
                     v = values[:, cols]
-                    if any(e in t.errors and t.values.shape == v.shape and np.allclose(t.values, v, rtol=1e-9,
-                                                                                        atol=1e-12)
-                           for t in taken if t.errors):
+                    if not cols or any(e in t.errors and t.values.shape == v.shape
+                                       and np.allclose(t.values, v, rtol=1e-9, atol=1e-12) for t in taken + out):
                         continue
-                    out.append(Candidate(family, (reading,), tuple(names[k] for k in cols), v, (e,)))
+                    out.append(Candidate(family, moves_with(v, data, form != "masses" or len(cols) > 1),
+                                         tuple(names[k] for k in cols), v, (e,)))
     return out
 
 
