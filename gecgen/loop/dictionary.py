@@ -295,8 +295,9 @@ def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str
                     if not cols or any(e in t.errors and t.values.shape == v.shape
                                        and np.allclose(t.values, v, rtol=1e-9, atol=1e-12) for t in taken + out):
                         continue
-                    out.append(Candidate(family, moves_with(v, data, form != "masses" or len(cols) > 1),
-                                         tuple(names[k] for k in cols), v, (e,)))
+                    terms = tuple(names[j] for j in cols)
+                    out.append(Candidate(family, moves_with(v, data, any(t.startswith("wrench") for t in terms)),
+                                         terms, v, (e,)))
     return out
 
 
