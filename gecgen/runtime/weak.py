@@ -1,0 +1,150 @@
+"""Weakly determined directions: what the data and the noise cannot hold, found and held.
+
+Identifiable (`runtime.redundancy`) says the data can separate a coefficient from the others at
+all; it does not say by how much. A laser tracker measuring one reflector while the tool keeps its
+orientation separates the wrist's rotation errors from the rest only through the tool's tiny
+deviations from that orientation: the column of H_e is independent, but so nearly dependent that
+the noise moves the least-squares value by metres. An undamped Gauss-Newton step then wanders
+along that direction, and the fit either never settles or carries an absurd value.
+
+The test is on the noise, not on a fixed rank tolerance. In the column-scaled least squares
+(x = c * scale, the R factor Rk = U S V^T of the kept columns), the direction V[:, i] is
+determined to sigma / S[i], sigma the noise per coordinate (stated, or the residual of the
+linearised fit). Moving along it by that much changes coefficient j by V[j, i] / scale[j]
+times it, that is its generalized error by that times the RMS of its term over the data. When the
+largest such change is beyond a plausible size (PLAUSIBLE_M, PLAUSIBLE_RAD: no robot's
+generalized error is known to less than that by a fit it cannot hold), the direction is weak:
+the coefficient it moves most is held at zero (the data cannot tell its value from zero), and the test
+repeats on the rest, until every direction left is determined. Holding a coefficient rather than
+a combination lets every later stage (covariance, significance gate, compensation) work on the
+coefficients it knows; the fit's steps then lie in the determined subspace only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gecgen.model.kinematics import tool_poses
+
+#: 1-sigma of a generalized error beyond which the data do not determine it (m, rad): real robots
+#: are off their nominal model by tenths of a millimetre to a few, and a value known only to 5 mm
+#: (5 mrad) is noise the compensation would carry to every pose
+PLAUSIBLE_M = 0.005
+PLAUSIBLE_RAD = 0.005
+#: an estimated noise (m per coordinate) is taken at most as this: no instrument a calibration uses is
+#: noisier, and a larger residual is the model missing the data (gross glitches under least squares, a
+#: wrong robot file), which must not pass for noise and hold every direction
+NOISE_CAP_M = 1e-3
+#: the tool "never turns" when its nominal orientation stays within this (rad) of its mean over the data
+TURN_RAD = 0.02
+#: a joint "barely moves" when its readings span less than this (rad; m for a prismatic joint)
+BARELY_RAD, BARELY_M = 0.05, 0.01
+
+
+@dataclass(frozen=True)
+class Held:
+    """A coefficient held at zero because its direction is weakly determined: its name and index,
+    the 1-sigma of its generalized error along that direction (`std`, in `unit`: mm or mrad; None
+    when nothing in the data fixes it at all, as the scale without a known distance) and why the
+    data leave it undetermined, in words."""
+
+    param: str
+    index: int
+    std: float | None
+    unit: str | None
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"param": self.param, **({} if self.std is None else {f"std_{self.unit}": self.std}),
+                "reason": self.reason}
+
+    def __str__(self) -> str:
+        known = "" if self.std is None else f" (known only to {self.std:.3g} {self.unit})"
+        return f"{self.param}{known}: {self.reason}"
+
+
+def plausible_units(cm, data) -> tuple[np.ndarray, np.ndarray]:
+    """Per coefficient (nc,): the generalized error its unit value gives, RMS over the poses of
+    `data` (m or rad per unit coefficient), and the plausible size of that error (m or rad)."""
+    terms = [t.text for t in cm.model.unique_terms()]
+    f = cm.basis(data.q, data.w, data.aux_columns(cm.model.aux))
+    rms = np.sqrt(np.mean(f ** 2, axis=0))
+    coefs = cm.model.coefficients
+    size = np.array([rms[terms.index(c.term.text)] for c in coefs])
+    limit = np.array([PLAUSIBLE_M if c.error % 6 < 3 else PLAUSIBLE_RAD for c in coefs])
+    return size, limit
+
+
+def weak(Rk: np.ndarray, scale: np.ndarray, size: np.ndarray, limit: np.ndarray,
+         sigma: float) -> list[tuple[int, float]]:
+    """The positions (in Rk's columns) of the coefficients to hold, each with the 1-sigma (m or
+    rad) of its generalized error along its direction, weakest first. Rk (k, k): R factor of the
+    kept columns scaled by scale (k,); size, limit (k,): `plausible_units` of those coefficients;
+    sigma: the noise per coordinate (m)."""
+    active = list(range(Rk.shape[1]))
+    out = []
+    if not sigma > 0 or not np.isfinite(sigma):
+        return out
+    while active:
+        _, S, Vt = np.linalg.svd(Rk[:, active])
+        # per direction (row) and coefficient: generalized error, in plausible sizes, per scaled unit move
+        W = np.abs(Vt) * (size[active] / scale[active] / limit[active])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(S > 0, sigma / S, np.inf) * W.max(axis=1)
+        i = int(np.argmax(ratio))
+        if not ratio[i] > 1.0:
+            break
+        # the coefficient held is the one the direction moves most in the scaled coordinates (QR
+        # pivoting's choice): the column the others come nearest to, whose loss conditions the rest best
+        j = int(np.argmax(np.abs(Vt[i])))
+        out.append((active[j], float(sigma / S[i] * W[i, j] * limit[active[j]])))
+        active.pop(j)
+    return out
+
+
+def tool_turn(robot, q: np.ndarray) -> float:
+    """The largest angle (rad) between the nominal tool orientation at a pose of q (P, n) and
+    its mean over them (on a tree: over every branch's tool, the largest)."""
+    out = 0.0
+    for T in tool_poses(robot, q):
+        rot = Rotation.from_matrix(T[:, :3, :3])
+        out = max(out, float(np.max((rot * rot.mean().inv()).magnitude())))
+    return out
+
+
+def reasons(cm, data, indices, stds) -> list[Held]:
+    """The held coefficients (indices into the model's, with their std in m or rad), each with why
+    the data leave it undetermined, as far as the data tell: the tool never turns, its joint barely
+    moves, no known distance fixes the scale; else the plain statement of its uncertainty."""
+    robot = cm.robot
+    names = cm.model.coefficient_names(robot)
+    turn = tool_turn(robot, data.q)
+    span = np.ptp(data.q, axis=0) if len(data.q) else np.zeros(robot.n)
+    unscaled = data.relative is not None and not data.relative.distances and \
+        not any(r.kind == "offset" for r in data.relative.relations)
+    out = []
+    for j, std in zip(indices, stds):
+        e = cm.model.coefficients[j].error
+        frame, rotation = e // 6, e % 6 >= 3
+        unit, value = ("mrad", 1e3 * std) if rotation else ("mm", 1e3 * std)
+        joint = robot.joints[frame - 1] if 1 <= frame <= robot.n else None
+        barely = joint is not None and span[frame - 1] < (BARELY_RAD if joint.kind == "R" else BARELY_M)
+        if unscaled:
+            why = ("no known distance between sockets or planes: the data do not fix the scale, and this error "
+                   "acts like it; held at zero (give a known distance to determine it)")
+        elif turn < TURN_RAD:
+            why = (f"the tool never turns (its orientation stays within {1e3 * turn:.3g} mrad over the data): its "
+                   f"orientation errors are not determined, nor this error, which only a turn of the tool would "
+                   f"tell from them; held at zero (measure poses that turn the tool, or a second target)")
+        elif barely:
+            what = f"{span[frame - 1]:.3g} {'rad' if joint.kind == 'R' else 'm'}"
+            why = (f"joint {frame} ({joint.name}) barely moves (its readings span {what}): its errors are not "
+                   f"determined; held at zero (measure poses that move it)")
+        else:
+            why = (f"the data determine it only to {value:.3g} {unit} (1-sigma), beyond a plausible "
+                   f"{1e3 * (PLAUSIBLE_RAD if rotation else PLAUSIBLE_M):g} {unit}; held at zero (measure poses "
+                   f"that move it)")
+        out.append(Held(names[j], int(j), value, unit, why))
+    return out
