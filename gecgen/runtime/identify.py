@@ -852,8 +852,9 @@ def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.nda
     found = weak.weak(R[:k, :k], scale, size[kept], limit[kept], sigma)
     if not found:
         return red, list(range(k)), ()
-    held = tuple(weak.reasons(cm, data, [int(kept[i]) for i, _ in found], [s for _, s in found]))
-    out = {i for i, _ in found}
+    held = tuple(weak.reasons(cm, data, [int(kept[i]) for i, _, _ in found], [s for _, s, _ in found],
+                              [r for _, _, r in found]))
+    out = {i for i, _, _ in found}
     stay = [i for i in range(k) if i not in out]
     red = replace(red, kept=tuple(int(kept[i]) for i in stay),
                   eliminated=tuple(sorted((*red.eliminated, *(Eliminated(h.param, h.index, "held", h.reason)

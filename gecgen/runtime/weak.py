@@ -55,13 +55,15 @@ class Held:
     std: float | None
     unit: str | None
     reason: str
+    #: the 1-sigma along the direction of the generalized error it moves most, in plausible sizes (> 1)
+    beyond: float | None = None
 
     def to_dict(self) -> dict:
         return {"param": self.param, **({} if self.std is None else {f"std_{self.unit}": self.std}),
-                "reason": self.reason}
+                **({} if self.beyond is None else {"beyond_plausible": self.beyond}), "reason": self.reason}
 
     def __str__(self) -> str:
-        known = "" if self.std is None else f" (known only to {self.std:.3g} {self.unit})"
+        known = "" if self.beyond is None else f" (its direction known only to {self.beyond:.3g} times a plausible size)"
         return f"{self.param}{known}: {self.reason}"
 
 
@@ -78,9 +80,10 @@ def plausible_units(cm, data) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weak(Rk: np.ndarray, scale: np.ndarray, size: np.ndarray, limit: np.ndarray,
-         sigma: float) -> list[tuple[int, float]]:
+         sigma: float) -> list[tuple[int, float, float]]:
     """The positions (in Rk's columns) of the coefficients to hold, each with the 1-sigma (m or
-    rad) of its generalized error along its direction, weakest first. Rk (k, k): R factor of the
+    rad) of its generalized error along its direction and that direction's largest 1-sigma in
+    plausible sizes (> 1), weakest first. Rk (k, k): R factor of the
     kept columns scaled by scale (k,); size, limit (k,): `plausible_units` of those coefficients;
     sigma: the noise per coordinate (m)."""
     active = list(range(Rk.shape[1]))
@@ -99,7 +102,7 @@ def weak(Rk: np.ndarray, scale: np.ndarray, size: np.ndarray, limit: np.ndarray,
         # the coefficient held is the one the direction moves most in the scaled coordinates (QR
         # pivoting's choice): the column the others come nearest to, whose loss conditions the rest best
         j = int(np.argmax(np.abs(Vt[i])))
-        out.append((active[j], float(sigma / S[i] * W[i, j] * limit[active[j]])))
+        out.append((active[j], float(sigma / S[i] * W[i, j] * limit[active[j]]), float(ratio[i])))
         active.pop(j)
     return out
 
@@ -114,8 +117,9 @@ def tool_turn(robot, q: np.ndarray) -> float:
     return out
 
 
-def reasons(cm, data, indices, stds) -> list[Held]:
-    """The held coefficients (indices into the model's, with their std in m or rad), each with why
+def reasons(cm, data, indices, stds, beyond) -> list[Held]:
+    """The held coefficients (indices into the model's, with their std in m or rad and their
+    direction's in plausible sizes), each with why
     the data leave it undetermined, as far as the data tell: the tool never turns, its joint barely
     moves, no known distance fixes the scale; else the plain statement of its uncertainty."""
     robot = cm.robot
@@ -125,12 +129,13 @@ def reasons(cm, data, indices, stds) -> list[Held]:
     unscaled = data.relative is not None and not data.relative.distances and \
         not any(r.kind == "offset" for r in data.relative.relations)
     out = []
-    for j, std in zip(indices, stds):
+    for j, std, ratio in zip(indices, stds, beyond):
         e = cm.model.coefficients[j].error
         frame, rotation = e // 6, e % 6 >= 3
         unit, value = ("mrad", 1e3 * std) if rotation else ("mm", 1e3 * std)
-        joint = robot.joints[frame - 1] if 1 <= frame <= robot.n else None
-        barely = joint is not None and span[frame - 1] < (BARELY_RAD if joint.kind == "R" else BARELY_M)
+        # frame i's errors are told from frame i+1's by joint i+1's motion, and carry joint i's terms
+        barely = [i for i in (frame + 1, frame) if 1 <= i <= robot.n
+                  and span[i - 1] < (BARELY_RAD if robot.joints[i - 1].kind == "R" else BARELY_M)]
         if unscaled:
             why = ("no known distance between sockets or planes: the data do not fix the scale, and this error "
                    "acts like it; held at zero (give a known distance to determine it)")
@@ -139,12 +144,14 @@ def reasons(cm, data, indices, stds) -> list[Held]:
                    f"orientation errors are not determined, nor this error, which only a turn of the tool would "
                    f"tell from them; held at zero (measure poses that turn the tool, or a second target)")
         elif barely:
-            what = f"{span[frame - 1]:.3g} {'rad' if joint.kind == 'R' else 'm'}"
-            why = (f"joint {frame} ({joint.name}) barely moves (its readings span {what}): its errors are not "
-                   f"determined; held at zero (measure poses that move it)")
+            i = barely[0]
+            joint = robot.joints[i - 1]
+            what = f"{span[i - 1]:.3g} {'rad' if joint.kind == 'R' else 'm'}"
+            why = (f"joint {i} ({joint.name}) barely moves (its readings span {what}): the errors its motion "
+                   f"would tell apart are not determined; held at zero (measure poses that move it)")
         else:
-            why = (f"the data determine it only to {value:.3g} {unit} (1-sigma), beyond a plausible "
-                   f"{1e3 * (PLAUSIBLE_RAD if rotation else PLAUSIBLE_M):g} {unit}; held at zero (measure poses "
-                   f"that move it)")
-        out.append(Held(names[j], int(j), value, unit, why))
+            why = (f"the data determine its direction only to {ratio:.3g} times a plausible size (1-sigma against "
+                   f"{1e3 * PLAUSIBLE_M:g} mm, {1e3 * PLAUSIBLE_RAD:g} mrad); held at zero (measure poses that "
+                   f"move it)")
+        out.append(Held(names[j], int(j), value, unit, why, ratio))
     return out
