@@ -114,7 +114,7 @@ def test_a_planar_grid_converges_with_what_it_holds_named():
     design = constant_orientation(robot, np.radians(HOME_DEG), SPACING_M, (8, 8, 1))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        cal = api.Calibrator(errors=str(ROBOTS / "constant.errors.yaml")).fit(robot, simulate(robot, truth, design, rng))
+        cal = api.Calibrator().fit(robot, simulate(robot, truth, design, rng))
     assert cal.report_["converged"] and cal.report_["held"]
     assert all("the tool never turns" in h["reason"] for h in cal.report_["held"])
 

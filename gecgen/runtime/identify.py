@@ -615,9 +615,12 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
     being insignificant (`runtime.significance`); `analysis`, the `Fit.analysis` of an earlier fit
     of the same compiled model and data, spares the first round's analysis where it would repeat it.
-    hold_weak (default) holds at zero the coefficients whose direction the data determine too weakly
-    against the noise to hold a plausible value (`runtime.weak`; noise_m the instrument's noise per
-    coordinate, m, when known, else estimated), each listed in `Fit.held` with why.
+    hold_weak (default): when the fit cannot be trusted (it does not converge, or carries an absurd
+    or undetermined value), it is redone with the coefficients whose direction the data determine too
+    weakly against the noise to hold a plausible value held at zero (`runtime.weak`; noise_m the
+    instrument's noise per coordinate, m, when known, else estimated), each listed in `Fit.held`
+    with why; that fit is returned when it holds some and fails for fewer reasons. Not when the
+    failure names a pose the others do not predict (`Fit.suspects`): a glitch is fixed in the data.
 
     Stations (`data.station`): each is registered onto the nominal model on its own. With more
     than one, what the nominal model leaves of each frame differs between stations, and frame 0's
@@ -628,8 +631,29 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     0's errors as with one station. `Fit.before` stays that of the nominal registrations.
     """
     robust.check_loss(loss)
+    options = (registration_mode, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold or {}, analysis)
+    fit = _identify(cm, data, *options, noise_m, False)
+    if fit.failures and hold_weak and not fit.suspects:
+        # a fit the data do not let converge, or that carries what they cannot hold, is redone with the
+        # weakly determined directions held; a fit that stands keeps every coefficient the data separate
+        # (the significance gate then judges them), as weakly held real data fit well without this. A
+        # pose the others do not predict explains a failure better than weak directions: that stands
+        held = _identify(cm, data, *options, noise_m, True)
+        if held.held and len(held.failures) < len(fit.failures):
+            fit = replace(held, warnings=(f"the fit of every identifiable coefficient cannot be trusted "
+                                          f"({'; '.join(fit.failures)}): refitted with the weakly determined "
+                                          f"ones held", *held.warnings))
+    for note in [*fit.failures, *fit.warnings]:
+        warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
+    return fit
+
+
+def _identify(cm: CompiledModel, data: Measurements, registration_mode: str, max_iter: int, step_tol_m: float,
+              progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], analysis: Analysis | None,
+              noise_m: float | None, hold_weak: bool) -> Fit:
+    """`identify`, with the weakly determined directions held (`_fit`'s hold_weak) or not; its notes
+    not yet warned."""
     frames = fit_frames(cm, data, None, loss, registration_mode)
-    hold = hold or {}
     weakly = {"noise_m": noise_m, "hold_weak": hold_weak}
     fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, analysis=analysis,
                **weakly)
@@ -657,8 +681,6 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                                          f"{STATION_ROUNDS} rounds (last move {1e3 * moved:.3g} mm): on this data "
                                          f"they are hard to tell from the robot's errors; measure more poses, "
                                          f"spread wider, from each station"))
-    for note in [*fit.failures, *fit.warnings]:
-        warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
     return replace(fit, analysis=begun)
 
 
@@ -847,9 +869,9 @@ def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.nda
     fits some noise too, so that fewer directions are held rather than more."""
     k = len(red.kept)
     sigma = noise_m if noise_m is not None else min(float(abs(R[k, k]) / np.sqrt(max(m - k, 1.0))), weak.NOISE_CAP_M)
-    size, limit = weak.plausible_units(cm, data)
+    F, error, limit = weak.term_values(cm, data)
     kept = np.array(red.kept, int)
-    found = weak.weak(R[:k, :k], scale, size[kept], limit[kept], sigma)
+    found = weak.weak(R[:k, :k], scale, F[:, kept], error[kept], limit[kept], sigma)
     if not found:
         return red, list(range(k)), ()
     held = tuple(weak.reasons(cm, data, [int(kept[i]) for i, _, _ in found], [s for _, s, _ in found],

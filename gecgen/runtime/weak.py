@@ -11,13 +11,15 @@ The test is on the noise, not on a fixed rank tolerance. In the column-scaled le
 (x = c * scale, the R factor Rk = U S V^T of the kept columns), the direction V[:, i] is
 determined to sigma / S[i], sigma the noise per coordinate (stated, or the residual of the
 linearised fit). Moving along it by that much changes coefficient j by V[j, i] / scale[j]
-times it, that is its generalized error by that times the RMS of its term over the data. When the
-largest such change is beyond a plausible size (PLAUSIBLE_M, PLAUSIBLE_RAD: no robot's
+times it, and each generalized error by the sum of its coefficients' changes times their terms
+(RMS over the measured poses). When the largest such change is beyond a plausible size (PLAUSIBLE_M, PLAUSIBLE_RAD: no robot's
 generalized error is known to less than that by a fit it cannot hold), the direction is weak:
 the coefficient it moves most is held at zero (the data cannot tell its value from zero), and the test
 repeats on the rest, until every direction left is determined. Holding a coefficient rather than
 a combination lets every later stage (covariance, significance gate, compensation) work on the
-coefficients it knows; the fit's steps then lie in the determined subspace only.
+coefficients it knows; the fit's steps then lie in the determined subspace only. `identify` does
+this when the fit of every coefficient cannot be trusted: a fit that stands is judged by the
+significance gate instead.
 """
 from __future__ import annotations
 
@@ -67,42 +69,56 @@ class Held:
         return f"{self.param}{known}: {self.reason}"
 
 
-def plausible_units(cm, data) -> tuple[np.ndarray, np.ndarray]:
-    """Per coefficient (nc,): the generalized error its unit value gives, RMS over the poses of
-    `data` (m or rad per unit coefficient), and the plausible size of that error (m or rad)."""
+#: poses the generalized errors of a direction are evaluated at, at most (spread through the data)
+SAMPLE_POSES = 2000
+
+
+def term_values(cm, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the test works with: each coefficient's term at up to SAMPLE_POSES poses spread through
+    `data` (P, nc), the generalized error each scales (nc,) and that error's plausible size (nc,),
+    m or rad."""
+    poses = np.unique(np.linspace(0, data.n_poses - 1, min(data.n_poses, SAMPLE_POSES)).astype(int))
     terms = [t.text for t in cm.model.unique_terms()]
-    f = cm.basis(data.q, data.w, data.aux_columns(cm.model.aux))
-    rms = np.sqrt(np.mean(f ** 2, axis=0))
+    f = cm.basis(data.q[poses], data.w[poses], data.aux_columns(cm.model.aux)[poses])
     coefs = cm.model.coefficients
-    size = np.array([rms[terms.index(c.term.text)] for c in coefs])
-    limit = np.array([PLAUSIBLE_M if c.error % 6 < 3 else PLAUSIBLE_RAD for c in coefs])
-    return size, limit
+    F = f[:, [terms.index(c.term.text) for c in coefs]]
+    error = np.array([c.error for c in coefs])
+    return F, error, np.where(error % 6 < 3, PLAUSIBLE_M, PLAUSIBLE_RAD)
 
 
-def weak(Rk: np.ndarray, scale: np.ndarray, size: np.ndarray, limit: np.ndarray,
+def weak(Rk: np.ndarray, scale: np.ndarray, F: np.ndarray, error: np.ndarray, limit: np.ndarray,
          sigma: float) -> list[tuple[int, float, float]]:
     """The positions (in Rk's columns) of the coefficients to hold, each with the 1-sigma (m or
-    rad) of its generalized error along its direction and that direction's largest 1-sigma in
-    plausible sizes (> 1), weakest first. Rk (k, k): R factor of the
-    kept columns scaled by scale (k,); size, limit (k,): `plausible_units` of those coefficients;
-    sigma: the noise per coordinate (m)."""
+    rad, RMS over the poses) of its generalized error along its direction and that direction's
+    largest 1-sigma in plausible sizes (> 1), weakest first. Rk (k, k): R factor of the kept
+    columns scaled by scale (k,); F, error, limit: `term_values` of those coefficients (P, k), (k,),
+    (k,); sigma: the noise per coordinate (m).
+
+    A direction moves every generalized error it touches by the sum of its coefficients' terms,
+    which is what is compared with a plausible size: a constant and a slope in Unix seconds are each
+    known to metres, their difference (what the data see) to micrometres."""
     active = list(range(Rk.shape[1]))
     out = []
     if not sigma > 0 or not np.isfinite(sigma):
         return out
     while active:
         _, S, Vt = np.linalg.svd(Rk[:, active])
-        # per direction (row) and coefficient: generalized error, in plausible sizes, per scaled unit move
-        W = np.abs(Vt) * (size[active] / scale[active] / limit[active])
+        D = Vt / scale[active]  # per direction (row): the coefficients' change per scaled unit move
+        size = np.zeros((len(S), len(active)))  # per direction: each coefficient's error's RMS motion
+        err = error[active]
+        for e in np.unique(err):
+            on = err == e
+            motion = np.sqrt(np.mean((F[:, active][:, on] @ D[:, on].T) ** 2, axis=0)) / limit[active][on][0]
+            size[:, on] = motion[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(S > 0, sigma / S, np.inf) * W.max(axis=1)
+            ratio = np.where(S > 0, sigma / S, np.inf) * size.max(axis=1)
         i = int(np.argmax(ratio))
         if not ratio[i] > 1.0:
             break
         # the coefficient held is the one the direction moves most in the scaled coordinates (QR
         # pivoting's choice): the column the others come nearest to, whose loss conditions the rest best
         j = int(np.argmax(np.abs(Vt[i])))
-        out.append((active[j], float(sigma / S[i] * W[i, j] * limit[active[j]]), float(ratio[i])))
+        out.append((active[j], float(sigma / S[i] * size[i, j] * limit[active[j]]), float(ratio[i])))
         active.pop(j)
     return out
 
