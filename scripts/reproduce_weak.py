@@ -114,7 +114,8 @@ def main():
         for seed, r in enumerate(rows):
             cal = (f" {r['calibrate']:.4f} | {r['calibrate'] / r['floor']:.3f} | {r['model']} |"
                    if not args.no_calibrate else "")
-            lines.append(f"| {seed} | {r['without']} | {r['identify']:.4f} | {r['identify'] / r['floor']:.3f} | {r['iterations']} | "
+            lines.append(f"| {seed} | {r['without']} | {r['identify']:.4f} | {r['identify'] / r['floor']:.3f} | "
+                         f"{r['iterations']} | "
                          f"{len(r['held'])} | {r['largest'][0]:.3g} / {r['largest'][1]:.3g} |{cal}")
         worst = max(r["identify"] / r["floor"] for r in rows)
         over = [str(s) for s, r in enumerate(rows) if r["identify"] / r["floor"] > 1.1

@@ -446,8 +446,8 @@ def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, 
     """`red` (the analysis of data with relative rows) with the coefficients the same rows would
     excite as absolute measurements (`absolute`, their columns unprojected) eliminated for being
     invisible to relative data, and why. Without a known distance or offset, the one of them that
-    carries the scale is named as such (SCALE_HELD; `Fit.held` lists it): H (rows, s) the unprojected rows over the
-    structurally kept columns, moves (rows, 7) what a motion and a scaling of the whole set do to
+    carries the scale is named as such (SCALE_HELD; `Fit.held` lists it): H (rows, s) the
+    unprojected rows over the structurally kept columns, moves (rows, 7) what a motion and a scaling of the whole set do to
     them (`runtime.relative.rigid`), at the column of each of red's eliminated coefficients in H."""
     seen = set(absolute.kept)
     names = [e.split(".")[0] for e in cm.robot.error_names()]

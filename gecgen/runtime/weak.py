@@ -12,10 +12,10 @@ The test is on the noise, not on a fixed rank tolerance. In the column-scaled le
 determined to sigma / S[i], sigma the noise per coordinate (stated, or the residual of the
 linearised fit). Moving along it by that much changes coefficient j by V[j, i] / scale[j]
 times it, and each generalized error by the sum of its coefficients' changes times their terms
-(RMS over the measured poses). When the largest such change is beyond a plausible size (PLAUSIBLE_M, PLAUSIBLE_RAD: no robot's
-generalized error is known to less than that by a fit it cannot hold), the direction is weak:
-the coefficient it moves most is held at zero (the data cannot tell its value from zero), and the test
-repeats on the rest, until every direction left is determined. Holding a coefficient rather than
+(RMS over the measured poses). When the largest such change is beyond a plausible size
+(PLAUSIBLE_M, PLAUSIBLE_RAD: a value known only that roughly is no robot's error), the direction
+is weak: the coefficient it moves most is held at zero (the data cannot tell its value from zero),
+and the test repeats on the rest, until every direction left is determined. Holding a coefficient rather than
 a combination lets every later stage (covariance, significance gate, compensation) work on the
 coefficients it knows; the fit's steps then lie in the determined subspace only. `identify` does
 this when the fit of every coefficient cannot be trusted: a fit that stands is judged by the
@@ -65,7 +65,8 @@ class Held:
                 **({} if self.beyond is None else {"beyond_plausible": self.beyond}), "reason": self.reason}
 
     def __str__(self) -> str:
-        known = "" if self.beyond is None else f" (its direction known only to {self.beyond:.3g} times a plausible size)"
+        known = ("" if self.beyond is None else
+                 f" (its direction known only to {self.beyond:.3g} times a plausible size)")
         return f"{self.param}{known}: {self.reason}"
 
 
