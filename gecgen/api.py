@@ -313,7 +313,9 @@ class Calibrator:
             options.update(chosen)
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
-            fit = identify(cm, data, registration_mode=register, progress=progress, **options)
+            # the stated noise decides which directions the data determine (`runtime.weak`)
+            fit = identify(cm, data, registration_mode=register, progress=progress, noise_m=_noise(self.noise_mm),
+                           **options)
         if fit.failures:
             raise RuntimeError(f"the fit is not trustworthy, no calibration made or written: {'; '.join(fit.failures)}")
         full = fit

@@ -14,6 +14,7 @@ from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import write_measurements
 from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
+from gecgen.simulate.designs import constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
@@ -29,9 +30,17 @@ def add_parser(command):
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the "
                                    "nominal robot: no errors, no noise)")
-    p.add_argument("--design", choices=["random", "one-at-a-time", "paper"], default="random",
-                   help="random poses within the limits, one joint at a time, or the seed paper's PPS design "
-                        "(default %(default)s)")
+    p.add_argument("--design", choices=["random", "one-at-a-time", "paper", "tool-grid"], default="random",
+                   help="random poses within the limits, one joint at a time, the seed paper's PPS design, or a "
+                        "grid the tool visits keeping the orientation it has at --home, as a laser tracker's "
+                        "reflector is kept facing the tracker (default %(default)s)")
+    p.add_argument("--home", type=numbers(),
+                   help="--design tool-grid: comma-separated joint values (rad or m) whose tool orientation the "
+                        "grid keeps, and whose tool origin is its centre (default: the middle of each joint's range)")
+    p.add_argument("--spacing", type=number(0, 10, above=True), default=0.1,
+                   help="--design tool-grid: distance between grid points, m (default %(default)s)")
+    p.add_argument("--grid", type=numbers(1), default=[6, 6, 6],
+                   help="--design tool-grid: points along x, y, z of the world (default 6,6,6; 8,8,1 a plane)")
     p.add_argument("--poses", type=whole(1, MAX_POSES),
                    help=f"poses of the random design (default {POSES})")
     p.add_argument("--step", type=number(0, above=True), default=0.05,
@@ -59,6 +68,8 @@ def add_parser(command):
                    help=f"distance between a plate's sockets, m (default {FIXTURE_DEFAULTS['socket_distance']})")
     g.add_argument("--distance-std", type=number(0, 1),
                    help="stated uncertainty of that distance, m (default 0: exact)")
+    g.add_argument("--no-distance", action="store_true",
+                   help="the plates' distance is not declared in the data: nothing fixes the scale")
     g.add_argument("--planes", type=whole(0, 3), default=0,
                    help="planes touched: a table, then up to two faces of a square on it (default %(default)s)")
     g.add_argument("--touches", type=whole(4, MAX_POSES),
@@ -89,7 +100,8 @@ def run(args) -> dict:
     if args.plates or args.planes:
         return _fixtures(args, robot, truth, rng)
     given = [f"--{k.replace('_', '-')}" for k in (*FIXTURE_DEFAULTS, "block_width", "target")
-             if getattr(args, k) is not None] + (["--plane-relations"] if args.plane_relations else [])
+             if getattr(args, k) is not None] + (["--plane-relations"] if args.plane_relations else []) + \
+        (["--no-distance"] if args.no_distance else [])
     if given:
         raise ModelError(f"{given[0]} goes with --plates or --planes (sockets and planes); drop it, or add one of them")
     payloads = args.payload_kg or [0.0]
@@ -98,6 +110,8 @@ def run(args) -> dict:
     if args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
         design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
+    elif args.design == "tool-grid":
+        design = _tool_grid(args, robot)
     elif args.design == "one-at-a-time":
         lo, hi = robot.sampling_box()
         count = len(payloads) * sum(int((b - a) / args.step) + 1 for a, b in zip(lo, hi))
@@ -134,6 +148,19 @@ def run(args) -> dict:
             "files": files}
 
 
+def _tool_grid(args, robot):
+    """The constant-orientation grid of --design tool-grid (`simulate.designs.constant_orientation`)."""
+    lo, hi = robot.sampling_box()
+    home = args.home if args.home is not None else [(a + b) / 2 for a, b in zip(lo, hi)]
+    require(len(home) == robot.n, f"--home: {len(home)} values for {robot.n} joints; give one per joint (rad or m)")
+    require(len(args.grid) == 3 and all(float(k).is_integer() for k in args.grid),
+            f"--grid {','.join(f'{k:g}' for k in args.grid)}: give three whole numbers, points along x, y, z")
+    try:
+        return constant_orientation(robot, home, args.spacing, tuple(int(k) for k in args.grid))
+    except ValueError as exc:
+        raise ModelError(f"--design tool-grid: {exc} (--spacing, --home)") from None
+
+
 def _fixtures(args, robot, truth, rng) -> dict:
     """Socket and plane data (`simulate.fixtures`); --val-out gets new placements of the same fixtures."""
     require(args.design == "random" and not args.orientation and args.val_poses is None and args.poses is None
@@ -143,7 +170,8 @@ def _fixtures(args, robot, truth, rng) -> dict:
     value = {k: default if getattr(args, k) is None else getattr(args, k) for k, default in FIXTURE_DEFAULTS.items()}
     fixtures = Fixtures(args.target or next(iter(robot.targets)), args.plates, value["per_socket"],
                         value["socket_distance"], value["distance_std"], args.planes, value["touches"],
-                        value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width)
+                        value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width,
+                        not args.no_distance)
     data, floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),

@@ -85,7 +85,7 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
               "loss": fit.loss, "outlier_limit_mm": 1e3 * fit.outlier_limit_m if np.isfinite(fit.outlier_limit_m) else None,
               "outliers": [o.to_dict() for o in fit.outliers],
               "suspect_poses": [p.to_dict() for p in fit.suspects], "train_inliers": fit.train_inliers,
-              "training_ranges": fit.ranges}
+              "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held]}
     return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report,
                        fit.registrations)
 

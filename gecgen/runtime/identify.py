@@ -23,7 +23,7 @@ from scipy.linalg import solve_triangular
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
-from gecgen.runtime import influence, relative, robust
+from gecgen.runtime import influence, relative, robust, weak
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
 from gecgen.runtime.redundancy import (RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited,
                                       unmeasured_frames)
@@ -130,7 +130,8 @@ class Fit:
     each input over the data ({"q1": [lo, hi], ..., "fx": ..., aux: ...}). A fit with `failures`
     must not be used: each says why. suspects: the poses the other poses do not predict, each
     named in `warnings` (and in `failures`, when the fit has any). analysis: the data analysis its
-    first round began from, which a refit of the same data begins from too (`Analysis`)."""
+    first round began from, which a refit of the same data begins from too (`Analysis`). held: the
+    weakly determined coefficients held at zero (`runtime.weak`), each named in `warnings`."""
 
     c: np.ndarray
     std: np.ndarray
@@ -156,6 +157,9 @@ class Fit:
     measured_dof: float | None = None
     suspects: tuple[Suspect, ...] = ()
     analysis: Analysis | None = field(default=None, repr=False, compare=False)
+    #: the coefficients held at zero because the data and the noise leave their direction weakly
+    #: determined (`runtime.weak`), each with why; each is also in `redundancy.eliminated` ("held")
+    held: tuple[weak.Held, ...] = ()
 
     @property
     def trustworthy(self) -> bool:
@@ -408,7 +412,8 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
     then, of that, the directions relative rows cannot see (`runtime.relative.unseen`) taken out, so
     that a coefficient is eliminated for each, named as invisible to relative data."""
     n_targets, columns = len(np.unique(data.target)), np.array(struct.kept, int)
-    R_abs, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=weights, projected=False), columns)
+    unprojected = list(rows_H_and_residual(cm, data, y, c, weights=weights, projected=False))  # one block (_blocks)
+    R_abs, _ = qr_accumulate(unprojected, columns)
     absolute = unexcited(struct, R_abs[:, :-1], cm.robot, cm.model, n_targets, rank_tol)
     excited = np.searchsorted(struct.kept, absolute.kept)
     lengths = blocks[-1][0][relative.scale_rows(data.relative)][:, columns] if data.relative.n_known else \
@@ -419,8 +424,8 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
     p = cm.model_targets(q, w, aux, c)[data.pose, data.target]
     wts = np.ones(len(p)) if weights is None else weights
     order = np.argsort(data.pose, kind="stable")  # the row order of the block (_blocks)
-    G = (relative.project(data.relative, relative.rigid(data.relative, p), p, wts)
-         * np.sqrt(wts)[:, None, None])[order].reshape(-1, 7)
+    moves = relative.rigid(data.relative, p)
+    G = (relative.project(data.relative, moves, p, wts) * np.sqrt(wts)[:, None, None])[order].reshape(-1, 7)
     H = blocks[0][0][:, columns]
     R_rows = np.linalg.qr(H - G @ np.linalg.lstsq(G, H, rcond=None)[0], mode="r")
     A = R_abs[:, excited]
@@ -428,17 +433,24 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
     R = R0[:, :-1].copy()
     R[:, excited] = relative.blind(R[:, excited], V, A.T @ A)
     R[:, excited[relative.spanning(V, np.linalg.norm(A, axis=0))]] = 0.0  # one coefficient dropped per direction
-    return _unseen_by_relative(cm, data, unexcited(struct, R, cm.robot, cm.model, n_targets, rank_tol), absolute)
+    red = unexcited(struct, R, cm.robot, cm.model, n_targets, rank_tol)
+    scaled = (moves * np.sqrt(wts)[:, None, None])[order].reshape(-1, 7)
+    return _unseen_by_relative(cm, data, red, absolute, unprojected[0][0][:, columns], scaled,
+                               np.searchsorted(struct.kept, [e.index for e in red.eliminated]))
 
 
 #: m: a tracker's or a socket's noise, for what does not depend on it
 TYPICAL_NOISE_M = 5e-5
 
 
-def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, absolute: Redundancy) -> Redundancy:
+def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, absolute: Redundancy,
+                        H: np.ndarray, moves: np.ndarray, at: np.ndarray) -> Redundancy:
     """`red` (the analysis of data with relative rows) with the coefficients the same rows would
     excite as absolute measurements (`absolute`, their columns unprojected) eliminated for being
-    invisible to relative data, and why."""
+    invisible to relative data, and why. Without a known distance or offset, the one of them that
+    carries the scale is named as such (SCALE_HELD; `Fit.held` lists it): H (rows, s) the
+    unprojected rows over the structurally kept columns, moves (rows, 7) what a motion and a scaling of the whole set do to
+    them (`runtime.relative.rigid`), at the column of each of red's eliminated coefficients in H."""
     seen = set(absolute.kept)
     names = [e.split(".")[0] for e in cm.robot.error_names()]
     scale = ("" if data.relative.distances or any(x.kind == "offset" for x in data.relative.relations) else
@@ -451,9 +463,30 @@ def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, 
                 "relative data cannot see it: at the measured poses it moves the points and planes only together, "
                 "as a rigid motion or a scaling of the whole set does" + scale)
 
-    return replace(red, eliminated=tuple(replace(e, reason="relative", detail=why(e.index))
-                                         if e.reason in ("unexcited", "weak") and e.index in seen else e
-                                         for e in red.eliminated))
+    unseen = [i for i, e in enumerate(red.eliminated) if e.reason in ("unexcited", "weak") and e.index in seen]
+    carrier = None
+    if scale and unseen:
+        # beyond what a rigid motion of the set does (taken out of every column), the unseen coefficient
+        # whose column is most nearly the scaling carries the scale; one that is a rigid motion keeps
+        # only rounding, and counts for nothing
+        Q = np.linalg.qr(moves[:, :6])[0]
+        X = np.column_stack([H[:, at[unseen]], moves[:, 6]])
+        before = np.linalg.norm(X, axis=0)
+        X = X - Q @ (Q.T @ X)
+        after = np.linalg.norm(X, axis=0)
+        cos = np.abs(X[:, -1] @ X[:, :-1]) / np.maximum(after[:-1] * after[-1], 1e-300)
+        cos[after[:-1] <= 1e-6 * before[:-1]] = 0.0
+        carrier = unseen[int(np.argmax(cos))]
+    return replace(red, eliminated=tuple(
+        replace(e, reason="relative", detail=SCALE_HELD) if i == carrier else
+        replace(e, reason="relative", detail=why(e.index)) if i in unseen else e
+        for i, e in enumerate(red.eliminated)))
+
+
+#: why the coefficient that carries the scale is held, for relative data without a known distance
+SCALE_HELD = ("the scale is not determined: no known distance between sockets or points, nor offset between planes, "
+              "fixes it, and this error acts as a scaling of the whole set; held at zero (declare a known distance "
+              "to determine it)")
 
 
 def redundancy(cm: CompiledModel, data: Measurements | None = None, registration_mode: str = "auto") -> Redundancy:
@@ -518,8 +551,16 @@ def _fit_failures(cm: CompiledModel, data: Measurements, c: np.ndarray, std: np.
         return out
     absurd = absurd_error(cm, data.q, data.w, data.aux_columns(cm.model.aux), c)
     if absurd:
-        out.append(f"{absurd} at a measured pose: no real robot is that far from its model; the data cannot hold "
-                   f"its coefficients (see their std) or the robot file does not describe this robot")
+        # the cause is the data when that error's coefficients are not determined (|value| within two
+        # std of zero: noise put them there); only determined values speak against the robot file
+        error = cm.robot.error_names().index(absurd.split()[2])
+        own = [j for j in kept if cm.model.coefficients[j].error == error]
+        determined = any(abs(c[j]) > 2 * std[j] for j in own)
+        out.append(f"{absurd} at a measured pose: no real robot is that far from its model; " +
+                   ("its coefficients are determined by the data, so the robot file (or its targets) does not "
+                    "describe this robot" if determined else
+                    "the data do not determine its coefficients (|value| within two std of zero): measure poses "
+                    "that move it, or reduce the model"))
     return out
 
 
@@ -559,7 +600,7 @@ STATION_TOL_M = 1e-6  # a micrometre: a fiftieth of a good tracker's noise
 def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "auto", max_iter: int = 30,
              step_tol_m: float = 1e-12, progress=None, ridge: float = 0.0, rank_tol: float = RANK_TOL,
              loss: str = "cauchy", hold: dict[int, str] | None = None,
-             analysis: Analysis | None = None) -> Fit:
+             analysis: Analysis | None = None, noise_m: float | None = None, hold_weak: bool = True) -> Fit:
     """Fit the error model of `cm` to `data`.
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms) or
@@ -576,6 +617,12 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
     being insignificant (`runtime.significance`); `analysis`, the `Fit.analysis` of an earlier fit
     of the same compiled model and data, spares the first round's analysis where it would repeat it.
+    hold_weak (default): when the fit cannot be trusted (it does not converge, or carries an absurd
+    or undetermined value), it is redone with the coefficients whose direction the data determine too
+    weakly against the noise to hold a plausible value held at zero (`runtime.weak`; noise_m the
+    instrument's noise per coordinate, m, when known, else estimated), each listed in `Fit.held`
+    with why; that fit is returned when it holds some and fails for fewer reasons. Not when the
+    failure names a pose the others do not predict (`Fit.suspects`): a glitch is fixed in the data.
 
     Stations (`data.station`): each is registered onto the nominal model on its own. With more
     than one, what the nominal model leaves of each frame differs between stations, and frame 0's
@@ -586,14 +633,37 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     0's errors as with one station. `Fit.before` stays that of the nominal registrations.
     """
     robust.check_loss(loss)
+    options = (registration_mode, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold or {}, analysis)
+    fit = _identify(cm, data, *options, noise_m, False)
+    if fit.failures and hold_weak and not fit.suspects:
+        # a fit the data do not let converge, or that carries what they cannot hold, is redone with the
+        # weakly determined directions held; a fit that stands keeps every coefficient the data separate
+        # (the significance gate then judges them), as weakly held real data fit well without this. A
+        # pose the others do not predict explains a failure better than weak directions: that stands
+        held = _identify(cm, data, *options, noise_m, True)
+        if held.held and len(held.failures) < len(fit.failures):
+            fit = replace(held, warnings=(f"the fit of every identifiable coefficient cannot be trusted "
+                                          f"({'; '.join(fit.failures)}): refitted with the weakly determined "
+                                          f"ones held", *held.warnings))
+    for note in [*fit.failures, *fit.warnings]:
+        warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
+    return fit
+
+
+def _identify(cm: CompiledModel, data: Measurements, registration_mode: str, max_iter: int, step_tol_m: float,
+              progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], analysis: Analysis | None,
+              noise_m: float | None, hold_weak: bool) -> Fit:
+    """`identify`, with the weakly determined directions held (`_fit`'s hold_weak) or not; its notes
+    not yet warned."""
     frames = fit_frames(cm, data, None, loss, registration_mode)
-    hold = hold or {}
-    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, analysis=analysis)
+    weakly = {"noise_m": noise_m, "hold_weak": hold_weak}
+    fit = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, analysis=analysis,
+               **weakly)
     begun = fit.analysis
     if data.relative is not None:
         # at c = 0 the rows of a socket scatter by the model's whole error, which lets a rigid motion
         # of the set look visible; at the fit they scatter by the noise: analysed again there
-        again = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, fit.c)
+        again = _fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold, fit.c, **weakly)
         fit = replace(again, before=fit.before)
     if len(frames) > 1 and registration_mode != "never":
         first = min(frames)
@@ -605,7 +675,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             moved = float(np.max(gone, initial=0.0, where=~np.isnan(gone)))  # relative rows have no frame
             frames = new
             fit = replace(_fit(cm, data, frames, max_iter, step_tol_m, progress, ridge, rank_tol, loss, hold,
-                               fit.c if data.relative is not None else None), before=fit.before)
+                               fit.c if data.relative is not None else None, **weakly), before=fit.before)
             if moved <= STATION_TOL_M:
                 break
         else:
@@ -613,18 +683,19 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
                                          f"{STATION_ROUNDS} rounds (last move {1e3 * moved:.3g} mm): on this data "
                                          f"they are hard to tell from the robot's errors; measure more poses, "
                                          f"spread wider, from each station"))
-    for note in [*fit.failures, *fit.warnings]:
-        warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
     return replace(fit, analysis=begun)
 
 
 def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration], max_iter: int, step_tol_m: float,
          progress, ridge: float, rank_tol: float, loss: str, hold: dict[int, str], at: np.ndarray | None = None,
-         analysis: Analysis | None = None) -> Fit:
+         analysis: Analysis | None = None, noise_m: float | None = None, hold_weak: bool = True) -> Fit:
     """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted,
     from c = 0, the redundancy analysed at coefficients `at` (default 0; at 0, `analysis` where it serves).
     The robust unit is the measured row (`model.rows.Rows`): a point, or a frame whose
-    residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`)."""
+    residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`).
+    With hold_weak, the coefficients whose direction the data determine weakly against the noise
+    (noise_m, m per coordinate; None: the linearised fit's residual) are held at zero first
+    (`runtime.weak`)."""
     notes = []
     y = to_world(frames, data)
     nc = cm.dims.nc
@@ -641,10 +712,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                       eliminated=(*red.eliminated, *(Eliminated(names[j], j, "insignificant", hold[j])
                                                      for j in red.kept if j in hold)))
         A0 = A0[:, [*stay, -1]]
-    kept = np.array(red.kept, int)
-    k = len(kept)
     known = _known_rows(cm, data)
     m = float(row_dof.sum()) + known.n  # a known distance or plane relation is one more equation
+    kept = np.array(red.kept, int)
+    k = len(kept)
     if m <= k:
         raise ModelError(f"{data.source}: {m:.0f} measured coordinates for {k} identifiable coefficients; "
                          f"measure more poses or reduce the error model")
@@ -664,6 +735,23 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         stale = False  # True once c (or the weights) moved on from those R was factored at
     else:
         stale = True
+    # the analysis holds what relative data without a known distance leave of the scale
+    held = tuple(weak.Held(e.param, e.index, None, None, e.detail) for e in red.eliminated if e.detail == SCALE_HELD)
+    if hold_weak and k:
+        if stale:  # the first round's R, robustly weighted: a gross outlier would pass for noise
+            w = rows.weight * wr[rows.group]
+            if data.relative is not None:
+                known = known.at(robust.scale(row_errors(cm, data, y, c, w)[2] * norm))
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
+                                 kept, scale)
+            stale = False  # the first round's R: the same c and weights
+        first = float(row_dof @ wr) + known.n
+        red, stay, more = _hold_weak(cm, data, red, R, scale, first, noise_m)
+        if more:
+            held += more
+            kept, k, scale = kept[stay], len(stay), scale[stay]
+            R = np.linalg.qr(R[:, [*stay, -1]], mode="r")  # the same rows' R factor over the columns left
+    notes.extend(f"not determined, held at zero: {h}" for h in held)
     converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
     for it in range(1, max_iter + 1):
         w = rows.weight * wr[rows.group]
@@ -770,7 +858,32 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
                before=before, train=train, warnings=tuple(notes), failures=tuple(failures),
                loss=loss, outlier_limit_m=float(limit), weights=w, outliers=tuple(outliers),
                train_inliers=train_inliers,
-               ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects, analysis=analysis)
+               ranges=_ranges(cm, data), measured_dof=m_eff, suspects=suspects, analysis=analysis, held=held)
+
+
+def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.ndarray, scale: np.ndarray, m: float,
+               noise_m: float | None) -> tuple[Redundancy, list[int], tuple[weak.Held, ...]]:
+    """`red` with the weakly determined coefficients (`runtime.weak`) moved from kept to eliminated
+    ("held"), the positions in red.kept of those left, and the held coefficients with why. R (k+1,
+    k+1): the R factor of [H / scale | r] over red.kept at the fit's start, from m degrees of
+    freedom. The noise is noise_m (m per coordinate) or, unknown, what the linearised fit over
+    every kept column leaves (at most weak.NOISE_CAP_M): if anything smaller than the noise, as it
+    fits some noise too, so that fewer directions are held rather than more."""
+    k = len(red.kept)
+    sigma = noise_m if noise_m is not None else min(float(abs(R[k, k]) / np.sqrt(max(m - k, 1.0))), weak.NOISE_CAP_M)
+    F, error, limit = weak.term_values(cm, data)
+    kept = np.array(red.kept, int)
+    found = weak.weak(R[:k, :k], scale, F[:, kept], error[kept], limit[kept], sigma)
+    if not found:
+        return red, list(range(k)), ()
+    held = tuple(weak.reasons(cm, data, [int(kept[i]) for i, _, _ in found], [s for _, s, _ in found],
+                              [r for _, _, r in found]))
+    out = {i for i, _, _ in found}
+    stay = [i for i in range(k) if i not in out]
+    red = replace(red, kept=tuple(int(kept[i]) for i in stay),
+                  eliminated=tuple(sorted((*red.eliminated, *(Eliminated(h.param, h.index, "held", h.reason)
+                                                               for h in held)), key=lambda e: e.index)))
+    return red, stay, held
 
 
 @dataclass(frozen=True)

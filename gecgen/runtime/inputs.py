@@ -25,17 +25,22 @@ def error_model(errors, robot: Robot, aux: tuple[str, ...] = (), constant: bool 
 
 def placed(robot: Robot, data: Measurements):
     """The robot with the targets the data must place placed (runtime.placement), and the placement
-    or None; a warning says which targets moved and how far."""
+    or None; a warning says which targets moved and how far, and which the data would move further
+    than they support (held where the robot file puts them)."""
     from gecgen.runtime.placement import FAR_M, FAR_RAD, place_targets
 
     robot, placement = place_targets(robot, data)
     if placement:
         moves = ", ".join([f"{n} estimated" if d is None else f"{n} {d:.0f} mm from the robot file's"
-                           for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M]
+                           for n, d in placement.moved_mm.items()
+                           if (d is None or d > 1e3 * FAR_M) and n not in placement.held]
                           + [f"{n}'s measured frame turned {a:.0f} mrad from the tool frame"
                              for n, a in placement.turned_mrad.items() if a > 1e3 * FAR_RAD])
-        warnings.warn(f"targets placed from the data before the fit: {moves} (nominal model residual "
-                      f"{placement.rms_mm:.2f} mm rms with them)")
+        if moves:
+            warnings.warn(f"targets placed from the data before the fit: {moves} (nominal model residual "
+                          f"{placement.rms_mm:.2f} mm rms with them)")
+        for name, why in placement.held.items():
+            warnings.warn(f"target {name} held where the robot file puts it: {why}")
     return robot, placement
 
 

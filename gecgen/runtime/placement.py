@@ -45,6 +45,13 @@ from gecgen.runtime.registration import kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
+#: ... unless the data would move it further than this (m) while the given target already fits them within
+#: FITS_M rms (the nominal model's residual with the tracker frames refitted): a robot's own errors leave
+#: millimetres, and a tool that barely turns places its target only weakly, so such a move is what the
+#: robot's errors pushed along the weak direction (a reflector "moved" by 643 mm on a constant-orientation
+#: grid), not what the data determine; the given target is held, and the fit's last-frame errors take up
+#: what is left
+HOLD_M, FITS_M = 0.05, 0.005
 #: rad: the forward-difference step of a tracker frame's rotation vector (`estimate_placement`)
 ROTATION_STEP = 1e-7
 #: a measured frame (pose data) this far (rad) from the robot's is turned to the estimate before the fit
@@ -64,7 +71,8 @@ class Placement:
 
     rms_mm: residual of the nominal model with these targets and the fitted tracker frames (what
     the generalized errors are left to explain); moved_mm: distance of each target from the robot
-    file's (None for one the file leaves to estimate).
+    file's (None for one the file leaves to estimate); held: the given targets the data would move
+    further than they support (HOLD_M), kept where the robot file puts them, each with why.
     """
 
     targets: dict[str, tuple[float, float, float]]
@@ -74,12 +82,13 @@ class Placement:
     #: its angle from the robot's (mrad)
     frames: dict[str, tuple[float, float, float]] = dataclasses.field(default_factory=dict)
     turned_mrad: dict[str, float] = dataclasses.field(default_factory=dict)
+    held: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict:
         frames = {"frames_rotvec_rad": {k: list(v) for k, v in self.frames.items()},
                   "turned_mrad": self.turned_mrad} if self.frames else {}
         return {"targets_m": {k: list(v) for k, v in self.targets.items()}, "rms_mm": self.rms_mm,
-                "moved_mm": self.moved_mm, **frames}
+                "moved_mm": self.moved_mm, **frames, **({"held": self.held} if self.held else {})}
 
 
 def _closed_form(T: np.ndarray, data: Measurements, rows: np.ndarray, k_targets: int):
@@ -176,6 +185,21 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved, turns, turned)
 
 
+def given_rms_mm(robot: Robot, data: Measurements) -> float:
+    """The nominal model's residual (mm rms) with the targets where the robot file puts them, each
+    stationing's tracker frame fitted (least squares, `kabsch`)."""
+    tools = np.stack(tool_poses(robot, data.q))
+    T = tools[[robot.branch_of(n) for n in robot.target_names]][data.target, data.pose]
+    m = np.array([robot.targets[n] for n in robot.target_names])[data.target]
+    p = np.einsum("nij,nj->ni", T[:, :3, :3], m) + T[:, :3, 3]
+    sq = 0.0
+    for s in np.unique(data.station):
+        on = data.station == s
+        R, t = kabsch(p[on], data.xyz[on])
+        sq += float(np.sum((data.xyz[on] - p[on] @ R.T - t) ** 2))
+    return 1e3 * float(np.sqrt(sq / max(len(p), 1)))
+
+
 def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> dict[str, tuple[float, float, float]]:
     """Pose data: the rotation X_k of each target's measured frame in the tool frame, from every
     measured orientation R = R_s R_i X_k (R_s the station's tracker rotation, R_i the nominal tool
@@ -251,7 +275,17 @@ def place_targets(robot: Robot, data: Measurements, loss: str = "cauchy") -> tup
             raise
         return robot, None  # the data cannot place the targets, and the robot file does
     far = {n: d for n, d in placement.moved_mm.items() if d is None or d > 1e3 * FAR_M}
+    unsupported = [n for n, d in far.items() if d is not None and d > 1e3 * HOLD_M]
+    if unsupported:
+        given = given_rms_mm(robot, spread_sample(data))
+        if given <= 1e3 * FITS_M:
+            held = {n: f"the data would move it {far.pop(n):.0f} mm, further than they support (beyond "
+                       f"{1e3 * HOLD_M:g} mm, while where the robot file puts it the nominal model already leaves "
+                       f"only {given:.3g} mm rms): the poses barely turn the tool, so its position is weakly "
+                       f"determined; held at the robot file's value (the fit's last-frame errors take up the rest)"
+                    for n in unsupported}
+            placement = dataclasses.replace(placement, held=held)
     turned = {n: placement.frames[n] for n, a in placement.turned_mrad.items() if a > 1e3 * FAR_RAD}
     if not far and not turned:
-        return robot, None
+        return robot, placement if placement.held else None
     return with_targets(robot, {n: placement.targets[n] for n in far}, turned), placement

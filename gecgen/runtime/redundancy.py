@@ -48,8 +48,8 @@ MERGE_REPORT_TOL = 1e-6
 class Eliminated:
     param: str
     index: int
-    # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes) or (identify's
-    # hold) "insignificant"
+    # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes), (identify's
+    # hold) "insignificant" or (weakly determined against the noise, `runtime.weak`) "held"
     reason: str
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
@@ -79,10 +79,11 @@ class Redundancy:
 
     def to_dict(self) -> dict:
         counts = {r: sum(e.reason == r for e in self.eliminated)
-                  for r in ("structural", "unexcited", "weak", "relative", "insignificant")}
+                  for r in ("structural", "unexcited", "weak", "relative", "insignificant", "held")}
         return {"n_params": self.n_params, "n_identifiable": self.n_identifiable,
                 "n_structural": counts["structural"], "n_unexcited": counts["unexcited"], "n_weak": counts["weak"],
                 **({"n_relative": counts["relative"]} if counts["relative"] else {}),
+                **({"n_held": counts["held"]} if counts["held"] else {}),
                 **({"n_insignificant": counts["insignificant"], "n_carried": len(self.kept)}
                    if counts["insignificant"] else {}),
                 "identifiable": [self.names[k] for k in self.kept],

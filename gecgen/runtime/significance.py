@@ -102,7 +102,8 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
     `options`, on compiled model cm and data) with the coefficients the data do not determine held
     at zero, and a warning naming them. Raises RuntimeError when that refit cannot be trusted. With
     the instrument noise noise_m (m per coordinate), the verdict's `overall` says whether the fit's
-    residual is beyond it (`overall`), with a warning when it is."""
+    residual is beyond it (`overall`), with a warning when it is; the refit holds the weakly
+    determined directions against it (`identify`'s noise_m)."""
     verdict, hold = judge(cm.model.coefficient_names(cm.robot), fit.c, fit.std, fit.redundancy.kept, fit.cov,
                           fit.sigma_m, fit.measured_dof)
     verdict["insignificant_carried"] = bool(hold) and keep
@@ -112,7 +113,7 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
                       f"/ std < {T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
                       f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
                       f"(--keep-insignificant carries them)", stacklevel=3)
-        fit = identify(cm, data, **options, hold=hold, analysis=fit.analysis)
+        fit = identify(cm, data, **options, hold=hold, analysis=fit.analysis, noise_m=noise_m)
         if fit.failures:
             raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
                                f"calibration made or written: {'; '.join(fit.failures)}")

@@ -124,3 +124,82 @@ def paper_split(design: Design, rng: np.random.Generator) -> tuple[np.ndarray, n
     val = a[np.isin(a % n_cfg, cfg)]
     train = np.setdiff1d(np.arange(design.n_poses), val)
     return train, val
+
+
+#: inverse kinematics of a pose design: the tool within this of its goal (m, and rad) counts as reached
+POSE_REACHED = 1e-9
+
+
+def pose_ik(robot: Robot, goals: np.ndarray, start: np.ndarray, iterations: int = 100) -> tuple[np.ndarray, np.ndarray]:
+    """Joint readings (N, n) putting the nominal tool frame at each goal (N, 4, 4) within POSE_REACHED,
+    by damped least-norm Newton steps from `start` (n,) (a redundant arm keeps its posture nearest the
+    start), within the sampling box; and which goals were reached (N,)."""
+    from scipy.spatial.transform import Rotation
+
+    from gecgen.model.kinematics import tool_pose
+
+    lo, hi = _limits(robot)
+    n, N = robot.n, len(goals)
+    q = np.tile(np.asarray(start, float), (N, 1))
+    h = 1e-7
+
+    def error(q):
+        T = tool_pose(robot, q)
+        turn = Rotation.from_matrix(goals[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2)).as_rotvec()
+        return np.column_stack([goals[:, :3, 3] - T[:, :3, 3], turn])
+
+    for _ in range(iterations):
+        err = error(q)
+        todo = np.linalg.norm(err, axis=1) > POSE_REACHED
+        if not todo.any():
+            break
+        J = np.stack([(error(q) - error(q + h * np.eye(n)[j])) / h for j in range(n)], axis=2)  # d(-err)/dq
+        JJ = np.einsum("nij,nkj->nik", J, J) + 1e-10 * np.eye(6)
+        step = np.einsum("nji,nj->ni", J, np.linalg.solve(JJ, err[..., None])[..., 0])
+        q = np.where(todo[:, None], np.clip(q + step, lo, hi), q)
+    return q, np.linalg.norm(error(q), axis=1) <= POSE_REACHED
+
+
+def constant_orientation(robot: Robot, home, spacing_m: float, counts=(6, 6, 6), targets=None, wobble_rad: float = 0.0,
+                         rng: np.random.Generator | None = None, shift=(0.0, 0.0, 0.0)) -> Design:
+    """A laser tracker's common design: the tool keeps the orientation it has at `home` (n,)
+    (so that its reflector keeps facing the tracker) while its origin visits a grid of counts
+    (3,) points spacing_m apart, centred where home puts it (counts (k, k, 1): a planar grid).
+    Poses come from inverse kinematics of the nominal model (`pose_ik`, from home), visited in grid
+    order; grid points out of reach are left out. The data then never determine the tool's
+    orientation errors (one measured point) nor anything only a turn of the tool shows. shift (3,),
+    m: the grid moved off that centre (half a spacing: held-out points between the grid's).
+
+    wobble_rad: the orientation each pose holds is off by a random rotation of this size (rad per
+    axis, drawn from rng), as when the controller's kinematics are not the robot file's: the nominal
+    tool then turns a little, and the data determine what a turn shows only weakly."""
+    from gecgen.model.kinematics import tool_pose
+
+    home = np.asarray(home, float)
+    T0 = tool_pose(robot, home[None])[0]
+    axes = [(np.arange(k) - (k - 1) / 2) * spacing_m for k in counts]
+    offsets = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) + np.asarray(shift, float)
+    goals = np.repeat(T0[None], len(offsets), 0)
+    goals[:, :3, 3] += offsets
+    if wobble_rad:
+        from scipy.spatial.transform import Rotation
+
+        turn = Rotation.from_rotvec(rng.normal(0.0, wobble_rad, (len(goals), 3))).as_matrix()
+        goals[:, :3, :3] = turn @ goals[:, :3, :3]
+    q, ok = pose_ik(robot, goals, home)
+    q = q[ok]
+    if not len(q):
+        raise ValueError("no grid point is within reach: a smaller spacing or another home")
+    return Design(q, np.zeros(len(q)), np.zeros(3), tuple(targets or robot.targets), np.array(["grid"] * len(q)))
+
+
+def barely_moving(robot: Robot, n_poses: int, rng: np.random.Generator, joint: int, span: float,
+                  targets=None) -> Design:
+    """Random poses within the limits except joint `joint` (1-based), which stays within `span`
+    (m or rad) about the middle of its range: the data then hardly separate its errors."""
+    design = random_design(robot, n_poses, rng, targets=targets)
+    lo, hi = _limits(robot)
+    middle = (lo[joint - 1] + hi[joint - 1]) / 2
+    q = design.q.copy()
+    q[:, joint - 1] = middle + rng.uniform(-span / 2, span / 2, n_poses)
+    return Design(q, design.payload_kg, design.payload_at, design.targets, np.array(["barely"] * n_poses))

@@ -45,7 +45,8 @@ class Fixtures:
     (rad or m per joint reading) noise; distance_std_m the stated uncertainty of the distance;
     `relations`: the planes' known perpendicularity is declared (the square's faces and the table);
     block_m: a block of that width (m) stands on the table, its far face a fourth plane parallel to
-    the first face at that offset, declared."""
+    the first face at that offset, declared; distance_known: the plates' distance is declared in the
+    data (False: the sockets are measured without a known distance, and nothing fixes the scale)."""
 
     target: str
     plates: int = 0
@@ -58,6 +59,7 @@ class Fixtures:
     encoder_rad: float = 1e-5
     relations: bool = False
     block_m: float | None = None
+    distance_known: bool = True
 
 
 def _goals(robot: Robot, truth: Truth, fixtures: Fixtures, rng: np.random.Generator):
@@ -81,7 +83,8 @@ def _goals(robot: Robot, truth: Truth, fixtures: Fixtures, rng: np.random.Genera
             group += [len(names)] * fixtures.per_socket
             names.append(f"plate{i + 1}.{k}")
             kinds.append(POINT)
-        distances.append(Distance(len(names) - 2, len(names) - 1, fixtures.distance_m, fixtures.distance_std_m))
+        if fixtures.distance_known:
+            distances.append(Distance(len(names) - 2, len(names) - 1, fixtures.distance_m, fixtures.distance_std_m))
     require(fixtures.planes <= 3, f"{fixtures.planes} planes: simulated planes are a table and up to two faces of a "
                                   f"square on it; give at most 3")
     corner = somewhere() if fixtures.planes else None
