@@ -91,7 +91,7 @@ def main():
              f"{floor:.4f} mm). 500 training and 200 held-out poses; `diagnose` from constant errors (120 "
              "coefficients) in a fresh process, reading the CSVs included; peak = the process's maximum resident "
              "memory. The dictionary holds every frame's whole load (docs/frame-loads.md); target: warm, at most "
-             "twice the 7.9 s measured here with the joints' loads alone.", "",
+             "twice the time of the dictionary with the joints' loads alone on the same machine.", "",
              "| run | total (s) | peak memory (MB) | candidates screened | held-out before (mm) | after (mm) | "
              "after / floor | effects |",
              "|---|---|---|---|---|---|---|---|"]

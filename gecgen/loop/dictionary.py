@@ -245,18 +245,25 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
 MATCHING = (0, 1, 2, 4, 5, 3)
 
 
-def moves_with(values: np.ndarray, data: Measurements, wrench: bool) -> tuple[str, ...]:
+def moves_with(values: np.ndarray, inputs: list[tuple[str, np.ndarray]], wrench: bool) -> tuple[str, ...]:
     """What a person plots a load against: the reading its largest column follows most closely, and,
     for a load with the measured wrench in it, the wrench component likewise (|correlation| over the
-    poses). values: (P, k) the load's columns."""
+    poses). values: (P, k) the load's columns; inputs: `standardized_inputs`."""
     v = values[:, np.argmax(values.std(axis=0))]
-    inputs = [(f"q{i + 1}", data.q[:, i]) for i in range(data.q.shape[1])]
+    v = (v - v.mean()) / v.std()
     out = []
-    for group in [inputs] + [[(name, data.w[:, k]) for k, name in enumerate(WRENCH)]] * wrench:
-        moving = [(name, x) for name, x in group if _range(x) > 1e-9]
-        if moving:
-            out.append(max(moving, key=lambda item: abs(np.corrcoef(item[1], v)[0, 1]))[0])
+    for kind in ("q", "w")[:1 + wrench]:
+        names, Z = zip(*[(n, z) for n, z in inputs if (n[0] == "q") == (kind == "q")]) if inputs else ((), ())
+        if names:
+            out.append(names[int(np.argmax(np.abs(np.column_stack(Z).T @ v)))])
     return tuple(out)
+
+
+def standardized_inputs(data: Measurements) -> list[tuple[str, np.ndarray]]:
+    """The readings and wrench components that move over the data, each centred and scaled to unit
+    standard deviation (P,): their dot product with a standardized load is its correlation times P."""
+    raw = [(f"q{i + 1}", data.q[:, i]) for i in range(data.q.shape[1])] + list(zip(WRENCH, data.w.T))
+    return [(name, (x - x.mean()) / x.std()) for name, x in raw if _range(x) > 1e-9]
 
 
 def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str], values: np.ndarray,
@@ -280,7 +287,7 @@ def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str
                      "wrench_load": ("regressor", "masses", "wrench")}[m.group(1)]
             for form in forms:
                 by.setdefault((int(m.group(2)), form, WRENCH.index(m.group(3))), []).append(k)
-    robot, out = cm.robot, []
+    robot, out, inputs = cm.robot, [], standardized_inputs(data)
     for f in range(robot.n_frames + 1):
         for k in range(6):
             e, matched = 6 * f + k, MATCHING[k]
@@ -296,7 +303,7 @@ def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str
                                        and np.allclose(t.values, v, rtol=1e-9, atol=1e-12) for t in taken + out):
                         continue
                     terms = tuple(names[j] for j in cols)
-                    out.append(Candidate(family, moves_with(v, data, any(t.startswith("wrench") for t in terms)),
+                    out.append(Candidate(family, moves_with(v, inputs, any(t.startswith("wrench") for t in terms)),
                                          terms, v, (e,)))
     return out
 

@@ -144,6 +144,14 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     dofs = np.array([c.dof for c in cands])
     free = np.array([c.errors is None for c in cands])
     only = {e: [ci for ci, c in enumerate(cands) if c.errors is not None and e in c.errors] for e in errors}
+    # each error's products run over the columns offered to it alone: the candidates offered to every
+    # error, then its own (a load acts on one frame's errors; thousands of them would otherwise be
+    # multiplied for every error). start: where each offered candidate's columns begin among them
+    columns = [np.arange(bounds[ci], bounds[ci + 1]) for ci in range(len(cands))]
+    everyone = np.flatnonzero(free)
+    shared = np.concatenate([columns[ci] for ci in everyone]) if len(everyone) else np.zeros(0, int)
+    start = np.zeros(len(cands), int)
+    start[everyone] = np.cumsum(dofs[everyone]) - dofs[everyone]
     found = []  # (drop, dof, candidate, error, v, QtX v)
     for e in errors:
         offered = free.copy()
@@ -151,19 +159,21 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
         j = J[:, e]
         if not offered.any() or not np.any(j):
             continue
+        start[only[e]] = len(shared) + np.cumsum(dofs[only[e]]) - dofs[only[e]]
+        Fe = np.asfortranarray(F[:, np.concatenate([shared, *(columns[ci] for ci in only[e])])])
         S.data = j  # the sums over each pose's rows of J_e times what follows
         BtS = (S @ base.B).T  # (k, G): B^T X = BtS F; R^-T on whichever side is smaller
-        QtX = base.project(BtS) @ F if BtS.shape[1] < F.shape[1] else base.project(BtS @ F)
-        rX = (S @ resid) @ F
+        QtX = base.project(BtS) @ Fe if BtS.shape[1] < Fe.shape[1] else base.project(BtS @ Fe)
+        rX = (S @ resid) @ Fe
         w = S @ j
-        Fw = np.multiply(w[:, None], F, order="F")
+        Fw = np.multiply(w[:, None], Fe, order="F")
         # candidates of one size at once (thousands of auxiliary signals are thousands of
         # candidates), found in candidate order as one at a time would be
         ours = []
         for dof in np.unique(dofs[offered]):
             group_of = np.flatnonzero(offered & (dofs == dof))
-            cols = bounds[group_of][:, None] + np.arange(dof)  # (n, dof) each candidate's columns
-            XtX = np.einsum("gni,gnj->nij", F[:, cols], Fw[:, cols])
+            cols = start[group_of][:, None] + np.arange(dof)  # (n, dof) each candidate's columns in Fe
+            XtX = np.einsum("gni,gnj->nij", Fe[:, cols], Fw[:, cols])
             Q = QtX[:, cols]
             G = XtX - np.einsum("kni,knj->nij", Q, Q)  # Gram matrices of the projected columns
             scale = np.sqrt(np.maximum(np.diagonal(XtX, axis1=1, axis2=2), 1e-300))  # (n, dof)
