@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.loop.diagnose import Diagnosis, diagnose
-from gecgen.loop.dictionary import MATCHING, frame_own_errors, loads_by_joint
+from gecgen.loop.dictionary import frame_own_errors, loads_by_joint
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, MATCHING, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import Fit, identify, squared_error
@@ -78,7 +78,7 @@ def elastic_spec(robot: Robot, data: Measurements, seed: int = 0) -> dict | None
             loads = by_joint.get(alone[frame], {})
             terms = [names[k] for k in loads.get("gravity_torque", []) + loads.get("wrench_torque", [])]
         else:
-            terms = [n for n in (f"{kind}({f},{WRENCH[MATCHING[e]]})" for kind in ("gravity_load", "wrench_load"))
+            terms = [n for n in (f"{kind}({f},{MATCHING[e]})" for kind in ("gravity_load", "wrench_load"))
                      if n in varies]
         if terms:
             frames.setdefault(f, {})[ERROR_NAMES[e]] = ["1", *terms]

@@ -30,7 +30,7 @@ from gecgen.loop.screening import Candidate
 from gecgen.model.errors import ErrorModel
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.measurements import Measurements
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, MATCHING, WRENCH, Robot
 from gecgen.runtime.compiled import CompiledModel
 
 #: periods scanned per joint for Fourier pairs
@@ -240,9 +240,6 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
     return out + frame_load_candidates(cm, data, names, values, set(by_frame.values()), out)
 
 
-#: the wrench component that acts on each generalized error of a frame (in ERROR_NAMES order ex..ep):
-#: a translation with the force along it, a rotation with the moment about its axis
-MATCHING = (0, 1, 2, 4, 5, 3)
 
 
 def moves_with(values: np.ndarray, inputs: list[tuple[str, np.ndarray]], wrench: bool) -> tuple[str, ...]:
@@ -290,8 +287,8 @@ def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str
     robot, out, inputs = cm.robot, [], standardized_inputs(data)
     for f in range(robot.n_frames + 1):
         for k in range(6):
-            e, matched = 6 * f + k, MATCHING[k]
-            axis = MATCHING[k] % 3
+            e, matched = 6 * f + k, WRENCH.index(MATCHING[k])
+            axis = matched % 3
             across = [b + 3 * (k < 3) for b in range(3) if b != axis]
             for c, family in [(matched, "joint compliance" if e in own else
                                "lateral compliance" if k >= 3 else "frame compliance")] + \

@@ -39,6 +39,9 @@ Elementary = tuple
 
 WRENCH = ("fx", "fy", "fz", "mx", "my", "mz")
 ERROR_NAMES = ("ex", "ey", "ez", "es", "er", "ep")
+#: the wrench component that acts on each generalized error of a frame, in ERROR_NAMES order: a
+#: translation with the force along it, a rotation with the moment about its axis (es turns about y)
+MATCHING = ("fx", "fy", "fz", "my", "mz", "mx")
 #: standard gravity, m/s^2, in the robot file's world frame unless the file's `gravity` says otherwise
 GRAVITY = (0, 0, -9.80665)
 #: names of the term language (functions, pi) and of the generated code's variables: neither a joint

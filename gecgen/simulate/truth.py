@@ -46,7 +46,7 @@ import numpy as np
 
 from gecgen.model.gravity import robot_frame_wrenches, robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, MATCHING, WRENCH, Robot
 from gecgen.model.robot_file import with_couplings
 from gecgen.model.validation import require, require_keys
 
@@ -88,8 +88,6 @@ _SOURCE_KEYS = {
     "frame_compliance": ({"frame", "compliance"}, set()),
     "beam": ({"frame", "axis", "length", "flexibility"}, set()),
 }
-#: the wrench component that turns (or moves) each generalized error of a frame: ex <- fx, ..., es <- my
-MATCHING = {"ex": "fx", "ey": "fy", "ez": "fz", "es": "my", "er": "mz", "ep": "mx"}
 #: the generalized error of a small rotation about a frame's x, y and z axes
 ROTATION = ("ep", "es", "er")
 
@@ -112,7 +110,7 @@ def _compliance(spec, where: str) -> np.ndarray:
     C = np.zeros((6, 6))
     for error, value in spec.items():
         require(error in ERROR_NAMES, f"{where}: {error!r} is not a generalized error; use {' '.join(ERROR_NAMES)}")
-        per = value if isinstance(value, dict) else {MATCHING[error]: value}
+        per = value if isinstance(value, dict) else {MATCHING[ERROR_NAMES.index(error)]: value}
         for component, c in per.items():
             require(component in WRENCH, f"{where}.{error}: {component!r} is not a wrench component; use "
                                          f"{' '.join(WRENCH)}")
