@@ -4,9 +4,12 @@ from __future__ import annotations
 
 def scalar(value) -> str:
     """A value as a person reads it: three significant digits, as the reports print them, and every
-    digit before the point of a number of 1000 or more (a time in seconds, a log det)."""
+    digit before the point of a number of 1000 or more (a time in seconds, a log det); `-` for a value
+    not known (JSON null) and `none` for an empty list, not Python's spellings."""
+    if value is None:
+        return "-"
     if isinstance(value, list):  # an interval: [low, high]
-        return "[" + ", ".join(map(scalar, value)) + "]"
+        return "[" + ", ".join(map(scalar, value)) + "]" if value else "none"
     if not isinstance(value, float):
         return str(value)
     return f"{value:.0f}" if abs(value) >= 1e3 else f"{value:.3g}"
