@@ -72,7 +72,7 @@ def judge(names: list[str], c: np.ndarray, std: np.ndarray, kept, cov: np.ndarra
     kept = list(kept)
     dropped = backward_elimination(c[kept], cov, sigma, measured_dof - len(kept))
     hold = {kept[a]: f"t = {t:.3f} < {T_MIN:g}: the data do not determine it; held at zero and the rest refitted "
-                     f"(--keep-insignificant carries it)" for a, t in dropped.items()}
+                     f"(keep_insignificant=True, or --keep-insignificant, carries it)" for a, t in dropped.items()}
     frames: dict[str, dict[str, int]] = {}
     for j in kept:
         count = frames.setdefault(names[j].split(".")[0], {"determined": 0, "held": 0})
@@ -112,7 +112,7 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
         warnings.warn(f"{len(hold)} of {len(fit.redundancy.kept)} coefficients are not determined by the data (|value| "
                       f"/ std < {T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
                       f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
-                      f"(--keep-insignificant carries them)", stacklevel=3)
+                      f"(keep_insignificant=True, or --keep-insignificant, carries them)", stacklevel=3)
         fit = identify(cm, data, **options, hold=hold, analysis=fit.analysis, noise_m=noise_m)
         if fit.failures:
             raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
