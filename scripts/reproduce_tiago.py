@@ -1,6 +1,6 @@
 """Calibrate the real TIAGo from motion capture and write docs/real-data-tiago.md.
 
-    python scripts/reproduce_tiago.py                   # needs ../shared/data/tiago-mocap
+    python scripts/reproduce_tiago.py                   # the data: tests/data/tiago-mocap
     python scripts/reproduce_tiago.py --calibrate-only  # only the `gecgen calibrate` section
 
 Every number comes from the `gecgen` commands printed in the document; the validation file is
@@ -26,7 +26,7 @@ from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify, position_errors
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
+DATA = ROOT / "tests" / "data" / "tiago-mocap"
 OUT = ROOT / "out" / "tiago"
 ROBOT = "robots/tiago.yaml"
 FIGAROH = {"base": (3.37, 4.87, 9), "offsets": (2.88, 4.23, 14), "full": (1.68, 3.22, 30)}
@@ -117,7 +117,7 @@ def main():
             if val.q[:, j].min() < lo[j] - 0.05 or val.q[:, j].max() > hi[j] + 0.05]
 
     lines = ["# Real data: the TIAGo arm from motion capture", "",
-             "Data: `../shared/data/tiago-mocap` (figaroh-examples, 37 training postures of 2021-11-30, 62 validation "
+             "Data: `tests/data/tiago-mocap` (figaroh-examples, 37 training postures of 2021-11-30, 62 validation "
              "postures of 2021-11-26; four markers of one rigid body on the hand, in the frame of a body fixed to the "
              "base). Robot: `robots/tiago.yaml` (the URDF's torso lift and seven arm joints, base_footprint to "
              "arm_7_link; the marker body is a rigid tool whose placement frame 8's errors absorb). Regenerate "

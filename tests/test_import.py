@@ -14,8 +14,7 @@ from gecgen.model import ModelError, load_robot
 from gecgen.model.measurements import LIMIT_TOLERANCE, read_measurements
 from gecgen.model.wide import import_wide, load_mapping
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "tiago-mocap"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real TIAGo data not found at {DATA} (../shared/data)")
+DATA = Path(__file__).resolve().parent / "data" / "tiago-mocap"
 FILES = {"train_2021-11-30.csv": 37, "validation_2021-11-26.csv": 62}
 MAPPING = ROBOTS / "tiago.import.yaml"
 POINTS = [[f"{a}{k}" for a in "xyz"] for k in range(1, 5)]  # the x, y, z columns of m1..m4
@@ -32,7 +31,6 @@ def read_table(path) -> list[dict]:
 
 
 # -- the real TIAGo files --------------------------------------------------------------------------
-@needs_data
 def test_train_file_converts_to_37_poses_of_4_targets_exactly(tiago, tmp_path, capsys):
     rows = read_table(DATA / "train_2021-11-30.csv")
     data = import_wide(DATA / "train_2021-11-30.csv", tiago, MAPPING)
@@ -54,7 +52,6 @@ def test_train_file_converts_to_37_poses_of_4_targets_exactly(tiago, tmp_path, c
         assert getattr(back, key).tolist() == getattr(data, key).tolist(), key
 
 
-@needs_data
 @pytest.mark.parametrize("name", FILES)
 def test_readings_outside_the_urdf_limits_are_reported_not_clipped(tiago, tmp_path, capsys, name):
     rows = read_table(DATA / name)

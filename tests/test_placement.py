@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 ROBOT = ROBOTS / "industrial6r.yaml"
 CONSTANT = ROBOTS / "constant.errors.yaml"
 TOOL = (0.35, -0.42, 0.62)  # where the reflector really is, flange frame (m)
-TIAGO = ROBOTS.parent.parent / "shared" / "data" / "tiago-mocap" / "train_2021-11-30.csv"
+TIAGO = ROBOTS.parent / "tests" / "data" / "tiago-mocap" / "train_2021-11-30.csv"
 
 
 def robot_file(folder: Path, source: Path, old: str, new: str, name: str) -> Path:
@@ -115,7 +115,6 @@ def test_nothing_compiles_before_the_targets_are_placed(long_tool, capsys):
     assert run(capsys, "redundancy", user_robot, d / "data.csv", "--errors", CONSTANT)["n_identifiable"] == 27
 
 
-@pytest.mark.skipif(not TIAGO.is_file(), reason="needs ../shared/data/tiago-mocap")
 def test_tiago_markers_placed_from_the_data_and_a_misplaced_one_corrected(tmp_path, capsys):
     """Four markers left to estimate land within a millimetre of the starting values the robot file
     ships (found once by a multi-start search on the same file); a marker written 50 mm off in the

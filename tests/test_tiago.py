@@ -7,8 +7,7 @@ from conftest import ROBOTS, ROOT
 
 from gecgen.cli import main
 
-DATA = ROOT.parent / "shared" / "data" / "tiago-mocap"
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real TIAGo data not found at {DATA} (../shared/data)")
+DATA = ROOT / "tests" / "data" / "tiago-mocap"
 
 
 def run(capsys, *args) -> dict:
