@@ -63,7 +63,7 @@ def discussion(rate: dict, sets: list[str]) -> list[str]:
     return [
         "## What it shows",
         "",
-        f"- Against the issue's acceptance (10 poses; a joint's zero moved 0.2 mm or the sag changed 0.3 mm flagged "
+        f"- Against the target (10 poses; a joint's zero moved 0.2 mm or the sag changed 0.3 mm flagged "
         f"in at least 95 % of 100 checks, an unchanged robot in at most 5 %): with poses drawn at random, the "
         f"unchanged robot is flagged in {rate[rand, 'unchanged']:.0%}, the joint zeros in "
         f"{rate[rand, 'lateral zero +0.2 mm']:.0%} and {rate[rand, 'couch angle zero +0.4 mrad']:.0%}, the sag in "

@@ -147,7 +147,7 @@ def discussion(results: list[dict]) -> list[str]:
         "The statement says *cannot tell* (the loop gain), or *does not meet* where its coefficients' own "
         "uncertainty already passes 0.5 mm.",
         "",
-        "## Against the issue's acceptance",
+        "## Against the target",
         "",
         "The issue asks for the true worst within the bound in at least 95 % of the truths and a bound at most 1.5 "
         "times the true worst in the median, on the PPS with the paper's design. Measured above:",
