@@ -324,7 +324,7 @@ class Calibrator:
         if fit is full:  # not refitted: the fit's own notes stand (a refit said its own)
             for w in said:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        calib = _calibration.from_fit(robot, model, fit)
+        calib = _calibration.from_fit(robot, model, fit, _ratio_loads(cm, fit, data))
         calib.report["significance"] = verdict
         calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
         if robot.branches:
@@ -511,6 +511,16 @@ class Calibrator:
         return Path(path)
 
 
+def _ratio_loads(cm, fit, data) -> list[dict]:
+    """The coupling ratios whose value depends on the loads (`loop.confounding`), each said."""
+    from gecgen.loop.confounding import describe, ratio_load_confounding
+
+    found = ratio_load_confounding(cm, fit, data)
+    for item in found:
+        warnings.warn(describe(item), stacklevel=3)
+    return found
+
+
 def _summary(cm, data, y, c, interval: bool = False) -> dict:
     """`runtime.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
     confidence interval by pose (mm) too."""
@@ -581,6 +591,7 @@ class Diagnoser:
     def fit(self, robot, data, val=None, progress=None) -> "Diagnoser":
         """Diagnose on `data` (CSV path, DataFrame or Measurements of `robot`); `val` is scored only,
         never used to choose terms. progress(round, rms_mm) is called each round. Returns self."""
+        from gecgen.loop.confounding import describe
         from gecgen.loop.diagnose import diagnose, verdict
 
         register = _choice(self.register, "register", REGISTER)
@@ -596,6 +607,8 @@ class Diagnoser:
                         noise_mm=self.noise_mm, max_rounds=self.max_rounds, seed=self.seed,
                         register_val=self.register_val)
         self.diagnosis_, self.effects_, self.error_model_ = diag, diag.effects, diag.final.model
+        for item in diag.ratio_loads:
+            warnings.warn(describe(item), stacklevel=2)
         self.verdict_, self.robot_, self.placement_, self.data_ = verdict(diag.remaining), robot, placement, data
         self.val_ = val  # None: diagnose held part of data out itself
         return self
@@ -672,7 +685,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     choice = choose(fitted, data, default, seed, progress=progress, names=names)
     fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
     choice = replace(choice, fit=fit)
-    calib = _calibration.from_fit(robot, choice.model, choice.fit)
+    calib = _calibration.from_fit(robot, choice.model, choice.fit, _ratio_loads(choice.cm, choice.fit, data))
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
                          "placement": placement.to_dict() if placement else None, "significance": verdict})
     if fitted.vertex_of:

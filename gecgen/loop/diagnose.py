@@ -32,13 +32,15 @@ import yaml
 from scipy import special
 
 from gecgen.files import write_atomically
+from gecgen.loop.confounding import ratio_load_confounding
 from gecgen.loop.dictionary import candidates, refine_period, shown_family
+from gecgen.loop.linear import Round, linear_system, pose_rows, weighted_J
 from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms, significance_order
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, fit_frames, identify, row_errors, rows_H_and_residual, summary, to_world
+from gecgen.runtime.identify import fit_frames, identify, row_errors, summary, to_world
 from gecgen.runtime.significance import T_MIN
 from gecgen.runtime.threads import one_blas_thread
 
@@ -71,13 +73,6 @@ class Effect:
                 "indistinguishable": self.alternatives}
 
 
-@dataclass
-class Round:
-    model: ErrorModel
-    cm: CompiledModel
-    fit: Fit
-
-
 def _fit(robot, model, data, registration_mode) -> Round:
     cm = CompiledModel(robot, model)
     with warnings.catch_warnings():
@@ -97,20 +92,6 @@ def _with_terms(robot: Robot, model: ErrorModel, error: int, terms: tuple[str, .
     return error_model_from_dict(spec, robot, "<diagnose>", aux)
 
 
-def _linear_system(rnd: Round, data: Measurements, y: np.ndarray):
-    """H over the kept columns and the residual, rows scaled by the robust fit's point weights, so
-    a glitch neither passes for an effect nor hides one."""
-    H, r = zip(*rows_H_and_residual(rnd.cm, data, y, rnd.fit.c, weights=rnd.fit.weights))
-    return np.vstack(H)[:, list(rnd.fit.redundancy.kept)], np.concatenate(r)
-
-
-def _rows_pose(data: Measurements) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row of the linear system: its pose (3R,) and degrees of freedom (3R,; 1, or 1/2 for a
-    coordinate of a measured frame's vertex); and the point order rows_H_and_residual yields."""
-    order = np.argsort(data.pose, kind="stable")
-    return np.repeat(data.pose[order], 3), np.repeat(data.rows.dof[order] / 3, 3), order
-
-
 @dataclass
 class Diagnosis:
     robot: Robot
@@ -123,6 +104,8 @@ class Diagnosis:
     after: dict
     history: list[dict]
     remaining: dict
+    #: the final model's coupling ratios whose value depends on the loads (`loop.confounding`)
+    ratio_loads: list[dict] = field(default_factory=list)
 
 
 def _choose(found: list[Hit], cands, fs: Folded, J, rows_pose, n_tests: int, base_cv: float):
@@ -164,17 +147,14 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         if progress:
             progress(round_no, rnd.fit.train["rms_mm"])
         y = rnd.fit.to_world(data)
-        H, r = _linear_system(rnd, data, y)
-        rows_pose, rows_dof, order = _rows_pose(data)
+        H, r = linear_system(rnd, data, y)
+        rows_pose, rows_dof, order = pose_rows(data)
         fs = Folded(H, r, rows_pose, fold, rows_dof)
         base = fs.basis()
         m, k = rows_dof.sum(), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
         cands = candidates(rnd.cm, data, rng)
-        eps = rnd.cm.eps(data.q, data.w, data.aux_columns(rnd.model.aux), rnd.fit.c)
-        _, Jall = rnd.cm.J_e(data.q, eps)
-        J = Jall.reshape(data.n_poses, -1, 3, robot.n_errors)[data.pose[order], data.target[order]].reshape(-1, robot.n_errors)
-        J *= np.repeat(np.sqrt(rnd.fit.weights[order]), 3)[:, None]  # weighted as H and r are
+        J = weighted_J(rnd, data, order)
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
         base_cv = fs.cv_rms()
         present = [{t.text for t in ts} for ts in rnd.model.terms]
@@ -240,7 +220,8 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
     remaining = {**what_remains(rnd, data, final_cv, noise), "correlates": correlates,
                  "stopped": "round cap" if history[-1]["accepted"] else "nothing passes the statistics",
                  "dropped": dropped}
-    return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining)
+    return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining,
+                     ratio_load_confounding(rnd.cm, rnd.fit, data))
 
 
 #: joint angles taken 2 pi apart are compared to this many decimals (rad) once wrapped: the wrap's

@@ -300,6 +300,8 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
     names = calib.model.coefficient_names(robot)
     kept = set(calib.kept)
     eliminated = {e["param"]: e for e in calib.report.get("eliminated", [])}
+    ratio_loads = calib.report.get("ratio_loads") or []
+    loaded = {r["coefficient"] for r in ratio_loads}
     rows = []
     for j in sorted(kept):
         coef = calib.model.coefficients[j]
@@ -307,6 +309,7 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
         unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
         term = coef.term.label
         unit = unit if term == "1" else f"{unit} per unit of {term}"
+        unit += " (a coupling ratio that depends on the loads: see below)" if names[j] in loaded else ""
         rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.3g}",
                      f"{1e3 * calib.std[j]:.2g}", f"{abs(calib.c[j]) / calib.std[j]:.1f}", unit))
     out = [Section("Coefficients", [
@@ -315,6 +318,17 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
         "frame's geometry); any other term's coefficient is per unit of the term (rad or m for joints, N or N m for "
         "the wrench).",
         Table(("frame", "error", "term", "value", "std", "t", "unit"), rows)])]
+    if ratio_loads:
+        out.append(Section("Coupling ratios and loads", [
+            "A coupling ratio's coefficient turns the coupled joint in proportion to a reading, and over the measured "
+            "poses so may the load the joint carries. Each ratio below takes a value with the loads on its error "
+            "modelled and another without them, further apart than the data's noise allows, so its value is not a "
+            "gear-ratio error by itself: without the loads it absorbs them (model the load: calibrate's elastic model, "
+            "or diagnose); with them it is as good as the load terms beside it. Values in mrad per rad of the reading.",
+            Table(("coefficient", "with the loads", "without", "std", "apart (std)", "loads", "loads in the model"),
+                  [(f"`{r['coefficient']}`", f"{1e3 * r['with_loads']:.3g}", f"{1e3 * r['without_loads']:.3g}",
+                    f"{1e3 * r['std']:.2g}", f"{r['shift_std']:.1f}", ", ".join(f"`{n}`" for n in r["loads"]),
+                    "yes" if r["in_model"] else "no") for r in ratio_loads])]))
     if eliminated:
         rows = [(f"`{p}`", e["reason"], e["detail"] if e["reason"] == "insignificant" else
                  ", ".join(f"`{m['param']}` x {m['factor']:.3g}" for m in e["merged_into"])
@@ -460,7 +474,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
 
     robot = diag.robot
     sets = _diagnosed_sets(diag, data, val, register_val, registration_mode)
-    calib = from_fit(robot, diag.final.model, diag.final.fit)
+    calib = from_fit(robot, diag.final.model, diag.final.fit, diag.ratio_loads)
     found = [f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS on the "
              "training data.", verdict(diag.remaining)]

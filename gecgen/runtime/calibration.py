@@ -75,7 +75,9 @@ class Calibration:
         }
 
 
-def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
+def from_fit(robot: Robot, model: ErrorModel, fit: Fit, ratio_loads: list[dict] | None = None) -> Calibration:
+    """The calibration of a fit. ratio_loads: the coupling ratios whose value depends on the loads
+    (`loop.confounding`), recorded for a robot whose couplings carry ratio coefficients."""
     report = {"n_params": fit.redundancy.n_params, "n_identifiable": fit.redundancy.n_identifiable,
               "n_carried": len(fit.redundancy.kept),
               "eliminated": [e.to_dict() for e in fit.redundancy.eliminated],
@@ -86,6 +88,8 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit) -> Calibration:
               "outliers": [o.to_dict() for o in fit.outliers],
               "suspect_poses": [p.to_dict() for p in fit.suspects], "train_inliers": fit.train_inliers,
               "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held]}
+    if robot.ratio_terms():
+        report["ratio_loads"] = list(ratio_loads or [])
     return Calibration(robot, model, fit.c, fit.std, fit.redundancy.kept, fit.cov, fit.registration, report,
                        fit.registrations)
 
