@@ -615,7 +615,8 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
     `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
     `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
-    being insignificant (`runtime.significance`); `analysis`, the `Fit.analysis` of an earlier fit
+    being insignificant (`runtime.significance`), or, where why is a `weak.Held`, as weakly determined
+    (a refit keeps what its fit held, `Fit.held`); `analysis`, the `Fit.analysis` of an earlier fit
     of the same compiled model and data, spares the first round's analysis where it would repeat it.
     hold_weak (default): when the fit cannot be trusted (it does not converge, or carries an absurd
     or undetermined value), it is redone with the coefficients whose direction the data determine too
@@ -637,17 +638,72 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     fit = _identify(cm, data, *options, noise_m, False)
     if fit.failures and hold_weak and not fit.suspects:
         # a fit the data do not let converge, or that carries what they cannot hold, is redone with the
-        # weakly determined directions held; a fit that stands keeps every coefficient the data separate
-        # (the significance gate then judges them), as weakly held real data fit well without this. A
-        # pose the others do not predict explains a failure better than weak directions: that stands
+        # weakly determined directions held. A pose the others do not predict explains a failure better
+        # than weak directions: that stands
         held = _identify(cm, data, *options, noise_m, True)
         if held.held and len(held.failures) < len(fit.failures):
             fit = replace(held, warnings=(f"the fit of every identifiable coefficient cannot be trusted "
                                           f"({'; '.join(fit.failures)}): refitted with the weakly determined "
                                           f"ones held", *held.warnings))
+    if hold_weak and not fit.failures:
+        fit = _plausible(cm, data, options, fit, noise_m)
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
     return fit
+
+
+#: holding weak directions may raise the residual sum of squares by at most this chi-square quantile
+#: of the noise (one degree of freedom per coefficient held)
+HOLD_P = 0.99
+
+
+#: a fit that carries an implausible value holds the directions determined to within this many times
+#: a plausible size, in turn, as long as the noise explains what that costs
+WIDEN = (1, 2, 4, 8, 16)
+
+
+def _plausible(cm: CompiledModel, data: Measurements, options: tuple, fit: Fit, noise_m: float | None) -> Fit:
+    """A fit that stands, or the same data fitted with more weakly determined directions held when
+    it gives a generalized error beyond a plausible size (`weak.largest`). Real data fit well with
+    every coefficient the data separate (the significance gate then judges them), so a direction is
+    held only when the fit carries a value no robot has and holding it costs no more residual than
+    the noise explains (`_costs_only_noise`); directions determined to within WIDEN times a plausible
+    size are held in turn until every value is plausible. Returns the fit with the fewest held
+    directions that lowers the largest value most."""
+    size, where = weak.largest(cm, data, fit.c)
+    if size <= 1.0:
+        return fit
+    # the test's noise: stated, else what the fit leaves (weak.NOISE_CAP_M at most, as `_hold_weak`)
+    sigma = noise_m if noise_m is not None else min(fit.sigma_m, weak.NOISE_CAP_M)
+    best, best_size = fit, size
+    for widen in WIDEN[1:] if fit.held else WIDEN:
+        held = _identify(cm, data, *options, sigma * widen, True)
+        if held.failures or not _costs_only_noise(fit, held, noise_m):
+            break
+        after, _ = weak.largest(cm, data, held.c)
+        if held.held and after < best_size:
+            best, best_size = held, after
+        if best_size <= 1.0:
+            break
+    if best is fit:
+        return fit
+    return replace(best, warnings=(
+        f"the fit gives {where} {size:.3g} times a plausible size ({1e3 * weak.PLAUSIBLE_M:g} mm, "
+        f"{1e3 * weak.PLAUSIBLE_RAD:g} mrad) along directions the data determine only weakly: refitted with those "
+        f"held ({best_size:.3g} times at most), the residual {fit.train['rms_mm']:.4g} -> "
+        f"{best.train['rms_mm']:.4g} mm rms, within the noise", *best.warnings))
+
+
+def _costs_only_noise(full: Fit, held: Fit, noise_m: float | None) -> bool:
+    """Whether the held fit's larger residual is what the noise alone makes of the coefficients it
+    holds (their true values near zero): the rise in the weighted residual sum of squares within the
+    HOLD_P chi-square quantile, in units of the noise (stated, else the full fit's sigma)."""
+    from scipy.stats import chi2
+
+    k_full, k_held = len(full.redundancy.kept), len(held.redundancy.kept)
+    rss = [f.sigma_m ** 2 * max(f.measured_dof - k, 1.0) for f, k in ((full, k_full), (held, k_held))]
+    sigma = noise_m if noise_m is not None else full.sigma_m
+    return (rss[1] - rss[0]) / sigma ** 2 <= chi2.ppf(HOLD_P, max(k_full - k_held, 1))
 
 
 def _identify(cm: CompiledModel, data: Measurements, registration_mode: str, max_iter: int, step_tol_m: float,
@@ -705,12 +761,15 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     if at is not None or analysis is None or not analysis.serves(cm, y, rank_tol):
         analysis = Analysis(*_data_analysis(cm, data, y, rank_tol, rows.weight, at)[:2], cm.key, y, rank_tol)
     red, A0 = analysis.red, analysis.A0
+    kept_held = ()  # a refit's weakly determined directions, held again as such (`identify`'s hold)
     if hold:
         stay = [i for i, j in enumerate(red.kept) if j not in hold]
         names = cm.model.coefficient_names(cm.robot)
+        kept_held = tuple(hold[j] for j in red.kept if isinstance(hold.get(j), weak.Held))
         red = replace(red, kept=tuple(red.kept[i] for i in stay),
-                      eliminated=(*red.eliminated, *(Eliminated(names[j], j, "insignificant", hold[j])
-                                                     for j in red.kept if j in hold)))
+                      eliminated=(*red.eliminated, *(
+                          Eliminated(names[j], j, "held", hold[j].reason) if isinstance(hold[j], weak.Held)
+                          else Eliminated(names[j], j, "insignificant", hold[j]) for j in red.kept if j in hold)))
         A0 = A0[:, [*stay, -1]]
     known = _known_rows(cm, data)
     m = float(row_dof.sum()) + known.n  # a known distance or plane relation is one more equation
@@ -736,7 +795,8 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     else:
         stale = True
     # the analysis holds what relative data without a known distance leave of the scale
-    held = tuple(weak.Held(e.param, e.index, None, None, e.detail) for e in red.eliminated if e.detail == SCALE_HELD)
+    held = tuple(weak.Held(e.param, e.index, None, None, e.detail)
+                 for e in red.eliminated if e.detail == SCALE_HELD) + kept_held
     if hold_weak and k:
         if stale:  # the first round's R, robustly weighted: a gross outlier would pass for noise
             w = rows.weight * wr[rows.group]

@@ -113,7 +113,9 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
                       f"/ std < {T_MIN:g}: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''}): "
                       f"held at zero and the rest refitted, so the compensation carries no value nobody measured "
                       f"(keep_insignificant=True, or --keep-insignificant, carries them)", stacklevel=3)
-        fit = identify(cm, data, **options, hold=hold, analysis=fit.analysis, noise_m=noise_m)
+        # what the fit held as weakly determined stays held: the refit need not find it again
+        fit = identify(cm, data, **options, hold={**{h.index: h for h in fit.held}, **hold}, analysis=fit.analysis,
+                       noise_m=noise_m)
         if fit.failures:
             raise RuntimeError(f"the refit without the {len(hold)} insignificant coefficients is not trustworthy, no "
                                f"calibration made or written: {'; '.join(fit.failures)}")

@@ -18,8 +18,9 @@ is weak: the coefficient it moves most is held at zero (the data cannot tell its
 and the test repeats on the rest, until every direction left is determined. Holding a coefficient rather than
 a combination lets every later stage (covariance, significance gate, compensation) work on the
 coefficients it knows; the fit's steps then lie in the determined subspace only. `identify` does
-this when the fit of every coefficient cannot be trusted: a fit that stands is judged by the
-significance gate instead.
+this when the fit of every coefficient cannot be trusted, and when a fit that stands carries a
+generalized error beyond a plausible size (`largest`) that holding its weak directions removes at a
+cost in residual the noise explains; any other fit that stands is judged by the significance gate.
 """
 from __future__ import annotations
 
@@ -85,6 +86,19 @@ def term_values(cm, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     F = f[:, [terms.index(c.term.text) for c in coefs]]
     error = np.array([c.error for c in coefs])
     return F, error, np.where(error % 6 < 3, PLAUSIBLE_M, PLAUSIBLE_RAD)
+
+
+def largest(cm, data, c: np.ndarray) -> tuple[float, str]:
+    """The largest generalized error that coefficients c (nc,) give at the poses of `data`, in
+    plausible sizes (PLAUSIBLE_M, PLAUSIBLE_RAD), and the error's name."""
+    F, error, limit = term_values(cm, data)
+    size, name = 0.0, ""
+    for e in np.unique(error):
+        on = error == e
+        value = float(np.abs(F[:, on] @ c[on]).max()) / limit[on][0] if len(F) else 0.0
+        if value > size:
+            size, name = value, cm.robot.error_names()[e]
+    return size, name
 
 
 def weak(Rk: np.ndarray, scale: np.ndarray, F: np.ndarray, error: np.ndarray, limit: np.ndarray,
