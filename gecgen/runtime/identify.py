@@ -645,7 +645,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             fit = replace(held, warnings=(f"the fit of every identifiable coefficient cannot be trusted "
                                           f"({'; '.join(fit.failures)}): refitted with the weakly determined "
                                           f"ones held", *held.warnings))
-    if hold_weak and not fit.failures:
+    if hold_weak and not fit.failures and noise_m is not None:
         fit = _plausible(cm, data, options, fit, noise_m)
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
@@ -662,22 +662,21 @@ HOLD_P = 0.99
 WIDEN = (1, 2, 4, 8, 16)
 
 
-def _plausible(cm: CompiledModel, data: Measurements, options: tuple, fit: Fit, noise_m: float | None) -> Fit:
+def _plausible(cm: CompiledModel, data: Measurements, options: tuple, fit: Fit, noise_m: float) -> Fit:
     """A fit that stands, or the same data fitted with more weakly determined directions held when
     it gives a generalized error beyond a plausible size (`weak.largest`). Real data fit well with
     every coefficient the data separate (the significance gate then judges them), so a direction is
     held only when the fit carries a value no robot has and holding it costs no more residual than
-    the noise explains (`_costs_only_noise`); directions determined to within WIDEN times a plausible
-    size are held in turn until every value is plausible. Returns the fit with the fewest held
-    directions that lowers the largest value most."""
+    the stated instrument noise noise_m (m per coordinate) explains (`_costs_only_noise`; a residual
+    estimate holds what the model misses too, and would let a few poses hold anything); directions
+    determined to within WIDEN times a plausible size are held in turn until every value is
+    plausible. Returns the fit with the fewest held directions that lowers the largest value most."""
     size, where = weak.largest(cm, data, fit.c)
     if size <= 1.0:
         return fit
-    # the test's noise: stated, else what the fit leaves (weak.NOISE_CAP_M at most, as `_hold_weak`)
-    sigma = noise_m if noise_m is not None else min(fit.sigma_m, weak.NOISE_CAP_M)
     best, best_size = fit, size
     for widen in WIDEN[1:] if fit.held else WIDEN:
-        held = _identify(cm, data, *options, sigma * widen, True)
+        held = _identify(cm, data, *options, noise_m * widen, True)
         if held.failures or not _costs_only_noise(fit, held, noise_m):
             break
         after, _ = weak.largest(cm, data, held.c)
@@ -694,16 +693,15 @@ def _plausible(cm: CompiledModel, data: Measurements, options: tuple, fit: Fit, 
         f"{best.train['rms_mm']:.4g} mm rms, within the noise", *best.warnings))
 
 
-def _costs_only_noise(full: Fit, held: Fit, noise_m: float | None) -> bool:
+def _costs_only_noise(full: Fit, held: Fit, noise_m: float) -> bool:
     """Whether the held fit's larger residual is what the noise alone makes of the coefficients it
     holds (their true values near zero): the rise in the weighted residual sum of squares within the
-    HOLD_P chi-square quantile, in units of the noise (stated, else the full fit's sigma)."""
+    HOLD_P chi-square quantile, in units of the instrument noise noise_m (m per coordinate)."""
     from scipy.stats import chi2
 
     k_full, k_held = len(full.redundancy.kept), len(held.redundancy.kept)
     rss = [f.sigma_m ** 2 * max(f.measured_dof - k, 1.0) for f, k in ((full, k_full), (held, k_held))]
-    sigma = noise_m if noise_m is not None else full.sigma_m
-    return (rss[1] - rss[0]) / sigma ** 2 <= chi2.ppf(HOLD_P, max(k_full - k_held, 1))
+    return (rss[1] - rss[0]) / noise_m ** 2 <= chi2.ppf(HOLD_P, max(k_full - k_held, 1))
 
 
 def _identify(cm: CompiledModel, data: Measurements, registration_mode: str, max_iter: int, step_tol_m: float,
