@@ -27,7 +27,8 @@ def print_human(result: dict):
     """A short summary for a person; the full record (every list entry) is what --json prints. A
     dict whose units are given beside it (`<key>_units`, one per entry) is printed with them."""
     for key, value in result.items():
-        if key in ("identifiable", "training_ranges") or (key.endswith("_units") and key[:-6] in result):
+        # the warnings are on stderr already, one line each
+        if key in ("identifiable", "training_ranges", "warnings") or (key.endswith("_units") and key[:-6] in result):
             continue
         units = result.get(f"{key}_units", {})
         if key == "outliers":
