@@ -158,13 +158,17 @@ def add_tolerance(p):
                         "held-out poses meet it, do not, or cannot tell")
 
 
-def next_commands(robot: str, train: str, held: str, calibration: str, n_train: int, relative: bool, noise: str):
+def next_commands(robot: str, train: str, held: str, calibration: str, n_train: int | None, relative: bool,
+                  noise: str):
     """The commands a report's next step names (`report.verdict.Commands`), with the run's own files:
-    held the option that names held-out data (`--val V.csv`, `--holdout 0.2`, or empty), noise the
-    option stating the instrument's noise as given (or the option to give)."""
+    held the option that names held-out data (`--val V.csv`, `--holdout 0.2`, or empty), n_train the
+    training poses (as many more are designed; None: not known, N), noise the option stating the
+    instrument's noise as given (empty: the option to give)."""
     from shlex import quote
 
     from gecgen.report.verdict import Commands
+
+    n_train = "N" if n_train is None else n_train
 
     more = (f"gecgen design {quote(robot)} --fixtures FIXTURES.csv --poses {n_train} -o more.csv" if relative else
             f"gecgen design {quote(robot)} --given {quote(train)} --poses {n_train} -o more.csv")

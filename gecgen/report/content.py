@@ -231,7 +231,7 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
                  *([f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}"] if absolute.any() else []),
                  *([_fixtures_fact(relative)] if relative is not None else []),
                  *([f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
-                   if np.any(data.w[:, :3]) else [])]
+                   if np.any(data.w[:, :3]) else ["no force measured"])]
         if noise is not None and ds is sets[0]:
             facts.append(f"instrument noise from repeated poses: {noise['noise_mm']:.3g} mm per coordinate")
         blocks += [f"**{ds.name.capitalize()} data** (`{data.source or 'in memory'}`):", Bullets(facts)]

@@ -94,20 +94,20 @@ def _figure(score: dict, relative: bool) -> str:
     return ", ".join(parts)
 
 
-def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int, tolerance_mm: float | None,
+def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | None, tolerance_mm: float | None,
            noise: Noise | None, held: tuple[int, int] | None, n_train_poses: int | None, extrapolation: dict,
-           inside: dict | None, relative: bool, commands: Commands) -> Assessment:
+           inside: dict | None, relative: bool, commands: Commands, before_name: str = "uncalibrated") -> Assessment:
     """The verdict on a score `after` ({rms_mm, max_mm[, rms_mm_ci95, consistency_mm, distance_error_mm]},
-    `identify.summary` as the JSON has it) of n_poses poses, `held_out` (data the fit never saw) or
-    the training data; `before` the nominal model's on the same data. noise: the fit's residual
+    `identify.summary` as the JSON has it) of n_poses poses (None: not known), `held_out` (data the
+    fit never saw) or the training data; `before` that of the model named before_name on the same data. noise: the fit's residual
     against the instrument's; held: (coefficients held at zero as not determined, identifiable ones)
     of a fit on n_train_poses poses; extrapolation: poses outside the training range per input
     ({name: poses}); inside: the score of the poses inside every range; relative: socket or plane
     data (no absolute position measured)."""
     what = "held-out" if held_out else "training"
-    statement = f"On {n_poses} {what} poses: {_figure(after, relative)}"
+    statement = f"On {'the' if n_poses is None else n_poses} {what} poses: {_figure(after, relative)}"
     if before is not None:
-        statement += f"; uncalibrated {before['rms_mm']:.3g} mm"
+        statement += f"; {before_name} {before['rms_mm']:.3g} mm"
     statement += "."
     if relative:
         statement += (" Sockets and planes measure the arm's shape, not where it stands: the base placement is not "
@@ -149,7 +149,7 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int, to
                       "instrument, or averaging repeated measurements, would.")
     ci = _interval(after)
     if held_out and ci and ci[1] - ci[0] > WIDE_INTERVAL * after["rms_mm"]:
-        limits.append(f"{n_poses} held-out poses give a wide interval ({ci[0]:.3g} to {ci[1]:.3g} mm): more "
+        limits.append(f"{n_poses or 'Too few'} held-out poses give a wide interval ({ci[0]:.3g} to {ci[1]:.3g} mm): more "
                       "held-out poses narrow it.")
 
     if tolerance_mm is None:
