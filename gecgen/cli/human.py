@@ -43,6 +43,11 @@ def print_human(result: dict):
             for c in value:
                 score = f"{c['cv_rms_mm']:.3g} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
                 print(f"  {c['model']}: {score}")
+        elif key == "assessment":
+            print(f"verdict: {value['verdict']}. {value['statement']}")
+            for line in value["limits"]:
+                print(f"  limits it: {line}")
+            print(f"next step: {value['next_step']}")
         elif key == "table":
             print_error_table(value)
         elif key == "fixtures" and value and "poses" in value[0]:

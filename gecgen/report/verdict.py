@@ -87,8 +87,8 @@ def _figure(score: dict, relative: bool) -> str:
     ci = f" (95 % interval by pose {ci[0]:.3g} to {ci[1]:.3g} mm)" if ci else ""
     if not relative:
         return f"RMS point error {score['rms_mm']:.3g} mm{ci}, largest {score['max_mm']:.3g} mm"
-    parts = [f"consistency {score['rms_mm']:.3g} mm RMS{ci} (each seating's distance from its socket's fitted "
-             f"place, or touch from its plane), largest {score['max_mm']:.3g} mm"]
+    parts = [f"consistency {score['rms_mm']:.3g} mm RMS{ci}, largest {score['max_mm']:.3g} mm: each seating's "
+             f"distance from its socket's fitted place, or a touch's from its plane"]
     if score.get("distance_error_mm") is not None:
         parts.append(f"known distances off by {abs(score['distance_error_mm']):.3g} mm at most")
     return ", ".join(parts)
