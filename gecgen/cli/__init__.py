@@ -15,8 +15,7 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
-from gecgen.cli.common import warning_lines
-from gecgen.cli.human import print_human
+from gecgen.cli.human import print_human, warning_lines
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml

@@ -8,7 +8,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
-                               next_commands, progress_status, warned, warning_lines, whole)
+                               next_commands, progress_status, warned, whole)
+from gecgen.cli.human import warning_lines
 from gecgen.loop.calibrate import NAMES
 
 

@@ -136,14 +136,9 @@ def fit_options(args) -> dict:
             for name in ("ridge", "rank_tol")}
 
 
-def warning_lines(caught) -> list[str]:
-    """The lines the terminal prints for recorded warnings: each one's first line, once, in order."""
-    return list(dict.fromkeys(str(w.message).splitlines()[0] for w in caught))
-
-
 @contextmanager
 def warned():
-    """Record the block's warnings (the list it yields: `warning_lines(it)` is what the terminal will
+    """Record the block's warnings (the list it yields: `human.warning_lines(it)` is what the terminal will
     print) and pass them on when it ends, so a report carries the warnings the terminal shows."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -5,7 +5,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from gecgen.cli.common import (MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, add_tolerance, next_commands,
-                               number, progress_status, warned, warning_lines, whole)
+                               number, progress_status, warned, whole)
+from gecgen.cli.human import warning_lines
 from gecgen.model import ModelError
 
 

@@ -1,8 +1,8 @@
 """`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import (CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned,
-                               warning_lines)
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned
+from gecgen.cli.human import warning_lines
 
 
 def add_parser(command):

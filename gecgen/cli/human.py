@@ -2,6 +2,11 @@
 from __future__ import annotations
 
 
+def warning_lines(caught) -> list[str]:
+    """The lines the terminal prints for recorded warnings: each one's first line, once, in order."""
+    return list(dict.fromkeys(str(w.message).splitlines()[0] for w in caught))
+
+
 def scalar(value) -> str:
     """A value as a person reads it: three significant digits, as the reports print them, and every
     digit before the point of a number of 1000 or more (a time in seconds, a log det); `-` for a value

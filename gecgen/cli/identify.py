@@ -3,7 +3,8 @@ from __future__ import annotations
 
 
 from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
-                               fit_options, next_commands, progress_status, warned, warning_lines)
+                               fit_options, next_commands, progress_status, warned)
+from gecgen.cli.human import warning_lines
 
 
 def add_parser(command):
