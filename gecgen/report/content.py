@@ -626,8 +626,9 @@ def iso9283(result: dict) -> Report:
                    f"{result['frame']}."], sections)
 
 
-def accuracy(result: dict, figure: Figure) -> Report:
-    """The accuracy statement over a volume from `gecgen accuracy`'s result and its map."""
+def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] | None = None) -> Report:
+    """The accuracy statement over a volume from `gecgen accuracy`'s result and its map; first the
+    verdict and next step (`verdict.accuracy_next_step`) and the warnings the command printed."""
     tol = result["tolerance_mm"]
     rows = [("bound on the worst compensated error", f"{result['bound_mm']:.3g} mm at {result['confidence']:.0%}"),
             ("from the coefficients' uncertainty alone", f"{result['parametric_bound_mm']:.3g} mm (its low "
@@ -648,7 +649,7 @@ def accuracy(result: dict, figure: Figure) -> Report:
                   [f"The worst compensated error over the volume `{result['volume']}` ({result['samples']} samples, "
                    f"{result['draws']} Monte Carlo draws), its unmodelled part read from `{result['residual_from']}` "
                    f"({source})."],
-                  [Section("Statement", [Table(("", "value"), rows)]),
+                  [*verdict_sections(assessment, warnings), Section("Statement", [Table(("", "value"), rows)]),
                    Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
                                                         "Nothing keeps it from being signed."]),
                    Section("Where it is worst", [f"The sample with the largest own bound ({worst['bound_mm']:.3g} "

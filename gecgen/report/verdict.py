@@ -184,3 +184,32 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
         steps.append(export)
     text = "; then ".join(steps[:2])
     return Assessment(verdict, statement, limits, text[0].upper() + text[1:] + ".", tolerance_mm)
+
+
+def accuracy_next_step(result: dict, calibration: str, volume: str, data: str) -> Assessment:
+    """The accuracy statement's verdict (`gecgen accuracy`'s result, as it is: meets, does not
+    meet, cannot tell or no tolerance given), what limits it (its reasons) and the next step, with
+    this run's files."""
+    verdict, tol = result["verdict"], result["tolerance_mm"]
+    statement = (f"The worst compensated error over the volume is at most {result['bound_mm']:.3g} mm with "
+                 f"{result['confidence']:.0%} confidence, largest at the worst sample ({result['worst_at']['bound_mm']:.3g} "
+                 f"mm); " + ("no tolerance was given." if tol is None else f"the tolerance is {tol:.3g} mm."))
+    again = f"gecgen accuracy {calibration} {volume} {data}"
+    if result["noise_mm"] is None:
+        step = (f"state the tracker's noise and the robot's repeatability, without which the noise counts as model "
+                f"error: `{again} --noise-mm S --repeatability-mm R`")
+    elif verdict == MEETS and not result["held_out"]:
+        step = (f"sign it with held-out poses measured inside the volume, at its extremes: `{again} --val VAL.csv "
+                f"--tolerance-mm {tol:g}`")
+    elif verdict == MEETS:
+        step = f"put the calibration into the controller: `gecgen export {calibration} --c CONTROLLER_DIR`"
+    elif tol is None:
+        step = f"state the accuracy the robot must reach: `{again} --tolerance-mm T`"
+    elif verdict == DOES_NOT_MEET:
+        step = ("measure poses where the bound is largest (the joints named under \"Where it is worst\") and "
+                "calibrate again with them, or run `gecgen diagnose` on the training data to find what the model "
+                "misses")
+    else:
+        step = (f"narrow the bound: measure held-out poses inside the volume, at its extremes, and give them: "
+                f"`{again} --val VAL.csv --tolerance-mm {tol:g}`")
+    return Assessment(verdict, statement, list(result["reasons"]), step[0].upper() + step[1:] + ".", tol)
