@@ -611,8 +611,9 @@ def _iso_run(title: str, run: dict) -> Section:
     return Section(title, blocks)
 
 
-def iso9283(result: dict) -> Report:
-    """The ISO 9283 pose test's report from `gecgen iso9283 --measured`'s result."""
+def iso9283(result: dict, assessment=None, warnings: list[str] | None = None) -> Report:
+    """The ISO 9283 pose test's report from `gecgen iso9283 --measured`'s result; first the verdict
+    and next step (`verdict.iso9283_next_step`) and the warnings the command printed."""
     sections = [_iso_run("Before compensation" if "after" in result else "The test", result)]
     if "after" in result:
         sections.append(_iso_run("After compensation", result["after"]))
@@ -623,7 +624,7 @@ def iso9283(result: dict) -> Report:
     return Report(f"gecgen iso9283: {result['robot']}",
                   [f"ISO 9283 pose test of plan `{result['plan']}`, scored against the pose the nominal model gives "
                    f"each target at the plan's joints (what the robot was commanded to reach); measured in "
-                   f"{result['frame']}."], sections)
+                   f"{result['frame']}."], [*verdict_sections(assessment, warnings), *sections])
 
 
 def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] | None = None) -> Report:

@@ -213,3 +213,48 @@ def accuracy_next_step(result: dict, calibration: str, volume: str, data: str) -
         step = (f"narrow the bound: measure held-out poses inside the volume, at its extremes, and give them: "
                 f"`{again} --val VAL.csv --tolerance-mm {tol:g}`")
     return Assessment(verdict, statement, list(result["reasons"]), step[0].upper() + step[1:] + ".", tol)
+
+
+def iso9283_next_step(result: dict, tolerance_mm: float | None, robot: str) -> Assessment:
+    """The ISO 9283 pose test's verdict from `gecgen iso9283 --measured`'s result (the compensated
+    run's, when there is one): against a tolerance on the position a pose is brought to, MEETS when
+    at every point the pose accuracy plus the repeatability, AP_p + RP_l (the farthest a cycle's
+    position lies from the commanded one, by the standard's 3 S), is within it; DOES_NOT_MEET when
+    the pose accuracy AP_p alone (the mean position's distance) is beyond it at some point; else
+    CANNOT_TELL. Without a tolerance, "no tolerance given"."""
+    run, stage = (result["after"], "compensated") if "after" in result else (result, "as commanded")
+    points = [v for t in run["points"].values() for v in t.values()]
+    reach = max(v["AP_p"] + v["RP_l"] for v in points)
+    worst = run["worst"]
+    statement = (f"{stage.capitalize()}: pose accuracy AP_p {worst['AP_p']:.3g} mm and repeatability RP_l "
+                 f"{worst['RP_l']:.3g} mm at worst over the points; a cycle's position lies at most {reach:.3g} mm "
+                 f"from the commanded one (AP_p + RP_l).")
+    if "after" in result:
+        statement += f" Before compensation AP_p was {result['worst']['AP_p']:.3g} mm."
+    limits = [] if "after" in result else ["Only the run as commanded was measured: what compensation gives is not "
+                                           "known."]
+    if worst["RP_l"] >= worst["AP_p"]:
+        limits.append("The repeatability is as large as the accuracy: no calibration can bring the robot closer than "
+                      "it repeats.")
+    if tolerance_mm is None:
+        verdict = "no tolerance given"
+    elif max(v["AP_p"] for v in points) > tolerance_mm:
+        verdict = DOES_NOT_MEET
+    elif reach <= tolerance_mm:
+        verdict = MEETS
+    else:
+        verdict = CANNOT_TELL
+        limits.append(f"The tolerance {tolerance_mm:.3g} mm lies between the mean positions' distance and the "
+                      "farthest cycle's: the repeatability decides it.")
+    if "after" not in result:
+        step = (f"compensate the plan (`gecgen compensate CALIB {result['plan']} -o compensated.csv`), run and measure "
+                f"it, and give it: `gecgen iso9283 {robot} --plan {result['plan']} --measured {result['measured']} "
+                f"--after RUN2.csv`")
+    elif verdict == DOES_NOT_MEET:
+        step = ("calibrate again with poses around the test's cube (`gecgen design` with `--given` the training data), "
+                "then repeat the test")
+    elif tolerance_mm is None:
+        step = "state the tolerance the robot must reach: `--tolerance-mm T`"
+    else:
+        step = "sign the test's figures; repeat it after any change to the robot (`gecgen check` for a short one)"
+    return Assessment(verdict, statement, limits, step[0].upper() + step[1:] + ".", tolerance_mm)
