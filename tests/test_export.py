@@ -306,3 +306,36 @@ def test_urdf_of_an_elastic_calibration_states_what_leaving_the_load_terms_out_c
         assert cost["exported_rms_mm"] > 10 * cost["calibration_rms_mm"]
     warning = [line for line in run.err.splitlines() if "constant errors only" in line]
     assert len(warning) == 1 and f"{out['cost']['held_out']['exported_rms_mm']:.3g} mm" in warning[0]
+
+
+def test_a_ball_offset_the_data_cannot_tell_from_the_robot_is_named(tmp_path, capsys, rng):
+    """A Panda measured at one ball on its last joint's axis, the ball 7 mm further out than the
+    robot file says: the ball's offset along that axis is indistinguishable from errors of frame 6,
+    which the calibration holds instead. The export puts the ball's link where the calibration puts
+    the ball (pinocchio, 1e-9 m) and says which coefficients carry the offset, so nobody takes them
+    for the robot's."""
+    robot_file = ROBOTS / "panda_ball.yaml"
+    (tmp_path / "truth.yaml").write_text('seed: 1\nconstant: {values: {"7.ez": 0.007}}\n'
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    gecgen_json("simulate", robot_file, "--truth", tmp_path / "truth.yaml", "--poses", 60, "--seed", 1,
+                "-o", tmp_path / "train.csv")
+    gecgen_json("identify", robot_file, tmp_path / "train.csv", "--errors", CONSTANT, "-o", tmp_path / "cal.json")
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "cal.json"), "--urdf", str(tmp_path / "cal.urdf"), "--json"]) == 0
+    run = capsys.readouterr()
+    out = json.loads(run.out)["urdf"]
+    calib = calibration.load(tmp_path / "cal.json")
+    carried = out["tool_offset_carried"]
+    assert carried["errors"] == ["7.ez:1"] and carried["carried_by"]
+    names = calib.model.coefficient_names(calib.robot)
+    assert all(v == pytest.approx(1e3 * calib.c[names.index(k)]) and not k.startswith("7.")
+               for k, v in carried["carried_by"].items())
+    warning = [line for line in run.err.splitlines() if "tool's offset" in line]
+    assert len(warning) == 1 and all(k in warning[0] for k in carried["carried_by"])
+    robot = calib.robot
+    model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    pdata = model.createData()
+    eps = constant_errors(calib)
+    for q in random_q(robot, rng, 20):
+        got = pin_placement(model, pdata, dict(zip(robot.joint_names, q)), out["tool_links"]["ball"], "panda_link0")
+        np.testing.assert_allclose(got[:3, 3], target_positions(robot, q, eps)[0, 0], atol=1e-9)

@@ -151,6 +151,27 @@ def tool_points(robot: Robot) -> list[dict[str, np.ndarray]]:
     return out
 
 
+#: the translation errors, reported in mm (the rotations in mrad)
+ERRORS_MM = ("ex", "ey", "ez")
+
+
+def tool_offset_carried(calib: Calibration) -> dict | None:
+    """When a translation of a branch's last frame (the measured tool's offset from the flange) is
+    eliminated as indistinguishable from other errors, and the kept coefficients it merges into hold
+    values: {"errors": the eliminated ones, "carried_by": {kept coefficient: value, mm or mrad}};
+    those values may be the tool's offset rather than the robot's. None otherwise."""
+    robot = calib.robot
+    last = {b.tip for b in robot.branches} or {robot.n_frames}
+    eliminated = [e for e in calib.report.get("eliminated", []) if e["reason"] == "structural"
+                  and e["param"].endswith(":1") and int(e["param"].split(".")[0]) in last
+                  and e["param"].split(".")[1].split(":")[0] in ERRORS_MM]
+    names = calib.model.coefficient_names(robot)
+    by = {m["param"]: 1e3 * float(calib.c[names.index(m["param"])]) for e in eliminated for m in e["merged_into"]
+          if int(m["param"].split(".")[0]) not in last and abs(m["factor"]) > FACTOR_TOL}
+    by = {k: v for k, v in by.items() if v != 0.0}
+    return {"errors": [e["param"] for e in eliminated], "carried_by": by} if by else None
+
+
 def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, dict]:
     """The robot's URDF with the calibration's constant errors folded into its joint origins
     (`model.urdf.folded_copy`), and what the command reports about it. The tracker registration
@@ -173,10 +194,18 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     tip_links = [b.tip_link for b in robot.branches] or [robot.tip_link]
     text, tips, tool_links, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note, tool_points(robot))
     left = not_carried(calib, cm, where)
+    carried = tool_offset_carried(calib)
+    if carried:
+        warnings.warn(f"the data cannot tell the measured tool's offset along {', '.join(carried['errors'])} from "
+                      f"errors of the robot, and the calibration carries it in "
+                      + ", ".join(f"{k} ({v:.3g} {'mm' if k.split('.')[1][:2] in ERRORS_MM else 'mrad'})"
+                                  for k, v in carried["carried_by"].items())
+                      + ": the links before the tool move with it (the tool point is right); measure a second point "
+                        "on the tool to keep them apart (urdf.tool_offset_carried)")
     reg = calib.registration.to_dict()
     branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
     return text, {"tip_link": tips[0], **branch_tips, "tool_links": tool_links, "changed_joints": changed,
-                  "not_carried": left,
+                  "not_carried": left, "tool_offset_carried": carried,
                   "registration_applied": False, "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
 
 
