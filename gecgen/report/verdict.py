@@ -134,7 +134,7 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
             rest = f"; the {rest} inside" if rest else ""
         else:
             names = ", ".join(f"{name} {k}" for name, k in extrapolation.items())
-            out = f"{worst} or more of the {n_poses} poses lie outside a training range (per input: {names})"
+            out = f"at least {worst} of the {n_poses} poses lie outside a training range (per input: {names})"
             rest = "; the poses inside every range"
         rest = f"{rest}: {inside['rms_mm']:.3g} mm RMS" if inside else ""
         limits.append(f"Extrapolation: {out}{rest}. The calibration is not validated there.")
@@ -168,8 +168,11 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
                    f"the RMS interval, {hi:.3g} mm")
         else:
             verdict = CANNOT_TELL
-            why = (f"the tolerance of {tolerance_mm:.3g} mm lies within what these poses allow (RMS interval "
-                   f"{lo:.3g} to {hi:.3g} mm, largest {after['max_mm']:.3g} mm)")
+            why = (f"the RMS's 95 % interval, {lo:.3g} to {hi:.3g} mm, spans the tolerance of {tolerance_mm:.3g} mm"
+                   if hi > tolerance_mm else
+                   f"the RMS's 95 % interval, {lo:.3g} to {hi:.3g} mm, is within the tolerance of {tolerance_mm:.3g} "
+                   f"mm, but the largest held-out point error, {after['max_mm']:.3g} mm, is beyond it (the robot or "
+                   f"the measurement: check that pose, or measure it again)")
             steps.insert(0, "measure more held-out poses inside the working volume and score them: "
                             f"`{commands.score}`")
         statement += f" {PHRASE[verdict]} the tolerance: {why}."
