@@ -17,7 +17,8 @@ from gecgen.cli import main
 ROBOT = ROBOTS / "industrial6r.yaml"
 ERRORS = ROBOTS / "constant.errors.yaml"
 #: sections every report has, and those of one command only
-COMMON = ("Verdict and next step", "Warnings", "Summary", "What was measured", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
+COMMON = ("Verdict and next step", "Warnings",
+          "Summary", "What was measured", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
           "Extrapolation")
 ONLY = {"identify": (), "evaluate": (), "diagnose": ("What diagnose found", "Rounds"),
         "calibrate": ("Model choice", "Files")}
@@ -221,7 +222,8 @@ def test_some_report_of_the_fixture_has_warnings(reports):
 def test_calibrate_report_counts_the_held_out_poses_outside_the_training_ranges(reports):
     """The extrapolation table's counts are those the terminal warned of (JSON val_extrapolation)."""
     res = reports["calibrate"]
-    rows = re.findall(r"^\| (q[1-6]) [^|]* \| [^|]+ \| [^|]+ \| ([^|]+) \|$", section(report_md(res), "Extrapolation"), re.M)
+    rows = re.findall(r"^\| (q[1-6]) [^|]* \| [^|]+ \| [^|]+ \| ([^|]+) \|$", section(report_md(res), "Extrapolation"),
+                      re.M)
     assert len(rows) == 6 and all(count.strip() != "-" for _, count in rows)
     assert {q: int(count) for q, count in rows if int(count)} == res["val_extrapolation"]
 

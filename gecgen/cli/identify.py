@@ -63,7 +63,8 @@ def _identified(args, caught: list) -> dict:
     assessment = assess(after=cal.report_["train"], before=cal.report_["before"], held_out=False,
                         n_poses=cal.counts_["n_poses"], tolerance_mm=args.tolerance_mm,
                         noise=Noise.of_significance(sig), n_train_poses=cal.counts_["n_poses"],
-                        held=None if sig.get("insignificant_carried") else (len(sig["held"]), cal.report_["n_identifiable"]),
+                        held=None if sig.get("insignificant_carried") else
+                        (len(sig["held"]), cal.report_["n_identifiable"]),
                         extrapolation={}, inside=None, relative=relative,
                         commands=next_commands(args.robot, args.data, "", str(out), cal.counts_["n_poses"], relative,
                                                f"--noise-mm {args.noise_mm:g}" if args.noise_mm else ""))

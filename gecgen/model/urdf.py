@@ -477,7 +477,8 @@ def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: 
             names.append(f"{link}_joint")
             added.append(f'  <joint name={quoteattr(link + "_joint")} type="fixed">\n'
                          f'    <parent link={quoteattr(tip_link)}/>\n    <child link={quoteattr(link)}/>\n'
-                         f'    {_origin_tag(np.linalg.inv(fixed) @ E @ T)}\n  </joint>\n  <link name={quoteattr(link)}/>\n')
+                         f'    {_origin_tag(np.linalg.inv(fixed) @ E @ T)}\n  </joint>\n'
+                         f'  <link name={quoteattr(link)}/>\n')
     edits.append((end, end, "".join(added)))
     for a, b, new in sorted(edits, reverse=True):
         text = text[:a] + new + text[b:]

@@ -457,8 +457,8 @@ def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, 
     return Report(f"gecgen identify: {robot.name}",
                   [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses). "
                    "Training data only: score it on new data with `gecgen evaluate --report`."],
-                  [*verdict_sections(assessment, warnings), headline([train], robot), measured_section(cm.robot, [train]),
-                   *residual_sections(robot, [train]),
+                  [*verdict_sections(assessment, warnings), headline([train], robot),
+                   measured_section(cm.robot, [train]), *residual_sections(robot, [train]),
                    *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, None, None)])
 

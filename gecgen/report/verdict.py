@@ -99,8 +99,8 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
            inside: dict | None, relative: bool, commands: Commands, before_name: str = "uncalibrated") -> Assessment:
     """The verdict on a score `after` ({rms_mm, max_mm[, rms_mm_ci95, consistency_mm, distance_error_mm]},
     `identify.summary` as the JSON has it) of n_poses poses (None: not known), `held_out` (data the
-    fit never saw) or the training data; `before` that of the model named before_name on the same data. noise: the fit's residual
-    against the instrument's; held: (coefficients held at zero as not determined, identifiable ones)
+    fit never saw) or the training data; `before` that of the model named before_name on the same
+    data. noise: the fit's residual against the instrument's; held: (coefficients held at zero as not determined, identifiable ones)
     of a fit on n_train_poses poses; extrapolation: poses outside the training range per input
     ({name: poses}); inside: the score of the poses inside every range; relative: socket or plane
     data (no absolute position measured)."""
@@ -149,8 +149,8 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
                       "instrument, or averaging repeated measurements, would.")
     ci = _interval(after)
     if held_out and ci and ci[1] - ci[0] > WIDE_INTERVAL * after["rms_mm"]:
-        limits.append(f"{n_poses or 'Too few'} held-out poses give a wide interval ({ci[0]:.3g} to {ci[1]:.3g} mm): more "
-                      "held-out poses narrow it.")
+        limits.append(f"{n_poses or 'Too few'} held-out poses give a wide interval ({ci[0]:.3g} to {ci[1]:.3g} "
+                      "mm): more held-out poses narrow it.")
 
     if tolerance_mm is None:
         verdict = NOISE_UNKNOWN if noise is None else BEYOND_NOISE if noise.beyond else AT_NOISE
@@ -195,8 +195,8 @@ def accuracy_next_step(result: dict, calibration: str, volume: str, data: str) -
     this run's files."""
     verdict, tol = result["verdict"], result["tolerance_mm"]
     statement = (f"The worst compensated error over the volume is at most {result['bound_mm']:.3g} mm with "
-                 f"{result['confidence']:.0%} confidence, largest at the worst sample ({result['worst_at']['bound_mm']:.3g} "
-                 f"mm); " + ("no tolerance was given." if tol is None else f"the tolerance is {tol:.3g} mm."))
+                 f"{result['confidence']:.0%} confidence, largest at the worst sample "
+                 f"({result['worst_at']['bound_mm']:.3g} mm); " + ("no tolerance was given." if tol is None else f"the tolerance is {tol:.3g} mm."))
     again = f"gecgen accuracy {calibration} {volume} {data}"
     if result["noise_mm"] is None:
         step = (f"state the tracker's noise and the robot's repeatability, without which the noise counts as model "
