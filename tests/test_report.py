@@ -17,9 +17,8 @@ from gecgen.cli import main
 ROBOT = ROBOTS / "industrial6r.yaml"
 ERRORS = ROBOTS / "constant.errors.yaml"
 #: sections every report has, and those of one command only
-COMMON = ("Verdict and next step", "Warnings",
-          "Summary", "What was measured", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
-          "Extrapolation")
+COMMON = ("Verdict and next step", "Warnings", "Summary", "What was measured", "Distribution of point errors",
+          "Residuals against each joint", "Coefficients", "Glossary", "Extrapolation")
 ONLY = {"identify": (), "evaluate": (), "diagnose": ("What diagnose found", "Rounds"),
         "calibrate": ("Model choice", "Files")}
 BROWSER = shutil.which("chromium")
