@@ -629,7 +629,8 @@ class Selection:
     Calibrator (score, predict, compensate, save); choice: loop.calibrate.Choice (its error model,
     fit and diagnosis); effects: what diagnose added, if the choice was diagnosed; counts: of the
     training data; val_before, val: the validation data's errors (nominal and calibrated), None
-    without validation data; val_inside: as `Score.after_inside`."""
+    without validation data; val_inside: as `Score.after_inside`; val_extrapolation: as
+    `Score.extrapolation`, of the validation data."""
 
     model: str
     table: list[dict]
@@ -645,6 +646,7 @@ class Selection:
     #: on a tree, the validation data's errors per branch ({name: {before, after}}, as `Score.branches`)
     val_branches: dict = field(default_factory=dict)
     val_inside: Errors | None = None
+    val_extrapolation: dict = field(default_factory=dict)
 
 
 def model_names(names, label: str = "models") -> tuple[str, ...]:
@@ -698,4 +700,4 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
-                     data, scored.data, scored.branches, scored.after_inside)
+                     data, scored.data, scored.branches, scored.after_inside, scored.extrapolation)

@@ -85,5 +85,7 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     print_human({"seconds": 1234.56, "log_det": 312.44})
     assert capsys.readouterr().out.splitlines() == ["seconds: 1235", "log_det: 312"]
     # what JSON spells null and [] a person reads as not known and none, not as Python prints them
-    print_human({"warnings": [], "placement": None, "val": {"rms_mm": 0.2, "cv_rms_mm": None}})
-    assert capsys.readouterr().out.splitlines() == ["warnings: none", "placement: -", "val: rms_mm 0.2, cv_rms_mm -"]
+    # (a result's `warnings` are not printed here: each is a line on stderr already)
+    print_human({"suspect_poses": [], "placement": None, "val": {"rms_mm": 0.2, "cv_rms_mm": None}, "warnings": ["x"]})
+    assert capsys.readouterr().out.splitlines() == ["suspect_poses: none", "placement: -",
+                                                    "val: rms_mm 0.2, cv_rms_mm -"]

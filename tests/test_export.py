@@ -14,7 +14,7 @@ from test_urdf import ARM, MOVING, urdf_text, write_robot
 
 from gecgen.cli import main
 from gecgen.model import load_robot
-from gecgen.model.kinematics import error_transform, frames, target_positions
+from gecgen.model.kinematics import constant, error_transform, frames, target_positions
 from gecgen.model.urdf import folded_copy
 from gecgen.runtime import calibration
 from gecgen.runtime.compiled import compiler
@@ -123,52 +123,67 @@ def pin_placement(model, data, q_by_name: dict, frame: str, base: str) -> np.nda
     return np.linalg.inv(data.oMf[model.getFrameId(base)].homogeneous) @ data.oMf[model.getFrameId(frame)].homogeneous
 
 
-def test_exported_urdf_has_the_calibrated_kinematics(ur10_calib, tmp_path, rng):
+def test_exported_urdf_keeps_each_measured_tool_point_as_its_own_link(ur10_calib, tmp_path, rng):
+    """pinocchio on the exported URDF: each marker's link is where the calibrated model puts the
+    marker (1e-9 m at random joints), and the last joint's link and what hangs on it (tool0) sit
+    where the calibrated chain puts them without the last frame's errors: those belong to the
+    measured tool, whose placement the data cannot tell from them."""
     out = gecgen_json("export", ur10_calib, "--urdf", tmp_path / "cal.urdf")["urdf"]
     calib = calibration.load(ur10_calib)
     robot = calib.robot
-    assert out["tip_link"] == "wrist_3_link_calibrated" and out["not_carried"] == []
+    assert out["tip_link"] == "wrist_3_link" and out["not_carried"] == []
+    assert out["tool_links"] == {t: f"wrist_3_link_{t}" for t in robot.targets}
     assert out["registration_applied"] is False
     eps = constant_errors(calib)
+    assert np.abs(eps[-6:]).max() > 1e-4  # the last frame has errors: the test can tell where they went
+    robot_only = eps.copy()
+    robot_only[-6:] = 0.0
     nominal, exported = pin.buildModelFromUrdf(str(UR10_URDF)), pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
     dn, de = nominal.createData(), exported.createData()
-    t = np.array(list(robot.targets.values()))
-    worst = worst_tool0 = 0.0
+    worst = worst_link = 0.0
     for q in random_q(robot, rng, 30):
         named = dict(zip(robot.joint_names, q))
-        T = pin_placement(exported, de, named, "wrist_3_link_calibrated", "base_link")
         want = target_positions(robot, q, eps)[0]
-        worst = max(worst, np.abs(t @ T[:3, :3].T + T[:3, 3] - want).max())
-        # tool0 hangs below the tip on a branch of fixed joints: it moves with the last frame's errors
-        W = frames(robot, q, eps)[-2][0]
+        for k, (name, link) in enumerate(out["tool_links"].items()):
+            worst = max(worst, np.abs(pin_placement(exported, de, named, link, "base_link")[:3, 3] - want[k]).max())
+        W = frames(robot, q, robot_only)[-2][0]
         Wn = frames(robot, q)[-2][0]
-        tool0 = W @ np.linalg.inv(Wn) @ pin_placement(nominal, dn, named, "tool0", "base_link")
-        worst_tool0 = max(worst_tool0, np.abs(pin_placement(exported, de, named, "tool0", "base_link") - tool0).max())
-    assert worst < 1e-9 and worst_tool0 < 1e-9
-    # only the joints the errors go into change, and nothing else in the file
+        for link in ("wrist_3_link", "tool0"):  # tool0 hangs below the last link on fixed joints
+            moved = W @ np.linalg.inv(Wn) @ pin_placement(nominal, dn, named, link, "base_link")
+            worst_link = max(worst_link, np.abs(pin_placement(exported, de, named, link, "base_link") - moved).max())
+    assert worst < 1e-9 and worst_link < 1e-9
+    # only the joints the errors go into change, and nothing else in the file but the tool links
     before, after = UR10_URDF.read_text().splitlines(), (tmp_path / "cal.urdf").read_text().splitlines()
     diff = [line for line in difflib.unified_diff(before, after, lineterm="", n=0) if line[:3] not in ("---", "+++")]
     removed, added = [line for line in diff if line[0] == "-"], [line for line in diff if line[0] == "+"]
-    assert len(removed) == len(out["changed_joints"]) - 1 and all("<origin" in line for line in removed)
-    assert len(added) == len(removed) + 1 + 6  # the note; the new fixed joint (5 lines) and link
+    assert len(removed) == len(out["changed_joints"]) - 3 and all("<origin" in line for line in removed)
+    assert len(added) == len(removed) + 1 + 3 * 6  # the note; per marker a fixed joint (5 lines) and its link
 
 
 def test_folding_into_fixed_joints_branches_and_missing_origins(tmp_path, rng):
     """Errors of every frame, on an arm with fixed joints between moving ones, a branch off the
-    chain, a tool after the last joint, a skew axis and a joint without <origin>."""
+    chain, a tool after the last joint, a skew axis and a joint without <origin>: the robot's links
+    carry the errors of every frame but the last, and the tool point's own link the last one's."""
     text = urdf_text().replace('    <origin xyz="0.1 0.0 0.2" rpy="0.3 -0.2 1.1"/>\n', "")
     robot = load_robot(write_robot(tmp_path, text))
     eps = rng.normal(0, 1e-2, robot.n_errors)
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n + 1)]
-    copy, tips, changed = folded_copy(robot.urdf, "world", ["tool"], E, "test")
-    assert tips == ["tool"] and changed == ["flange", "j1", "j3", "j4", "side_joint", "tool_mount"]
+    point = np.eye(4)
+    point[:3, 3] = [0.01, -0.02, 0.03]
+    copy, tips, links, changed = folded_copy(robot.urdf, "world", ["tool"], E, "test",
+                                             [{"p": constant(robot.tool) @ point}])
+    assert tips == ["tool"] and links == {"p": "tool_p"}
+    assert changed == ["flange", "j1", "j3", "j4", "side_joint", "tool_p_joint"]
     (tmp_path / "cal.urdf").write_text(copy)
     model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
     data = model.createData()
+    robot_only = eps.copy()
+    robot_only[-6:] = 0.0
     for q in random_q(robot, rng, 10):
         named = dict(zip([j.name for j in MOVING], q))
-        W = frames(robot, q, eps)
-        np.testing.assert_allclose(pin_placement(model, data, named, "tool", "world"), W[-1][0], atol=1e-12)
+        W, W0 = frames(robot, q, eps), frames(robot, q, robot_only)
+        np.testing.assert_allclose(pin_placement(model, data, named, "tool_p", "world"), W[-1][0] @ point, atol=1e-12)
+        np.testing.assert_allclose(pin_placement(model, data, named, "tool", "world"), W0[-1][0], atol=1e-12)
         side = next(j for j in ARM if j.name == "side_joint")
         np.testing.assert_allclose(pin_placement(model, data, named, "side", "world")[:3, 3],
                                    W[2][0][:3, :3] @ side.xyz + W[2][0][:3, 3], atol=1e-12)
@@ -240,11 +255,87 @@ def test_export_of_a_robot_with_mimic_joints(tmp_path, rng):
     calib = calibration.load(calib_file)
     robot = calib.robot
     assert [o["joint"] for o in out["table"]["zero_offsets"]] == list(robot.joint_names)
-    text = robot_file.read_text().replace("urdf: telescope.urdf", f"urdf: {tmp_path / 'cal.urdf'}")
-    text = text.replace(f"tip_link: {robot.tip_link}", f"tip_link: {out['urdf']['tip_link']}")
-    (tmp_path / "cal.yaml").write_text(text)
-    exported = load_robot(tmp_path / "cal.yaml")
-    assert exported.n == robot.n == 4 and robot.n_frames == 7
     q = random_q(robot, rng, 20)
-    np.testing.assert_allclose(target_positions(exported, q), target_positions(robot, q, constant_errors(calib)),
-                               atol=1e-9)
+    want = target_positions(robot, q, constant_errors(calib))
+    for k, (name, link) in enumerate(out["urdf"]["tool_links"].items()):  # each target at its own link's origin
+        (tmp_path / "cal.yaml").write_text(f"name: telescope\nangle_unit: rad\nurdf: {tmp_path / 'cal.urdf'}\n"
+                                           f"base_link: {robot.base_link}\ntip_link: {link}\n"
+                                           f"targets:\n  {name}: [0.0, 0.0, 0.0]\n")
+        exported = load_robot(tmp_path / "cal.yaml")
+        assert exported.n == robot.n == 4 and robot.n_frames == 7
+        np.testing.assert_allclose(target_positions(exported, q)[:, 0], want[:, k], atol=1e-9)
+
+
+def test_urdf_of_an_elastic_calibration_states_what_leaving_the_load_terms_out_costs(ur10_calib, tmp_path, capsys):
+    """A UR10 whose shoulder gives under gravity, calibrated with a load term the URDF cannot carry:
+    export scores the exported model on the training and held-out data against the full
+    calibration, and its figures are pinocchio's forward kinematics of the written URDF, scored
+    against the measured points by hand."""
+    from gecgen.api import read_measurements
+    from gecgen.runtime.identify import to_world
+
+    robot_file = ur10_file(tmp_path)
+    (tmp_path / "truth.yaml").write_text("seed: 3\nmasses: urdf\nconstant: {translation_std: 5.0e-4, rotation_std: "
+                                         "3.0e-4}\nsources:\n  - {type: compliance, joint: 2, compliance: 2.0e-5}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    (tmp_path / "elastic.errors.yaml").write_text('default: ["1"]\nframes:\n  2: ["1", "gravity_torque(q2)"]\n')
+    gecgen_json("simulate", robot_file, "--truth", tmp_path / "truth.yaml", "--poses", 40, "--seed", 1,
+                "-o", tmp_path / "train.csv", "--val-out", tmp_path / "val.csv", "--val-poses", 20)
+    gecgen_json("identify", robot_file, tmp_path / "train.csv", "--errors", tmp_path / "elastic.errors.yaml",
+                "-o", tmp_path / "cal.json")
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "cal.json"), "--urdf", str(tmp_path / "cal.urdf"), "--data",
+                 str(tmp_path / "train.csv"), "--val", str(tmp_path / "val.csv"), "--json"]) == 0
+    run = capsys.readouterr()
+    out = json.loads(run.out)["urdf"]
+    assert [c["coefficient"] for c in out["not_carried"]] == ["2.er:gravity_torque(q2)"]
+    calib = calibration.load(tmp_path / "cal.json")
+    model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    pdata = model.createData()
+    for name in ("training", "held_out"):
+        cost = out["cost"][name]
+        data = read_measurements(cost["data"], calib.robot)
+        y = to_world(calib.frames, data)
+        got = np.array([pin_placement(model, pdata, dict(zip(calib.robot.joint_names, data.q[p])),
+                                      out["tool_links"][calib.robot.target_names[t]], "base_link")[:3, 3]
+                        for p, t in zip(data.pose, data.target)])
+        e = 1e3 * np.linalg.norm(got - y, axis=1)
+        assert cost["exported_rms_mm"] == pytest.approx(np.sqrt(np.mean(e ** 2)), rel=1e-6)
+        assert cost["exported_max_mm"] == pytest.approx(e.max(), rel=1e-6)
+        # the load term is what the fit needed: without it the error is tens of times the calibration's
+        assert cost["exported_rms_mm"] > 10 * cost["calibration_rms_mm"]
+    warning = [line for line in run.err.splitlines() if "constant errors only" in line]
+    assert len(warning) == 1 and f"{out['cost']['held_out']['exported_rms_mm']:.3g} mm" in warning[0]
+
+
+def test_a_ball_offset_the_data_cannot_tell_from_the_robot_is_named(tmp_path, capsys, rng):
+    """A Panda measured at one ball on its last joint's axis, the ball 7 mm further out than the
+    robot file says: the ball's offset along that axis is indistinguishable from errors of frame 6,
+    which the calibration holds instead. The export puts the ball's link where the calibration puts
+    the ball (pinocchio, 1e-9 m) and says which coefficients carry the offset, so nobody takes them
+    for the robot's."""
+    robot_file = ROBOTS / "panda_ball.yaml"
+    (tmp_path / "truth.yaml").write_text('seed: 1\nconstant: {values: {"7.ez": 0.007}}\n'
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    gecgen_json("simulate", robot_file, "--truth", tmp_path / "truth.yaml", "--poses", 60, "--seed", 1,
+                "-o", tmp_path / "train.csv")
+    gecgen_json("identify", robot_file, tmp_path / "train.csv", "--errors", CONSTANT, "-o", tmp_path / "cal.json")
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "cal.json"), "--urdf", str(tmp_path / "cal.urdf"), "--json"]) == 0
+    run = capsys.readouterr()
+    out = json.loads(run.out)["urdf"]
+    calib = calibration.load(tmp_path / "cal.json")
+    carried = out["tool_offset_carried"]
+    assert carried["errors"] == ["7.ez:1"] and carried["carried_by"]
+    names = calib.model.coefficient_names(calib.robot)
+    assert all(v == pytest.approx(1e3 * calib.c[names.index(k)]) and not k.startswith("7.")
+               for k, v in carried["carried_by"].items())
+    warning = [line for line in run.err.splitlines() if "tool's offset" in line]
+    assert len(warning) == 1 and all(k in warning[0] for k in carried["carried_by"])
+    robot = calib.robot
+    model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    pdata = model.createData()
+    eps = constant_errors(calib)
+    for q in random_q(robot, rng, 20):
+        got = pin_placement(model, pdata, dict(zip(robot.joint_names, q)), out["tool_links"]["ball"], "panda_link0")
+        np.testing.assert_allclose(got[:3, 3], target_positions(robot, q, eps)[0, 0], atol=1e-9)

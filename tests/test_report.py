@@ -17,18 +17,25 @@ from gecgen.cli import main
 ROBOT = ROBOTS / "industrial6r.yaml"
 ERRORS = ROBOTS / "constant.errors.yaml"
 #: sections every report has, and those of one command only
-COMMON = ("Summary", "What was measured", "Distribution of point errors", "Residuals against each joint", "Coefficients", "Glossary",
-          "Extrapolation")
+COMMON = ("Verdict and next step", "Warnings", "Summary", "What was measured", "Distribution of point errors",
+          "Residuals against each joint", "Coefficients", "Glossary", "Extrapolation")
 ONLY = {"identify": (), "evaluate": (), "diagnose": ("What diagnose found", "Rounds"),
         "calibrate": ("Model choice", "Files")}
 BROWSER = shutil.which("chromium")
 
 
 def gecgen(*args) -> dict:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+    """A command's JSON result, with the warning lines it printed on the terminal under TERMINAL."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         assert main([*map(str, args), "--json"]) == 0
-    return json.loads(out.getvalue())
+    said = f"gecgen {args[0]}: warning: "
+    return {**json.loads(out.getvalue()),
+            TERMINAL: [line[len(said):] for line in err.getvalue().splitlines() if line.startswith(said)]}
+
+
+#: where `gecgen` keeps the warnings a command printed
+TERMINAL = "terminal warnings"
 
 
 @pytest.fixture(scope="module")
@@ -141,7 +148,8 @@ def test_what_was_measured_counts_the_data_and_scores_each_target(reports):
     md = open(reports["identify"]["report"]).read()
     section = md[md.index("## What was measured"):md.index("## Distribution")]
     assert "30 poses, 30 measured rows: target `smr` 30" in section and "1 tracker stationing" in section
-    assert "1 load case" in section and "positions only" in section
+    # no force column: no load cases in force steps, which would claim a force was measured
+    assert "no force measured" in section and "load case" not in section and "positions only" in section
     assert len(re.findall(r"\| q[1-6] [^|]+ \| -?[0-9.]+ to -?[0-9.]+ deg \| .* \| [0-9]+ % \|", section)) == 6
     train = reports["identify"]["train"]
     assert f"| target `smr` | {reports['identify']['before']['rms_mm']:.3g} / " in section
@@ -185,3 +193,83 @@ def test_the_residual_grid_names_each_joint_under_its_panel_at_its_scale(monkeyp
         degrees = np.degrees(q[:, j])
         lo, hi = degrees.min() - 0.05 * np.ptp(degrees), degrees.max() + 0.05 * np.ptp(degrees)
         assert float(text.replace("\u2212", "-")) == pytest.approx(lo + (loc - j * (1 + plots.GAP)) * (hi - lo))
+
+
+def report_md(result: dict) -> str:
+    return open(result.get("report") or result["files"]["report"]).read()
+
+
+def section(md: str, title: str) -> str:
+    text = md[md.index(f"## {title}\n"):]
+    return text[:text.find("\n## ", 3) if "\n## " in text[3:] else None]
+
+
+@pytest.mark.parametrize("command", list(ONLY))
+def test_report_warnings_are_the_terminal_warnings(reports, command):
+    """The report lists, word for word and in order, the warnings the command printed on the
+    terminal, carried in its result (JSON `warnings`)."""
+    res = reports[command]
+    listed = re.findall(r"^- (.*)$", section(report_md(res), "Warnings"), re.M)
+    assert listed == res["warnings"] == res[TERMINAL]
+
+
+def test_some_report_of_the_fixture_has_warnings(reports):
+    """The comparison above is not of empty lists only."""
+    assert any(reports[command][TERMINAL] for command in ONLY)
+
+
+def test_calibrate_report_counts_the_held_out_poses_outside_the_training_ranges(reports):
+    """The extrapolation table's counts are those the terminal warned of (JSON val_extrapolation)."""
+    res = reports["calibrate"]
+    rows = re.findall(r"^\| (q[1-6]) [^|]* \| [^|]+ \| [^|]+ \| ([^|]+) \|$", section(report_md(res), "Extrapolation"),
+                      re.M)
+    assert len(rows) == 6 and all(count.strip() != "-" for _, count in rows)
+    assert {q: int(count) for q, count in rows if int(count)} == res["val_extrapolation"]
+
+
+def _expected_verdict(result: dict, tolerance: float | None) -> str:
+    """The verdict from the figures of calibrate's JSON, by the rule the reference states."""
+    if tolerance is None:
+        overall = result["significance"].get("overall")
+        return "noise not known" if overall is None else "beyond the noise" if overall["beyond_noise"] else \
+            "at the noise"
+    lo, hi = result["val"]["rms_mm_ci95"]
+    if lo > tolerance:
+        return "does not meet"
+    return "meets" if hi <= tolerance and result["val"]["max_mm"] <= tolerance else "cannot tell"
+
+
+@pytest.mark.parametrize("name, meets", [("pps", False), ("industrial6r", True), ("puma560", False)])
+def test_each_shipped_example_report_states_a_verdict_and_a_next_step(name, meets, tmp_path):
+    """calibrate on each shipped robot (a geometric model, the fastest path): the report opens with
+    the verdict the JSON's figures give, what limits it and a next step naming a gecgen command;
+    then with the instrument's noise and a tolerance above the held-out figures (meets) or below
+    them (does not meet)."""
+    robot = ROBOTS / f"{name}.yaml"
+    gecgen("simulate", robot, "--poses", 30, "--seed", 2, "-o", tmp_path / "train.csv", "--val-out",
+           tmp_path / "val.csv", "--val-poses", 10)
+    base = ["calibrate", robot, tmp_path / "train.csv", "--val", tmp_path / "val.csv", "--errors", ERRORS,
+            "--models", "geometric"]
+    first = gecgen(*base, "-o", tmp_path / "plain")
+    lo, hi = first["val"]["rms_mm_ci95"]
+    tolerance = 2 * max(hi, first["val"]["max_mm"]) if meets else lo / 2
+    for options in ([], ["--noise-mm", 0.03, "--tolerance-mm", tolerance]):
+        res = first if not options else gecgen(*base, *options, "-o", tmp_path / "with")
+        tolerance = options[3] if options else None
+        verdict = _expected_verdict(res, tolerance)
+        if tolerance is not None:
+            assert verdict == ("meets" if tolerance > hi else "does not meet")
+        md = section(report_md(res), "Verdict and next step")
+        assert res["assessment"]["verdict"] == verdict and f"**Verdict: {verdict}.**" in md
+        assert f"RMS point error {res['val']['rms_mm']:.3g} mm" in md and "What limits it:" in md
+        assert re.search(r"\*\*Next step:\*\* .*`gecgen [a-z]+ [^`]+`", md), md
+
+
+def test_log_axis_ticks_are_numbered_within_any_span():
+    """Every span gets at least two tick values inside it, each short, never more than 12."""
+    from gecgen.report.plots import log_ticks
+
+    for lo, hi in ((2.4, 3.4), (0.011, 0.5), (1e-3, 40.0), (0.7, 0.71), (5e-5, 2e-4)):
+        ticks = log_ticks(lo, hi)
+        assert 2 <= len(ticks) <= 12 and ticks.min() >= lo and ticks.max() <= hi, (lo, hi, ticks)
+        assert all(len(f"{v:g}") <= 6 for v in ticks), ticks

@@ -333,10 +333,12 @@ def test_export_of_a_tree(talos, tmp_path, capsys):
     subprocess.run([compiler(), "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(ctrl / "ex"),
                     str(ctrl / "talos_example.c"), str(ctrl / "talos.c"), "-lm"], check=True)
     assert subprocess.run([str(ctrl / "ex")], capture_output=True, text=True).returncode == 0
-    # --urdf folds every branch's errors: pinocchio on the copy puts each hand's tool where the calibration does
+    # --urdf folds every branch's errors: pinocchio on the copy puts each hand's measured points where the
+    # calibration does, each on a link of its own below its hand's tip link
     assert main(["export", str(tmp_path / "c.json"), "--urdf", str(tmp_path / "x.urdf"), "--json"]) == 0
-    tips = json.loads(capsys.readouterr().out)["urdf"]["tip_links"]
-    assert tips == {"left": "arm_left_7_link_calibrated", "right": "arm_right_7_link_calibrated"}
+    urdf = json.loads(capsys.readouterr().out)["urdf"]
+    assert urdf["tip_links"] == {"left": "arm_left_7_link", "right": "arm_right_7_link"}
+    assert urdf["tool_links"] == {t: f"{talos.branches[talos.branch_of(t)].tip_link}_{t}" for t in talos.targets}
     from gecgen.runtime.calibration import load as load_calibration
     from gecgen.runtime.export import constant_errors
 
@@ -347,8 +349,10 @@ def test_export_of_a_tree(talos, tmp_path, capsys):
         pin.forwardKinematics(model, pdata, pin_config(model, talos, q))
         pin.updateFramePlacements(model, pdata)
         tools = frames(talos, q[None], eps)[talos.n_frames + 1:]
-        for k, tip in enumerate(tips.values()):
-            np.testing.assert_allclose(pdata.oMf[model.getFrameId(tip)].homogeneous, tools[k][0], atol=1e-12)
+        for target, link in urdf["tool_links"].items():
+            T = tools[talos.branch_of(target)][0]
+            np.testing.assert_allclose(pdata.oMf[model.getFrameId(link)].translation,
+                                       T[:3, :3] @ np.asarray(talos.targets[target]) + T[:3, 3], atol=1e-12)
     # evaluate scores each hand apart; the points of both make the whole (1 left, 2 right per pose)
     assert main(["evaluate", str(tmp_path / "c.json"), str(data), "--json"]) == 0
     result = json.loads(capsys.readouterr().out)

@@ -4,6 +4,7 @@ error read as a tool motion, and the statement against the true worst error of s
 from __future__ import annotations
 
 import dataclasses
+import re
 import warnings
 
 import numpy as np
@@ -167,6 +168,11 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     text = (tmp_path / "report" / "report.md").read_text()
     assert f"{out['bound_mm']:.3g} mm at 95%" in text and "does not meet" in text and "Where it is worst" in text
     assert (tmp_path / "report" / "report.html").stat().st_size > 0
+    # it opens with the verdict and a next step: where the bound is largest, or what the model misses
+    assert text.index("## Verdict and next step") < text.index("## Statement")
+    assert "**Verdict: does not meet.**" in text and "**Next step:** Measure poses where the bound is largest" in text
+    assert out["next_step"] in text and re.findall(r"^- (.*)$", text[text.index("## Warnings"):
+                                                               text.index("## Statement")], re.M) == out["warnings"]
     assert -90 <= out["worst_at"]["joints"]["theta"] <= 90 and len(out["worst_at"]["tool_point_m"]) == 3
     bare = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--tolerance-mm", "0.5",
                 "--draws", "500")
@@ -174,6 +180,7 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     assert bare["bound_mm"] > out["bound_mm"]  # the whole residual counted as unmodelled error
     # training residuals alone cannot sign it
     assert bare["verdict"] == "cannot tell" and any("give them as --val" in r for r in bare["reasons"])
+    assert "--noise-mm S --repeatability-mm R" in bare["next_step"]  # first, the noise it counted as error
     write_measurements(tmp_path / "val.csv", pps, val)
     with pytest.raises(ModelError, match="not the data the calibration was fitted to"):
         accuracy(cal.calibration_, load_volume(volume, pps), val, to_world(cal.calibration_.frames, val), None, None,

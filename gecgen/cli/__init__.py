@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
-from gecgen.cli.human import print_human
+from gecgen.cli.human import print_human, warning_lines
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
             return 130
     if code and result is None:
         return code
-    for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
+    for message in warning_lines(caught):
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
     if args.json:
         print(json.dumps(result, allow_nan=False))

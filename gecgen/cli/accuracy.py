@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, whole
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, warned, whole
+from gecgen.cli.human import warning_lines
 
 #: Monte Carlo draws of the coefficient and unmodelled errors
 DRAWS = 2000
@@ -47,11 +48,18 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    with warned() as caught:
+        return _stated(args, caught)
+
+
+def _stated(args, caught: list) -> dict:
+    """The statement, its result, map and report; caught: the warnings said on the way (`warned`)."""
     import numpy as np
 
     from gecgen.api import load_calibration
     from gecgen.model.validation import require
     from gecgen.model.volume import load_volume
+    from gecgen.report.verdict import accuracy_next_step
     from gecgen.runtime.volume import accuracy
 
     cal = load_calibration(args.calibration)
@@ -77,6 +85,8 @@ def run(args) -> dict:
     result = {"robot": calib.robot.name, "volume": str(args.volume), "samples": len(samples.q),
               "unreachable": samples.unreachable, **statement.to_dict(),
               "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst}
+    assessment = accuracy_next_step(result, args.calibration, args.volume, args.data)
+    result["next_step"], result["warnings"] = assessment.next_step, warning_lines(caught)
     if args.plot or args.report:
         from gecgen.files import write_atomically
         from gecgen.report import content, plots, write
@@ -86,7 +96,7 @@ def run(args) -> dict:
             write_atomically(Path(args.plot), figure.png)
             result["plot"] = str(args.plot)
         if args.report:
-            result.update(write(content.accuracy(result, figure), args.report))
+            result.update(write(content.accuracy(result, figure, assessment, warning_lines(caught)), args.report))
     return result
 
 

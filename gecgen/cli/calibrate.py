@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, progress_status,
-                               whole)
+from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
+                               next_commands, progress_status, warned, whole)
+from gecgen.cli.human import warning_lines
 from gecgen.loop.calibrate import NAMES
 
 
@@ -37,9 +38,17 @@ def add_parser(command):
     add_orientation_length(p)
     add_keep_insignificant(p)
     add_noise(p)
+    add_tolerance(p)
 
 
 def run(args) -> dict:
+    with warned() as caught:
+        return _calibrated(args, caught)
+
+
+def _calibrated(args, caught: list) -> dict:
+    """The calibration, its files and report; caught: the warnings said on the way (`warned`), which
+    the result and the report carry."""
     from gecgen import report
     from gecgen.api import calibrate, model_names
     from gecgen.files import write_atomically
@@ -76,6 +85,7 @@ def run(args) -> dict:
               "effects": [e.to_dict() for e in sel.effects], "placement": cal.report_["placement"]}
     if sel.val is not None:
         result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
+        result["val_extrapolation"] = sel.val_extrapolation
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
         if sel.val_inside:  # the held-out poses inside every training range: where the model is validated
             result["val_inside"] = sel.val_inside.to_dict()
@@ -84,6 +94,29 @@ def run(args) -> dict:
             result["val_branches"] = sel.val_branches
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
-    files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), out))
     result["files"] = {k: str(v) for k, v in files.items()}
+    result["assessment"] = (assessment := _assessment(args, sel, result)).to_dict()
+    result["warnings"] = warning_lines(caught)
+    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register,
+                                                    assessment), out)
+    result["files"].update({k: str(v) for k, v in written.items()})
     return result
+
+
+def _assessment(args, sel, result):
+    """The verdict and next step (`report.verdict.assess`) from the result, with this run's files."""
+    from shlex import quote
+
+    from gecgen.report.verdict import Noise, assess
+
+    sig = result["significance"]
+    held = f"--val {quote(args.val)}" if args.val else f"--holdout {args.holdout:g}" if args.holdout is not None else ""
+    commands = next_commands(args.robot, args.train, held, result["files"]["calibration"], sel.data.n_poses,
+                             sel.data.relative is not None, f"--noise-mm {args.noise_mm:g}" if args.noise_mm else "")
+    val = sel.val is not None
+    return assess(after=result["val"] if val else result["train"], before=result["val_before" if val else "before"],
+                  held_out=val, n_poses=sel.val_data.n_poses if val else sel.data.n_poses,
+                  tolerance_mm=args.tolerance_mm, noise=Noise.of_significance(sig),
+                  held=None if sig.get("insignificant_carried") else (len(sig["held"]), result["n_identifiable"]),
+                  n_train_poses=sel.data.n_poses, extrapolation=sel.val_extrapolation if val else {},
+                  inside=result.get("val_inside"), relative=sel.data.relative is not None, commands=commands)

@@ -5,6 +5,8 @@ import argparse
 import math
 import sys
 import time
+import warnings
+from contextlib import contextmanager
 
 from gecgen.model import load_robot
 
@@ -132,3 +134,39 @@ def fit_options(args) -> dict:
 
     return {name: fit_option(getattr(args, name), name, "--" + name.replace("_", "-"))
             for name in ("ridge", "rank_tol")}
+
+
+@contextmanager
+def warned():
+    """Record the block's warnings (the list it yields: `human.warning_lines(it)` is what the terminal will
+    print) and pass them on when it ends, so a report carries the warnings the terminal shows."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+
+
+def add_tolerance(p):
+    p.add_argument("--tolerance-mm", type=number(0, 1000, above=True),
+                   help="the accuracy the robot must reach, mm (point error): the report's verdict says whether the "
+                        "held-out poses meet it, do not, or cannot tell")
+
+
+def next_commands(robot: str, train: str, held: str, calibration: str, n_train: int | None, relative: bool,
+                  noise: str):
+    """The commands a report's next step names (`report.verdict.Commands`), with the run's own files:
+    held the option that names held-out data (`--val V.csv`, `--holdout 0.2`, or empty), n_train the
+    training poses (as many more are designed; None: not known, N), noise the option stating the
+    instrument's noise as given (empty: the option to give)."""
+    from shlex import quote
+
+    from gecgen.report.verdict import Commands
+
+    n_train = "N" if n_train is None else n_train
+
+    more = (f"gecgen design {quote(robot)} --fixtures FIXTURES.csv --poses {n_train} -o more.csv" if relative else
+            f"gecgen design {quote(robot)} --given {quote(train)} --poses {n_train} -o more.csv")
+    return Commands(diagnose=" ".join(filter(None, ["gecgen diagnose", quote(robot), quote(train), held, noise])),
+                    more_poses=more, score=f"gecgen evaluate {quote(calibration)} NEW.csv --report REPORT_DIR",
+                    export=f"gecgen export {quote(calibration)} --c CONTROLLER_DIR", noise=noise or "--noise-mm S")

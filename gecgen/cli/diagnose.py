@@ -1,9 +1,12 @@
 """`gecgen diagnose ROBOT DATA [--val VAL]`: trace the residual to missing effects, add them, refit, report."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, number, progress_status, whole
+from gecgen.cli.common import (MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, add_tolerance, next_commands,
+                               number, progress_status, warned, whole)
+from gecgen.cli.human import warning_lines
 from gecgen.model import ModelError
 
 
@@ -33,10 +36,20 @@ def add_parser(command):
                    help="measurement noise per coordinate (mm), to say whether what remains is only noise (default: "
                         "from repeated poses, if any)")
     add_orientation_length(p)
+    add_tolerance(p)
 
 
 def run(args) -> dict:
+    with warned() as caught:
+        return _diagnosed(args, caught)
+
+
+def _diagnosed(args, caught: list) -> dict:
+    """The diagnosis, its files, result and report; caught: the warnings said on the way (`warned`)."""
+    from shlex import quote
+
     from gecgen.api import Diagnoser
+    from gecgen.report.verdict import Noise, assess
     from gecgen.emit import generate
     from gecgen.runtime.compiled import printed_code
 
@@ -63,13 +76,25 @@ def run(args) -> dict:
               "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
               if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
+    # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
+    calib = Path(out).with_name(f"{robot.name}.calib.json")  # beside the error model, not in the working folder
+    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}"
+    val, relative = diagnoser.val_, diagnoser.data_.relative is not None
+    held = f"--val {quote(args.val)}" if args.val else f"--holdout {args.holdout:g}" if args.holdout is not None else ""
+    commands = next_commands(args.robot, args.data, held, str(calib), diagnoser.data_.n_poses, relative,
+                             f"--noise-mm {args.noise_mm:g}" if args.noise_mm else "")
+    # diagnose has looked for what the model misses: the new model's fit on all the data shows the rest
+    commands = replace(commands, diagnose=f"{result['next']} --report REPORT_DIR")
+    assessment = assess(after={"rms_mm": diag.after["val_rms_mm"], "max_mm": diag.after["val_max_mm"]},
+                        before={"rms_mm": diag.before["val_rms_mm"]}, before_name="the declared model",
+                        held_out=True, n_poses=None if val is None else val.n_poses, tolerance_mm=args.tolerance_mm,
+                        noise=Noise.of_remaining(diag.remaining), held=None, n_train_poses=diagnoser.data_.n_poses,
+                        extrapolation={}, inside=None, relative=relative, commands=commands)
+    result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)
     if args.report:
         from gecgen import report
 
         content = report.content.diagnose(diag, diagnoser.data_, diagnoser.val_, str(out), register_val,
-                                          "auto" if register_val else args.register)
+                                          "auto" if register_val else args.register, assessment, result["warnings"])
         result.update(report.write(content, args.report))
-    # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
-    calib = Path(out).with_name(f"{robot.name}.calib.json")  # beside the error model, not in the working folder
-    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}"
     return result

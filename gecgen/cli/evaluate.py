@@ -1,7 +1,8 @@
 """`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned
+from gecgen.cli.human import warning_lines
 
 
 def add_parser(command):
@@ -13,12 +14,22 @@ def add_parser(command):
                    help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
                         "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
     add_orientation_length(p, calibration_first=True)
+    add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
 
 
 def run(args) -> dict:
+    with warned() as caught:
+        return _evaluated(args, caught)
+
+
+def _evaluated(args, caught: list) -> dict:
+    """The scores, result and report; caught: the warnings said on the way (`warned`)."""
+    from shlex import quote
+
     from gecgen.api import load_calibration
+    from gecgen.report.verdict import Noise, assess
 
     cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
     score = cal.score(args.data, register=args.register)
@@ -37,10 +48,20 @@ def run(args) -> dict:
     result.update(before=score.before.to_dict(), after=score.after.to_dict(), extrapolation=score.extrapolation,
                   **({"after_inside": score.after_inside.to_dict()} if score.after_inside else {}),
                   **({"branches": score.branches} if score.branches else {}))
+    fitted = cal.report_
+    sig, relative = fitted.get("significance") or {}, score.data.relative is not None
+    assessment = assess(after=result["after"], before=result["before"], held_out=True, n_poses=score.n_poses,
+                        tolerance_mm=args.tolerance_mm, noise=Noise.of_significance(sig), n_train_poses=None,
+                        held=(len(sig["held"]), fitted["n_identifiable"]) if "held" in sig and not sig.get(
+                            "insignificant_carried") else None, extrapolation=score.extrapolation,
+                        inside=result.get("after_inside"), relative=relative,
+                        commands=next_commands(cal.robot_.source, "TRAIN.csv", f"--val {quote(args.data)}",
+                                               args.calibration, None, relative, ""))
+    result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)
     if args.report:
         from gecgen import report
 
         result.update(report.write(report.content.evaluate(cal.calibration_, score.cm, score.data, score.y_before,
-                                                           score.y, score.extrapolation, args.calibration),
-                                   args.report))
+                                                           score.y, score.extrapolation, args.calibration, assessment,
+                                                           result["warnings"]), args.report))
     return result

@@ -17,6 +17,11 @@ def add_parser(command):
     p.add_argument("--urdf", metavar="OUT.urdf", help="write the robot's URDF with the constant errors in its joint "
                                                       "origins (URDF robots only)")
     p.add_argument("--table", action="store_true", help="joint zero offsets and constant errors per frame")
+    p.add_argument("--data", metavar="TRAIN.csv", help="with --urdf: the calibration's training data; when the URDF "
+                                                       "cannot carry some terms, the exported model is scored on it "
+                                                       "against the full calibration (mm)")
+    p.add_argument("--val", metavar="VAL.csv", help="with --urdf: held-out data (in the calibration's tracker frame), "
+                                                    "scored as --data is")
 
 
 def run(args) -> dict:
@@ -27,6 +32,8 @@ def run(args) -> dict:
 
     if not (args.c or args.urdf or args.table):
         raise ModelError("say what to export: --c DIR, --urdf OUT.urdf and/or --table")
+    if (args.data or args.val) and not args.urdf:
+        raise ModelError("--data and --val score the exported URDF's model: give --urdf OUT.urdf too")
     calib = calibration.load(args.calibration)
     where = args.calibration
     out: dict = {"calibration": where, "robot": calib.robot.name,
@@ -47,5 +54,38 @@ def run(args) -> dict:
     if urdf is not None:
         write_atomically(args.urdf, urdf[0])
         out["urdf"] = {"output": args.urdf, **urdf[1]}
+        if urdf[1]["not_carried"]:
+            out["urdf"]["cost"] = _cost(args)
+            _warn_left_out(urdf[1]["not_carried"], out["urdf"]["cost"])
     return out
+
+
+def _cost(args) -> dict:
+    """What the exported model (the constant errors only, `export.rigid_part`) scores on --data and
+    --val against the full calibration: {data set: {data, calibration_rms_mm, exported_rms_mm,
+    calibration_max_mm, exported_max_mm}}, each scored in the calibration's tracker frame."""
+    from gecgen.api import load_calibration
+    from gecgen.runtime import export
+
+    full, exported = load_calibration(args.calibration), load_calibration(args.calibration)
+    exported._set(export.rigid_part(exported.calibration_))
+    cost = {}
+    for name, path in (("training", args.data), ("held_out", args.val)):
+        if path:
+            a, b = full.score(path).after, exported.score(path).after
+            cost[name] = {"data": path, "calibration_rms_mm": a.rms_mm, "exported_rms_mm": b.rms_mm,
+                          "calibration_max_mm": a.max_mm, "exported_max_mm": b.max_mm}
+    return cost
+
+
+def _warn_left_out(left: list[dict], cost: dict):
+    import warnings
+
+    top = left[0]
+    said = "; ".join(f"on the {name.replace('_', '-')} data the exported model leaves {c['exported_rms_mm']:.3g} mm "
+                     f"RMS against the calibration's {c['calibration_rms_mm']:.3g} mm" for name, c in cost.items())
+    warnings.warn(f"the URDF carries the constant errors only: {len(left)} coefficients of other terms are left out "
+                  f"(largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the training "
+                  f"ranges); " + (said + " (urdf.cost)" if said else "give the calibration's data (--data TRAIN.csv, "
+                                  "--val VAL.csv) to learn what that costs in mm") + "; see not_carried")
 

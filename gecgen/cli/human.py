@@ -2,6 +2,11 @@
 from __future__ import annotations
 
 
+def warning_lines(caught) -> list[str]:
+    """The lines the terminal prints for recorded warnings: each one's first line, once, in order."""
+    return list(dict.fromkeys(str(w.message).splitlines()[0] for w in caught))
+
+
 def scalar(value) -> str:
     """A value as a person reads it: three significant digits, as the reports print them, and every
     digit before the point of a number of 1000 or more (a time in seconds, a log det); `-` for a value
@@ -27,7 +32,8 @@ def print_human(result: dict):
     """A short summary for a person; the full record (every list entry) is what --json prints. A
     dict whose units are given beside it (`<key>_units`, one per entry) is printed with them."""
     for key, value in result.items():
-        if key in ("identifiable", "training_ranges") or (key.endswith("_units") and key[:-6] in result):
+        # the warnings are on stderr already, one line each
+        if key in ("identifiable", "training_ranges", "warnings") or (key.endswith("_units") and key[:-6] in result):
             continue
         units = result.get(f"{key}_units", {})
         if key == "outliers":
@@ -42,6 +48,11 @@ def print_human(result: dict):
             for c in value:
                 score = f"{c['cv_rms_mm']:.3g} mm" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
                 print(f"  {c['model']}: {score}")
+        elif key == "assessment":
+            print(f"verdict: {value['verdict']}. {value['statement']}")
+            for line in value["limits"]:
+                print(f"  limits it: {line}")
+            print(f"next step: {value['next_step']}")
         elif key == "table":
             print_error_table(value)
         elif key == "fixtures" and value and "poses" in value[0]:

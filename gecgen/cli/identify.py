@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 
-from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, fit_options,
-                               progress_status)
+from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
+                               fit_options, next_commands, progress_status, warned)
+from gecgen.cli.human import warning_lines
 
 
 def add_parser(command):
@@ -29,12 +30,20 @@ def add_parser(command):
     add_orientation_length(p)
     add_keep_insignificant(p)
     add_noise(p)
+    add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
 
 
 def run(args) -> dict:
+    with warned() as caught:
+        return _identified(args, caught)
+
+
+def _identified(args, caught: list) -> dict:
+    """The calibration, its result and report; caught: the warnings said on the way (`warned`)."""
     from gecgen.api import Calibrator
+    from gecgen.report.verdict import Noise, assess
 
     cal = Calibrator(args.errors, loss=args.loss, register=args.register, orientation_length=args.orientation_length,
                      keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm, **fit_options(args))
@@ -50,11 +59,22 @@ def run(args) -> dict:
               "error_model": cal.calibration_.model.source, **cal.counts_, **cal.report_,
               "registration": fit.registration.to_dict(),
               "registrations": {str(k): r.to_dict() for k, r in fit.registrations.items()}}
+    sig, relative = cal.report_["significance"], cal.data_.relative is not None
+    assessment = assess(after=cal.report_["train"], before=cal.report_["before"], held_out=False,
+                        n_poses=cal.counts_["n_poses"], tolerance_mm=args.tolerance_mm,
+                        noise=Noise.of_significance(sig), n_train_poses=cal.counts_["n_poses"],
+                        held=None if sig.get("insignificant_carried") else
+                        (len(sig["held"]), cal.report_["n_identifiable"]),
+                        extrapolation={}, inside=None, relative=relative,
+                        commands=next_commands(args.robot, args.data, "", str(out), cal.counts_["n_poses"], relative,
+                                               f"--noise-mm {args.noise_mm:g}" if args.noise_mm else ""))
+    result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)
     if args.report:
         from gecgen import report
 
         result.update(report.write(report.content.identify(cal.robot_, cal.cm_, cal.data_, fit, cal.calibration_,
-                                                           str(out), args.register), args.report))
+                                                           str(out), args.register, assessment, result["warnings"]),
+                                   args.report))
     result["next"] = (f"gecgen evaluate {out} VAL.csv (new poses), gecgen diagnose {args.robot} {args.data} "
                       f"(what the model lacks), gecgen export {out} --c DIR (the controller's code)")
     return result

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gecgen.cli.common import MAX_SEED, whole
+from gecgen.cli.common import MAX_SEED, add_tolerance, warned, whole
+from gecgen.cli.human import warning_lines
 
 #: rad or m: a measured run's readings may differ from the plan's by this much (the compensated
 #: commands of the "after" run differ by the corrections, a few mrad); beyond it, it ran another plan
@@ -39,11 +40,13 @@ def add_parser(command):
     p.add_argument("--calibration", help="a calibration whose tracker frame the measurements are in")
     p.add_argument("--report", metavar="DIR", help="with --measured: folder for report.md and report.html (the "
                                                    "characteristics per point, before and after)")
+    add_tolerance(p)
 
 
 def run(args) -> dict:
     from gecgen.model import load_robot
     from gecgen.model.validation import require
+    from gecgen.report.verdict import iso9283_next_step
 
     robot = load_robot(args.robot)
     require((args.plan is None) == (args.measured is None), "--plan and --measured go together: the plan the "
@@ -51,13 +54,19 @@ def run(args) -> dict:
     require(args.after is None or args.measured, "--after goes with --plan and --measured (the run before)")
     require(args.report is None or args.measured, "--report goes with --plan and --measured: it reports a "
                                                   "measured test")
+    require(args.tolerance_mm is None or args.measured, "--tolerance-mm goes with --plan and --measured: it judges "
+                                                        "a measured test")
     if args.measured:
         require(not args.output, "-o writes a plan; with --measured the characteristics are the result (--json)")
-        result = _characteristics(robot, args)
-        if args.report:
-            from gecgen import report
+        with warned() as caught:
+            result = _characteristics(robot, args)
+            assessment = iso9283_next_step(result, args.tolerance_mm, args.robot)
+            result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)
+            if args.report:
+                from gecgen import report
 
-            result.update(report.write(report.content.iso9283(result), args.report))
+                result.update(report.write(report.content.iso9283(result, assessment, result["warnings"]),
+                                           args.report))
         return result
     require(args.output, "-o: give the file to write the plan to (or --plan and --measured to evaluate a test)")
     return _plan(robot, args)

@@ -143,6 +143,8 @@ class Robot:
     parents: tuple[int, ...] = ()
     branches: tuple[Branch, ...] = ()
     target_branch: dict[str, int] = field(default_factory=dict)
+    #: the robot file's unit of angles (deg or rad): reports show revolute joints in it (prismatic in m)
+    angle_unit: str = "rad"
 
     def parent(self, i: int) -> int:
         """The frame that frame i (1..m) hangs from."""

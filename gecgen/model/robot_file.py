@@ -460,7 +460,7 @@ def load_robot(path: str | Path) -> Robot:
                   parents=tuple(parents) if tree else (),
                   branches=tuple(Branch(n, tip, tool, str(b.get("tip_link", "")))
                                  for (n, b, _), (tip, _), tool in zip(branches, tips, tools)) if tree else (),
-                  target_branch=target_branch if tree else {})
+                  target_branch=target_branch if tree else {}, angle_unit=unit)
     for i, j in enumerate(robot.chain, start=1):
         if j.coupling and j.coupling.declared and len(j.coupling.terms) > j.coupling.own \
                 and robot.zero_offset_error(i) is None:

@@ -404,24 +404,31 @@ def _origin_tag(T: np.ndarray, close: str = "/>") -> str:
 
 
 def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: list[np.ndarray],
-                note: str) -> tuple[str, list[str], list[str]]:
-    """The URDF's text with constant error transforms folded into joint origins.
+                note: str, tools: list[dict[str, np.ndarray]]) -> tuple[str, list[str], dict[str, str], list[str]]:
+    """The URDF's text with constant error transforms folded into joint origins, and each measured
+    tool point as a link of its own.
 
     errors[i] (4x4, one per frame 0..n) sits right after frame i's nominal transform; the frames are
     the moving joints of the paths base_link -> each of tip_links (one on a chain; on a tree every
     branch's, shared joints once, numbered as `urdf_chain` and the robot file number them). E_0 goes
     into the first moving joint's origin (after it: frame 0 is that joint's frame at zero), or when
-    the branches part before any joint, before the origin of every joint below base_link. E_i (i >= 1)
-    goes before the origin of every joint below the i-th moving joint's child link, on the chain or
-    off it, so everything that link carries moves with it. When that link is a tip (E_i has nowhere on
-    the chain to go) a fixed joint and a new link `<tip>_calibrated` below it carry E_i, and the new
-    link is the calibrated branch's tip. Only those origins change, byte for byte; `note` becomes a
-    comment after the root's start tag. Returns (text, the tip link of each calibrated branch, the
-    names of the joints added or changed)."""
+    the branches part before any joint, before the origin of every joint below base_link. E_i of a
+    frame inside a path goes before the origin of every joint below the i-th moving joint's child
+    link, on the chain or off it, so everything that link carries moves with it. The last frame of a
+    path is where the measured tool hangs, and the data cannot tell its errors from the tool's own
+    placement (a ball's, a probe's, a reflector nest's): its E goes into the tool, not the robot, so
+    the tip link and everything on it keep their frames. tools[b]: branch b's measured points, name
+    -> their frame (4x4) in the last frame's (the tool transform, the fixed joints to the tip link
+    included, and the point); each becomes a fixed joint `<tip>_<name>_joint` and a link
+    `<tip>_<name>` below the tip link, at inv(fixed joints to the tip) E_last frame. Only those
+    origins change, byte for byte, and the tool links are added; `note` becomes a comment after the
+    root's start tag. Returns (text, the tip link of each branch, {point name: its link}, the names
+    of the joints added or changed)."""
     where = str(path)
     text = read_text(Path(path), "URDF file")
     links, above = _tree(_parse(path), where)
-    paths = [[uj for uj in _path(above, base_link, tip, where) if uj.type != "fixed"] for tip in tip_links]
+    full = [_path(above, base_link, tip, where) for tip in tip_links]
+    paths = [[uj for uj in p if uj.type != "fixed"] for p in full]
     chain = list({uj.name: uj for p in paths for uj in p}.values())  # first seen first: the frames' order
     require(len(chain) + 1 == len(errors), f"{where}: {len(chain)} moving joints from {base_link} to "
                                            f"{', '.join(tip_links)}, but {len(errors) - 1} frames of errors; the "
@@ -434,13 +441,14 @@ def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: 
         return constant(_origin(uj.element, f"{where}: joint {excerpt(uj.name)}"))
 
     identity = [np.array_equal(E, np.eye(4)) for E in errors]
+    last = {p[-1].name for p in paths}  # the frames the tools hang from
     changed = {}
     if not identity[0] and len({p[0].name for p in paths}) == 1:
         changed[chain[0].name] = origin(chain[0]) @ errors[0]
     elif not identity[0]:
         changed.update({child.name: errors[0] @ origin(child) for child in below.get(base_link, [])})
     for uj, E, unit in zip(chain, errors[1:], identity[1:]):
-        for child in [] if unit else below.get(uj.child, []):
+        for child in [] if unit or uj.name in last else below.get(uj.child, []):
             changed[child.name] = E @ origin(child)
     tags, (root_start, root_end) = _start_tags(text)
     edits = [(root_end, root_end, f"\n  <!-- {note.replace('--', '- -')} -->")]
@@ -453,22 +461,25 @@ def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: 
             indent = text[text.rfind("\n", 0, a) + 1:a]
             edits.append((b, b, f"\n{indent}  {_origin_tag(T)}"))
     names = sorted(changed)
-    tips, taken = [], set(links) | {uj.name for uj in above.values()}
-    for tip_link, p in zip(tip_links, paths):
-        frame = chain.index(p[-1]) + 1
-        if p[-1].child != tip_link or identity[frame]:
-            tips.append(tip_link)
-            continue
-        tip = f"{tip_link}_calibrated"
-        while tip in taken or f"{tip}_joint" in taken:
-            tip += "_"
-        taken |= {tip, f"{tip}_joint"}
-        tips.append(tip)
-        names.append(f"{tip}_joint")
-        end = text.rindex("</" + text[root_start + 1:root_end].split()[0].rstrip("/>"))  # the root's end tag
-        edits.append((end, end, f'  <joint name={quoteattr(tip + "_joint")} type="fixed">\n'
-                                f'    <parent link={quoteattr(tip_link)}/>\n    <child link={quoteattr(tip)}/>\n'
-                                f'    {_origin_tag(errors[frame])}\n  </joint>\n  <link name={quoteattr(tip)}/>\n'))
+    taken, tool_links, added = set(links) | {uj.name for uj in above.values()}, {}, []
+    end = text.rindex("</" + text[root_start + 1:root_end].split()[0].rstrip("/>"))  # the root's end tag
+    for tip_link, p, moving, points in zip(tip_links, full, paths, tools):
+        E = errors[chain.index(moving[-1]) + 1]
+        fixed = np.eye(4)  # the fixed joints from the last frame's link to the tip link
+        for uj in p[p.index(moving[-1]) + 1:]:
+            fixed = fixed @ origin(uj)
+        for point, T in points.items():
+            link = f"{tip_link}_{point}"
+            while link in taken or f"{link}_joint" in taken:
+                link += "_"
+            taken |= {link, f"{link}_joint"}
+            tool_links[point] = link
+            names.append(f"{link}_joint")
+            added.append(f'  <joint name={quoteattr(link + "_joint")} type="fixed">\n'
+                         f'    <parent link={quoteattr(tip_link)}/>\n    <child link={quoteattr(link)}/>\n'
+                         f'    {_origin_tag(np.linalg.inv(fixed) @ E @ T)}\n  </joint>\n'
+                         f'  <link name={quoteattr(link)}/>\n')
+    edits.append((end, end, "".join(added)))
     for a, b, new in sorted(edits, reverse=True):
         text = text[:a] + new + text[b:]
-    return text, tips, names
+    return text, list(tip_links), tool_links, names

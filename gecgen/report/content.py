@@ -116,16 +116,39 @@ def variable(data: Measurements, name: str) -> np.ndarray:
     return data.aux[:, data.aux_names.index(name)]
 
 
+def joint_unit(robot: Robot, k: int) -> str:
+    """The unit reports show joint variable k (0-based) in: the robot file's angle unit for a
+    revolute joint, m for a prismatic one (as the robot file states lengths)."""
+    return robot.angle_unit if robot.joints[k].kind == "R" else "m"
+
+
 def joint_label(robot: Robot, k: int) -> str:
-    """'q2 shoulder (deg)': joint variable k (0-based) with its name and the unit plots use."""
+    """'q2 shoulder (deg)': joint variable k (0-based) with its name and its unit (`joint_unit`)."""
     j = robot.joints[k]
     name = "" if j.name == f"q{k + 1}" else f" {j.name}"
-    return f"q{k + 1}{name} ({'deg' if j.kind == 'R' else 'mm'})"
+    return f"q{k + 1}{name} ({joint_unit(robot, k)})"
+
+
+def joint_scale(robot: Robot, k: int) -> float:
+    """Factor from joint k's internal unit (rad or m) to `joint_unit`."""
+    return 180 / np.pi if joint_unit(robot, k) == "deg" else 1.0
 
 
 def joint_values(robot: Robot, data: Measurements, k: int) -> np.ndarray:
-    """Joint k (0-based) per pose in the plots' unit: deg for revolute, mm for prismatic joints."""
-    return np.degrees(data.q[:, k]) if robot.joints[k].kind == "R" else 1e3 * data.q[:, k]
+    """Joint k (0-based) per pose in `joint_unit`."""
+    return joint_scale(robot, k) * data.q[:, k]
+
+
+def term_unit(robot: Robot, term: str) -> str:
+    """What a coefficient of `term` is per: 'rad of q2' or 'm of q3' for a joint variable (terms take
+    joints in rad or m, whatever unit the robot file states angles in), 'N of fz' or 'N m of mx' for
+    a wrench component, else 'unit of TERM'."""
+    names = {**{f"q{k + 1}": k for k in range(robot.n)}, **{j.name: k for k, j in enumerate(robot.joints)}}
+    if term in names:
+        return f"{'rad' if robot.joints[names[term]].kind == 'R' else 'm'} of {term}"
+    if term in WRENCH:
+        return f"{'N' if term in WRENCH[:3] else 'N m'} of {term}"
+    return f"unit of {term}"
 
 
 def frame_label(robot: Robot, i: int) -> str:
@@ -161,7 +184,12 @@ def headline(sets: list[DataSet], robot: Robot | None = None) -> Section:
         rows.append(tuple(row))
     counts = "; ".join(f"{ds.name}: {ds.data.n_poses} poses, {len(ds.stages[0].pose)} measured rows "
                        f"(`{ds.data.source or 'in memory'}`)" for ds in sets)
-    blocks = [Table(tuple(header), rows), f"Point error: the distance between measured and modelled point. {counts}."]
+    what = "Point error: the distance between measured and modelled point."
+    if any(ds.data.relative is not None for ds in sets):  # sockets and planes: no point was measured
+        what = ("A row with a measured position: the distance between measured and modelled point; a socket's row: "
+                "its target's distance from the socket's fitted place (how consistently the seatings agree); a "
+                "plane's row: its distance from the fitted plane.")
+    blocks = [Table(tuple(header), rows), f"{what} {counts}."]
     return Section("Summary", blocks + ([branch_table(robot, sets)] if robot is not None and robot.branches else []))
 
 
@@ -202,15 +230,15 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
                  "positions only (no orientation measured)",
                  *([f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}"] if absolute.any() else []),
                  *([_fixtures_fact(relative)] if relative is not None else []),
-                 f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
+                 *([f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
+                   if np.any(data.w[:, :3]) else ["no force measured"])]
         if noise is not None and ds is sets[0]:
             facts.append(f"instrument noise from repeated poses: {noise['noise_mm']:.3g} mm per coordinate")
         blocks += [f"**{ds.name.capitalize()} data** (`{data.source or 'in memory'}`):", Bullets(facts)]
         coverage = []
         for k, joint in enumerate(robot.joints):
             v = joint_values(robot, data, k)
-            unit = "mm" if joint.kind == "P" else "deg"
-            scale = 1e3 if joint.kind == "P" else 180 / np.pi
+            unit, scale = joint_unit(robot, k), joint_scale(robot, k)
             share = np.ptp(data.q[:, k]) / max(joint.upper - joint.lower, 1e-12)
             coverage.append((joint_label(robot, k), f"{v.min():.4g} to {v.max():.4g} {unit}",
                              f"{scale * joint.lower:.4g} to {scale * joint.upper:.4g} {unit}", f"{100 * share:.0f} %"))
@@ -308,7 +336,7 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
         frame, err = robot.error_names()[coef.error].split(".")
         unit = "mm" if err in ("ex", "ey", "ez") else "mrad"
         term = coef.term.label
-        unit = unit if term == "1" else f"{unit} per unit of {term}"
+        unit = unit if term == "1" else f"{unit} per {term_unit(robot, term)}"
         unit += " (a coupling ratio that depends on the loads: see below)" if names[j] in loaded else ""
         rows.append((frame_label(robot, int(frame)), err, f"`{term}`", f"{1e3 * calib.c[j]:.3g}",
                      f"{1e3 * calib.std[j]:.2g}", f"{abs(calib.c[j]) / calib.std[j]:.1f}", unit))
@@ -354,7 +382,7 @@ def extrapolation_section(robot: Robot, calib, counts: dict[str, int] | None, n_
         if lo == hi and not outside:
             constant.append(f"{name} = {lo:g}")
             continue
-        scale = (180 / np.pi if robot.joints[int(name[1:]) - 1].kind == "R" else 1e3) if name in label else 1.0
+        scale = joint_scale(robot, int(name[1:]) - 1) if name in label else 1.0
         rows.append((label.get(name, f"{name} ({unit[name]})" if name in unit else name), f"{scale * lo:.4g}",
                      f"{scale * hi:.4g}", str(outside) if counts is not None else "-"))
     blocks = ["Outside the span each input was fitted over the model extrapolates (a polynomial term can grow "
@@ -413,33 +441,52 @@ def effect_sections(robot: Robot, effects, cm, fit, y: np.ndarray, after: Residu
 
 # -- one report per command ----------------------------------------------------------------------
 
+def verdict_sections(assessment, warnings: list[str] | None) -> list[Section]:
+    """The verdict, what limits the result and the next step (`report.verdict.Assessment`), and the
+    warnings the command printed, as printed: what a reader needs first."""
+    out = []
+    if assessment is not None:
+        blocks = [f"**Verdict: {assessment.verdict}.** {assessment.statement}"]
+        if assessment.limits:
+            blocks += ["What limits it:", Bullets(assessment.limits)]
+        blocks.append(f"**Next step:** {assessment.next_step}")
+        out.append(Section("Verdict and next step", blocks))
+    if warnings is not None:
+        out.append(Section("Warnings", ["What the command warned on the terminal, word for word:", Bullets(warnings)]
+                           if warnings else ["The command printed no warning."]))
+    return out
+
+
+
 def _nominal_world(cm, data: Measurements, loss: str, registration_mode: str) -> np.ndarray:
     """The measured points in the frame registered onto the nominal model, as `Fit.before` scores them."""
     return to_world(fit_frames(cm, data, None, loss, registration_mode), data)
 
 
-def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, registration_mode: str = "auto"
-             ) -> Report:
+def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, registration_mode: str = "auto",
+             assessment=None, warnings: list[str] | None = None) -> Report:
     y0 = _nominal_world(cm, data, fit.loss, registration_mode)
     train = DataSet("training", data, [residuals("uncalibrated", cm, data, y0, None),
                                        residuals("calibrated", cm, data, fit.to_world(data), fit.c)])
     return Report(f"gecgen identify: {robot.name}",
                   [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses). "
                    "Training data only: score it on new data with `gecgen evaluate --report`."],
-                  [headline([train], robot), measured_section(cm.robot, [train]), *residual_sections(robot, [train]),
+                  [*verdict_sections(assessment, warnings), headline([train], robot),
+                   measured_section(cm.robot, [train]), *residual_sections(robot, [train]),
                    *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, None, None)])
 
 
 def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray, outside: dict[str, int],
-             calib_path: str) -> Report:
+             calib_path: str, assessment=None, warnings: list[str] | None = None) -> Report:
     robot = calib.robot
     val = DataSet("validation", data, [residuals("uncalibrated", cm, data, y_before, None),
                                        residuals("calibrated", cm, data, y, calib.c)])
     return Report(f"gecgen evaluate: {robot.name}",
                   [f"Calibration `{calib_path}` scored on `{data.source}` ({data.n_poses} poses), data it was not "
                    "fitted on."],
-                  [headline([val], robot), measured_section(cm.robot, [val]), *residual_sections(robot, [val]),
+                  [*verdict_sections(assessment, warnings), headline([val], robot), measured_section(cm.robot, [val]),
+                   *residual_sections(robot, [val]),
                    *coefficient_section(robot, calib),
                    glossary(robot), extrapolation_section(robot, calib, outside, data.n_poses)])
 
@@ -468,7 +515,7 @@ def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register
 
 
 def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str, register_val: bool = False,
-             registration_mode: str = "auto") -> Report:
+             registration_mode: str = "auto", assessment=None, warnings: list[str] | None = None) -> Report:
     from gecgen.loop.diagnose import verdict
     from gecgen.runtime.calibration import from_fit
 
@@ -495,7 +542,8 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
                   [f"Training data `{data.source}` ({data.n_poses} poses); validation "
                    f"{'`' + val.source + '`' if val is not None and val.source else 'held out'}, never used to choose "
                    f"terms. New error model: `{errors_out}`."],
-                  [headline(sets, robot), measured_section(diag.final.cm.robot, sets),
+                  [*verdict_sections(assessment, warnings), headline(sets, robot),
+                   measured_section(diag.final.cm.robot, sets),
                    Section("What diagnose found", found),
                    *effect_sections(robot, diag.effects, diag.final.cm, diag.final.fit,
                                     diag.final.fit.to_world(data), sets[0].stages[2], data),
@@ -504,9 +552,10 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
 
 
 def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements | None,
-              register_val: bool = False) -> Report:
+              register_val: bool = False, assessment=None) -> Report:
     """register_val: val was measured from another tracker stationing; each stage is scored in the
-    frame fitted on it (its coefficients held), as calibrate's JSON scores it."""
+    frame fitted on it (its coefficients held), as calibrate's JSON scores it. The warnings shown are
+    the result's (`warnings`), the extrapolation counts its `val_extrapolation`."""
     robot = calib.robot
     fit, cm = choice.fit, choice.cm
     diag = choice.diagnosis
@@ -549,9 +598,11 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     return Report(f"gecgen calibrate: {robot.name}",
                   [f"Training data `{result['train_data']}` ({data.n_poses} poses)"
                    + (f"; validation {result['validation']}, scored after the choice." if val is not None else ".")],
-                  [headline(sets, robot), measured_section(cm.robot, sets), choose, *effects,
-                   *residual_sections(robot, sets),
-                   *coefficient_section(robot, calib), glossary(robot), extrapolation_section(robot, calib, None, None),
+                  [*verdict_sections(assessment, result.get("warnings")), headline(sets, robot),
+                   measured_section(cm.robot, sets), choose, *effects, *residual_sections(robot, sets),
+                   *coefficient_section(robot, calib), glossary(robot),
+                   extrapolation_section(robot, calib, result.get("val_extrapolation") if val is not None else None,
+                                         val.n_poses if val is not None else None),
                    files])
 
 
@@ -574,8 +625,9 @@ def _iso_run(title: str, run: dict) -> Section:
     return Section(title, blocks)
 
 
-def iso9283(result: dict) -> Report:
-    """The ISO 9283 pose test's report from `gecgen iso9283 --measured`'s result."""
+def iso9283(result: dict, assessment=None, warnings: list[str] | None = None) -> Report:
+    """The ISO 9283 pose test's report from `gecgen iso9283 --measured`'s result; first the verdict
+    and next step (`verdict.iso9283_next_step`) and the warnings the command printed."""
     sections = [_iso_run("Before compensation" if "after" in result else "The test", result)]
     if "after" in result:
         sections.append(_iso_run("After compensation", result["after"]))
@@ -586,11 +638,12 @@ def iso9283(result: dict) -> Report:
     return Report(f"gecgen iso9283: {result['robot']}",
                   [f"ISO 9283 pose test of plan `{result['plan']}`, scored against the pose the nominal model gives "
                    f"each target at the plan's joints (what the robot was commanded to reach); measured in "
-                   f"{result['frame']}."], sections)
+                   f"{result['frame']}."], [*verdict_sections(assessment, warnings), *sections])
 
 
-def accuracy(result: dict, figure: Figure) -> Report:
-    """The accuracy statement over a volume from `gecgen accuracy`'s result and its map."""
+def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] | None = None) -> Report:
+    """The accuracy statement over a volume from `gecgen accuracy`'s result and its map; first the
+    verdict and next step (`verdict.accuracy_next_step`) and the warnings the command printed."""
     tol = result["tolerance_mm"]
     rows = [("bound on the worst compensated error", f"{result['bound_mm']:.3g} mm at {result['confidence']:.0%}"),
             ("from the coefficients' uncertainty alone", f"{result['parametric_bound_mm']:.3g} mm (its low "
@@ -611,7 +664,7 @@ def accuracy(result: dict, figure: Figure) -> Report:
                   [f"The worst compensated error over the volume `{result['volume']}` ({result['samples']} samples, "
                    f"{result['draws']} Monte Carlo draws), its unmodelled part read from `{result['residual_from']}` "
                    f"({source})."],
-                  [Section("Statement", [Table(("", "value"), rows)]),
+                  [*verdict_sections(assessment, warnings), Section("Statement", [Table(("", "value"), rows)]),
                    Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
                                                         "Nothing keeps it from being signed."]),
                    Section("Where it is worst", [f"The sample with the largest own bound ({worst['bound_mm']:.3g} "

@@ -15,11 +15,16 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 from gecgen.model.robot import Robot  # noqa: E402
-from gecgen.report.content import DataSet, Figure, Residuals, joint_label, joint_values, variable  # noqa: E402
+from gecgen.report.content import (DataSet, Figure, Residuals, joint_label, joint_scale, joint_values,  # noqa: E402
+                                   variable)
 
 #: one colour per stage, in order: uncalibrated, calibrated, diagnosed
 COLOURS = ("tab:red", "tab:blue", "tab:green")
 DPI = 100
+#: at most this many poses get a bar each per model in the per-pose figure (more: a point each)
+MAX_BARS = 40
+#: panels per row of the accuracy map: legible at a page's width
+MAP_COLUMNS = 4
 #: fixed margins of the one-row figures (a share of the figure): tight_layout would draw each figure twice
 MARGINS = {"left": 0.065, "right": 0.99, "bottom": 0.16, "top": 0.9}
 
@@ -57,13 +62,18 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
         e = np.maximum(e, lo)
         ax.hist(e, bins, color=colour, alpha=0.45, label=s.stage)
         cx.step(np.sort(e), np.arange(1, len(e) + 1) / len(e), where="post", color=colour, label=s.stage)
+    ticks = log_ticks(bins[0], bins[-1])
     for a in (ax, cx):
         a.set_xscale("log")
-        a.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+        a.set_xlim(bins[0], bins[-1])
+        # numbers at ticks chosen for the span: a log axis within one decade has no major tick to label
+        a.xaxis.set_major_locator(matplotlib.ticker.FixedLocator(ticks))
+        a.xaxis.set_major_formatter(matplotlib.ticker.FixedFormatter([f"{v:g}" for v in ticks]))
         a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         a.set_xlabel(f"{what} ({unit})")
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize=8)
+    ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts
     ax.set_ylabel("measured frames" if orientation else "measured rows")
     cx.set_ylabel("share of them at or below" if orientation else "share of rows at or below")
     ax.set_title(f"{robot.name}, {ds.name} data: histogram of {what}s")
@@ -72,18 +82,49 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
     return _figure(fig, name, f"{what.capitalize()}s on the {ds.name} data, each model")
 
 
+def log_ticks(lo: float, hi: float, most: int = 12) -> np.ndarray:
+    """Tick values for a log axis from lo to hi (> 0), each with two significant digits at most: 1, 2
+    and 5 times the powers of ten in it, or every digit times them when that gives fewer than three,
+    or three values spread evenly on the log scale when even those do not (a span under a factor
+    of two); never more than `most` (then the powers of ten, or every other one)."""
+    decades = np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
+    for subs in ((1.0,), (1.0, 2.0, 5.0), tuple(range(1, 10))):
+        values = np.array([s * 10 ** d for d in decades for s in subs])
+        values = values[(values >= lo) & (values <= hi)]
+        if len(values) >= 3 or subs[-1] == 9:
+            break
+    if len(values) < 2:
+        values = np.array([float(f"{v:.2g}") for v in np.geomspace(lo, hi, 4)[1:-1]] + [float(f"{lo:.2g}")])
+        values = np.unique(values[(values >= lo) & (values <= hi)])
+    while len(values) > most:
+        values = values[::2]
+    return values
+
+
 def per_pose(robot: Robot, ds: DataSet) -> Figure:
     """Each pose's RMS point error (mm) of every stage against the pose's order in the file, the
     five largest of the last stage labelled with their pose ids: a bad pose stands out."""
     fig, ax = plt.subplots(figsize=(12, 3.0))
     P = ds.data.n_poses
-    for s, colour in zip(ds.stages, COLOURS):
+    x = np.arange(P)
+    width = 0.8 / len(ds.stages)
+    for k, (s, colour) in enumerate(zip(ds.stages, COLOURS)):
         sq = np.bincount(s.pose, np.sum(s.position_mm ** 2, axis=1), P)
         rms = np.sqrt(sq / np.maximum(np.bincount(s.pose, minlength=P), 1))
-        ax.plot(np.arange(P), rms, ".-", ms=3, lw=0.5, color=colour, label=s.stage)
+        # poses are not a sequence: bars side by side for a few, points for many, never a line joining them
+        if P <= MAX_BARS:
+            ax.bar(x + (k - (len(ds.stages) - 1) / 2) * width, rms, width, color=colour, label=s.stage)
+        else:
+            ax.plot(x, rms, "o", ms=2.5, color=colour, label=s.stage)
     for p in np.argsort(-rms)[:5]:
         ax.annotate(f"pose {ds.data.pose_ids[p]}", (p, rms[p]), fontsize=7, xytext=(2, 2), textcoords="offset points")
-    ax.set_xlabel("pose, in the order of the file")
+    ids = ds.data.pose_ids
+    ax.xaxis.set_major_locator(matplotlib.ticker.FixedLocator(x) if P <= MAX_BARS // 2 else
+                               matplotlib.ticker.MaxNLocator(nbins=MAX_BARS // 2, integer=True))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(
+        lambda v, _: str(ids[int(v)]) if float(v).is_integer() and 0 <= v < P else ""))
+    ax.set_xlim(-0.6, P - 0.4)
+    ax.set_xlabel("pose id, in the order of the file")
     ax.set_ylabel("RMS point error (mm)")
     ax.set_title(f"{robot.name}, {ds.name} data: error per pose")
     ax.grid(alpha=0.3)
@@ -230,18 +271,24 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
     where = samples.point if volume.tool_box is not None else samples.world
     frame = "tool point" if volume.tool_box is not None else "world"
     axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
-    axes += [(f"{j.name} ({'deg' if j.kind == 'R' else 'm'})", samples.q[:, k] * (180 / np.pi if j.kind == "R" else 1))
-             for k, j in enumerate(robot.joints)]
+    axes += [(joint_label(robot, k), joint_scale(robot, k) * samples.q[:, k]) for k in range(robot.n)]
     axes += [("payload (kg)", samples.payload_kg)]
     axes = [(label, x) for label, x in axes if np.ptp(x) > 1e-9]
-    fig, panels = plt.subplots(1, len(axes), figsize=(3 * len(axes), 3.2), sharey=True, squeeze=False)
-    for ax, (label, x) in zip(panels[0], axes):
+    columns = min(MAP_COLUMNS, len(axes))
+    rows = -(-len(axes) // columns)
+    fig, panels = plt.subplots(rows, columns, figsize=(12, 2.8 * rows + 0.6), sharey=True, squeeze=False)
+    for ax, (label, x) in zip(panels.flat, axes):
         ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
         if statement.tolerance_mm is not None:
             ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
         ax.axhline(statement.bound_mm, color="C3", lw=1)
         ax.set_xlabel(label, fontsize=8)
-    panels[0][0].set_ylabel(f"{statement.confidence:.0%} bound of the point's error (mm)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in panels.flat[len(axes):]:
+        ax.set_visible(False)
+    for row in panels:
+        row[0].set_ylabel(f"{statement.confidence:.0%} bound of the point's error (mm)", fontsize=8)
     fig.suptitle(f"Compensated error over the volume: worst {statement.bound_mm:.3g} mm (red), "
                  f"{statement.verdict}", fontsize=9)
     fig.tight_layout()

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model.kinematics import error_transform
+from gecgen.model.kinematics import constant, error_transform
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import require
 from gecgen.runtime.calibration import Calibration, model_hash
@@ -106,6 +106,12 @@ def _unit(error: int) -> str:
     return "mm" if error % 6 < 3 else "mrad"
 
 
+def rigid_part(calib: Calibration) -> Calibration:
+    """The calibration as a URDF carries it: the coefficients of the term "1" only, the others zero."""
+    keep = np.array([coef.term.text == "1" for coef in calib.model.coefficients])
+    return dataclasses.replace(calib, c=np.where(keep, calib.c, 0.0))
+
+
 def not_carried(calib: Calibration, cm: CompiledModel, where: str) -> list[dict]:
     """The coefficients of terms other than "1" that are not zero, each with the largest value its
     term times it reaches over the training ranges (mm or mrad, the unit of its error), largest
@@ -133,6 +139,39 @@ def not_carried(calib: Calibration, cm: CompiledModel, where: str) -> list[dict]
     return sorted(out, key=lambda e: -e["max_effect"])
 
 
+def tool_points(robot: Robot) -> list[dict[str, np.ndarray]]:
+    """Per branch (one on a chain), its measured points: name -> their frame in the last frame of the
+    branch (4x4: the tool transform, then the point; the tool's axes)."""
+    tools = [b.tool for b in robot.branches] or [robot.tool]
+    out = [{} for _ in tools]
+    for name, xyz in robot.targets.items():
+        T = constant(tools[robot.branch_of(name)])
+        T[:3, 3] += T[:3, :3] @ np.asarray(xyz, float)
+        out[robot.branch_of(name)][name] = T
+    return out
+
+
+#: the translation errors, reported in mm (the rotations in mrad)
+ERRORS_MM = ("ex", "ey", "ez")
+
+
+def tool_offset_carried(calib: Calibration) -> dict | None:
+    """When a translation of a branch's last frame (the measured tool's offset from the flange) is
+    eliminated as indistinguishable from other errors, and the kept coefficients it merges into hold
+    values: {"errors": the eliminated ones, "carried_by": {kept coefficient: value, mm or mrad}};
+    those values may be the tool's offset rather than the robot's. None otherwise."""
+    robot = calib.robot
+    last = {b.tip for b in robot.branches} or {robot.n_frames}
+    eliminated = [e for e in calib.report.get("eliminated", []) if e["reason"] == "structural"
+                  and e["param"].endswith(":1") and int(e["param"].split(".")[0]) in last
+                  and e["param"].split(".")[1].split(":")[0] in ERRORS_MM]
+    names = calib.model.coefficient_names(robot)
+    by = {m["param"]: 1e3 * float(calib.c[names.index(m["param"])]) for e in eliminated for m in e["merged_into"]
+          if int(m["param"].split(".")[0]) not in last and abs(m["factor"]) > FACTOR_TOL}
+    by = {k: v for k, v in by.items() if v != 0.0}
+    return {"errors": [e["param"] for e in eliminated], "carried_by": by} if by else None
+
+
 def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, dict]:
     """The robot's URDF with the calibration's constant errors folded into its joint origins
     (`model.urdf.folded_copy`), and what the command reports about it. The tracker registration
@@ -150,18 +189,23 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     eps = constant_errors(calib)
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
-            f"into the joint origins; the tracker registration is not applied")
+            f"into the joint origins, the last frame's into the measured tool points' links; the tracker "
+            f"registration is not applied")
     tip_links = [b.tip_link for b in robot.branches] or [robot.tip_link]
-    text, tips, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note)
+    text, tips, tool_links, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note, tool_points(robot))
     left = not_carried(calib, cm, where)
-    if left:
-        top = left[0]
-        warnings.warn(f"the URDF carries the constant errors only: {len(left)} coefficients of other terms are left "
-                      f"out (largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the "
-                      f"training ranges); see not_carried")
+    carried = tool_offset_carried(calib)
+    if carried:
+        warnings.warn(f"the data cannot tell the measured tool's offset along {', '.join(carried['errors'])} from "
+                      f"errors of the robot, and the calibration carries it in "
+                      + ", ".join(f"{k} ({v:.3g} {'mm' if k.split('.')[1][:2] in ERRORS_MM else 'mrad'})"
+                                  for k, v in carried["carried_by"].items())
+                      + ": the links before the tool move with it (the tool point is right); measure a second point "
+                        "on the tool to keep them apart (urdf.tool_offset_carried)")
     reg = calib.registration.to_dict()
     branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
-    return text, {"tip_link": tips[0], **branch_tips, "changed_joints": changed, "not_carried": left,
+    return text, {"tip_link": tips[0], **branch_tips, "tool_links": tool_links, "changed_joints": changed,
+                  "not_carried": left, "tool_offset_carried": carried,
                   "registration_applied": False, "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
 
 
