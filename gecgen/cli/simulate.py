@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,10 +12,11 @@ from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, 
 from gecgen.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
-from gecgen.model.measurements import write_measurements
+from gecgen.model.measurements import pose_id_column, read_commands, write_measurements
+from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
-from gecgen.simulate.designs import constant_orientation
+from gecgen.simulate.designs import Design, constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
@@ -34,6 +36,10 @@ def add_parser(command):
                    help="random poses within the limits, one joint at a time, the seed paper's PPS design, or a "
                         "grid the tool visits keeping the orientation it has at --home, as a laser tracker's "
                         "reflector is kept facing the tracker (default %(default)s)")
+    p.add_argument("--commands",
+                   help="instead of --design: the joints of this CSV (q1..qn a row, the pose ids its pose column's, "
+                        "else 0, 1, ...), as a robot commanded to them is measured: an ISO 9283 plan "
+                        "(`gecgen iso9283 --plan`) for the run before, its compensated commands for the run after")
     p.add_argument("--home", type=numbers(),
                    help="--design tool-grid: comma-separated joint values (rad or m) whose tool orientation the "
                         "grid keeps, and whose tool origin is its centre (default: the middle of each joint's range)")
@@ -107,7 +113,12 @@ def run(args) -> dict:
     payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
-    if args.design == "paper":
+    ids = None
+    if args.commands:
+        require(args.design == "random" and args.poses is None and not args.val_out and len(payloads) == 1,
+                "--commands gives the poses: no --design, --poses or --val-out, and one --payload-kg")
+        design, ids = _commanded(args.commands, robot, payloads[0])
+    elif args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
         design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
     elif args.design == "tool-grid":
@@ -121,6 +132,8 @@ def run(args) -> dict:
     else:
         design = random_design(robot, args.poses or POSES, rng, payloads)
     data = simulate(robot, truth, design, rng, args.orientation)
+    if ids is not None:
+        data = replace(data, pose_ids=ids)
     files = {"data": args.output}
     if args.design == "paper":
         train, val = paper_split(design, rng)
@@ -143,9 +156,25 @@ def run(args) -> dict:
         files["truth"] = args.truth_out
     nominal = target_positions(robot, data.q)[data.pose, data.target]
     err = np.linalg.norm(data.xyz - nominal, axis=1)
-    return {"robot": robot.name, "design": args.design, "poses": data.n_poses, "rows": len(data.xyz),
+    return {"robot": robot.name, "design": "commands" if args.commands else args.design, "poses": data.n_poses,
+            "rows": len(data.xyz),
             "uncompensated": {"rms_mm": float(1e3 * np.sqrt(np.mean(err ** 2))), "max_mm": float(1e3 * err.max())},
             "files": files}
+
+
+def _commanded(path: str, robot, payload_kg: float) -> tuple[Design, np.ndarray | None]:
+    """The design of --commands (every target measured at each row's joints, the payload at the tool
+    origin) and its pose ids (P,), the file's pose column when it has one (None: 0, 1, ...)."""
+    q = read_commands(path, robot).q
+    table = read_table(path, "file of joint commands", "q1..qn")
+    ids = pose_id_column(table, "pose") if "pose" in table.header else None
+    if ids is not None:
+        _, first = np.unique(ids, return_index=True)
+        again = np.setdiff1d(np.arange(len(ids)), first)
+        require(not len(again), f"{path}: row {again[0] + 2 if len(again) else 0}: pose id {ids[again[0]] if len(again) else 0} "
+                                f"repeats an earlier row's; one row per pose")
+    n = len(q)
+    return Design(q, np.full(n, payload_kg), np.zeros(3), tuple(robot.targets), np.array(["commands"] * n)), ids
 
 
 def _tool_grid(args, robot):
