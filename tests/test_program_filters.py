@@ -1,0 +1,296 @@
+"""gecgen filter: robot programs corrected through a calibration (gecgen/deliver/programs).
+
+Checked against independent computation: the controllers' angle conventions built by hand from
+elementary rotations; a zero calibration leaves every byte; every byte outside the target numbers
+is unchanged after a real correction; and the corrected program, executed on the simulated truth
+robot through the controller's nominal model, lands nearer the intended targets than the original.
+"""
+import contextlib
+import io
+import json
+import shutil
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from gecgen.api import Calibrator, load_robot
+from gecgen.cli import main
+from gecgen.deliver.programs import filter_program, kuka, program_format, trial, ur
+from gecgen.deliver.programs.core import correct, read_frames
+from gecgen.deliver.programs.kinematics import arm_of
+from gecgen.model import ModelError
+from gecgen.simulate import load_truth, random_design, simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data" / "programs"
+
+
+def _rz(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rx(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _calibrated(robot_file, truth_file, errors, seed=1, n=80):
+    """A Calibrator fitted on simulated measurements of the truth robot, the robot and its truth."""
+    robot = load_robot(robot_file)
+    truth = load_truth(yaml.safe_load(Path(truth_file).read_text()), robot)
+    rng = np.random.default_rng(seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cal = Calibrator(errors).fit(robot, simulate(robot, truth, random_design(robot, n, rng), rng))
+    return cal, robot, truth
+
+
+@pytest.fixture(scope="module")
+def kuka_cal():
+    return _calibrated(ROOT / "robots" / "industrial6r.yaml", ROOT / "robots" / "industrial6r.truth.yaml",
+                       str(ROOT / "robots" / "industrial6r.errors.yaml"))
+
+
+@pytest.fixture(scope="module")
+def ur_cal():
+    return _calibrated(DATA / "robots" / "ur10.yaml", DATA / "robots" / "ur10.truth.yaml",
+                       str(ROOT / "robots" / "constant.errors.yaml"))
+
+
+def _zero(cal):
+    """The same calibration with every coefficient zero: the nominal robot."""
+    out = Calibrator()
+    out._set(replace(cal.calibration_, c=np.zeros_like(cal.calibration_.c)))
+    return out
+
+
+def _copy_krl(tmp_path):
+    for name in ("palletize.src", "palletize.dat", "frames.yaml"):
+        shutil.copy(DATA / "krl" / name, tmp_path / name)
+    return tmp_path / "palletize.src"
+
+
+def _outside_targets(program, texts):
+    """Each file's text with the numbers of every target cut out: what must not change."""
+    out = {}
+    for path, text in texts.items():
+        spans = sorted((n.start, n.end) for t in program.targets if t.file == path for n in t.numbers)
+        pieces, at = [], 0
+        for start, end in spans:
+            pieces.append(text[at:start])
+            at = end
+        out[path.suffix] = pieces + [text[at:]]
+    return out
+
+
+# -- conventions, by hand ------------------------------------------------------------------------
+
+def test_kuka_abc_is_z_y_x_euler_in_mm_and_deg():
+    T = kuka.pose((100.0, -20.0, 5.0, 30.0, -50.0, 70.0))
+    assert np.allclose(T[:3, :3], _rz(np.radians(30)) @ _ry(np.radians(-50)) @ _rx(np.radians(70)))
+    assert np.allclose(T[:3, 3], [0.1, -0.02, 0.005])
+    target = kuka.Target("P", Path("p"), 1, "pose", tuple(
+        kuka.numbers_in("100 -20 5 31 -50 69", 0, 19, ["mm"] * 3 + ["deg"] * 3)))
+    assert np.allclose(kuka.numbers(T, target), [100, -20, 5, 30, -50, 70])
+
+
+def test_ur_pose_is_a_rotation_vector_in_m_and_rad():
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    angle = 0.7
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K  # Rodrigues
+    T = ur.pose((0.4, -0.1, 0.3, *(angle * axis)))
+    assert np.allclose(T[:3, :3], R) and np.allclose(T[:3, 3], [0.4, -0.1, 0.3])
+
+
+def test_kuka_turn_and_status_follow_the_joint_signs_and_the_wrist():
+    arm = arm_of(load_robot(ROOT / "robots" / "industrial6r.yaml"), np.eye(4))
+    q = np.radians([[-10, -60, -40, 20, -30, -90], [10, -60, -140, -20, 30, 90]])
+    s, t = kuka.config(arm)(q).T
+    assert list(t) == [0b110111, 0b001110]  # bit k: axis k+1 negative
+    assert list(s & 4) == [0, 4]  # A5 > 0
+    # the stretched arm (contract: q = 0, -90, -90) divides elbow up from down, at the offset of a3
+    assert list(s & 2) == [2, 0]
+
+
+# -- round trips -----------------------------------------------------------------------------------
+
+def test_zero_calibration_leaves_a_krl_program_byte_identical(kuka_cal, tmp_path):
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, written, log = filter_program(_zero(kuka_cal[0]), source, out, tmp_path / "frames.yaml")
+    assert outcome.corrected == 0
+    assert out.read_bytes() == source.read_bytes()
+    assert out.with_suffix(".dat").read_bytes() == source.with_suffix(".dat").read_bytes()
+    assert log.is_file()
+
+
+def test_krl_program_corrected_changes_only_target_numbers(kuka_cal, tmp_path):
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, _, log = filter_program(kuka_cal[0], source, out, tmp_path / "frames.yaml")
+    original, filtered = kuka.parse(source), kuka.parse(out)
+    assert [t.name for t in original.targets] == [t.name for t in filtered.targets]
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    assert b"\r\n" in out.read_bytes() and b"\n" not in out.read_bytes().replace(b"\r\n", b"")
+    reasons = {c.target.name: c.reason for c in outcome.changes}
+    assert reasons["LIN_REL line 25"].startswith("a relative motion")
+    assert reasons["XHOME (line 14)"].startswith("declared outside")
+    corrected = [c for c in outcome.changes if c.after is not None]
+    assert len(corrected) >= 10
+    # the log names every target, with the corrections it made
+    rows = log.read_text().splitlines()
+    assert len(rows) == 1 + len(outcome.changes)
+    assert all(0.05 < c.position_mm < 20 for c in corrected)
+    # the configuration is kept: S and T as written
+    for a, b in zip(original.targets, filtered.targets):
+        assert a.config == b.config
+
+
+def test_corrected_krl_program_lands_on_its_targets_on_the_truth_robot(kuka_cal, tmp_path):
+    """The filtered program run through the controller's nominal inverse kinematics on the truth
+    robot: its tool lands nearer the intended targets than the original's, by the calibration's
+    gain."""
+    cal, robot, truth = kuka_cal
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, _, _ = filter_program(cal, source, out, tmp_path / "frames.yaml")
+    frames = read_frames(tmp_path / "frames.yaml", kuka.FORMAT)
+    arm = arm_of(robot, frames.flange)
+    original, filtered = kuka.parse(source), kuka.parse(out)
+    done = np.array([c.after is not None for c in outcome.changes])
+    before = trial.execute(kuka.FORMAT, original, original, frames, arm, robot, truth)
+    after = trial.execute(kuka.FORMAT, original, filtered, frames, arm, robot, truth)
+    assert after.reached[done].all()
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)[done]
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)[done]
+    assert np.sqrt(np.mean(miss_after ** 2)) < 0.35 * np.sqrt(np.mean(miss_before ** 2))
+    # a target kept as written misses as before
+    kept = ~done & before.reached
+    assert np.allclose(after.placed[kept], before.placed[kept])
+
+
+def test_ur_script_zero_and_real_calibration(ur_cal, tmp_path):
+    cal, robot, truth = ur_cal
+    source = DATA / "ur" / "pick_place.script"
+    out = tmp_path / "pick_place.script"
+    filter_program(_zero(cal), source, out)
+    assert out.read_bytes() == source.read_bytes()
+    outcome, _, _ = filter_program(cal, source, out)
+    original, filtered = ur.parse(source), ur.parse(out)
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    frames = read_frames(None, ur.FORMAT)
+    arm = arm_of(robot, frames.flange)
+    done = np.array([c.after is not None for c in outcome.changes])
+    assert done.sum() >= len(done) - 1
+    before = trial.execute(ur.FORMAT, original, original, frames, arm, robot, truth)
+    after = trial.execute(ur.FORMAT, original, filtered, frames, arm, robot, truth)
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)[done]
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)[done]
+    assert np.sqrt(np.mean(miss_after ** 2)) < 0.35 * np.sqrt(np.mean(miss_before ** 2))
+
+
+# -- what is kept, and what is refused ---------------------------------------------------------------
+
+def test_a_joint_target_outside_the_limits_is_kept_and_listed(kuka_cal, tmp_path):
+    source = _copy_krl(tmp_path)
+    dat = source.with_suffix(".dat")
+    dat.write_bytes(dat.read_bytes().replace(b"XP1={A1 -142.53669", b"XP1={A1 -192.53669"))
+    outcome, _, log = filter_program(kuka_cal[0], source, tmp_path / "out" / "palletize.src", tmp_path / "frames.yaml")
+    change = next(c for c in outcome.changes if c.target.name == "XP1")
+    assert change.after is None and change.reason == "outside the joint limits"
+    assert b"XP1={A1 -192.53669,A2 -103.81955" in (tmp_path / "out" / "palletize.dat").read_bytes()
+    assert "XP1,palletize.dat,12,joint,outside the joint limits" in log.read_text()
+
+
+def test_a_pose_in_another_configuration_than_it_names_is_kept(kuka_cal, tmp_path):
+    """XP2 names S 2; given S 3 (the wrist behind axis 1) its pose is out of reach in that configuration."""
+    source = _copy_krl(tmp_path)
+    dat = source.with_suffix(".dat")
+    dat.write_bytes(dat.read_bytes().replace(b"C -135.36718,S 2,T 27", b"C -135.36718,S 3,T 27"))
+    outcome, _, _ = filter_program(kuka_cal[0], source, tmp_path / "out" / "palletize.src", tmp_path / "frames.yaml")
+    change = next(c for c in outcome.changes if c.target.name == "XP2")
+    assert change.after is None and "unreachable" in change.reason
+
+
+def _cli(*args):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([*map(str, args), "--json"])
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def kuka_cal_file(kuka_cal, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cal") / "calibration.json"
+    kuka_cal[0].save(path)
+    return path
+
+
+def test_cli_filter_writes_program_dat_and_log(kuka_cal_file, tmp_path):
+    source = _copy_krl(tmp_path)
+    code, out, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "out" / "palletize.src",
+                          "--frames", tmp_path / "frames.yaml")
+    result = json.loads(out)
+    # two motions have no target of this program's own: listed, and the command says so
+    assert code == 1 and "kept as written" in err and len(err.strip().splitlines()) == 1
+    assert result["n_targets"] == 15 and result["corrected"] + len(result["kept"]) == 15
+    assert {k["target"] for k in result["kept"]} >= {"LIN_REL line 25", "XHOME (line 14)"}
+    assert (tmp_path / "out" / "palletize.dat").is_file() and Path(result["log"]).is_file()
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (lambda d: (d / "frames.yaml").write_text("tools:\n  1: [0, 0, 320, 0, -90, 0]\n"),
+     "palletize.src:26: target PTP line 26 is in base 2, which neither the program nor a frames file describes; "
+     "give its pose under bases: 2 in a frames file (--frames)"),
+    (lambda d: (d / "palletize.dat").unlink(),
+     "palletize.src:14: PTP to XHOME, and no palletize.dat beside the program declares it; copy palletize.dat "
+     "beside it"),
+    (lambda d: (d / "palletize.dat").write_bytes((d / "palletize.dat").read_bytes().replace(b"Y 1702.63624,", b"")),
+     "palletize.dat:13: E6POS XP2 lacks Y; give every component of the target"),
+])
+def test_cli_filter_refuses_bad_programs_in_one_line(kuka_cal_file, tmp_path, edit, expected):
+    source = _copy_krl(tmp_path)
+    edit(tmp_path)
+    code, out, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "out" / "palletize.src",
+                          "--frames", tmp_path / "frames.yaml")
+    assert code == 2 and out == ""
+    assert err.strip() == f"gecgen filter: {tmp_path / expected}"
+    assert not (tmp_path / "out").exists()
+
+
+def test_krl_output_must_keep_the_program_name(kuka_cal_file, tmp_path):
+    source = _copy_krl(tmp_path)
+    code, _, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "other.src", "--frames",
+                        tmp_path / "frames.yaml")
+    assert code == 2 and "write it as palletize.src in another folder" in err
+
+
+def test_ur_move_to_an_expression_is_refused(tmp_path):
+    bad = tmp_path / "bad.script"
+    bad.write_text("def p():\n  movel(pose_trans(base, p[0, 0, 0.1, 0, 0, 0]), a=1, v=0.1)\nend\n")
+    with pytest.raises(ModelError, match=r"bad.script:2: movel to 'pose_trans\(base, p\[0, 0, 0.1, 0, 0, 0\]\)'"):
+        ur.parse(bad)
+
+
+def test_unknown_suffix_is_refused_naming_the_formats(tmp_path):
+    with pytest.raises(ModelError, match=r"x.txt: no program format reads .txt; give one of .src \(krl\)"):
+        program_format(tmp_path / "x.txt")
+
+
+def test_ur_first_pose_without_an_earlier_target_is_kept(ur_cal, tmp_path):
+    program = tmp_path / "first.script"
+    program.write_text("def first():\n  set_tcp(p[0, 0, 0.15, 0, 0, 0])\n  movel(p[0.5, -0.3, 0.4, 3.0, 0.5, 0.1], "
+                       "a=1.2, v=0.25)\nend\n")
+    outcome = correct(ur.FORMAT, ur.parse(program), ur_cal[0], read_frames(None, ur.FORMAT))
+    assert outcome.changes[0].after is None and outcome.changes[0].reason.startswith("no earlier target")
