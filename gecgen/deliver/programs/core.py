@@ -30,8 +30,9 @@ NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 DECIMALS = {"mm": 3, "m": 6, "deg": 4, "rad": 6, "1": 7}
 #: a correction below these (m, rad) changes nothing the controller can act on: the target is kept as written
 NOTHING = (1e-7, 1e-8)
-#: the written numbers must bring the controller back to the corrected joints within this (rad or m)
-ROUND_TRIP = 1e-5
+#: the written pose must bring the controller back to the corrected joints within this (rad): further off,
+#: its inverse kinematics took another branch (a configuration flip); rounding moves them far less
+ROUND_TRIP = 1e-3
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,7 @@ class Change:
     position_mm: float = 0.0
     rotation_deg: float = 0.0
     joints_deg: float = 0.0
+    residual_mm: float = 0.0  # the tool error the compensation leaves (m in the model, mm here)
 
 
 def refuse(path, line: int | None, what: str, fix: str):
@@ -285,35 +287,41 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
 
     texts = dict(program.texts)
     edits: dict[Path, list[tuple[Number, str]]] = {}
-    changes = []
+    changes, previous = [], None
     for k, (t, tool, base) in enumerate(placed):
         if reasons[k] is not None:
             changes.append(Change(t, None, reasons[k]))
+            previous = nominal[k] if nominal[k] is not None else previous  # run as written
             continue
         q0 = nominal[k]
         q, status, residual = corrected[k]
         if status != 0:
-            changes.append(Change(t, None, f"compensation {STATUS_NAMES[status]} (tool off by {1e3 * residual:.3g} mm)"
-                                  if status != 3 else "corrected joints outside the joint limits"))
+            changes.append(Change(t, None, f"compensation {STATUS_NAMES[status]}" if status != 3 else
+                                  "corrected joints outside the joint limits", residual_mm=1e3 * residual))
+            previous = q0
             continue
         T0, T1 = arm.fk(q0)[0] @ tool, arm.fk(q)[0] @ tool
         move = (float(np.linalg.norm(T1[:3, 3] - T0[:3, 3])), rotation_angle(T0, T1))
         if move[0] < NOTHING[0] and move[1] < NOTHING[1] and np.max(np.abs(q - q0)) < NOTHING[1]:
             changes.append(Change(t, None, "no correction needed"))
+            previous = q0
             continue
         if t.kind == "joint":
             after = [formatted(n, v) for n, v in zip(t.numbers, q * scale)]
         else:
             after = [formatted(n, v) for n, v in zip(t.numbers, fmt.numbers(np.linalg.inv(base) @ T1, t))]
             written = base @ fmt.pose(tuple(float(a) for a in after))
+            # solved as the controller will: in the named configuration, or nearest the target before
             back = inverse(arm, written @ np.linalg.inv(tool), seeds, config, t.config,
-                           near=q if config is None else None)
+                           near=previous if config is None else None)
             if back is None or np.max(np.abs(back - q)) > ROUND_TRIP:
                 changes.append(Change(t, None, "the corrected pose would bring the controller to another "
-                                               "configuration"))
+                                               "configuration", residual_mm=1e3 * residual))
+                previous = q0
                 continue
+        previous = q
         changes.append(Change(t, tuple(after), "corrected", 1e3 * move[0], math.degrees(move[1]),
-                              math.degrees(float(np.max(np.abs(q - q0))))))
+                              math.degrees(float(np.max(np.abs(q - q0)))), 1e3 * residual))
         edits.setdefault(t.file, []).extend(zip(t.numbers, after))
     for path, spans in edits.items():
         text = texts[path]
@@ -329,12 +337,12 @@ def log_text(outcome: Outcome) -> str:
     out = io.StringIO()
     w = csv.writer(out, lineterminator="\n")
     w.writerow(["target", "file", "line", "kind", "status", "before", "after", "position_mm", "rotation_deg",
-                "joints_deg"])
+                "joints_deg", "residual_mm"])
     for c in outcome.changes:
         t = c.target
         w.writerow([t.name, t.file.name, t.line, t.kind, c.reason, " ".join(n.text for n in t.numbers),
                     "" if c.after is None else " ".join(c.after), f"{c.position_mm:.4f}", f"{c.rotation_deg:.5f}",
-                    f"{c.joints_deg:.5f}"])
+                    f"{c.joints_deg:.5f}", f"{c.residual_mm:.4g}"])
     return out.getvalue()
 
 
