@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 import gecgen
-from gecgen.deliver.programs import filter_program, kuka, trial, ur
+from gecgen.deliver.programs import abb, filter_program, kuka, trial, ur
 from gecgen.deliver.programs.core import read_frames
 from gecgen.deliver.programs.kinematics import arm_of
 from gecgen.model import load_robot
@@ -37,6 +37,14 @@ def _krl(folder: Path, arm, q, rng):
     return folder / "cell.src", folder / "frames.yaml", kinds
 
 
+def _rapid(folder: Path, arm, q, rng):
+    kinds = list(rng.choice(["jointtarget", "robtarget", "inline"], len(q), p=[0.3, 0.5, 0.2]))
+    text = trial.rapid_program("Cell", arm, q, kinds, abb.pose([0, 0, 250, 1, 0, 0, 0]),
+                               abb.pose([1400, -300, 450, 0.9238795, 0, 0, 0.3826834]))
+    (folder / "Cell.mod").write_text(text)
+    return folder / "Cell.mod", None, kinds
+
+
 def _ur(folder: Path, arm, q, rng):
     # a cycle of nearby postures: a UR pose goes to the solution nearest the target before
     q = q[0] + np.cumsum(rng.normal(0.0, 0.12, q.shape), axis=0)
@@ -50,6 +58,8 @@ CASES = [
     # name, format module, robot file, truth file, error model, program writer
     ("KUKA KRL", kuka, ROBOTS / "industrial6r.yaml", ROBOTS / "industrial6r.truth.yaml",
      ROBOTS / "industrial6r.errors.yaml", _krl),
+    ("ABB RAPID", abb, PROGRAM_ROBOTS / "irb6700.yaml", PROGRAM_ROBOTS / "irb6700.truth.yaml",
+     ROBOTS / "constant.errors.yaml", _rapid),
     ("UR script", ur, PROGRAM_ROBOTS / "ur10.yaml", PROGRAM_ROBOTS / "ur10.truth.yaml",
      ROBOTS / "constant.errors.yaml", _ur),
 ]

@@ -19,7 +19,7 @@ import yaml
 
 from gecgen.api import Calibrator, load_robot
 from gecgen.cli import main
-from gecgen.deliver.programs import filter_program, kuka, program_format, trial, ur
+from gecgen.deliver.programs import abb, filter_program, kuka, program_format, trial, ur
 from gecgen.deliver.programs.core import correct, read_frames
 from gecgen.deliver.programs.kinematics import arm_of
 from gecgen.model import ModelError
@@ -294,3 +294,64 @@ def test_ur_first_pose_without_an_earlier_target_is_kept(ur_cal, tmp_path):
                        "a=1.2, v=0.25)\nend\n")
     outcome = correct(ur.FORMAT, ur.parse(program), ur_cal[0], read_frames(None, ur.FORMAT))
     assert outcome.changes[0].after is None and outcome.changes[0].reason.startswith("no earlier target")
+
+
+# -- ABB RAPID -------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def abb_cal():
+    return _calibrated(DATA / "robots" / "irb6700.yaml", DATA / "robots" / "irb6700.truth.yaml",
+                       str(ROOT / "robots" / "constant.errors.yaml"))
+
+
+def test_abb_quaternion_is_w_x_y_z_and_keeps_its_sign():
+    half = np.radians(40) / 2
+    T = abb.pose((10.0, 20.0, 30.0, np.cos(half), 0.0, 0.0, np.sin(half)))
+    assert np.allclose(T[:3, :3], _rz(np.radians(40))) and np.allclose(T[:3, 3], [0.01, 0.02, 0.03])
+    negative = abb.Target("p", Path("p"), 1, "pose", tuple(
+        abb.numbers_in("10 20 30 -0.9 0 0 -0.3", 0, 23, ["mm"] * 3 + ["1"] * 4)))
+    assert np.allclose(abb.numbers(T, negative), [10, 20, 30, -np.cos(half), 0, 0, -np.sin(half)])
+
+
+def test_abb_confdata_quadrants_and_cfx_by_hand():
+    arm = arm_of(load_robot(DATA / "robots" / "irb6700.yaml"), np.eye(4))
+    q = np.radians([[10, 20, -30, -100, 40, 185], [-95, 10, -120, 30, -40, -5]])
+    cf = abb.config(arm)(q)
+    assert cf[:, :3].tolist() == [[0, -2, 2], [-2, 0, -1]]
+    assert list(cf[:, 3] & 1) == [0, 1]  # axis 5 negative
+
+
+def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
+    cal, robot, truth = abb_cal
+    source = DATA / "rapid" / "Cell.mod"
+    out = tmp_path / "Cell.mod"
+    filter_program(_zero(cal), source, out)
+    assert out.read_bytes() == source.read_bytes()
+    outcome, _, _ = filter_program(cal, source, out)
+    original, filtered = abb.parse(source), abb.parse(out)
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    assert [t.config for t in original.targets] == [t.config for t in filtered.targets]
+    done = np.array([c.after is not None for c in outcome.changes])
+    assert done.sum() == 10 and outcome.changes[-1].reason.startswith("a target computed")
+    frames = read_frames(None, abb.FORMAT)
+    arm = arm_of(robot, frames.flange)
+    before = trial.execute(abb.FORMAT, original, original, frames, arm, robot, truth)
+    after = trial.execute(abb.FORMAT, original, filtered, frames, arm, robot, truth)
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)[done]
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)[done]
+    assert np.sqrt(np.mean(miss_after ** 2)) < 0.35 * np.sqrt(np.mean(miss_before ** 2))
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    (b"PERS tooldata tGripper:=[TRUE,", b"PERS tooldata tGripper:=[FALSE,",
+     "Cell.mod:8: tooldata tGripper is a stationary tool (robhold FALSE); correct programs of a tool the robot holds"),
+    (b"MoveJ p3, v1000, z10, tGripper", b"MoveJ p3, v1000, z10, tWelder",
+     "Cell.mod:15: target p3 is in tool tWelder, which neither the program nor a frames file describes; give its "
+     "pose under tools: tWelder in a frames file (--frames)"),
+])
+def test_rapid_refusals_name_the_line_and_the_fix(abb_cal, tmp_path, old, new, expected):
+    bad = tmp_path / "Cell.mod"
+    bad.write_bytes((DATA / "rapid" / "Cell.mod").read_bytes().replace(old, new))
+    with pytest.raises(ModelError) as err:
+        filter_program(abb_cal[0], bad, tmp_path / "out" / "Cell.mod")
+    assert str(err.value) == f"{tmp_path / expected}"

@@ -9,7 +9,8 @@ from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, 
 from gecgen.model.validation import ModelError
 
 #: format name -> (its module, the file suffixes it reads)
-FORMATS = {"krl": ("kuka", (".src",)), "ur": ("ur", (".script", ".urscript"))}
+FORMATS = {"krl": ("kuka", (".src",)), "rapid": ("abb", (".mod", ".modx", ".prg")),
+           "ur": ("ur", (".script", ".urscript"))}
 
 
 def program_format(path: str | Path, name: str | None = None) -> Format:

@@ -156,3 +156,45 @@ def ur_program(name: str, arm: Arm, q: np.ndarray, kinds: list[str], tcp: np.nda
         if k % 10 == 9:
             lines.append("  sleep(0.5)")
     return "\n".join(lines + ["end", f"{name}()", ""])
+
+
+def rapid_program(name: str, arm: Arm, q: np.ndarray, kinds: list[str], tool: np.ndarray,
+                  wobj: np.ndarray) -> str:
+    """A RAPID module visiting postures q (N, 6) rad: kinds[k] one of "jointtarget", "robtarget" (declared)
+    or "inline" (a robtarget written in the move); robtargets in tooldata tGripper (flange -> TCP `tool`)
+    and wobjdata wobjTable (robot base -> `wobj`), both declared in the module."""
+    from gecgen.deliver.programs import abb
+
+    config = abb.config(arm)
+    units = ("mm",) * 3 + ("1",) * 4
+
+    def group(values, digits):
+        return ",".join(f"{v:.{digits}f}" for v in values)
+
+    t, w = pose_values(abb.FORMAT, tool, units), pose_values(abb.FORMAT, wobj, units)
+    head = [f"MODULE {name}", "    ! cell program: taught on the pendant, edited offline",
+            f"    PERS tooldata tGripper:=[TRUE,[[{group(t[:3], 1)}],[{group(t[3:], 6)}]],"
+            f"[12.5,[0,0,120],[1,0,0,0],0,0,0]];",
+            f"    TASK PERS wobjdata wobjTable:=[FALSE,TRUE,\"\",[[{group(w[:3], 1)}],[{group(w[3:], 6)}]],"
+            f"[[0,0,0],[1,0,0,0]]];",
+            "    CONST speeddata vFast:=[1500,500,5000,1000];"]
+    body = ["", "    PROC main()", "        ConfJ\\On;", "        ConfL\\On;"]
+    for k, (qk, kind) in enumerate(zip(q, kinds)):
+        deg = np.rad2deg(qk)
+        P = np.linalg.inv(wobj) @ arm.fk(qk)[0] @ tool
+        v = pose_values(abb.FORMAT, P, units)
+        cf = config(qk[None])[0]
+        literal = (f"[[{group(v[:3], 2)}],[{group(v[3:], 8)}],[{','.join(str(int(c)) for c in cf)}],"
+                   f"[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]]")
+        if kind == "jointtarget":
+            head.append(f"    CONST jointtarget j{k + 1}:=[[{group(deg, 4)}],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];")
+            body.append(f"        MoveAbsJ j{k + 1}\\NoEOffs, vFast, z50, tGripper;")
+        elif kind == "robtarget":
+            head.append(f"    CONST robtarget p{k + 1}:={literal};")
+            body.append(f"        Move{'L' if k % 2 else 'J'} p{k + 1}, v{500 if k % 2 else 1000}, z10, "
+                        f"tGripper\\WObj:=wobjTable;")
+        else:
+            body.append(f"        MoveL {literal}, v200, fine, tGripper\\WObj:=wobjTable;")
+        if k % 10 == 9:
+            body.append("        WaitTime 0.5;")
+    return "\n".join(head + body + ["    ENDPROC", "ENDMODULE", ""])
