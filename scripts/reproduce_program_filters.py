@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 import gecgen
-from gecgen.deliver.programs import abb, filter_program, kuka, trial, ur
+from gecgen.deliver.programs import abb, fanuc, filter_program, kuka, trial, ur
 from gecgen.deliver.programs.core import read_frames
 from gecgen.deliver.programs.kinematics import arm_of
 from gecgen.model import load_robot
@@ -45,6 +45,15 @@ def _rapid(folder: Path, arm, q, rng):
     return folder / "Cell.mod", None, kinds
 
 
+def _tp(folder: Path, arm, q, rng):
+    kinds = list(rng.choice(["joint", "cartesian"], len(q), p=[0.35, 0.65]))
+    tool, frame = [0, 0, 280, 0, -90, 180], [1500, 200, 300, 0, 0, -30]
+    text = trial.tp_program("cell", arm, q, kinds, (1, fanuc.pose(tool)), (2, fanuc.pose(frame)))
+    (folder / "cell.ls").write_text(text)
+    (folder / "frames.yaml").write_text(f"tools:\n  1: {tool}\nbases:\n  2: {frame}\n")
+    return folder / "cell.ls", folder / "frames.yaml", kinds
+
+
 def _ur(folder: Path, arm, q, rng):
     # a cycle of nearby postures: a UR pose goes to the solution nearest the target before
     q = q[0] + np.cumsum(rng.normal(0.0, 0.12, q.shape), axis=0)
@@ -60,6 +69,7 @@ CASES = [
      ROBOTS / "industrial6r.errors.yaml", _krl),
     ("ABB RAPID", abb, PROGRAM_ROBOTS / "irb6700.yaml", PROGRAM_ROBOTS / "irb6700.truth.yaml",
      ROBOTS / "constant.errors.yaml", _rapid),
+    ("FANUC TP", fanuc, ROBOTS / "fanuc.yaml", ROBOTS / "fanuc.truth.yaml", ROBOTS / "fanuc.errors.yaml", _tp),
     ("UR script", ur, PROGRAM_ROBOTS / "ur10.yaml", PROGRAM_ROBOTS / "ur10.truth.yaml",
      ROBOTS / "constant.errors.yaml", _ur),
 ]

@@ -19,7 +19,7 @@ import yaml
 
 from gecgen.api import Calibrator, load_robot
 from gecgen.cli import main
-from gecgen.deliver.programs import abb, filter_program, kuka, program_format, trial, ur
+from gecgen.deliver.programs import abb, fanuc, filter_program, kuka, program_format, trial, ur
 from gecgen.deliver.programs.core import correct, read_frames
 from gecgen.deliver.programs.kinematics import arm_of
 from gecgen.model import ModelError
@@ -354,4 +354,71 @@ def test_rapid_refusals_name_the_line_and_the_fix(abb_cal, tmp_path, old, new, e
     bad.write_bytes((DATA / "rapid" / "Cell.mod").read_bytes().replace(old, new))
     with pytest.raises(ModelError) as err:
         filter_program(abb_cal[0], bad, tmp_path / "out" / "Cell.mod")
+    assert str(err.value) == f"{tmp_path / expected}"
+
+
+# -- FANUC TP ----------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def fanuc_cal():
+    return _calibrated(ROOT / "robots" / "fanuc.yaml", ROOT / "robots" / "fanuc.truth.yaml",
+                       str(ROOT / "robots" / "fanuc.errors.yaml"))
+
+
+def test_fanuc_wpr_are_fixed_x_y_z_angles_and_turns_count_from_180():
+    T = fanuc.pose((1.0, 2.0, 3.0, 30.0, -50.0, 70.0))
+    assert np.allclose(T[:3, :3], _rz(np.radians(70)) @ _ry(np.radians(-50)) @ _rx(np.radians(30)))
+    assert fanuc.turns(np.radians([180.0, 180.5, -180.0, -179.5, 539.0, -541.0])).tolist() == [0, 1, -1, 0, 1, -2]
+
+
+def _copy_tp(tmp_path):
+    for name in ("weld_seam.ls", "frames.yaml"):
+        shutil.copy(DATA / "tp" / name, tmp_path / name)
+    return tmp_path / "weld_seam.ls"
+
+
+def test_tp_program_zero_real_and_untouched_bytes(fanuc_cal, tmp_path):
+    """On the coupled arm (the controller's J3 is the forearm's angle: couplings J3 = J2 + J3, the truth
+    1.003 J2 + J3): joint positions corrected in the controller's readings, Cartesian ones in their
+    user frame and tool; the aligned columns of the /POS section stay aligned."""
+    cal, robot, truth = fanuc_cal
+    source = _copy_tp(tmp_path)
+    out = tmp_path / "out" / "weld_seam.ls"
+    filter_program(_zero(cal), source, out, tmp_path / "frames.yaml")
+    assert out.read_bytes() == source.read_bytes()
+    outcome, _, _ = filter_program(cal, source, out, tmp_path / "frames.yaml")
+    original, filtered = fanuc.parse(source), fanuc.parse(out)
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    assert [t.config for t in original.targets] == [t.config for t in filtered.targets]
+    assert all(len(a.text) <= len(b.text) <= len(a.text) + 1 for s, f in zip(original.targets, filtered.targets)
+               for a, b in zip(s.numbers, f.numbers))
+    done = np.array([c.after is not None for c in outcome.changes])
+    assert done.sum() == 8 and outcome.changes[-1].reason.startswith("a position register")
+    frames = read_frames(tmp_path / "frames.yaml", fanuc.FORMAT)
+    arm = arm_of(robot, frames.flange)
+    before = trial.execute(fanuc.FORMAT, original, original, frames, arm, robot, truth)
+    after = trial.execute(fanuc.FORMAT, original, filtered, frames, arm, robot, truth)
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)[done]
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)[done]
+    assert np.sqrt(np.mean(miss_after ** 2)) < 0.35 * np.sqrt(np.mean(miss_before ** 2))
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    (b"\t\tCONFIG : 'N U T, 0, 0, 0',\r\n\tX = -1994.919", b"\r\n\tX = -1994.919",
+     "weld_seam.ls:38: P[2] has no CONFIG; write it as CONFIG : 'N U T, 0, 0, 0'"),
+    (b"   7:L P[3] 500mm/sec", b"   7:L P[9] 500mm/sec",
+     "weld_seam.ls:22: motion to P[9], which the /POS section does not define; export the program with its "
+     "positions"),
+    (b"UF : 2, UT : 1,\t\tCONFIG : 'F U T, 0, 0, 0',\r\n\tX =   832.008",
+     b"UF : 3, UT : 1,\t\tCONFIG : 'F U T, 0, 0, 0',\r\n\tX =   832.008",
+     "weld_seam.ls:44: target P[3] is in base 3, which neither the program nor a frames file describes; give its "
+     "pose under bases: 3 in a frames file (--frames)"),
+])
+def test_tp_refusals_name_the_line_and_the_fix(fanuc_cal, tmp_path, old, new, expected):
+    source = _copy_tp(tmp_path)
+    text = source.read_bytes()
+    assert old in text
+    source.write_bytes(text.replace(old, new))
+    with pytest.raises(ModelError) as err:
+        filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
     assert str(err.value) == f"{tmp_path / expected}"

@@ -26,7 +26,7 @@ COMMANDS = {
     "identify": ("identify", "fit the error model to measured data and write a calibration"),
     "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
     "compensate": ("compensate", "corrected joint commands for nominal commands"),
-    "filter": ("filter", "a robot program (KUKA, ABB, UR) with its targets corrected"),
+    "filter": ("filter", "a robot program (KUKA, ABB, FANUC, UR) with its targets corrected"),
     "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
     "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
     "simulate": ("simulate", "simulated measurements of a robot with physical error sources"),

@@ -7,14 +7,14 @@ from gecgen.cli.common import CALIBRATION_HELP, whole
 def add_parser(command):
     p = command("filter", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
-    p.add_argument("program", help="the robot program: KUKA .src (its .dat beside it), ABB RAPID .mod/.modx/.prg "
-                                      "or UR .script")
+    p.add_argument("program", help="the robot program: KUKA .src (its .dat beside it), ABB RAPID .mod/.modx/.prg, "
+                                      "FANUC TP .ls or UR .script")
     p.add_argument("-o", "--output", required=True,
                    help="the corrected program to write (KRL: under the same name in another folder, its .dat "
                         "beside it); the change log goes beside it as OUTPUT.log.csv")
     p.add_argument("--frames", help="YAML with the tools, bases and flange the program names but does not "
                                     "declare, in the controller's own units and angles")
-    p.add_argument("--format", choices=["krl", "rapid", "ur"], help="the program's format (default: from its suffix)")
+    p.add_argument("--format", choices=["krl", "rapid", "tp", "ur"], help="the program's format (default: from its suffix)")
     p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50, help="Newton steps at most per compensation "
                                                                             "(default %(default)s)")
 

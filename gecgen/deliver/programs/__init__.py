@@ -9,7 +9,7 @@ from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, 
 from gecgen.model.validation import ModelError
 
 #: format name -> (its module, the file suffixes it reads)
-FORMATS = {"krl": ("kuka", (".src",)), "rapid": ("abb", (".mod", ".modx", ".prg")),
+FORMATS = {"krl": ("kuka", (".src",)), "rapid": ("abb", (".mod", ".modx", ".prg")), "tp": ("fanuc", (".ls",)),
            "ur": ("ur", (".script", ".urscript"))}
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from gecgen.deliver.programs.kinematics import Arm, Seeds, arm_of, inverse, pose_error, seed_grid
 from gecgen.files import write_atomically
@@ -43,6 +44,7 @@ class Number:
     end: int
     text: str
     unit: str  # mm, m, deg, rad, or 1 (a quaternion component)
+    pad: bool = False  # the text carries the spaces that align it: a new value is right-aligned in that width
 
     @property
     def value(self) -> float:
@@ -141,16 +143,35 @@ def decimals(text: str) -> int:
 def formatted(number: Number, value: float) -> str:
     """value in the number's style: its decimals, or more when the unit needs them (DECIMALS), and the
     original text when it already says this value at its own decimals."""
-    d = decimals(number.text)
+    d = decimals(number.text.strip())
     if float(f"{value:.{d}f}") == number.value and abs(value - number.value) < 0.5 * 10.0 ** -DECIMALS[number.unit]:
         return number.text
     text = f"{value:.{max(d, DECIMALS[number.unit])}f}"
-    return "0" + text[text.index("."):] if text.startswith("-") and float(text) == 0 else text
+    text = "0" + text[text.index("."):] if text.startswith("-") and float(text) == 0 else text
+    return text.rjust(len(number.text)) if number.pad else text
 
 
 def rotation_angle(A: np.ndarray, B: np.ndarray) -> float:
     """The angle (rad) between the rotations of poses A and B (4, 4)."""
     return float(np.linalg.norm(pose_error(A[None], B[None])[0, 3:]))
+
+
+def near_angles(candidates: list[np.ndarray], old: np.ndarray) -> np.ndarray:
+    """Of equivalent Euler triples (deg), the one nearest `old`, each angle shifted by whole turns to lie
+    within 180 deg of the old one (the style of the program is kept: 179.9 does not become -180.1)."""
+    best = None
+    for c in candidates:
+        shifted = old + (c - old + 180.0) % 360.0 - 180.0
+        if best is None or np.sum(np.abs(shifted - old)) < np.sum(np.abs(best - old)):
+            best = shifted
+    return best
+
+
+def euler_numbers(T: np.ndarray, old, sequence: str) -> list[float]:
+    """x y z (mm) and the Euler angles of `sequence` (deg), the equivalent triple nearest `old` (6,)."""
+    e = Rotation.from_matrix(T[:3, :3]).as_euler(sequence, degrees=True)
+    other = np.array([e[0] + 180.0, 180.0 - e[1], e[2] + 180.0])
+    return [*(1000.0 * T[:3, 3]), *near_angles([e, other], np.asarray(old[3:6], float))]
 
 
 # -- frames ----------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.core import Format, Program, Target, line_of, numbers_in, read_text, refuse
+from gecgen.deliver.programs.core import Format, Program, Target, euler_numbers, line_of, numbers_in, read_text, \
+    refuse
 from gecgen.deliver.programs.kinematics import Arm, elbow_up, front
 from gecgen.files import write_atomically
 
@@ -40,24 +41,6 @@ def pose(values) -> np.ndarray:
     T[:3, :3] = Rotation.from_euler("ZYX", values[3:6], degrees=True).as_matrix()
     T[:3, 3] = np.asarray(values[:3], float) / 1000.0
     return T
-
-
-def near_angles(candidates: list[np.ndarray], old: np.ndarray) -> np.ndarray:
-    """Of equivalent Euler triples (deg), the one nearest `old`, each angle shifted by whole turns to lie
-    within 180 deg of the old one (the style of the program is kept: 179.9 does not become -180.1)."""
-    best = None
-    for c in candidates:
-        shifted = old + (c - old + 180.0) % 360.0 - 180.0
-        if best is None or np.sum(np.abs(shifted - old)) < np.sum(np.abs(best - old)):
-            best = shifted
-    return best
-
-
-def euler_numbers(T: np.ndarray, old, sequence: str) -> list[float]:
-    """x y z (mm) and the Euler angles of `sequence` (deg), the equivalent triple nearest `old` (6,)."""
-    e = Rotation.from_matrix(T[:3, :3]).as_euler(sequence, degrees=True)
-    other = np.array([e[0] + 180.0, 180.0 - e[1], e[2] + 180.0])
-    return [*(1000.0 * T[:3, 3]), *near_angles([e, other], np.asarray(old[3:6], float))]
 
 
 def numbers(T: np.ndarray, target: Target) -> list[float]:

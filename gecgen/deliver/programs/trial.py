@@ -198,3 +198,34 @@ def rapid_program(name: str, arm: Arm, q: np.ndarray, kinds: list[str], tool: np
         if k % 10 == 9:
             body.append("        WaitTime 0.5;")
     return "\n".join(head + body + ["    ENDPROC", "ENDMODULE", ""])
+
+
+def tp_program(name: str, arm: Arm, q: np.ndarray, kinds: list[str], tool: tuple[int, np.ndarray],
+               frame: tuple[int, np.ndarray]) -> str:
+    """A FANUC TP program (.ls) visiting postures q (N, 6) rad, kinds[k] "joint" or "cartesian"; Cartesian
+    positions in user frame frame[0] (robot base -> frame[1]) with tool tool[0] (faceplate -> tool[1])."""
+    from gecgen.deliver.programs import fanuc
+
+    config = fanuc.config(arm)
+    main = ["/PROG  " + name.upper(), "/ATTR", "OWNER\t\t= MNEDITOR;", 'COMMENT\t\t= "cell cycle";',
+            "PROTECT\t\t= READ_WRITE;", "DEFAULT_GROUP\t= 1,*,*,*,*;", "CONTROL_CODE\t= 00000000 00000000;", "/MN",
+            f"   1:  UFRAME_NUM={frame[0]} ;", f"   2:  UTOOL_NUM={tool[0]} ;"]
+    points = ["/POS"]
+    for k, (qk, kind) in enumerate(zip(q, kinds)):
+        main.append(f"{k + 3:4d}:{'J' if k % 3 == 0 else 'L'} P[{k + 1}] "
+                    f"{'100%' if k % 3 == 0 else '500mm/sec'} {'FINE' if k % 5 == 4 else 'CNT50'}    ;")
+        if kind == "joint":
+            j = np.rad2deg(qk)
+            body = (f"\tUF : {frame[0]}, UT : {tool[0]},\t\n"
+                    f"\tJ1= {j[0]:9.3f} deg,\tJ2= {j[1]:9.3f} deg,\tJ3= {j[2]:9.3f} deg,\n"
+                    f"\tJ4= {j[3]:9.3f} deg,\tJ5= {j[4]:9.3f} deg,\tJ6= {j[5]:9.3f} deg")
+        else:
+            P = np.linalg.inv(frame[1]) @ arm.fk(qk)[0] @ tool[1]
+            v = pose_values(fanuc.FORMAT, P, ("mm",) * 3 + ("deg",) * 3)
+            f, u, t, *turn = config(qk[None])[0]
+            body = (f"\tUF : {frame[0]}, UT : {tool[0]},\t\tCONFIG : '{'F' if f else 'N'} {'U' if u else 'D'} "
+                    f"{'T' if t else 'B'}, {turn[0]}, {turn[1]}, {turn[2]}',\n"
+                    f"\tX = {v[0]:9.3f}  mm,\tY = {v[1]:9.3f}  mm,\tZ = {v[2]:9.3f}  mm,\n"
+                    f"\tW = {v[3]:9.3f} deg,\tP = {v[4]:9.3f} deg,\tR = {v[5]:9.3f} deg")
+        points.append(f"P[{k + 1}]{{\n   GP1:\n{body}\n}};")
+    return "\n".join(main + points + ["/END", ""])
