@@ -156,6 +156,14 @@ def rotation_angle(A: np.ndarray, B: np.ndarray) -> float:
     return float(np.linalg.norm(pose_error(A[None], B[None])[0, 3:]))
 
 
+def euler_pose(values, sequence: str) -> np.ndarray:
+    """x y z (mm) and three Euler angles (deg) of scipy's `sequence` -> 4x4 in m."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler(sequence, values[3:6], degrees=True).as_matrix()
+    T[:3, 3] = np.asarray(values[:3], float) / 1000.0
+    return T
+
+
 def near_angles(candidates: list[np.ndarray], old: np.ndarray) -> np.ndarray:
     """Of equivalent Euler triples (deg), the one nearest `old`, each angle shifted by whole turns to lie
     within 180 deg of the old one (the style of the program is kept: 179.9 does not become -180.1)."""

@@ -11,10 +11,9 @@ import re
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.core import Format, Number, Program, Target, euler_numbers, line_of, read_text, refuse, \
-    write_same_names
+from gecgen.deliver.programs.core import Format, Number, Program, Target, euler_numbers, euler_pose, line_of, \
+    read_text, refuse, write_same_names
 from gecgen.deliver.programs.kinematics import Arm, elbow_up, front
 
 POINT = re.compile(r"^P\[(\d+)(?:\s*:\s*\"[^\"]*\")?\]\s*\{(.*?)\};", re.M | re.S)
@@ -28,10 +27,7 @@ IDENTITY = ("0",)
 
 def pose(values) -> np.ndarray:
     """X Y Z (mm) W P R (deg, fixed x-y-z) -> 4x4 in m."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("xyz", values[3:6], degrees=True).as_matrix()
-    T[:3, 3] = np.asarray(values[:3], float) / 1000.0
-    return T
+    return euler_pose(values, "xyz")
 
 
 def numbers(T: np.ndarray, target: Target) -> list[float]:

@@ -14,10 +14,9 @@ import re
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.core import Format, Program, Target, euler_numbers, line_of, numbers_in, read_text, \
-    refuse
+from gecgen.deliver.programs.core import Format, Program, Target, euler_numbers, euler_pose, line_of, numbers_in, \
+    read_text, refuse
 from gecgen.deliver.programs.kinematics import Arm, elbow_up, front
 from gecgen.files import write_atomically
 
@@ -37,10 +36,7 @@ IDENTITY = ("0", "$NULLFRAME", "NULLFRAME")
 
 def pose(values) -> np.ndarray:
     """X Y Z (mm) A B C (deg, Z-Y-X Euler: Rz(A) Ry(B) Rx(C)) -> 4x4 in m."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("ZYX", values[3:6], degrees=True).as_matrix()
-    T[:3, 3] = np.asarray(values[:3], float) / 1000.0
-    return T
+    return euler_pose(values, "ZYX")
 
 
 def numbers(T: np.ndarray, target: Target) -> list[float]:
