@@ -156,7 +156,7 @@ def parse(path: Path) -> Program:
         if not code[m.end():m.end() + 1] == "[":
             refuse(path, line_of(text, m.start()), f"{kind} {name} is not given as a literal", "write it as [...]")
         if m.group(3):
-            arrays[m.end()] = Target(f"{name}{m.group(3)}", path, line_of(text, m.start()), "joint", (),
+            arrays[m.end()] = Target(f"{name}{m.group(3)}", path, line_of(text, m.start()), "motion", (),
                                      note="an array of targets: not corrected (declare its elements one by one)")
         elif kind == "tooldata":
             tools[name] = _frame(text, code, path, m.end(), kind, name)
@@ -189,7 +189,7 @@ def parse(path: Path) -> Program:
             elif re.fullmatch(r"\w+\{.*\}", stripped, re.S):
                 continue  # an element of an array: the array is listed where it is declared
             else:
-                inline[start] = Target(f"{stripped[:30]} (line {line})", path, line, "joint", (),
+                inline[start] = Target(f"{stripped[:30]} (line {line})", path, line, "motion", (),
                                        note="a target computed or declared elsewhere: not this module's to correct")
     targets = inline | arrays
     for name, (kind, start) in declared.items():

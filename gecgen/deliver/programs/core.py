@@ -61,7 +61,7 @@ class Target:
     name: str
     file: Path
     line: int
-    kind: str  # "joint" or "pose"
+    kind: str  # "joint", "pose", or "motion" (a motion with no target of its own to correct: see note)
     numbers: tuple[Number, ...]
     config: tuple | None = None
     tool: str | None = None

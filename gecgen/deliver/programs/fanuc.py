@@ -93,7 +93,7 @@ def parse(path: Path) -> Program:
     for m in MOTION.finditer(text, 0, section if section >= 0 else len(text)):
         line = line_of(text, m.start())
         if m.group(2) == "PR":
-            targets.append(Target(f"PR[{m.group(3)}] (line {line})", path, line, "joint", (),
+            targets.append(Target(f"PR[{m.group(3)}] (line {line})", path, line, "motion", (),
                                   note="a position register: correct it on the controller"))
         elif f"P[{m.group(3)}]" not in defined:
             refuse(path, line, f"motion to P[{m.group(3)}], which the /POS section does not define",

@@ -142,7 +142,7 @@ def parse(path: Path) -> Program:
             e += 1
         line = line_of(src, m.start())
         if m.group(1).upper().endswith("_REL"):
-            targets[m.start()] = Target(f"{m.group(1).upper()} line {line}", path, line, "joint", (),
+            targets[m.start()] = Target(f"{m.group(1).upper()} line {line}", path, line, "motion", (),
                                         note="a relative motion: no target of its own to correct")
             continue
         rest, at = m.group(2), m.start(2)
@@ -165,7 +165,7 @@ def parse(path: Path) -> Program:
                 refuse(path, line, f"{m.group(1)} to {token.group()}, and no {path.with_suffix('.dat').name} beside "
                                    f"the program declares it", f"copy {path.with_suffix('.dat').name} beside it")
             else:  # a global point ($config.dat) or a system variable: not this program's to change
-                targets[at + token.start()] = Target(f"{token.group()} (line {line})", path, line, "joint", (),
+                targets[at + token.start()] = Target(f"{token.group()} (line {line})", path, line, "motion", (),
                                                      note="declared outside the program: correct it where it is "
                                                           "declared")
     for name, (p, kind, start, end) in decls.items():
