@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 import yaml
 
 from gecgen.api import Calibrator, load_robot
@@ -401,3 +403,101 @@ def test_tp_refusals_name_the_line_and_the_fix(fanuc_cal, tmp_path, old, new, ex
     with pytest.raises(ModelError) as err:
         filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
     assert str(err.value) == f"{tmp_path / expected}"
+
+
+# -- details ---------------------------------------------------------------------------------------
+
+def test_the_controller_arm_is_the_robot_files_chain(rng):
+    """Arm.frames (the solver's own evaluation, constants folded once) equals the model's exact chain."""
+    from gecgen.model.kinematics import frames
+
+    for robot_file in (ROOT / "robots" / "fanuc.yaml", DATA / "robots" / "ur10.yaml"):
+        robot = load_robot(robot_file)
+        arm = arm_of(robot, np.eye(4))
+        q = rng.uniform(-2, 2, (20, 6))
+        assert np.allclose(arm.fk(q), frames(robot, q)[robot.n_frames], atol=1e-12)
+
+
+def _krl_two_poses(tmp_path, arm, q, tool_line="$TOOL={X 0,Y 0,Z 200,A 0,B 0,C 0}"):
+    """A KRL program moving to the pose of each posture q (K, 6) rad, written in the motion, with
+    the tool set in the program itself."""
+    config = kuka.config(arm)
+    lines = ["DEF two( )", tool_line, "$BASE=$NULLFRAME"]
+    for qk in q:
+        values = trial.pose_values(kuka.FORMAT, arm.fk(qk)[0] @ kuka.pose((0, 0, 200, 0, 0, 0)), ("mm",) * 3 + ("deg",) * 3)
+        s, t = config(qk[None])[0]
+        lines.append("PTP {" + ",".join(f"{k} {v:.4f}" for k, v in zip(kuka.POSE_KEYS, values)) + f",S {s},T {t}}}")
+    (tmp_path / "two.src").write_text("\n".join(lines + ["END", ""]))
+    return tmp_path / "two.src"
+
+
+def test_a_correction_that_would_flip_a_turn_bit_is_kept(kuka_cal, tmp_path):
+    """A4 0.06 deg either side of zero: the correction (0.27 deg on A4 here) moves it the same way at
+    both, so at one of the two it crosses zero, T changes, and the controller would solve the written
+    pose in another configuration; that target is kept, the other corrected."""
+    cal, robot, _ = kuka_cal
+    arm = arm_of(robot, np.eye(4))
+    q = np.radians([[20.0, -70.0, -60.0, 0.0, 40.0, 30.0]] * 2)
+    q[:, 3] = [1e-3, -1e-3]
+    assert abs(cal.compensate(q).q[0, 3] - q[0, 3]) > 2e-3
+    outcome = correct(kuka.FORMAT, kuka.parse(_krl_two_poses(tmp_path, arm, q)), cal,
+                      read_frames(None, kuka.FORMAT))
+    reasons = sorted(c.reason for c in outcome.changes)
+    assert reasons == ["corrected", "the corrected pose would bring the controller to another configuration"]
+
+
+def test_krl_tool_set_in_the_program_and_a_pose_without_s_and_t(kuka_cal, tmp_path):
+    cal, robot, _ = kuka_cal
+    arm = arm_of(robot, np.eye(4))
+    q = np.radians([[20.0, -70.0, -60.0, 30.0, 40.0, 30.0]])
+    source = _krl_two_poses(tmp_path, arm, q)
+    program = kuka.parse(source)
+    assert program.targets[0].tool == "$TOOL line 2"
+    assert np.allclose(program.tools["$TOOL line 2"], kuka.pose((0, 0, 200, 0, 0, 0)))
+    assert correct(kuka.FORMAT, program, cal, read_frames(None, kuka.FORMAT)).corrected == 1
+    text = source.read_text()
+    source.write_text(text[:text.index(",S ")] + "}\nEND\n")
+    outcome = correct(kuka.FORMAT, kuka.parse(source), cal, read_frames(None, kuka.FORMAT))
+    assert outcome.changes[0].reason.startswith("names no configuration")
+
+
+def test_ur_installation_tcp_comes_from_the_frames_file(ur_cal, tmp_path):
+    program = tmp_path / "p.script"
+    program.write_text("def p():\n  movej([0.3, -1.2, 1.6, -1.9, -1.57, 0.4])\n  movel(p[-0.8, -0.4, 0.1, 2.2, 2.2, 0.0])\n"
+                       "end\n")
+    with pytest.raises(ModelError, match="p.script:3: target movel line 3 is in tool installation, which neither the "
+                                         "program nor a frames file describes; give its pose under tools: installation"):
+        correct(ur.FORMAT, ur.parse(program), ur_cal[0], read_frames(None, ur.FORMAT))
+    (tmp_path / "frames.yaml").write_text("tools:\n  installation: [0, 0, 0.18, 0, 0, 0]\n")
+    assert ur.parse(program).targets[1].tool == "installation"
+    frames = read_frames(tmp_path / "frames.yaml", ur.FORMAT)
+    assert np.allclose(frames.tools["installation"], ur.pose((0, 0, 0.18, 0, 0, 0)))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("tools:\n  1: [0, 0, 320]\n", "frames.yaml: tools: 1: give 6 numbers in the krl controller's pose convention"),
+    ("tool:\n  1: [0, 0, 320, 0, 0, 0]\n", "frames.yaml: unknown key tool; give flange, tools and bases"),
+])
+def test_a_bad_frames_file_is_refused_naming_the_key(tmp_path, text, message):
+    (tmp_path / "frames.yaml").write_text(text)
+    with pytest.raises(ModelError, match=message):
+        read_frames(tmp_path / "frames.yaml", kuka.FORMAT)
+
+
+@given(st.integers(-10 ** 7, 10 ** 7), st.integers(0, 6), st.floats(-5.0, 5.0), st.sampled_from(["mm", "deg", "m"]),
+       st.booleans())
+def test_a_number_keeps_its_style_and_says_the_new_value(mantissa, digits, change, unit, pad):
+    """A rewritten number has the original's decimals or the unit's minimum, whichever is more, and
+    says the value to half its last digit; an unchanged value keeps its text."""
+    from gecgen.deliver.programs.core import DECIMALS, Number, formatted
+
+    text = f"{mantissa / 10 ** digits:.{digits}f}"
+    number = Number(0, len(text) + 2 * pad, "  " * pad + text, unit, pad)
+    assert formatted(number, number.value) == number.text
+    new = formatted(number, number.value + change)
+    kept = max(digits, DECIMALS[unit])
+    assert abs(float(new) - (number.value + change)) <= 0.5 * 10.0 ** -kept * (1 + 1e-9) + 1e-12 * abs(float(new))
+    if new != number.text:
+        assert len(new.strip().split(".")[1]) == kept
+    if pad:
+        assert len(new) >= len(number.text) and new.strip() == new.lstrip()
