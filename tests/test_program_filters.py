@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 import yaml
 
 from gecgen.api import Calibrator, load_robot
@@ -424,7 +425,8 @@ def _krl_two_poses(tmp_path, arm, q, tool_line="$TOOL={X 0,Y 0,Z 200,A 0,B 0,C 0
     config = kuka.config(arm)
     lines = ["DEF two( )", tool_line, "$BASE=$NULLFRAME"]
     for qk in q:
-        values = trial.pose_values(kuka.FORMAT, arm.fk(qk)[0] @ kuka.pose((0, 0, 200, 0, 0, 0)), ("mm",) * 3 + ("deg",) * 3)
+        tcp = arm.fk(qk)[0] @ kuka.pose((0, 0, 200, 0, 0, 0))
+        values = trial.pose_values(kuka.FORMAT, tcp, ("mm",) * 3 + ("deg",) * 3)
         s, t = config(qk[None])[0]
         lines.append("PTP {" + ",".join(f"{k} {v:.4f}" for k, v in zip(kuka.POSE_KEYS, values)) + f",S {s},T {t}}}")
     (tmp_path / "two.src").write_text("\n".join(lines + ["END", ""]))
@@ -501,3 +503,20 @@ def test_a_number_keeps_its_style_and_says_the_new_value(mantissa, digits, chang
         assert len(new.strip().split(".")[1]) == kept
     if pad:
         assert len(new) >= len(number.text) and new.strip() == new.lstrip()
+
+
+def test_a_turned_flange_with_its_tool_turned_back_changes_nothing(kuka_cal, tmp_path):
+    """`flange:` in the frames file: the controller's flange F in the robot file's frame n. The same
+    TCP given as F^-1 T on that flange must give the same corrected program as T on frame n."""
+    source = _copy_krl(tmp_path)
+    plain = filter_program(kuka_cal[0], source, tmp_path / "a" / "palletize.src", tmp_path / "frames.yaml")[0]
+    F = kuka.pose((0.0, 0.0, 50.0, 30.0, 10.0, 0.0))
+    tool = np.linalg.inv(F) @ kuka.pose((0, 0, 320, 0, -90, 0))
+    numbers = [*(1e3 * tool[:3, 3]), *Rotation.from_matrix(tool[:3, :3]).as_euler("ZYX", degrees=True)]
+    (tmp_path / "turned.yaml").write_text(f"flange: [0, 0, 50, 30, 10, 0]\ntools:\n  1: {[float(v) for v in numbers]}\n"
+                                          f"bases:\n  2: [1800, -400, 650, 90, 0, 0]\n")
+    turned = filter_program(kuka_cal[0], source, tmp_path / "b" / "palletize.src", tmp_path / "turned.yaml")[0]
+    assert [c.reason for c in plain.changes] == [c.reason for c in turned.changes]
+    for x, y in zip(plain.changes, turned.changes):
+        if x.after is not None and x.target.kind == "pose":
+            assert np.allclose([float(v) for v in x.after], [float(v) for v in y.after], atol=2e-3)

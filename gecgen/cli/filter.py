@@ -14,7 +14,8 @@ def add_parser(command):
                         "beside it); the change log goes beside it as OUTPUT.log.csv")
     p.add_argument("--frames", help="YAML with the tools, bases and flange the program names but does not "
                                     "declare, in the controller's own units and angles")
-    p.add_argument("--format", choices=["krl", "rapid", "tp", "ur"], help="the program's format (default: from its suffix)")
+    p.add_argument("--format", choices=["krl", "rapid", "tp", "ur"],
+                   help="the program's format (default: from its suffix)")
     p.add_argument("--max-iter", type=whole(0, 1_000_000), default=50, help="Newton steps at most per compensation "
                                                                             "(default %(default)s)")
 
@@ -26,7 +27,7 @@ def run(args) -> dict:
 
     cal = load_calibration(args.calibration)
     outcome, written, log = filter_program(cal, args.program, args.output, args.frames, args.format, args.max_iter)
-    kept = [c for c in outcome.changes if c.after is None and c.reason != "no correction needed"]
+    kept = outcome.kept
     result = {"robot": cal.robot_.name, "program": str(args.program),
               "written": [str(p) for p in written.values()], "log": str(log),
               "n_targets": len(outcome.changes), "corrected": outcome.corrected, "status_counts": outcome.counts(),
@@ -36,8 +37,8 @@ def run(args) -> dict:
               "max_correction_deg": max((c.rotation_deg for c in outcome.changes), default=0.0)}
     if kept:
         first = kept[0]
-        raise Incomplete(f"{first.target.file}:{first.target.line}: {first.target.name} kept as written ({first.reason}); "
-                         f"{outcome.corrected} of {len(outcome.changes)} targets corrected, {len(kept)} kept as written "
-                         f"(each with its reason in {result['log']}): the program is written, the kept targets "
-                         f"carry the uncalibrated error", result)
+        raise Incomplete(f"{first.target.file}:{first.target.line}: {first.target.name} kept as written "
+                         f"({first.reason}); {outcome.corrected} of {len(outcome.changes)} targets corrected, "
+                         f"{len(kept)} kept as written (each with its reason in {result['log']}): the program is "
+                         f"written, the kept targets carry the uncalibrated error", result)
     return result

@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.kinematics import Arm, Seeds, arm_of, inverse, pose_error, seed_grid
+from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, pose_error, seed_grid
 from gecgen.files import write_atomically
 from gecgen.model.validation import ModelError, read_yaml, require
 
@@ -31,6 +31,8 @@ NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 DECIMALS = {"mm": 3, "m": 6, "deg": 4, "rad": 6, "1": 7}
 #: a correction below these (m, rad) changes nothing the controller can act on: the target is kept as written
 NOTHING = (1e-7, 1e-8)
+#: the outcome of a target the calibration does not move: kept byte for byte, and not a failure
+UNCHANGED = "no correction needed"
 #: the written pose must bring the controller back to the corrected joints within this (rad): further off,
 #: its inverse kinematics took another branch (a configuration flip); rounding moves them far less
 ROUND_TRIP = 1e-3
@@ -256,6 +258,12 @@ class Outcome:
     def corrected(self) -> int:
         return sum(c.after is not None for c in self.changes)
 
+    @property
+    def kept(self) -> list[Change]:
+        """The targets kept as written that the calibration would have moved, or that have no target
+        of their own: each still carries the uncalibrated error."""
+        return [c for c in self.changes if c.after is None and c.reason != UNCHANGED]
+
 
 def _joint_scale(fmt: Format) -> float:
     return 180.0 / math.pi if fmt.joint_unit == "deg" else 1.0
@@ -332,7 +340,7 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
         T0, T1 = arm.fk(q0)[0] @ tool, arm.fk(q)[0] @ tool
         move = (float(np.linalg.norm(T1[:3, 3] - T0[:3, 3])), rotation_angle(T0, T1))
         if move[0] < NOTHING[0] and move[1] < NOTHING[1] and np.max(np.abs(q - q0)) < NOTHING[1]:
-            changes.append(Change(t, None, "no correction needed"))
+            changes.append(Change(t, None, UNCHANGED))
             previous = q0
             continue
         if t.kind == "joint":

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.deliver.programs.core import Format, Frames, Number, Program, Target, frame_of
-from gecgen.deliver.programs.kinematics import Arm, elbow_up, front, inverse, seed_grid, wrapped
+from gecgen.deliver.programs.kinematics import Arm, inverse, seed_grid, wrapped
 from gecgen.model.kinematics import constant
 
 
@@ -140,11 +140,11 @@ def ur_program(name: str, arm: Arm, q: np.ndarray, kinds: list[str], tcp: np.nda
     the TCP tcp (4, 4, flange -> TCP) set by set_tcp."""
     from gecgen.deliver.programs import ur
 
-    lines = [f"def {name}():", f"  set_tcp(p[{', '.join(f'{v:.4f}' for v in pose_values(ur.FORMAT, tcp, ('m',) * 3 + ('rad',) * 3))}])",
+    units = ("m",) * 3 + ("rad",) * 3
+    lines = [f"def {name}():", f"  set_tcp(p[{', '.join(f'{v:.4f}' for v in pose_values(ur.FORMAT, tcp, units))}])",
              "  set_payload(2.5)", "  # a pick-and-place cycle"]
     for k, (qk, kind) in enumerate(zip(q, kinds)):
-        P = arm.fk(qk)[0] @ tcp
-        p = ", ".join(f"{v:.6f}" for v in pose_values(ur.FORMAT, P, ("m",) * 3 + ("rad",) * 3))
+        p = ", ".join(f"{v:.6f}" for v in pose_values(ur.FORMAT, arm.fk(qk)[0] @ tcp, units))
         if kind == "movej":
             lines.append(f"  movej([{', '.join(f'{v:.5f}' for v in qk)}], a=1.4, v=1.05)")
         elif kind == "variable":
