@@ -520,3 +520,14 @@ def test_a_turned_flange_with_its_tool_turned_back_changes_nothing(kuka_cal, tmp
     for x, y in zip(plain.changes, turned.changes):
         if x.after is not None and x.target.kind == "pose":
             assert np.allclose([float(v) for v in x.after], [float(v) for v in y.after], atol=2e-3)
+
+
+def test_a_public_krl_program_round_trips(kuka_cal, tmp_path):
+    """ros-industrial's RSI program (BSD, tests/data/programs/krl/ros_rsi): no .dat, two inline joint
+    targets among RSI calls, LF line ends."""
+    source = DATA / "krl" / "ros_rsi" / "ros_rsi.src"
+    program = kuka.parse(source)
+    assert [(t.kind, t.values) for t in program.targets] == [("joint", (0, -90, 90, 0, 90, 0))] * 2
+    outcome = _round_trips(kuka.FORMAT, kuka_cal[0], source, tmp_path / "ros_rsi.src")
+    assert outcome.corrected == 2
+    assert (tmp_path / "ros_rsi.src").read_text().count("PTP {A1 ") == 2
