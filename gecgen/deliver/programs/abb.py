@@ -150,13 +150,17 @@ def _frame(text: str, code: str, path: Path, start: int, kind: str, name: str) -
 def parse(path: Path) -> Program:
     text = read_text(path)
     code = _code(text)
-    tools, bases, declared, arrays = {}, {}, {}, {}
+    tools, bases, declared, listed = {}, {}, {}, {}
     for m in DECL.finditer(code):
         kind, name = m.group(1).lower(), m.group(2)
-        if not code[m.end():m.end() + 1] == "[":
-            refuse(path, line_of(text, m.start()), f"{kind} {name} is not given as a literal", "write it as [...]")
-        if m.group(3):
-            arrays[m.end()] = Target(f"{name}{m.group(3)}", path, line_of(text, m.start()), "motion", (),
+        if code[m.end():m.end() + 1] != "[":
+            if kind in ("tooldata", "wobjdata"):  # a frame computed at run time: nobody can say where it is
+                refuse(path, line_of(text, m.start()), f"{kind} {name} is not given as a literal",
+                       f"write it as [...], or give {name} in a frames file")
+            listed[m.end()] = Target(name, path, line_of(text, m.start()), "motion", (),
+                                     note="computed from an expression: it follows what it is computed from")
+        elif m.group(3):
+            listed[m.end()] = Target(f"{name}{m.group(3)}", path, line_of(text, m.start()), "motion", (),
                                      note="an array of targets: not corrected (declare its elements one by one)")
         elif kind == "tooldata":
             tools[name] = _frame(text, code, path, m.end(), kind, name)
@@ -191,7 +195,7 @@ def parse(path: Path) -> Program:
             else:
                 inline[start] = Target(f"{stripped[:30]} (line {line})", path, line, "motion", (),
                                        note="a target computed or declared elsewhere: not this module's to correct")
-    targets = inline | arrays
+    targets = inline | listed
     for name, (kind, start) in declared.items():
         tool, wobj = uses.get(name, (None, None))
         if kind == "robtarget" and name not in uses:
