@@ -23,7 +23,7 @@ from gecgen.simulate import load_truth, random_design, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS, PROGRAM_ROBOTS = ROOT / "robots", ROOT / "tests" / "data" / "programs" / "robots"
-#: the acceptance: the filtered program's tool within this multiple of the calibration's held-out RMS
+#: the target: the filtered program's tool within this multiple of the calibration's held-out RMS
 WITHIN = 1.2
 
 
