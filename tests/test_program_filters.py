@@ -531,3 +531,17 @@ def test_a_public_krl_program_round_trips(kuka_cal, tmp_path):
     outcome = _round_trips(kuka.FORMAT, kuka_cal[0], source, tmp_path / "ros_rsi.src")
     assert outcome.corrected == 2
     assert (tmp_path / "ros_rsi.src").read_text().count("PTP {A1 ") == 2
+
+
+def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
+    program = tmp_path / "c.script"
+    program.write_text("def c():\n  movej(get_inverse_kin(p[0.5, -0.2, 0.3, 3.1, 0.1, 0.0], qnear=[0, -1.5, 1.5, -1.5, -1.5, 0]),"
+                       " a=1.4, v=1.05)\n  movec(p[0.5, -0.1, 0.3, 3.1, 0.1, 0.0], Via_p, a=1.2, v=0.25, r=0.05, mode=1)\n"
+                       "  movec(Via_p, p[0.4, 0.0, 0.3, 3.1, 0.1, 0.0], a=1.2, v=0.25)\nend\n")
+    with pytest.raises(ModelError, match=r"c.script:3: movec to 'Via_p': not a joint list"):
+        ur.parse(program)
+    program.write_text(program.read_text().replace("def c():\n", "def c():\n  global Via_p=p[0.45, -0.15, 0.3, 3.1, 0.1, 0.0]\n"))
+    targets = ur.parse(program).targets
+    assert [(t.name, t.kind, t.values[0]) for t in targets] == [
+        ("Via_p", "pose", 0.45), ("movej line 3", "pose", 0.5), ("movec line 4", "pose", 0.5),
+        ("movec line 5", "pose", 0.4)]

@@ -1,6 +1,7 @@
-"""Universal Robots script (.script, .urscript): `movej`, `movel` and `movep` to a joint list
-`[q1, ..., q6]` (rad) or a pose `p[x, y, z, rx, ry, rz]` (m, rotation vector in rad) in the robot's
-base frame, written in the call or assigned to a variable the call names. The TCP is the last
+"""Universal Robots script (.script, .urscript): `movej`, `movel`, `movep` and `movec` (its via pose and
+its target) to a joint list `[q1, ..., q6]` (rad) or a pose `p[x, y, z, rx, ry, rz]` (m, rotation vector
+in rad) in the robot's base frame, written in the call (also through `get_inverse_kin(pose, ...)`) or
+assigned to a variable the call names. The TCP is the last
 `set_tcp(p[...])` before the target, else the installation's (`tools: installation` of a frames file).
 The controller has no configuration flags: a pose is reached nearest the joints of the target before.
 """
@@ -15,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.deliver.programs.core import Format, Program, Target, line_of, numbers_in, read_text, refuse, \
     write_same_names
 
-MOVE = re.compile(r"\b(movej|movel|movep)\s*\(")
+MOVE = re.compile(r"\b(movej|movel|movep|movec)\s*\(")
 #: a literal joint list or pose: p[ six numbers ] or [ six numbers ]
 LITERAL = re.compile(r"(p?)\[\s*([^\[\]]*)\]")
 ASSIGN = re.compile(r"^[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[ \t]*(p?)\[([^\[\]\n]*)\]", re.M)
@@ -80,22 +81,26 @@ def parse(path: Path) -> Program:
     used: dict[str, int] = {}
     for m in MOVE.finditer(code):
         start = m.end()
-        end = _argument_end(code, start)
-        arg = code[start:end].strip()
-        literal = LITERAL.fullmatch(arg)
-        if literal and SIX.match(literal.group(2)):
-            at = start + code[start:end].index(arg)
-            found[at] = _target(text, path, at, LITERAL.match(code, at), f"{m.group(1)} line {line_of(text, at)}",
-                                tool_at(at))
-            continue
-        called = re.fullmatch(r"(\w+)\s*\((.*)\)", arg, re.S)
-        inner = called.group(2).split(",")[0].strip() if called and called.group(1) in PASS else arg
-        if NAME.fullmatch(inner) and inner in assigned:
-            used.setdefault(inner, start)
-            continue
-        refuse(path, line_of(text, start), f"{m.group(1)} to {arg.splitlines()[0][:40]!r}: not a joint list, a pose "
-                                           f"p[...] or a variable assigned one",
-               "write the target as a literal or assign it to a variable first")
+        # movec passes through a via pose to its target: both are targets
+        for _ in range(2 if m.group(1) == "movec" else 1):
+            end = _argument_end(code, start)
+            arg = code[start:end].strip()
+            called = re.fullmatch(r"(\w+)\s*\(.*\)", arg, re.S)
+            first = start + code[start:end].index("(") + 1 if called and called.group(1) in PASS else start
+            inner_end = _argument_end(code, first)
+            inner = code[first:inner_end].strip()
+            literal = LITERAL.fullmatch(inner)
+            if literal and SIX.match(literal.group(2)):
+                at = first + code[first:inner_end].index(inner)
+                found[at] = _target(text, path, at, LITERAL.match(code, at), f"{m.group(1)} line {line_of(text, at)}",
+                                    tool_at(at))
+            elif NAME.fullmatch(inner) and inner in assigned:
+                used.setdefault(inner, start)
+            else:
+                refuse(path, line_of(text, start), f"{m.group(1)} to {arg.splitlines()[0][:40]!r}: not a joint list, "
+                                                   f"a pose p[...] or a variable assigned one",
+                       "write the target as a literal or assign it to a variable first")
+            start = end + 1
     for a in ASSIGN.finditer(code):
         if a.group(1) in used and SIX.match(a.group(3)):
             # the controller moves with the TCP set when the move runs, not when the variable was assigned
