@@ -545,3 +545,16 @@ def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
     assert [(t.name, t.kind, t.values[0]) for t in targets] == [
         ("Via_p", "pose", 0.45), ("movej line 3", "pose", 0.5), ("movec line 4", "pose", 0.5),
         ("movec line 5", "pose", 0.4)]
+
+
+def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
+    (tmp_path / "arc.src").write_text("DEF arc( )\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\n"
+                                      "CIRC XAUX1, {X 10,Y 20,Z 30,A 0,B 90,C 0,S 2,T 10} CA 180 C_DIS\n"
+                                      "SLIN XEND1 WITH $VEL = SVEL_CP(0.2, , LCPDAT1)\nSPTP {A1 1,A2 -90,A3 90,A4 0,A5 30,A6 0}\nEND\n")
+    (tmp_path / "arc.dat").write_text("DEFDAT arc\nDECL E6POS XAUX1={X 1,Y 2,Z 3,A 4,B 5,C 6,S 2,T 10,E1 0}\n"
+                                      "DECL E6POS XEND1={X 7,Y 8,Z 9,A 1,B 2,C 3,S 6,T 2,E1 0}\nDECL E6POS XUNUSED={X 7,Y 8,"
+                                      "Z 9,A 1,B 2,C 3,S 6,T 2}\nENDDAT\n")
+    found = {t.name: (t.kind, t.tool, t.base, t.config) for t in kuka.parse(tmp_path / "arc.src").targets}
+    assert found == {"CIRC line 4": ("pose", "1", "2", (2, 10)), "SPTP line 6": ("joint", None, None, None),
+                     "XAUX1": ("pose", "1", "2", (2, 10)), "XEND1": ("pose", "1", "2", (6, 2)),
+                     "XUNUSED": ("motion", None, None, None)}

@@ -170,7 +170,12 @@ def parse(path: Path) -> Program:
                                                           "declared")
     for name, (p, kind, start, end) in decls.items():
         fd = fdat.get("F" + name[1:]) if name.startswith("X") else None
-        tool, base = fd if fd else first_use.get(name, ("$TOOL", "$BASE"))
+        if not fd and name not in first_use and kind in ("E6POS", "POS"):
+            targets[(0 if p == path else 1, start)] = Target(
+                name, p, line_of(texts[p], start), "motion", (),
+                note="used by no motion of the program and without an FDAT: its tool and base are unknown")
+            continue
+        tool, base = fd if fd else first_use[name] if name in first_use else (None, None)
         targets[(0 if p == path else 1, start)] = _target(texts[p], p, kind, name, start, end, tool, base)
     ordered = sorted(targets.items(), key=lambda kv: kv[0] if isinstance(kv[0], tuple) else (0, kv[0]))
     return Program(path, texts, [t for _, t in ordered], tools, bases)
