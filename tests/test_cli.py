@@ -57,7 +57,7 @@ def test_every_argument_is_explained_with_its_default():
                    if not isinstance(a, argparse._HelpAction)
                    and (not a.help or (a.option_strings and a.default not in (None, False) and "default" not in a.help))]
     assert unexplained == []
-    assert len(commands) == 16
+    assert len(commands) == 17
 
 
 @pytest.mark.parametrize("args", [["--version"], ["--help"], ["simulat"]])
