@@ -1,4 +1,4 @@
-"""gecgen design: D- and I-optimal choice of the poses to measure (gecgen/runtime/design.py)."""
+"""gecgen design: D- and I-optimal choice of the poses to measure (gecgen/plan/design.py)."""
 import csv
 import json
 import warnings
@@ -11,7 +11,7 @@ from test_cli import gecgen
 from gecgen.cli import main
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.measurements import read_measurements, write_measurements
-from gecgen.runtime import design as D
+from gecgen.plan import design as D
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import identify, position_errors, rows_H_and_residual
 from gecgen.simulate import load_truth, random_design, simulate

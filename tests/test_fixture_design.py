@@ -1,4 +1,4 @@
-"""Designs for calibration without a tracker (gecgen/runtime/fixture_design.py, `gecgen design
+"""Designs for calibration without a tracker (gecgen/plan/fixture_design.py, `gecgen design
 --fixtures`): which configurations to record in each socket and on each plane.
 
 Checked against independent computation: the exchange's incremental gain against the log det of the
@@ -22,9 +22,9 @@ from gecgen.model.fixture_file import Fixture
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import read_measurements
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.runtime import fixture_design as FD
+from gecgen.plan import fixture_design as FD
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.design import logdet
+from gecgen.plan.design import logdet
 from gecgen.simulate import load_truth
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 

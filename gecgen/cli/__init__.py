@@ -14,9 +14,9 @@ import sys
 import warnings
 from pathlib import Path
 
-from gecgen import __version__
+from gecgen.version import __version__
 from gecgen.cli.human import print_human, warning_lines
-from gecgen.files import check_output_dir, check_output_file, reading, same_file
+from gecgen.model.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
 

@@ -88,7 +88,7 @@ def _stated(args, caught: list) -> dict:
     assessment = accuracy_next_step(result, args.calibration, args.volume, args.data)
     result["next_step"], result["warnings"] = assessment.next_step, warning_lines(caught)
     if args.plot or args.report:
-        from gecgen.files import write_atomically
+        from gecgen.model.files import write_atomically
         from gecgen.report import content, plots, write
 
         figure = plots.volume_map(calib.robot, volume, samples, statement)

@@ -51,7 +51,7 @@ def _calibrated(args, caught: list) -> dict:
     the result and the report carry."""
     from gecgen import report
     from gecgen.api import calibrate, model_names
-    from gecgen.files import write_atomically
+    from gecgen.model.files import write_atomically
     from gecgen.loop.diagnose import write_error_model
     from gecgen.runtime import export
     from gecgen.runtime.compiled import CompiledModel

@@ -1,13 +1,13 @@
 """`gecgen design ROBOT [--errors FILE] --poses N -o POSES.csv [--json]`: choose the poses to measure.
 
 Candidates are uniform samples within the joint limits (`--candidates K`, `--seed`) or the rows
-of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/runtime/design.py`
+of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/plan/design.py`
 chooses N of the rest (`--criterion`: D- or I-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
 of the pose, `fx..mz` and `payload_kg`: the commands to send, and the measurement file's joint
 columns once `target x y z` are filled in.
 
 With `--fixtures FILE.csv` (sockets and planes, `model/fixture_file.py`) the configurations are chosen
-for calibration without a tracker instead (`gecgen/runtime/fixture_design.py`): POSES.csv is then a
+for calibration without a tracker instead (`gecgen/plan/fixture_design.py`): POSES.csv is then a
 measurement file's rows, `point` or `plane` named and `x y z` empty, to be recorded with the joints
 read once the ball is seated or the probe touches.
 """
@@ -24,8 +24,8 @@ from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime import design as D
-from gecgen.runtime import fixture_design as FD
+from gecgen.plan import design as D
+from gecgen.plan import fixture_design as FD
 
 DEFAULT_CANDIDATES = 5000
 

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 
 from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import pose_id_column, read_commands, write_measurements

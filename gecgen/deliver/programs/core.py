@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, pose_error, seed_grid
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.model.validation import ModelError, read_yaml, require
 
 #: a number in a program: sign, digits, decimals, exponent

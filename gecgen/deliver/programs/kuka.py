@@ -18,7 +18,7 @@ import numpy as np
 from gecgen.deliver.programs.core import Format, Program, Target, euler_numbers, euler_pose, line_of, numbers_in, \
     read_text, refuse
 from gecgen.deliver.programs.kinematics import Arm, elbow_up, front
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 
 MOTION = re.compile(r"^[ \t]*(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL|SPTP_REL|SLIN_REL)\b([^;\n]*)",
                     re.M | re.I)
