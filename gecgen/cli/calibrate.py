@@ -40,6 +40,21 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    from gecgen.files import output_folder
+
+    out = Path(args.output)
+    try:
+        # the folder is held from the start (a second run into it is refused at once) and written
+        # aside, replacing the old one whole at the end (files.output_folder)
+        with output_folder(out, "calibration folder") as build:
+            return _calibrate(args, out, build)
+    except KeyboardInterrupt as exc:
+        raise type(exc)(f"{out} is as it was before this run") from None
+
+
+def _calibrate(args, out: Path, build: Path) -> dict:
+    """The command's work, its files written into `build`, which becomes `out`: the paths the result
+    names are those under `out`."""
     from gecgen import report
     from gecgen.api import calibrate, model_names
     from gecgen.files import write_atomically
@@ -56,17 +71,17 @@ def run(args) -> dict:
         sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
                         seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
                         progress=progress, keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
-    out = Path(args.output)
     cal, choice = sel.calibrator, sel.choice
-    cal.save(out / "calibration.json")
-    write_error_model(cal.robot_, choice.model, sel.effects, out / "errors.yaml")
+    # the same depth beside `out`: the robot file's path relative to the calibration is the same
+    cal.save(build / "calibration.json")
+    write_error_model(cal.robot_, choice.model, sel.effects, build / "errors.yaml")
     # the code, the coefficient header and an example program: what `gecgen export --c` writes, its
     # example command chosen on the calibration's own targets (the fit's model of pose data has the
     # measured frames' vertices as targets, which the emitted code does not)
     calib = cal.calibration_
     code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
     for name, text in code.items():
-        write_atomically(out / "generated" / name, text)
+        write_atomically(build / "generated" / name, text)
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
               "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table,
               "n_params": len(choice.model.coefficients),
@@ -84,6 +99,7 @@ def run(args) -> dict:
             result["val_branches"] = sel.val_branches
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
-    files.update(report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), out))
+    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), build)
+    files.update({k: out / Path(v).relative_to(build) for k, v in written.items()})
     result["files"] = {k: str(v) for k, v in files.items()}
     return result
