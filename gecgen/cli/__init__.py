@@ -6,11 +6,14 @@ with a one-line reason on stderr when it cannot do its job.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -175,19 +178,44 @@ class Incomplete(Exception):
         self.result = result
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a service manager, `kill`, a CI timeout), raised where the command is, so that it
+    ends as on Ctrl-C: its half-written output removed, its worker processes ended."""
+
+
+def _terminated(signum, frame):
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """While the command runs, SIGTERM raises `Terminated` (only the main thread may set handlers:
+    a command run from another thread, as fleet's robots are, keeps its process's handling)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the
     # failure's reason is then the one line on stderr
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _sigterm_interrupts():
         warnings.simplefilter("always")
         try:
             code, result = _run(args)
-        except KeyboardInterrupt:  # Ctrl-C: what was being written is cleaned up (files.write_atomically)
-            print(f"gecgen {args.command}: interrupted; nothing was written for this command's unfinished step",
+        except KeyboardInterrupt as exc:  # what was being written is cleaned up (files.write_atomically,
+            # files.output_folder), unless the command says what it leaves (the exception's text)
+            how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+            print(f"gecgen {args.command}: {how}; {str(exc) or 'nothing was written for its unfinished step'}",
                   file=sys.stderr)
-            return 130
+            return code
     if code and result is None:
         return code
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
