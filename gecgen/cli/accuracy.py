@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, whole
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, progress_status, say, whole
 
 #: Monte Carlo draws of the coefficient and unmodelled errors
 DRAWS = 2000
@@ -47,6 +47,13 @@ def add_parser(command):
 
 
 def run(args) -> dict:
+    with progress_status(not args.json) as status:
+        say(status, f"reading {args.calibration} and the data")
+        return _statement(args, status)
+
+
+def _statement(args, status) -> dict:
+    """The command's work, saying how far it is on `status` (`common.progress_status`)."""
     import numpy as np
 
     from gecgen.api import load_calibration
@@ -62,6 +69,7 @@ def run(args) -> dict:
     volume = load_volume(args.volume, calib.robot)
     data, y = _positions(args.data, calib)
     held_out = _positions(args.val, calib) if args.val else None
+    say(status, f"bounding the compensated error over {args.volume} ({args.draws} draws of the coefficients)")
     samples, statement, _ = accuracy(calib, volume, data, y, held_out,
                                      None if args.noise_mm is None else 1e-3 * args.noise_mm,
                                      1e-3 * args.repeatability_mm, args.tolerance_mm,
@@ -81,6 +89,7 @@ def run(args) -> dict:
         from gecgen.files import write_atomically
         from gecgen.report import content, plots, write
 
+        say(status, "drawing the map of the bound over the volume, writing the outputs")
         figure = plots.volume_map(calib.robot, volume, samples, statement)
         if args.plot:
             write_atomically(Path(args.plot), figure.png)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, progress_status,
-                               whole)
+                               say, whole)
 from gecgen.loop.calibrate import NAMES
 
 
@@ -46,15 +46,15 @@ def run(args) -> dict:
     try:
         # the folder is held from the start (a second run into it is refused at once) and written
         # aside, replacing the old one whole at the end (files.output_folder)
-        with output_folder(out, "calibration folder") as build:
-            return _calibrate(args, out, build)
+        with output_folder(out, "calibration folder") as build, progress_status(not args.json) as status:
+            return _calibrate(args, out, build, status)
     except KeyboardInterrupt as exc:
         raise type(exc)(f"{out} is as it was before this run") from None
 
 
-def _calibrate(args, out: Path, build: Path) -> dict:
+def _calibrate(args, out: Path, build: Path, status) -> dict:
     """The command's work, its files written into `build`, which becomes `out`: the paths the result
-    names are those under `out`."""
+    names are those under `out`. Says how far it is on `status` (`common.progress_status`)."""
     from gecgen import report
     from gecgen.api import calibrate, model_names
     from gecgen.files import write_atomically
@@ -63,14 +63,12 @@ def _calibrate(args, out: Path, build: Path) -> dict:
     from gecgen.runtime.compiled import CompiledModel
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
-    with progress_status(not args.json) as status:
-        def progress(name):
-            if status:
-                status.update(f"cross-validating the {name} model on the training poses")
-
-        sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
-                        seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
-                        progress=progress, keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
+    say(status, "reading the robot and the data, compiling the candidate models")
+    sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
+                    seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
+                    progress=lambda name: say(status, f"cross-validating the {name} model on the training poses"),
+                    keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
+    say(status, f"writing the calibration, its code and the report into {out}")
     cal, choice = sel.calibrator, sel.choice
     # the same depth beside `out`: the robot file's path relative to the calibration is the same
     cal.save(build / "calibration.json")

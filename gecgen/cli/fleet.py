@@ -33,7 +33,7 @@ import sys
 import time
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, number, whole
+from gecgen.cli.common import MAX_SEED, number, progress_status, say, whole
 from gecgen.files import output_lock, write_atomically
 from gecgen.model.measurements import write_csv
 from gecgen.model.table import read_table
@@ -135,11 +135,11 @@ def calibrate_one(row: dict, out: str, seed: int = 0) -> dict:
 
 
 def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 2, seed: int = 0,
-                    timeout: float | None = None) -> list[dict]:
+                    timeout: float | None = None, progress=None) -> list[dict]:
     """Calibrate every robot of the manifest (`read_manifest`) into out/NAME as tasks on Dask: the
     scheduler at `scheduler`, else a local cluster of `workers` processes (one thread each: a fit
     uses one BLAS thread). Returns `calibrate_one`'s results in manifest order, and writes
-    out/fleet.json and out/fleet.csv."""
+    out/fleet.json and out/fleet.csv. progress(done, failed, robots) is called as each robot ends."""
     try:
         import dask.distributed  # noqa: F401 - only to say what is missing before any work
     except ImportError:
@@ -158,7 +158,7 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
         for name in (SUMMARY, TABLE):  # an earlier run's summary would not describe this folder
             (out / name).unlink(missing_ok=True)
         try:
-            results = _run_tasks(robots, out, scheduler, workers, seed, timeout)
+            results = _run_tasks(robots, out, scheduler, workers, seed, timeout, progress)
         except KeyboardInterrupt as exc:
             raise type(exc)(f"{out} is marked incomplete ({out / MARK}): run the fleet again") from None
         write_atomically(out / SUMMARY, json.dumps(results, indent=1))
@@ -170,10 +170,11 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
 
 
 def _run_tasks(robots: list[dict], out: Path, scheduler: str | None, workers: int, seed: int,
-               timeout: float | None) -> list[dict]:
-    """`calibrate_one` of every robot as a task on Dask (see `calibrate_fleet`), the results in manifest order."""
+               timeout: float | None, progress=None) -> list[dict]:
+    """`calibrate_one` of every robot as a task on Dask (see `calibrate_fleet`), the results in
+    manifest order; progress(done, failed, robots) as each robot ends."""
     import dask
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client, LocalCluster, as_completed
 
     with contextlib.ExitStack() as stack:
         # Dask's own log lines (a socket closed late, a port in use) are not the user's business:
@@ -201,7 +202,12 @@ def _run_tasks(robots: list[dict], out: Path, scheduler: str | None, workers: in
         # pure=False: two rows with the same files are two robots, each run
         futures = [client.submit(calibrate_one, row, str(out), seed, key=f"calibrate-{row['name']}", pure=False)
                    for row in robots]
-        return client.gather(futures)
+        done, failed = 0, 0
+        for future in as_completed(futures):
+            done, failed = done + 1, failed + (future.result()["status"] != "ok")
+            if progress:
+                progress(done, failed, len(futures))
+        return [f.result() for f in futures]
 
 
 def dask_setup(worker):
@@ -232,7 +238,10 @@ def run(args) -> dict:
     from gecgen.cli import Incomplete
 
     start = time.perf_counter()
-    results = calibrate_fleet(args.manifest, args.output, args.scheduler, args.workers, args.seed, args.timeout)
+    with progress_status(not args.json) as status:
+        say(status, f"starting the Dask cluster and {args.manifest}'s robots")
+        results = calibrate_fleet(args.manifest, args.output, args.scheduler, args.workers, args.seed, args.timeout,
+                                  lambda done, failed, n: say(status, f"{done} of {n} robots done ({failed} failed)"))
     failed = [r for r in results if r["status"] != "ok"]
     for r in failed:
         print(f"gecgen fleet: {r['name']}: {r['reason']}", file=sys.stderr)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, progress_status, say, whole
 from gecgen.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
@@ -172,12 +172,16 @@ def _fixtures(args, robot, truth, rng) -> dict:
                         value["socket_distance"], value["distance_std"], args.planes, value["touches"],
                         value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width,
                         not args.no_distance)
-    data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+    with progress_status(not args.json) as status:
+        say(status, "placing the fixtures and solving the robot's configurations in them")
+        data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+        if args.val_out:
+            say(status, "placing the validation fixtures and solving the configurations in them")
+            val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),
            **data.relative.summary(), "noise_floor": floor, "files": {"data": args.output}}
     if args.val_out:
-        val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
         write_measurements(args.val_out, robot, val, wrench=False)
         out["files"]["val"] = args.val_out
         out["val_noise_floor"] = val_floor
