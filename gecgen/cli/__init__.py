@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
+from gecgen.cli.common import bare_register
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
@@ -202,7 +203,7 @@ def _sigterm_interrupts():
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv = bare_register(sys.argv[1:] if argv is None else list(argv))
     args = build_parser(argv).parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the
     # failure's reason is then the one line on stderr

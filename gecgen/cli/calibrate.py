@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, progress_status,
-                               say, whole)
+from gecgen.cli.common import (MAX_SEED, REGISTER, add_keep_insignificant, add_noise, add_orientation_length,
+                               add_register, progress_status, say, whole)
 from gecgen.loop.calibrate import NAMES
 
 
@@ -21,9 +21,10 @@ def add_parser(command):
     held.add_argument("--val", help="validation measurement CSV, scored after the choice (never used to choose)")
     held.add_argument("--holdout", type=float, help="share of TRAIN's poses to hold out for validation instead "
                                                     "(split by pose, seeded by --seed), e.g. 0.2")
-    p.add_argument("--register", action="store_true",
-                   help="--val was measured from another tracker stationing: fit its frame (the calibration's "
-                        "coefficients held) before scoring it, as evaluate --register does (default: off)")
+    add_register(p, REGISTER, bare="val", default="auto",
+                 lead="registration of TRAIN onto the nominal model: auto (when far apart), always or never; val: "
+                      "auto, and --val, measured from another tracker stationing, gets its frame fitted (the "
+                      "coefficients held) before it is scored, as evaluate --register does")
     p.add_argument("--errors", help="the robot's default error model among the candidates (default: "
                                     "robots/NAME.errors.yaml beside the robot file, if any)")
     p.add_argument("--models", default=",".join(NAMES),
@@ -63,9 +64,11 @@ def _calibrate(args, out: Path, build: Path, status) -> dict:
     from gecgen.runtime.compiled import CompiledModel
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
+    register_val = args.register == "val"
     say(status, "reading the robot and the data, compiling the candidate models")
     sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
-                    seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
+                    seed=args.seed, orientation_length=args.orientation_length, register_val=register_val,
+                    register="auto" if register_val else args.register,
                     progress=lambda name: say(status, f"cross-validating the {name} model on the training poses"),
                     keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
     say(status, f"writing the calibration, its code and the report into {out}")
@@ -92,12 +95,12 @@ def _calibrate(args, out: Path, build: Path, status) -> dict:
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
         if sel.val_inside:  # the held-out poses inside every training range: where the model is validated
             result["val_inside"] = sel.val_inside.to_dict()
-        result["val_registered"] = args.register
+        result["val_registered"] = register_val
         if sel.val_branches:
             result["val_branches"] = sel.val_branches
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{cal.robot_.name}_calibration.h"}
-    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register), build)
+    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, register_val), build)
     files.update({k: out / Path(v).relative_to(build) for k, v in written.items()})
     result["files"] = {k: str(v) for k, v in files.items()}
     return result

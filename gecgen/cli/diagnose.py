@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, number, progress_status, whole
+from gecgen.cli.common import (MAX_SEED, DATA_HELP, REGISTER, ROBOT_HELP, add_orientation_length, add_register, number,
+                               progress_status, whole)
 from gecgen.model import ModelError
 
 
@@ -23,10 +24,10 @@ def add_parser(command):
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
-    p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
-                   help="registration of DATA onto the nominal model: auto (default; when far apart), always or never; "
-                        "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
-                        "the --val file, measured from another stationing, before scoring it")
+    add_register(p, REGISTER, bare="val", default="auto",
+                 lead="registration of DATA onto the nominal model: auto (when far apart), always or never; val: "
+                      "auto, and each round's model also re-fits the tracker frame of --val, measured from another "
+                      "stationing, before scoring it")
     p.add_argument("--max-rounds", type=whole(1, 10_000), default=50,
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
     p.add_argument("--noise-mm", type=number(0, above=True),

@@ -1,0 +1,59 @@
+"""An option means the same, and is spelled the same, in every command that takes it."""
+from __future__ import annotations
+
+import pytest
+
+from gecgen.cli import build_parser
+from gecgen.cli.common import bare_register
+
+
+def _parsed(*argv: str):
+    argv = bare_register(list(argv))
+    return build_parser(argv).parse_args(argv)
+
+
+@pytest.mark.parametrize("argv, register", [
+    # every spelling that worked keeps its meaning
+    (["evaluate", "c.json", "d.csv"], "never"),
+    (["evaluate", "c.json", "d.csv", "--register"], "always"),
+    (["evaluate", "--register", "c.json", "d.csv"], "always"),
+    (["calibrate", "r.yaml", "t.csv", "--val", "v.csv", "--register", "-o", "out"], "val"),
+    (["calibrate", "--register", "r.yaml", "t.csv", "-o", "out"], "val"),
+    (["identify", "r.yaml", "d.csv", "--register", "never"], "never"),
+    (["diagnose", "r.yaml", "d.csv", "--register"], "val"),
+    (["diagnose", "r.yaml", "d.csv", "--register", "always"], "always"),
+    # and each takes the one form: --register MODE, --register=MODE, --register alone
+    (["evaluate", "c.json", "d.csv", "--register", "always"], "always"),
+    (["evaluate", "c.json", "d.csv", "--register=never"], "never"),
+    (["calibrate", "r.yaml", "t.csv", "--register", "always", "-o", "out"], "always"),
+    (["calibrate", "r.yaml", "t.csv", "--register=val", "-o", "out"], "val"),
+    (["identify", "r.yaml", "d.csv", "--register"], "always"),
+    (["identify", "--register", "r.yaml", "d.csv"], "always"),
+    (["diagnose", "r.yaml", "d.csv", "--register=val"], "val"),
+])
+def test_register_takes_one_form_everywhere_and_every_old_spelling(argv, register):
+    args = _parsed(*argv)
+    assert args.register == register
+    first = next(a for a in argv[1:] if a.endswith((".yaml", ".json")))  # not taken for the mode
+    assert first in (getattr(args, "robot", None), getattr(args, "calibration", None))
+
+
+@pytest.mark.parametrize("argv, allowed", [
+    (["evaluate", "c.json", "d.csv", "--register=auto"], "always, never"),
+    (["identify", "r.yaml", "d.csv", "--register=val"], "auto, always, never"),
+])
+def test_a_registration_a_command_does_not_do_is_one_line(capsys, argv, allowed):
+    with pytest.raises(SystemExit) as exc:
+        _parsed(*argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and len(err.splitlines()) == 1
+    assert f"is not a registration this command does; give one of {allowed}, or --register alone" in err
+
+
+def test_the_python_calibrate_refuses_an_unknown_registration():
+    from gecgen.api import calibrate
+    from gecgen.model import ModelError
+
+    with pytest.raises(ModelError, match="register"):
+        calibrate("r.yaml", "t.csv", register="sometimes")
+
