@@ -57,3 +57,14 @@ def test_the_python_calibrate_refuses_an_unknown_registration():
     with pytest.raises(ModelError, match="register"):
         calibrate("r.yaml", "t.csv", register="sometimes")
 
+
+
+def test_help_lists_the_commands_in_the_order_of_the_work(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--help"])
+    listed = capsys.readouterr().out.split("positional arguments:")[1].split("{", 1)[1].split("}", 1)[0].split(",")
+    plan, bring, fit, verify, deliver = (["design", "simulate", "redundancy"], ["import", "gravity"],
+                                         ["calibrate", "identify", "diagnose", "fleet"],
+                                         ["evaluate", "iso9283", "check", "accuracy"],
+                                         ["export", "compensate", "generate"])
+    assert listed == plan + bring + fit + verify + deliver

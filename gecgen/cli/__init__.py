@@ -24,25 +24,26 @@ from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
 
-#: command -> (its module in this package, its line in `gecgen --help`), in the order listed there
+#: command -> (its module in this package, its line in `gecgen --help`), in the order of the work, as
+#: listed there: plan the measurement, bring it in, fit, verify, deliver to the controller
 COMMANDS = {
-    "generate": ("generate", "write C, CasADi and a manifest for a robot and error model"),
-    "identify": ("identify", "fit the error model to measured data and write a calibration"),
-    "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
-    "compensate": ("compensate", "corrected joint commands for nominal commands"),
-    "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
-    "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
+    "design": ("design", "choose the poses to measure (optimal experiment design)"),
     "simulate": ("simulate", "simulated measurements of a robot with physical error sources"),
+    "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
     "import": ("import_", "convert a wide table (points side by side), or socket files, into a measurement CSV"),
     "gravity": ("gravity", "append the static gravity torques of joints (URDF masses) as aux columns"),
-    "design": ("design", "choose the poses to measure (optimal experiment design)"),
-    "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
     "calibrate": ("calibrate", "choose a model on the training data, fit it, write calibration, code and report"),
+    "identify": ("identify", "fit the error model to measured data and write a calibration"),
+    "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
     "fleet": ("fleet", "calibrate many robots at once (a manifest of robot and data files) on Dask"),
+    "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
     "iso9283": ("iso9283", "plan the ISO 9283 pose test, or its accuracy and repeatability from a measured run"),
     "check": ("check", "a QA check: a short measurement against the calibration, pass or fail, and what changed"),
     "accuracy": ("accuracy", "the worst compensated error over a declared volume, with a confidence, against a "
                              "tolerance"),
+    "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
+    "compensate": ("compensate", "corrected joint commands for nominal commands"),
+    "generate": ("generate", "write C, CasADi and a manifest for a robot and error model"),
 }
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
@@ -84,7 +85,11 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     one command need not pay for the others."""
     parser = _Parser(
         prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
-                                   "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
+                                   "that corrects its commands. The commands are listed in the order of the work: plan "
+                                   "the measurement (design, simulate, redundancy), bring it in (import, gravity), "
+                                   "fit (calibrate, identify, diagnose, fleet), verify (evaluate, iso9283, check, "
+                                   "accuracy), deliver (export, compensate, generate). `gecgen COMMAND --help` "
+                                   "explains each command; the "
                                    "README has a walk-through, docs/guide.md the user guide and docs/reference.md the "
                                    "file formats.")
     parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
