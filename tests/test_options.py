@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import pytest
+from conftest import ROBOTS
 
 from gecgen.cli import build_parser
 from gecgen.cli.common import bare_register
@@ -57,6 +58,27 @@ def test_the_python_calibrate_refuses_an_unknown_registration():
     with pytest.raises(ModelError, match="register"):
         calibrate("r.yaml", "t.csv", register="sometimes")
 
+
+def test_gravity_is_one_constant_wherever_a_default_is_taken():
+    """Standard gravity, 9.80665 m/s^2, in design's --gravity, the simulator's truth, the URDF
+    gravity torques and the robot file's default alike."""
+    import inspect
+
+    import numpy as np
+
+    from gecgen.model import gravity as urdf_gravity
+    from gecgen.model import load_robot
+    from gecgen.model.robot import GRAVITY
+    from gecgen.runtime import design
+    from gecgen.simulate import load_truth
+
+    assert np.linalg.norm(np.array(GRAVITY, float)) == 9.80665
+    puma = load_robot(ROBOTS / "puma560.yaml")
+    given = [[float(v) for v in _parsed("design", "r.yaml", "--poses", "3", "-o", "p.csv").gravity.split(",")],
+             list(load_truth({}, puma).gravity), list(urdf_gravity.UPRIGHT),
+             list(inspect.signature(design.uniform_candidates).parameters["gravity"].default),
+             [float(v) for v in puma.gravity]]
+    assert all(g == [float(v) for v in GRAVITY] for g in given), given
 
 
 def test_help_lists_the_commands_in_the_order_of_the_work(capsys):

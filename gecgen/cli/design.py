@@ -21,7 +21,7 @@ import numpy as np
 from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, robot_and_model, whole
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
-from gecgen.model.robot import WRENCH
+from gecgen.model.robot import GRAVITY, WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime import design as D
@@ -48,7 +48,7 @@ def add_parser(command):
                                      "else every target of the robot)")
     p.add_argument("--payload-kg", help="comma-separated payloads (kg) at the tool origin, as gecgen simulate: the "
                                         "wrench the sensor reads of their weight is part of each pose")
-    p.add_argument("--gravity", default="0,0,-9.81", help="gravity in the world frame for the payload wrench, m/s^2 "
+    p.add_argument("--gravity", default=",".join(f"{v:g}" for v in GRAVITY), help="gravity in the world frame for the payload wrench, m/s^2 "
                                                           "(default: %(default)s)")
     p.add_argument("--min-z", type=number(), help="every measured target at world z >= this (m)")
     p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
