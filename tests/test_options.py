@@ -5,7 +5,7 @@ import pytest
 from conftest import ROBOTS
 
 from gecgen.cli import build_parser
-from gecgen.cli.common import bare_register
+from gecgen.cli.register import bare_register
 
 
 def _parsed(*argv: str):

@@ -18,7 +18,7 @@ import warnings
 from pathlib import Path
 
 from gecgen import __version__
-from gecgen.cli.common import bare_register
+from gecgen.cli.register import bare_register
 from gecgen.cli.human import print_human
 from gecgen.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import (MAX_SEED, REGISTER, add_keep_insignificant, add_noise, add_orientation_length,
-                               add_register, progress_status, say, whole)
+from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, progress_status,
+                               say, whole)
+from gecgen.cli.register import REGISTER, add_register
 from gecgen.loop.calibrate import NAMES
 
 

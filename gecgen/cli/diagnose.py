@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import (MAX_SEED, DATA_HELP, REGISTER, ROBOT_HELP, add_orientation_length, add_register, number,
-                               progress_status, whole)
+from gecgen.cli.common import MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, number, progress_status, whole
+from gecgen.cli.register import REGISTER, add_register
 from gecgen.model import ModelError
 
 

@@ -1,7 +1,8 @@
 """`gecgen evaluate CALIB DATA [--register [always|never]]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_register
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length
+from gecgen.cli.register import add_register
 
 
 def add_parser(command):

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 
-from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, add_register,
+from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length,
                                fit_options, progress_status)
+from gecgen.cli.register import add_register
 
 
 def add_parser(command):
