@@ -228,8 +228,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
     if args.json:
         print(json.dumps(result, allow_nan=False))
-    else:
-        print_human(result)
+    else:  # a command may print its own summary (`human`, set by its parser)
+        getattr(args, "human", print_human)(result)
     return code
 
 
