@@ -228,7 +228,7 @@ def human(result: dict):
     from gecgen.cli.human import print_human, scalar
 
     if "predicted_std" not in result:
-        print_human(result)
+        _fixtures_human(result)
         return
     figures = {**{k: result[k] for k in ("log_det", "random_log_det", "mean_variance", "random_mean_variance")},
                **result["observability"], **result["predicted_std"]}
@@ -247,12 +247,39 @@ def human(result: dict):
     for key, random, label, means in COMPARED:
         means = means.format(noise=scalar(figures["noise_mm"]), n=figures["n_validation_poses"])
         print(f"  {label:<38}{scalar(figures[key]):>10}{scalar(figures[random]):>10}  {means}".rstrip())
-    gain = (result["log_det"] or 0) - (result["random_log_det"] or 0)
-    if result["log_det"] is not None and result["random_log_det"] is not None:
-        print(f"  with the designed poses the coefficients' confidence region is {math.exp(abs(gain) / 2):.3g} times "
-              f"{'smaller' if gain >= 0 else 'larger'} in volume (e^(gain in log det / 2))")
+    _volume(result)
     print(f"not excited by any candidate: {', '.join(result['unexcitable']) or 'none'}")
     history = result["history"]
     refreshed = f"; the pool of candidates refreshed {result['rounds']} times" if result["rounds"] else ""
     print(f"search: a greedy start, then {result['swaps']} exchanges in {result['passes']} passes (criterion "
           f"{scalar(history[0])} -> {scalar(history[-1])}){refreshed}")
+
+
+def _volume(result: dict):
+    """The designed poses' log det against the random ones', as what a person can picture."""
+    if result["log_det"] is not None and result["random_log_det"] is not None:
+        gain = result["log_det"] - result["random_log_det"]
+        print(f"  with the designed poses the coefficients' confidence region is {math.exp(abs(gain) / 2):.3g} times "
+              f"{'smaller' if gain >= 0 else 'larger'} in volume (e^(gain in log det / 2))")
+
+
+def _fixtures_human(result: dict):
+    """A fixture design's summary (`human`): the same comparison, then each fixture's share."""
+    from gecgen.cli.human import print_human, scalar
+
+    predicted = result["predicted"]
+    print(f"robot: {result['robot']} (error model {result['error_model']})")
+    print(f"output: {result['output']}")
+    print(f"configurations: {result['n_poses']} for target {result['target']} (seed {result['seed']})")
+    print(f"criterion: D-optimal (the largest log det of the information on the {result['n_identifiable']} "
+          f"identifiable coefficients)")
+    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many configurations drawn from the same candidates)")
+    print(f"  {'log det of the information (D)':<38}{scalar(result['log_det']):>10}"
+          f"{scalar(result['random_log_det']):>10}  higher is better")
+    print(f"  {'predicted RMS error added (mm)':<38}{scalar(predicted['rms_mm']):>10}"
+          f"{scalar(predicted['random_rms_mm']):>10}  by the coefficients' uncertainty at {scalar(predicted['noise_mm'])}"
+          f" mm noise")
+    _volume(result)
+    print_human({k: result[k] for k in ("fixtures", "by_fixtures")})
+    print(f"directions of the coefficients no configuration shows: {result['unseen']}")
+    print(f"search: a greedy start, then {result['swaps']} exchanges in {result['passes']} passes")
