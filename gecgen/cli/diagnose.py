@@ -36,6 +36,10 @@ def add_parser(command):
     add_orientation_length(p)
 
 
+#: the report's stages -> their keys in the JSON's per-branch figures: before and after as diagnose's own
+STAGES = {"uncalibrated": "uncalibrated", "calibrated (declared model)": "before", "diagnosed": "after"}
+
+
 def run(args) -> dict:
     from gecgen.api import Diagnoser
     from gecgen.emit import generate
@@ -64,6 +68,14 @@ def run(args) -> dict:
               "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
               if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
+    if robot.branches:  # a tree: each hand's figures, as the report's table and calibrate's val_branches
+        from gecgen.report.content import branch_figures, diagnosed_sets
+
+        figures = branch_figures(robot, diagnosed_sets(diag, diagnoser.data_, diagnoser.val_, register_val,
+                                                       "auto" if register_val else args.register))
+        for key, name in (("train_branches", "training"), ("val_branches", "validation")):
+            if figures and name in figures:
+                result[key] = {b: {STAGES[stage]: v for stage, v in by.items()} for b, by in figures[name].items()}
     if args.report:
         from gecgen import report
 
