@@ -89,6 +89,14 @@ def _survivors(tag: str) -> list[str]:
         time.sleep(0.1)
 
 
+def _refused(argv: list[str], out: Path, what: str):
+    """`gecgen ARGV` into `out` while another run holds it: refused at once, one line naming it."""
+    second = subprocess.run([sys.executable, "-m", "gecgen.cli", *argv], cwd=ROOT, capture_output=True, text=True)
+    assert second.returncode == 2 and second.stdout == ""
+    assert second.stderr == f"gecgen {argv[0]}: {out}: another gecgen run is writing this {what} now; wait for it " \
+                            f"to finish, or give another folder\n"
+
+
 def _snapshot(folder: Path) -> dict[str, str]:
     return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(folder.rglob("*")) if p.is_file()}
@@ -108,11 +116,7 @@ def test_an_interrupted_calibrate_leaves_the_old_folder_and_no_process(old, tmp_
     before = _snapshot(out)
     proc, tag = _start(_calibrate(old / "train.csv", out), step, tmp_path)
     if step == "folds" and how == "TERM":  # a second run into the folder meanwhile is refused, naming it
-        second = subprocess.run([sys.executable, "-m", "gecgen.cli", *_calibrate(old / "train.csv", out)],
-                                cwd=ROOT, capture_output=True, text=True)
-        assert second.returncode == 2 and second.stdout == ""
-        assert second.stderr == f"gecgen calibrate: {out}: another gecgen run is writing this calibration folder " \
-                                f"now; wait for it to finish, or give another folder\n"
+        _refused(_calibrate(old / "train.csv", out), out, "calibration folder")
     code, err = _signal(proc, how)
     assert code == EXIT[how], err
     assert _survivors(tag) == []
@@ -153,10 +157,7 @@ def test_an_interrupted_fleet_is_marked_incomplete_and_leaves_no_process(manifes
     argv = ["fleet", str(manifest), "-o", str(out), "--workers", "1", "--json"]
     proc, tag = _start(argv, "folds", tmp_path)
     if how == "TERM":  # a second fleet into the folder meanwhile is refused, naming it
-        second = subprocess.run([sys.executable, "-m", "gecgen.cli", *argv], cwd=ROOT, capture_output=True, text=True)
-        assert second.returncode == 2 and second.stdout == ""
-        assert second.stderr == f"gecgen fleet: {out}: another gecgen run is writing this fleet folder now; wait " \
-                                f"for it to finish, or give another folder\n"
+        _refused(argv, out, "fleet folder")
     code, err = _signal(proc, how)
     assert code == EXIT[how], err
     assert _survivors(tag) == []
