@@ -128,8 +128,11 @@ def output_lock(path: str | Path, what: str):
     it, instead of both writing and the folder holding a mix. The lock is an flock on a hidden file
     beside the folder (`.NAME.gecgen-lock`): the system releases it when the process ends, however
     it ends, so a killed run never leaves the folder locked. The file is removed on release."""
-    import fcntl
-
+    try:
+        import fcntl
+    except ImportError:  # Windows: no flock; the folder is still replaced whole (`output_folder`)
+        yield Path(path)
+        return
     path = Path(path)
     lock = _sibling(path, "lock")
     lock.parent.mkdir(parents=True, exist_ok=True)
@@ -166,7 +169,8 @@ def output_folder(path: str | Path, what: str, figures: str = "*.png"):
     except the old run's figures (`figures`, a glob), which belong to the report they replace."""
     import shutil
 
-    path = Path(path)
+    # a folder reached through a symbolic link is replaced where it is, the link left as it was
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
     with output_lock(path, what):
         for stale in path.parent.glob(glob.escape(_sibling(path, "build-").name) + "*"):  # left by a killed run
             if stale.name.endswith("-old") and not path.exists():  # killed between `_exchange`'s two renames

@@ -330,3 +330,15 @@ def test_what_a_killed_run_left_beside_a_folder_goes_with_the_next_run(tmp_path)
     with output_folder(out, "calibration folder") as build:
         (build / "calibration.json").write_text("new")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cal"] and (out / "calibration.json").read_text() == "new"
+
+
+def test_an_output_folder_reached_through_a_link_is_replaced_where_it_is(tmp_path):
+    from gecgen.files import output_folder
+
+    real = tmp_path / "disk" / "cal"
+    _folder(real, {"calibration.json": "old"})
+    (tmp_path / "cal").symlink_to(real, target_is_directory=True)
+    with output_folder(tmp_path / "cal", "calibration folder") as build:
+        (build / "calibration.json").write_text("new")
+    assert (tmp_path / "cal").is_symlink() and (real / "calibration.json").read_text() == "new"
+    assert sorted(p.name for p in real.parent.iterdir()) == ["cal"]
