@@ -67,3 +67,13 @@ def test_fleet_counts_the_robots_done_on_a_terminal_only(tmp_path, terminal):
     if not terminal:
         assert err.splitlines() == [f"gecgen fleet: gone: {tmp_path}/missing.csv: no such measurement file",
                                     "gecgen fleet: 1 of 1 robots failed: gone"]
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_simulate_plates_says_what_it_is_doing_on_a_terminal_only(tmp_path, terminal):
+    code, err = _gecgen(["simulate", str(ROBOTS / "panda_ball.yaml"), "--plates", "1", "-o", str(tmp_path / "s.csv")],
+                        terminal)
+    assert code == 0
+    assert ("placing the fixtures and solving the robot's configurations" in err) == terminal
+    if not terminal:  # the one warning: no truth file
+        assert [ln.split(":")[1] for ln in err.splitlines()] == [" warning"], err
