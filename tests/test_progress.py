@@ -77,3 +77,15 @@ def test_simulate_plates_says_what_it_is_doing_on_a_terminal_only(tmp_path, term
     assert ("placing the fixtures and solving the robot's configurations" in err) == terminal
     if not terminal:  # the one warning: no truth file
         assert [ln.split(":")[1] for ln in err.splitlines()] == [" warning"], err
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_accuracy_says_what_it_is_doing_on_a_terminal_only(train, tmp_path, terminal):
+    assert main(["identify", PUMA, str(train), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+    (tmp_path / "v.yaml").write_text("angle_unit: deg\nsamples: 5\n")
+    code, err = _gecgen(["accuracy", str(tmp_path / "c.json"), str(tmp_path / "v.yaml"), str(train), "--draws", "400",
+                         "--plot", str(tmp_path / "map.png")], terminal)
+    assert code == 0
+    assert ("drawing the map of the bound over the volume" in err) == terminal
+    if not terminal:
+        assert all(line.startswith("gecgen accuracy: warning: ") for line in err.splitlines()), err
