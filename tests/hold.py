@@ -4,14 +4,18 @@ that writes FLAG.PID (so the test knows, without waiting a fixed time, that the 
 then waits for good. Imported by `python tests/hold.py ARGS` (then runs `gecgen ARGS`), and as a
 Dask preload in a fleet's worker processes.
 
-STEP: `folds` (calibrate's cross-validation folds, in its worker processes), `report` (calibrate
-writing its report: the calibration and code already written into the new folder).
+STEP: `start` (calibrate about to read its inputs, its folder held), `folds` (calibrate's
+cross-validation folds, in its worker processes), `report` (calibrate writing its report: the
+calibration and code already written into the new folder), `fleet` (fleet about to start its
+cluster, its folder held and marked).
 """
 import os
 import signal
 import sys
 from pathlib import Path
 
+import gecgen.api
+import gecgen.cli.fleet
 import gecgen.loop.calibrate
 import gecgen.report
 
@@ -23,10 +27,14 @@ def _hold(*args, **kwargs):
 
 
 STEP, _, FLAG = os.environ.get("GECGEN_TEST_HOLD", "").partition(":")
-if STEP == "folds":
+if STEP == "start":
+    gecgen.api.calibrate = _hold
+elif STEP == "folds":
     gecgen.loop.calibrate.fold_score = _hold
 elif STEP == "report":
     gecgen.report.write = _hold
+elif STEP == "fleet":
+    gecgen.cli.fleet._run_tasks = _hold
 elif STEP:
     raise SystemExit(f"GECGEN_TEST_HOLD: unknown step {STEP!r}")
 

@@ -108,7 +108,7 @@ def _hidden(folder: Path) -> list[str]:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="worker processes are forked on Linux only")
-@pytest.mark.parametrize("step", ["folds", "report"])
+@pytest.mark.parametrize("step", ["start", "folds", "report"])
 @pytest.mark.parametrize("how", ["INT", "TERM", "KILL"])
 def test_an_interrupted_calibrate_leaves_the_old_folder_and_no_process(old, tmp_path, step, how):
     out = tmp_path / "cal"
@@ -147,16 +147,17 @@ def manifest(old):
     return path
 
 
+@pytest.mark.parametrize("step", ["fleet", "folds"])
 @pytest.mark.parametrize("how", ["INT", "TERM", "KILL"])
-def test_an_interrupted_fleet_is_marked_incomplete_and_leaves_no_process(manifest, tmp_path, how):
+def test_an_interrupted_fleet_is_marked_incomplete_and_leaves_no_process(manifest, tmp_path, step, how):
     pytest.importorskip("dask.distributed")
     out = tmp_path / "fleet"
     out.mkdir()
     for name in ("fleet.json", "fleet.csv"):  # an earlier run's summary
         (out / name).write_text("earlier\n")
     argv = ["fleet", str(manifest), "-o", str(out), "--workers", "1", "--json"]
-    proc, tag = _start(argv, "folds", tmp_path)
-    if how == "TERM":  # a second fleet into the folder meanwhile is refused, naming it
+    proc, tag = _start(argv, step, tmp_path)
+    if how == "TERM" and step == "folds":  # a second fleet into the folder meanwhile is refused, naming it
         _refused(argv, out, "fleet folder")
     code, err = _signal(proc, how)
     assert code == EXIT[how], err
