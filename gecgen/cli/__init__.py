@@ -214,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     # failure's reason is then the one line on stderr
     with warnings.catch_warnings(record=True) as caught, _sigterm_interrupts():
         warnings.simplefilter("always")
+        # as Python does by default: a library's socket or file closed late (Dask's) is not the user's business
+        warnings.simplefilter("ignore", ResourceWarning)
         try:
             code, result = _run(args)
         except KeyboardInterrupt as exc:  # what was being written is cleaned up (files.write_atomically,
