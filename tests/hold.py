@@ -7,7 +7,7 @@ Dask preload in a fleet's worker processes.
 STEP: `start` (calibrate about to read its inputs, its folder held), `folds` (calibrate's
 cross-validation folds, in its worker processes), `report` (calibrate writing its report: the
 calibration and code already written into the new folder), `fleet` (fleet about to start its
-cluster, its folder held and marked).
+cluster, its folder held).
 """
 import os
 import signal
@@ -25,6 +25,11 @@ def _hold(*args, **kwargs):
     while True:
         signal.pause()
 
+
+if __name__ == "__main__":
+    # Ctrl-C as a terminal gives it: the test runner's process may have SIGINT ignored (a process
+    # that calls C's system() from two threads at once can be left so), and a child inherits that
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 STEP, _, FLAG = os.environ.get("GECGEN_TEST_HOLD", "").partition(":")
 if STEP == "start":

@@ -45,19 +45,32 @@ def _calibrate(train, out, seed=2) -> list[str]:
             "-o", str(out), "--json"]
 
 
-def _start(argv: list[str], step: str, flags: Path) -> tuple[subprocess.Popen, str]:
+def _start(argv: list[str], step: str, flags: Path, runs: list) -> tuple[subprocess.Popen, str]:
     """`gecgen ARGV` in a session of its own, held at `step` (tests/hold.py): returns once a process
-    of the run has reached the step, with the run's tag."""
+    of the run has reached the step, with the run's tag; the run is added to `runs`."""
     tag = uuid.uuid4().hex
     env = dict(os.environ, GECGEN_TEST_HOLD=f"{step}:{flags / 'held'}", GECGEN_TEST_TAG=tag, GECGEN_WORKERS="2",
                DASK_DISTRIBUTED__WORKER__PRELOAD=json.dumps([str(HOLD)]))
     proc = subprocess.Popen([sys.executable, str(HOLD), *argv], cwd=ROOT, env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    runs.append(proc)
     while not list(flags.glob("held.*")):  # polled: the run writes the flag when it is at the step
         if proc.poll() is not None:
             pytest.fail(f"the run ended before reaching {step}: {proc.communicate()}")
         time.sleep(0.05)
     return proc, tag
+
+
+@pytest.fixture
+def runs():
+    """The held runs a test starts (`_start`): killed, with their process group, if the test fails
+    before it signals them, so that a failing test leaves nothing behind."""
+    started: list[subprocess.Popen] = []
+    yield started
+    for proc in started:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
 
 
 def _signal(proc: subprocess.Popen, how: str) -> tuple[int, str]:
@@ -110,11 +123,11 @@ def _hidden(folder: Path) -> list[str]:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="worker processes are forked on Linux only")
 @pytest.mark.parametrize("step", ["start", "folds", "report"])
 @pytest.mark.parametrize("how", ["INT", "TERM", "KILL"])
-def test_an_interrupted_calibrate_leaves_the_old_folder_and_no_process(old, tmp_path, step, how):
+def test_an_interrupted_calibrate_leaves_the_old_folder_and_no_process(old, tmp_path, runs, step, how):
     out = tmp_path / "cal"
     shutil.copytree(old / "old", out)
     before = _snapshot(out)
-    proc, tag = _start(_calibrate(old / "train.csv", out), step, tmp_path)
+    proc, tag = _start(_calibrate(old / "train.csv", out), step, tmp_path, runs)
     if step == "folds" and how == "TERM":  # a second run into the folder meanwhile is refused, naming it
         _refused(_calibrate(old / "train.csv", out), out, "calibration folder")
     code, err = _signal(proc, how)
@@ -132,9 +145,9 @@ def test_an_interrupted_calibrate_leaves_the_old_folder_and_no_process(old, tmp_
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="worker processes are forked on Linux only")
-def test_a_first_calibrate_interrupted_leaves_no_folder(old, tmp_path):
+def test_a_first_calibrate_interrupted_leaves_no_folder(old, tmp_path, runs):
     out = tmp_path / "cal"
-    proc, tag = _start(_calibrate(old / "train.csv", out), "report", tmp_path)
+    proc, tag = _start(_calibrate(old / "train.csv", out), "report", tmp_path, runs)
     code, err = _signal(proc, "TERM")
     assert code == 143 and _survivors(tag) == []
     assert not out.exists() and _hidden(out) == []
@@ -149,21 +162,25 @@ def manifest(old):
 
 @pytest.mark.parametrize("step", ["fleet", "folds"])
 @pytest.mark.parametrize("how", ["INT", "TERM", "KILL"])
-def test_an_interrupted_fleet_is_marked_incomplete_and_leaves_no_process(manifest, tmp_path, step, how):
+def test_an_interrupted_fleet_is_marked_incomplete_and_leaves_no_process(manifest, tmp_path, runs, step, how):
     pytest.importorskip("dask.distributed")
     out = tmp_path / "fleet"
     out.mkdir()
     for name in ("fleet.json", "fleet.csv"):  # an earlier run's summary
         (out / name).write_text("earlier\n")
     argv = ["fleet", str(manifest), "-o", str(out), "--workers", "1", "--json"]
-    proc, tag = _start(argv, step, tmp_path)
+    proc, tag = _start(argv, step, tmp_path, runs)
     if how == "TERM" and step == "folds":  # a second fleet into the folder meanwhile is refused, naming it
         _refused(argv, out, "fleet folder")
     code, err = _signal(proc, how)
     assert code == EXIT[how], err
     assert _survivors(tag) == []
-    assert (out / "fleet.incomplete").is_file()
-    assert not (out / "fleet.json").exists() and not (out / "fleet.csv").exists()
+    if step == "fleet":  # before the cluster ran anything: the folder as it was
+        assert sorted(p.name for p in out.iterdir()) == ["fleet.csv", "fleet.json"]
+        state = "is as it was before this run"
+    else:
+        assert (out / "fleet.incomplete").is_file()
+        assert not (out / "fleet.json").exists() and not (out / "fleet.csv").exists()
+        state = f"is marked incomplete ({out / 'fleet.incomplete'})"
     if how != "KILL":  # one line, no traceback of Dask's
-        assert err == f"gecgen fleet: {SAID[how]}; {out} is marked incomplete ({out / 'fleet.incomplete'}): run " \
-                      f"the fleet again\n"
+        assert err == f"gecgen fleet: {SAID[how]}; {out} {state}: run the fleet again\n"

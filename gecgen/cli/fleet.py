@@ -17,8 +17,8 @@ alone. The rows are tasks on Dask (`dask.distributed`): a local cluster of `--wo
 default, or the scheduler at `--scheduler` (a real cluster: every worker must see the files at the
 same paths). A robot that fails is reported with its one-line reason and the others go on; the
 command then exits 1 naming them. DIR gets `fleet.json` and `fleet.csv`, one row per robot. While
-the fleet runs DIR holds `fleet.incomplete` (and no summary of an earlier run): a run that is
-interrupted or killed leaves the folder marked so. A second fleet into DIR while one runs is
+its tasks run DIR holds `fleet.incomplete` (and no summary of an earlier run): a run that is
+interrupted or killed then leaves the folder marked so. A second fleet into DIR while one runs is
 refused. Python: `calibrate_fleet(manifest, out)`.
 """
 from __future__ import annotations
@@ -152,15 +152,11 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
     robots = read_manifest(manifest)
     out = Path(out)
     with output_lock(out, "fleet folder"):
-        out.mkdir(parents=True, exist_ok=True)
-        write_atomically(out / MARK, "a gecgen fleet run into this folder has not finished (or was interrupted): "
-                                     "its robots' folders may be of different runs; run the fleet again\n")
-        for name in (SUMMARY, TABLE):  # an earlier run's summary would not describe this folder
-            (out / name).unlink(missing_ok=True)
         try:
             results = _run_tasks(robots, out, scheduler, workers, seed, timeout, progress)
         except KeyboardInterrupt as exc:
-            raise type(exc)(f"{out} is marked incomplete ({out / MARK}): run the fleet again") from None
+            state = f"is marked incomplete ({out / MARK})" if (out / MARK).exists() else "is as it was before this run"
+            raise type(exc)(f"{out} {state}: run the fleet again") from None
         write_atomically(out / SUMMARY, json.dumps(results, indent=1))
         write_csv(out / TABLE, ["name", "status", "model", "train_rms_mm", "val_rms_mm", "seconds", "reason"],
                   ([r["name"], r["status"], r.get("result", {}).get("model", ""), _figure(r, "train"),
@@ -199,6 +195,7 @@ def _run_tasks(robots: list[dict], out: Path, scheduler: str | None, workers: in
                 scheduler_kwargs={"dashboard_address": ":0"}, silence_logs=logging.CRITICAL,
                 preload=[*dask.config.get("distributed.worker.preload"), __name__]))
             client = stack.enter_context(Client(cluster))
+        _begin(out)
         # pure=False: two rows with the same files are two robots, each run
         futures = [client.submit(calibrate_one, row, str(out), seed, key=f"calibrate-{row['name']}", pure=False)
                    for row in robots]
@@ -208,6 +205,17 @@ def _run_tasks(robots: list[dict], out: Path, scheduler: str | None, workers: in
             if progress:
                 progress(done, failed, len(futures))
         return [f.result() for f in futures]
+
+
+def _begin(out: Path):
+    """Mark the fleet folder as being written, once the cluster is there to write it (a scheduler
+    that does not answer leaves the folder as it was): `fleet.incomplete` in, the summary of an
+    earlier run, which would not describe the folder, out."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomically(out / MARK, "a gecgen fleet run into this folder has not finished (or was interrupted): its "
+                                 "robots' folders may be of different runs; run the fleet again\n")
+    for name in (SUMMARY, TABLE):
+        (out / name).unlink(missing_ok=True)
 
 
 def dask_setup(worker):
