@@ -223,9 +223,9 @@ COMPARED = (("log_det", "random_log_det", "log det of the information (D)", "hig
 
 def human(result: dict):
     """design's summary for a person: what each figure is and which way is better, the designed
-    poses beside as many random ones of the same candidates; --json has every figure (and a fixture
-    design, whose lines are its own, is printed as any result)."""
-    from gecgen.cli.human import print_human, scalar
+    poses beside as many random ones of the same candidates (a fixture design's: `_fixtures_human`);
+    --json has every figure."""
+    from gecgen.cli.human import scalar
 
     if "predicted_std" not in result:
         _fixtures_human(result)

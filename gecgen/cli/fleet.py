@@ -24,6 +24,7 @@ refused. Python: `calibrate_fleet(manifest, out)`.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import json
 import logging
@@ -140,10 +141,8 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
     scheduler at `scheduler`, else a local cluster of `workers` processes (one thread each: a fit
     uses one BLAS thread). Returns `calibrate_one`'s results in manifest order, and writes
     out/fleet.json and out/fleet.csv. progress(done, failed, robots) is called as each robot ends."""
-    try:
-        import dask.distributed  # noqa: F401 - only to say what is missing before any work
-    except ImportError:
-        raise ModelError("gecgen fleet runs on Dask: pip install 'gecgen[fleet]' (dask[distributed])") from None
+    require(importlib.util.find_spec("distributed") is not None,  # what is missing, said before any work
+            "gecgen fleet runs on Dask: pip install 'gecgen[fleet]' (dask[distributed])")
     require(scheduler is None or ADDRESS.match(scheduler), f"--scheduler {excerpt(scheduler)}: give a Dask "
                                                            f"scheduler's address, e.g. tcp://10.0.0.5:8786")
     require(isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1,
