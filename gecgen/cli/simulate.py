@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, progress_status, say, whole
 from gecgen.model.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
@@ -54,7 +54,11 @@ def add_parser(command):
     p.add_argument("--payload-kg", type=numbers(0),
                    help="comma-separated payloads (kg), at the tool origin (default 0; with --design paper 0,70)")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
-                   help="seed of the poses, the truth's draws and the noise (default %(default)s)")
+                   help="seed of the poses and the noise (default %(default)s); the truth's random errors come from "
+                        "the truth file's own seed, so files drawn with two --seed values are of one robot")
+    p.add_argument("--truth-seed", type=whole(0, MAX_SEED),
+                   help="draw the truth's random errors with this seed instead of the truth file's: another robot "
+                        "of the same error budget")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="validation CSV: with --design paper the validation half of set a; with "
                                       "--design random --val-poses new random poses of the same truth")
@@ -101,6 +105,10 @@ def run(args) -> dict:
     if not spec:
         warnings.warn(f"no truth file ({truth_path} does not exist, and no --truth): the simulated robot is the "
                       f"nominal one, without errors or noise; give --truth FILE to simulate a robot as built")
+    if args.truth_seed is not None:
+        require(spec, f"--truth-seed {args.truth_seed}: there is no truth file to draw ({truth_path} does not exist); "
+                      f"give --truth FILE")
+        spec = {**spec, "seed": args.truth_seed}
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
     if args.plates or args.planes:
@@ -201,12 +209,16 @@ def _fixtures(args, robot, truth, rng) -> dict:
                         value["socket_distance"], value["distance_std"], args.planes, value["touches"],
                         value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width,
                         not args.no_distance)
-    data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+    with progress_status(not args.json) as status:
+        say(status, "placing the fixtures and solving the robot's configurations in them")
+        data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+        if args.val_out:
+            say(status, "placing the validation fixtures and solving the configurations in them")
+            val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),
            **data.relative.summary(), "noise_floor": floor, "files": {"data": args.output}}
     if args.val_out:
-        val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
         write_measurements(args.val_out, robot, val, wrench=False)
         out["files"]["val"] = args.val_out
         out["val_noise_floor"] = val_floor

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import glob
 import os
 import secrets
 from pathlib import Path
@@ -108,3 +109,120 @@ def check_output_dir(path: str | Path, what: str) -> Path:
         raise ModelError(f"{path}: is a file; give a folder for the {what}")
     _require_writable_folder(path, path, what)
     return path
+
+
+def _sibling(path: Path, kind: str) -> Path:
+    """The hidden file or folder beside the output folder `path` that gecgen uses while it works on
+    it (`kind`: "lock", "build-..."): named after the folder, or after its name's hash where that
+    name is too long for one more suffix."""
+    import hashlib
+
+    name = path.name if len(os.fsencode(path.name)) < 200 else hashlib.sha256(os.fsencode(path.name)).hexdigest()[:16]
+    return path.parent / f".{name}.gecgen-{kind}"
+
+
+@contextlib.contextmanager
+def output_lock(path: str | Path, what: str):
+    """Hold the output folder `path` (`what`: "calibration folder", ...) for this process while the
+    block runs: a second gecgen run writing the same folder is refused at once with one line naming
+    it, instead of both writing and the folder holding a mix. The lock is an flock on a hidden file
+    beside the folder (`.NAME.gecgen-lock`): the system releases it when the process ends, however
+    it ends, so a killed run never leaves the folder locked. The file is removed on release."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: no flock; the folder is still replaced whole (`output_folder`)
+        yield Path(path)
+        return
+    path = Path(path)
+    lock = _sibling(path, "lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise ModelError(f"{path}: another gecgen run is writing this {what} now; wait for it to finish, or "
+                             f"give another folder") from None
+        # the holder before us may have removed the file between our open and our lock: then the
+        # lock is on a file nobody else will open, and the one at the path is the one to hold
+        try:
+            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
+        yield path
+    finally:
+        lock.unlink(missing_ok=True)
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def output_folder(path: str | Path, what: str, figures: str = "*.png"):
+    """Write the output folder `path` as a whole: the block writes into a new hidden folder beside
+    it (yielded), which replaces `path` in one rename when the block succeeds, and is removed when
+    it fails or is interrupted; so after an error, Ctrl-C, a full disk or a kill, `path` is the old
+    folder (or absent) or the new one, never a mix. Held by `output_lock` throughout. Entries of
+    the old folder that the new one lacks (files of the user's own) are carried into the new one,
+    except the old run's figures (`figures`, a glob), which belong to the report they replace."""
+    import shutil
+
+    # a folder reached through a symbolic link is replaced where it is, the link left as it was
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
+    with output_lock(path, what):
+        for stale in path.parent.glob(glob.escape(_sibling(path, "build-").name) + "*"):  # left by a killed run
+            if stale.name.endswith("-old") and not path.exists():  # killed between `_exchange`'s two renames
+                os.rename(stale, path)
+            else:
+                shutil.rmtree(stale, ignore_errors=True)
+        build = _sibling(path, f"build-{os.getpid()}-{secrets.token_hex(4)}")
+        build.mkdir()
+        try:
+            yield build
+            if path.is_dir():
+                for entry in path.iterdir():
+                    if not (build / entry.name).exists() and not entry.match(figures):
+                        _carry(entry, build / entry.name)
+                _exchange(build, path)  # build now names the old folder
+            else:
+                os.rename(build, path)
+        finally:
+            shutil.rmtree(build, ignore_errors=True)
+
+
+def _carry(source: Path, target: Path):
+    """A hard link of a file (a copy where links cannot be made), a folder's tree of them; symbolic links as links."""
+    import shutil
+
+    def link(a, b):
+        try:
+            os.link(a, b, follow_symlinks=False)
+        except OSError:
+            shutil.copy2(a, b, follow_symlinks=False)
+
+    if source.is_dir() and not source.is_symlink():
+        shutil.copytree(source, target, symlinks=True, copy_function=link)
+    else:
+        link(source, target)
+
+
+def _exchange(a: Path, b: Path):
+    """Swap the names of two folders in one step (Linux renameat2 RENAME_EXCHANGE), so that no
+    moment exists at which b names nothing; where the system cannot, in two renames."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    renameat2 = getattr(libc, "renameat2", None)
+    if renameat2 is not None:
+        at_fdcwd, rename_exchange = -100, 2
+        if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+            return
+        errno = ctypes.get_errno()
+        if errno not in (22, 38, 95):  # EINVAL, ENOSYS, EOPNOTSUPP: this file system cannot swap
+            raise OSError(errno, os.strerror(errno), str(b))
+    aside = a.with_name(a.name + "-old")
+    os.rename(b, aside)
+    os.rename(a, b)
+    os.rename(aside, a)

@@ -11,7 +11,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.report.blocks import (Bullets, DataSet, Drawing, Figure, Report, Residuals, Section, Table, frame_label,
                                   joint_label, joint_scale, joint_unit, joint_values, term_unit, variable)
-from gecgen.runtime.identify import filled, fit_frames, to_world
+from gecgen.runtime.identify import filled, fit_frames, summary, to_world
 from gecgen.runtime.processes import mapped
 from gecgen.runtime.significance import rms_interval
 
@@ -143,19 +143,32 @@ def _fixtures_fact(relative) -> str:
             f"fitted plane), {n['distances']} known distance(s) between points")
 
 
+def branch_figures(robot: Robot, sets: list[DataSet]) -> dict | None:
+    """Point errors per branch of a tree: {data set name: {branch: {stage: {rms_mm, max_mm}}}} over
+    each branch's measured points, the branches a set does not measure left out; {} on a chain, None
+    for measured frames (rows are frames, not points)."""
+    if not robot.branches:
+        return {}
+    if any(len(ds.stages[0].pose) != len(ds.data.target) for ds in sets):
+        return None
+    out = {}
+    for ds in sets:
+        side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
+        out[ds.name] = {b.name: {st.stage: summary(1e-3 * np.linalg.norm(st.position_mm[side == k], axis=1))
+                                 for st in ds.stages}
+                        for k, b in enumerate(robot.branches) if (side == k).any()}
+    return out
+
+
 def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:
     """RMS point error per branch of a tree, per data set and stage (a hand's accuracy is its own)."""
-    header, rows = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)], []
-    if any(len(ds.stages[0].pose) != len(ds.data.target) for ds in sets):
+    figures = branch_figures(robot, sets)
+    if figures is None:
         return "Per branch: not shown for measured frames (rows are frames, not points)."
-    for k, st in enumerate(sets[0].stages):
-        row = [st.stage]
-        for ds in sets:
-            side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
-            d = np.linalg.norm(ds.stages[k].position_mm, axis=1)
-            row += [f"{np.sqrt(np.mean(d[side == b] ** 2)):.3g}" if (side == b).any() else "-"
-                    for b in range(len(robot.branches))]
-        rows.append(tuple(row))
+    header = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)]
+    rows = [tuple([st.stage, *(f"{figures[ds.name][b.name][st.stage]['rms_mm']:.3g}" if b.name in figures[ds.name]
+                               else "-" for ds in sets for b in robot.branches)])
+            for st in sets[0].stages]
     return Table(tuple(header), rows)
 
 
@@ -376,7 +389,7 @@ def _scored(stage: str, cm, data: Measurements, c, frames, register: bool) -> Re
     return residuals(stage, cm, data, to_world(fit_frames(cm, data, c) if register else frames, data), c)
 
 
-def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
+def diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
                     registration_mode: str) -> list[DataSet]:
     """Uncalibrated, declared model and diagnosed model on the training and validation data, each
     scored as diagnose scored it."""
@@ -399,7 +412,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
     from gecgen.runtime.calibration import from_fit
 
     robot = diag.robot
-    sets = _diagnosed_sets(diag, data, val, register_val, registration_mode)
+    sets = diagnosed_sets(diag, data, val, register_val, registration_mode)
     calib = from_fit(robot, diag.final.model, diag.final.fit, diag.ratio_loads)
     found = [f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS on the "
@@ -439,7 +452,7 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     fit, cm = choice.fit, choice.cm
     diag = choice.diagnosis
     if diag is not None:
-        sets = _diagnosed_sets(diag, data, val, register_val, "auto")
+        sets = diagnosed_sets(diag, data, val, register_val, "auto")
     else:
         sets = [DataSet("training", data, [
             residuals("uncalibrated", cm, data, _nominal_world(cm, data, fit.loss, "auto"), None),
