@@ -69,7 +69,7 @@ def test_gravity_is_one_constant_wherever_a_default_is_taken():
     from gecgen.model import gravity as urdf_gravity
     from gecgen.model import load_robot
     from gecgen.model.robot import GRAVITY
-    from gecgen.runtime import design
+    from gecgen.plan import design
     from gecgen.simulate import load_truth
 
     assert np.linalg.norm(np.array(GRAVITY, float)) == 9.80665
@@ -88,5 +88,5 @@ def test_help_lists_the_commands_in_the_order_of_the_work(capsys):
     plan, bring, fit, verify, deliver = (["design", "simulate", "redundancy"], ["import", "gravity"],
                                          ["calibrate", "identify", "diagnose", "fleet"],
                                          ["evaluate", "iso9283", "check", "accuracy"],
-                                         ["export", "compensate", "generate"])
+                                         ["export", "compensate", "filter", "generate"])
     assert listed == plan + bring + fit + verify + deliver
