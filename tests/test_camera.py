@@ -174,3 +174,39 @@ def test_camera_and_board_files_refuse_what_they_cannot_use(tmp_path):
     (tmp_path / "b.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 25\n")
     with pytest.raises(ModelError, match="square's side in m"):
         read_board(tmp_path / "b.yaml")
+
+
+def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_path):
+    from conftest import run_json
+
+    robot, truth, model = arm
+    rig, *_, data = hand_rig(arm, n=40)
+    write_pixels(tmp_path / "pixels.csv", robot, data)
+    cam = rig.cameras["cam"]
+    (tmp_path / "cams.yaml").write_text(
+        f"cameras:\n  cam: {{mount: tool, fx: {cam.fx}, fy: {cam.fy}, cx: {cam.cx}, cy: {cam.cy}, "
+        f"distortion: {list(cam.distortion)}, width: {cam.width}, height: {cam.height}}}\n")
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    out = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "cams.yaml", "--board",
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+    fit = fit_pixels(robot, model, read_pixels(tmp_path / "pixels.csv", robot, rig.cameras, rig.board),
+                     rig.cameras, rig.board)
+    assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
+    assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
+    np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
+               header="q1,q2,q3,q4,q5,q6", comments="")
+    run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")
+    assert (tmp_path / "fixed.csv").read_text().count("\n") == 2
+
+
+def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
+    from gecgen.cli import main
+
+    robot, *_ = arm
+    rig, *_, data = hand_rig(arm, n=3)
+    write_pixels(tmp_path / "pixels.csv", robot, data)
+    assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
+    with pytest.raises(ModelError, match="a pixel file .*give the camera file with --cameras"):
+        from gecgen.model.measurements import read_measurements
+        read_measurements(tmp_path / "pixels.csv", robot)

@@ -76,7 +76,8 @@ class PixelFit:
     (mount tool); board: the board's (R, t) in the world (X_w = R x_b + t), None for world cameras;
     targets: the tool-frame position (m) of every target left to estimate; before and train:
     {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
-    eliminated: the coefficients held at zero and why; failures: why the fit must not be used."""
+    eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
+    and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -91,6 +92,9 @@ class PixelFit:
     converged: bool
     loss: str
     failures: tuple[str, ...] = ()
+    std: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    sigma_px: float = np.nan
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -367,6 +371,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             converged = True
             break
     wr = robust.weights(e, limit, loss)
+    std, cov, sigma = _uncertainty(problem, g, c, cols, wr, free_g)
     flagged = np.nonzero(e > limit)[0]
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
@@ -379,7 +384,52 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     if not np.isfinite(e).all():
         failures.append("a point lies behind its camera after the fit; check the camera file's mount and the data")
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures))
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma)
+
+
+def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
+    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+    r, J = problem.jacobian(g, c, cols)
+    if not free_g:
+        J = J[:, problem.n_geom:]
+    root = np.repeat(np.sqrt(wr), 2)
+    A, b = J * root[:, None], r.ravel() * root
+    dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
+    sigma = float(np.sqrt(b @ b / dof))
+    with np.errstate(all="ignore"):
+        try:
+            full = sigma ** 2 * np.linalg.inv(A.T @ A)
+        except np.linalg.LinAlgError:
+            full = np.full((A.shape[1],) * 2, np.inf)
+    k0 = A.shape[1] - len(cols)
+    cov = full[k0:, k0:]
+    std = np.full(problem.cm.dims.nc, np.nan)
+    std[cols] = np.sqrt(np.abs(np.diag(cov)))
+    return std, cov, sigma
+
+
+def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
+    """The calibration of a pixel fit (`runtime.calibration.Calibration`): coefficients in the robot's
+    world (the cameras' or the board's poses are in it, in `report`). Targets the robot file leaves to
+    estimate are placed where the fit put them; on a carried camera, at its optical centre."""
+    from gecgen.runtime.calibration import Calibration
+    from gecgen.runtime.placement import with_targets
+    from gecgen.runtime.registration import IDENTITY
+
+    placed = {n: tuple(map(float, t)) for n, t in fit.targets.items()}
+    if fit.board is not None:
+        centre = tuple(map(float, fit.tool_camera()[1]))
+        placed |= {n: centre for n in robot.estimated}
+    robot = with_targets(robot, placed)
+    report = {"n_params": len(fit.c), "n_identifiable": len(fit.kept), "n_carried": len(fit.kept),
+              "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
+              "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
+              "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
+              "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
+              **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
+                 if fit.board is not None else {})}
+    return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
 
 
 def refuse_untrustworthy(fit: PixelFit, where: str):
