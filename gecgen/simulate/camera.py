@@ -136,7 +136,7 @@ def eye_in_hand(robot: Robot, truth: Truth, camera: Camera, board: Board, q0: np
     T0 = true_tools(robot, truth, q0[None])[0]
     R_wc = T0[:3, :3] @ R.T  # the camera's axes in the world at q0
     centre = T0[:3, 3] - R_wc @ t + distance * R_wc[:, 2]
-    Rb = R_wc @ np.diag([1.0, -1.0, -1.0])  # the board faces the camera
+    Rb = R_wc  # the board's rows and columns along the image's: its r0c0 at the image's top-left
     size = np.array([(board.columns - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0])
     rig = CameraRig({camera.name: camera}, {camera.name: (R, t)}, board, (Rb, centre - Rb @ size))
     return rig, _in_view(robot, truth, rig, q0, span, n_poses, rng)
@@ -149,3 +149,47 @@ def eye_to_hand(robot: Robot, truth: Truth, cameras: list[Camera], eyes: np.ndar
     q0 +- span (rad) at which every camera sees every target of the robot."""
     rig = CameraRig({c.name: c for c in cameras}, {c.name: look_at(e, at) for c, e in zip(cameras, eyes)})
     return rig, _in_view(robot, truth, rig, q0, span, n_poses, rng)
+
+
+#: px between the pixels whose rays `render_board` computes exactly
+GRID = 8
+
+
+def render_board(camera: Camera, R: np.ndarray, t: np.ndarray, board: Board, rng: np.random.Generator,
+                 blur_px: float = 0.7, noise: float = 2.0, supersample: int = 2) -> np.ndarray:
+    """A grayscale image (height, width) uint8 of the chessboard as `camera` sees it with the board at
+    (R, t) in the camera frame (X_cam = R x_b + t): every pixel's ray, with the lens distortion undone
+    (OpenCV's undistortPoints), meets the board's plane, whose squares are black and white with a white
+    margin of one square; averaged over supersample^2 rays a pixel, blurred (Gaussian, blur_px) and
+    with Gaussian noise (grey levels)."""
+    import cv2
+    from scipy.ndimage import map_coordinates
+
+    s = supersample
+    # the rays of a coarse grid of pixels, undone to convergence; between them interpolated: the
+    # distortion is smooth over GRID px, and undoing it at every sample costs minutes an image
+    gu, gv = np.meshgrid(np.arange(-GRID, camera.width + 2 * GRID, GRID, dtype=float),
+                         np.arange(-GRID, camera.height + 2 * GRID, GRID, dtype=float))
+    coarse = cv2.undistortPointsIter(np.column_stack([gu.ravel(), gv.ravel()])[:, None], camera.K,
+                                     np.array(camera.distortion), None, None,
+                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14))
+    coarse = coarse.reshape(*gu.shape, 2)
+    u = (np.arange(camera.width * s) + 0.5) / s - 0.5
+    v = (np.arange(camera.height * s) + 0.5) / s - 0.5
+    mu, mv = np.meshgrid((u + GRID) / GRID, (v + GRID) / GRID)  # coordinates in the coarse grid
+    # scipy's cubic spline, not cv2.remap, whose map coordinates are quantised to 1/32 of a cell
+    rays = np.stack([map_coordinates(coarse[..., k], [mv.ravel(), mu.ravel()], order=3) for k in range(2)], -1)
+    d = np.column_stack([rays, np.ones(len(rays))]) @ R  # the rays in the board frame, from its origin at -R^T t
+    origin = -R.T @ t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = -origin[2] / d[:, 2]
+    xy = origin[:2] + lam[:, None] * d[:, :2]
+    cell = np.floor(xy / board.square).astype(np.int64)
+    inside = ((cell[:, 0] >= -1) & (cell[:, 0] < board.columns) & (cell[:, 1] >= -1) & (cell[:, 1] < board.rows)
+              & (lam > 0))
+    white = np.where(inside, (cell[:, 0] + cell[:, 1]) % 2 == 1, True)
+    image = np.where(white, 230.0, 25.0).reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
+    if blur_px > 0:
+        image = cv2.GaussianBlur(image, (0, 0), blur_px)
+    image = image + rng.normal(0.0, noise, image.shape)
+    return np.clip(np.round(image), 0, 255).astype(np.uint8)
