@@ -177,9 +177,11 @@ def write(rows: dict, seeds: int):
     lines += ["", "## What pixels leave undetermined", "",
               "Named in the fit's `eliminated` list, beside the error model's structural merges:", ""]
     for kind in rows:
-        elim = rows[kind][0][2]["eliminated"]
-        named = [e for e in elim if e.reason != "structural"]
-        lines.append(f"- {kind}: " + "; ".join(f"`{e.param}` ({e.detail})" for e in named))
+        why: dict[str, list[str]] = {}
+        for e in rows[kind][0][2]["eliminated"]:
+            if e.reason != "structural":
+                why.setdefault(e.detail, []).append(f"`{e.param}`")
+        lines.append(f"- {kind}: " + "; ".join(f"{', '.join(p)}: {d}" for d, p in why.items()))
     (ROOT / "docs" / "camera.md").write_text("\n".join(lines) + "\n")
 
 
