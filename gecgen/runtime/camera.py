@@ -228,6 +228,10 @@ def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
     for k, cam in enumerate(problem.cams):
         rows = np.nonzero(d.camera == k)[0]
         if not problem.tool:
+            # targets left to estimate sit at the tool origin until fitted: kept out of the first guess
+            # unless nothing else is left
+            placed = rows[~np.isin(np.array(d.points)[d.point[rows]], problem.estimated)]
+            rows = placed if len(placed) >= 6 else rows
             x = problem.local_points({t: np.zeros(3) for t in problem.estimated})[rows]
             Xw = np.einsum("rij,rj->ri", R[d.pose[rows]], x) + o[d.pose[rows]]
             ok, rvec, tvec = cv2.solvePnP(Xw, d.uv[rows], cam.K, np.array(cam.distortion), flags=cv2.SOLVEPNP_ITERATIVE)
@@ -312,6 +316,30 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
     return kept, eliminated
 
 
+def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+            fixed_poses: np.ndarray | None, backend: str):
+    """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
+    eliminated (structurally, and by `_analysis`), at the nominal model."""
+    require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
+    cm = CompiledModel(frame_robot(robot), model, backend)
+    problem = _Problem(cm, robot, data, cameras, board)
+    c = np.zeros(cm.dims.nc)
+    g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
+    struct = structural_analysis(cm, np.arange(4))
+    kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
+                                 fixed_poses is not None)
+    return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
+
+
+def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
+                     board: Board | None = None) -> dict:
+    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
+    `eliminated` (structural, and what pixels cannot give: `camera pose`, `scale`, not excited)."""
+    _, _, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+    return {"n_params": len(model.coefficients), "n_identifiable": len(kept),
+            "eliminated": [e.to_dict() for e in eliminated]}
+
+
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                backend: str = "auto") -> PixelFit:
@@ -319,16 +347,8 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras)."""
     robust.check_loss(loss)
-    require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
-    cm = CompiledModel(frame_robot(robot), model, backend)
-    nc = cm.dims.nc
-    problem = _Problem(cm, robot, data, cameras, board)
-    c = np.zeros(nc)
-    g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
-    names = model.coefficient_names(robot)
-    struct = structural_analysis(cm, np.arange(4))
-    kept, eliminated = _analysis(problem, g, c, list(struct.kept), names, fixed_poses is not None)
-    eliminated = tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend)
+    c = np.zeros(problem.cm.dims.nc)
     cols = np.array(kept, int)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)
