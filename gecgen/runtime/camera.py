@@ -34,7 +34,7 @@ from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime import robust
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import structural_analysis
+from gecgen.runtime.identify import RSS_TOL, structural_analysis
 from gecgen.runtime.redundancy import Eliminated
 
 #: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
@@ -44,8 +44,9 @@ FRAME_ARM = 0.1
 RANK_TOL = 1e-7
 #: median of a chi variable with 2 degrees of freedom (an image point's residual length)
 MEDIAN_CHI2 = float(np.sqrt(2 * np.log(2)))
-#: relative step of the objective below which the fit has converged
-OBJ_TOL = 1e-10
+#: px: a Gauss-Newton step whose predicted change of the residual is below this per coordinate changes
+#: nothing a camera resolves (a corner is found to 0.05 px at best)
+STEP_TOL_PX = 1e-4
 #: step (rad, m) of the central differences in the poses
 STEP = 1e-7
 #: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
@@ -370,6 +371,10 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
         A = A / scale
+        predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
+        if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
+            converged = True  # a full step would change nothing a camera resolves
+            break
         for _ in range(20):
             M = A.T @ A + lam * np.eye(A.shape[1])
             step = -np.linalg.solve(M, A.T @ b) / scale
@@ -387,7 +392,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         new_limit = limit_of(e)
         settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
         limit = new_limit
-        if settled and obj - obj_t <= OBJ_TOL * max(obj, 1e-30):
+        if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
             converged = True
             break
     wr = robust.weights(e, limit, loss)
@@ -396,8 +401,10 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
                              float(e[r]), float(wr[r])) for r in flagged[np.argsort(-e[flagged])])
-    failures = [] if converged else [f"Gauss-Newton did not converge in {max_iter} iterations; check the camera "
-                                     f"file (intrinsics of this camera?) and the point names"]
+    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({_summary(e)['rms_px']:.3g} "
+                                     f"px rms left): the images may not determine this model (fewer terms, e.g. "
+                                     f"--errors with constant errors, or more images), or the camera file is not "
+                                     f"this camera's"]
     poses, board_pose, targets = problem.unpack(g)
     inliers = e <= limit
     train = _summary(e) | {"rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
