@@ -103,9 +103,9 @@ def test_eye_in_hand_finds_the_camera_on_the_tool_and_the_tool_on_held_out_poses
     rel = np.linalg.inv(fitted_tools(robot, model, fit.c, held)) @ cam_true
     Rf, tf = fit.tool_camera()
     # the mean over the held-out poses: the model's misfit (the truth's gravity compliance) moves it pose by
-    # pose about that. 0.2 mm / 0.5 mrad is what docs/camera.md measures over seeds, and some miss it (this
-    # one: 0.29 mm); here, a bound no wrong chain or pose convention meets (the truth's last-frame errors
-    # alone put it 0.9 mm off)
+    # pose about that. docs/camera.md measures it against 0.2 mm / 0.5 mrad over seeds, and some seeds miss
+    # that (this one does); here, a bound no wrong chain or pose convention meets (the truth's last-frame
+    # errors alone put it 0.9 mm off)
     assert 1e3 * np.linalg.norm(rel[:, :3, 3].mean(axis=0) - tf) < 0.5
     assert 1e3 * np.linalg.norm(Rotation.from_matrix(rel[:, :3, :3] @ Rf.T).as_rotvec().mean(axis=0)) < 0.5
     named = {e.param: e.detail for e in fit.eliminated if e.reason != "structural"}

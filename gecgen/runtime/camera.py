@@ -119,7 +119,8 @@ class _Problem:
         self.tool = data.mount == "tool"
         self.inputs = (data.q, data.w, data.aux[:, [data.aux_names.index(a) for a in cm.model.aux]]
                        if cm.model.aux else None)
-        self.estimated = [] if self.tool else [t for t in robot.estimated if t in set(np.array(data.points)[data.point])]
+        seen = set(np.array(data.points)[data.point])
+        self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
         # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
         self.n_geom = 6 * len(self.cams) + (6 if self.tool else 0) + 3 * len(self.estimated)
 
@@ -277,7 +278,7 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
     ng = problem.n_geom
     kept, out, unexcited = [], [], []
     scale_dir = None
-    if not problem.tool and not poses_known:  # does scaling the robot about the world origin (cameras following) show in pixels?
+    if not problem.tool and not poses_known:  # does scaling the robot about the origin, cameras following, show?
         o, R, H = problem.frames(c, with_H=True)
         d = problem.data
         x = problem.local_points({t: np.zeros(3) for t in problem.estimated})
