@@ -93,3 +93,38 @@ def test_image_import_refusals(shots, tmp_path, capsys):
     cv2.imwrite(str(mixed / "img03.png"), cv2.resize(cv2.imread(str(mixed / "img03.png")), (320, 240)))
     assert "one camera's images share one size" in _refused([*base[:4], mixed, *base[5:]], capsys)
     assert "--images, --board and --cameras go together" in _refused(base[:7] + base[-2:], capsys)
+
+
+def test_a_charuco_board_names_its_corners(tmp_path):
+    """ChArUco: rendered from OpenCV's own drawing, every corner found is where the truth projects the
+    corner its id names, and the images calibrate."""
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
+    board = Board(9, 6, 0.04, kind="charuco", marker=0.03, dictionary="DICT_5X5_100")
+    rng = np.random.default_rng(9)
+    rig, q = eye_in_hand(robot, truth, CAMERA, board, np.radians([0, -90, -90, 0, 60, 0]),
+                         np.radians([8, 6, 6, 25, 20, 30]), 8, rng)
+    images = tmp_path / "images"
+    images.mkdir()
+    T = true_tools(robot, truth, q)
+    R, t = rig.poses["cam"]
+    Rb, tb = rig.board_pose
+    truth_px = []
+    for k in range(len(q)):
+        Rt, pt = T[k, :3, :3], T[k, :3, 3]
+        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
+        cv2.imwrite(str(images / f"img{k}.png"), image)
+        truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
+    (tmp_path / "readings.csv").write_text("image,q1,q2,q3,q4,q5,q6\n" + "".join(
+        f"img{k}.png," + ",".join(map(repr, q[k].tolist())) + "\n" for k in range(len(q))))
+    (tmp_path / "cams.yaml").write_text(camera_yaml(CAMERA))
+    (tmp_path / "board.yaml").write_text("type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\n"
+                                         "dictionary: DICT_5X5_100\n")
+    out = run_json("import", ROBOTS / "industrial6r.yaml", tmp_path / "readings.csv", "--images", images,
+                   "--board", tmp_path / "board.yaml", "--cameras", tmp_path / "cams.yaml", "-o", tmp_path / "px.csv")
+    assert out["not_found"] == [] and out["poses"] == 8
+    data = read_pixels(tmp_path / "px.csv", robot, {"cam": CAMERA}, board)
+    error = np.linalg.norm(data.uv - np.array(truth_px)[data.pose, data.point], axis=1)
+    assert len(error) >= 8 * 40 and np.sqrt(np.mean(error ** 2)) < 0.15
+    fit = fit_pixels(robot, load_error_model(ROBOTS / "constant.errors.yaml", robot), data, {"cam": CAMERA}, board)
+    assert fit.converged and not fit.failures and fit.train["rms_px"] < 0.3

@@ -51,7 +51,7 @@ def add_parser(command):
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): TABLE is a readings file, one row per "
                              "image (image, camera, q1..qn)")
     g.add_argument("--images", metavar="FOLDER", help="folder of the board's images; writes a pixel file")
-    g.add_argument("--board", metavar="FILE", help="with --images: the board file (chessboard: inner corners, square)")
+    g.add_argument("--board", metavar="FILE", help="with --images: the board file (chessboard or charuco: inner corners, square)")
     g.add_argument("--cameras", metavar="FILE", help="with --images: the camera file")
 
 

@@ -9,8 +9,8 @@ its five distortion coefficients, and where it is mounted:
 
 `mount: world` is a camera fixed in the world that sees points on the robot (eye-to-hand);
 `mount: tool` a camera the robot carries that sees a board fixed in the world (eye-in-hand). A board
-file (`--board FILE`) gives a chessboard's inner corners and square size; its corners are named
-`rRcC` (row R, column C, from 0) and sit at (C square, R square, 0) in the board frame.
+file (`--board FILE`) gives a chessboard's (or a ChArUco board's) inner corners and square size; its
+corners are named `rRcC` (row R, column C, from 0) and sit at (C square, R square, 0) in the board frame.
 """
 from __future__ import annotations
 
@@ -23,7 +23,9 @@ import yaml
 from gecgen.model.validation import ModelError, require
 
 MOUNTS = ("world", "tool")
-BOARD_TYPES = ("chessboard",)
+BOARD_TYPES = ("chessboard", "charuco")
+#: the ArUco dictionaries a ChArUco board may use (OpenCV's predefined ones, by name)
+ARUCO_DICTIONARIES = tuple(f"DICT_{b}X{b}_{n}" for b in (4, 5, 6, 7) for n in (50, 100, 250, 1000))
 
 
 @dataclass(frozen=True)
@@ -74,12 +76,17 @@ class Camera:
 
 @dataclass(frozen=True)
 class Board:
-    """A chessboard: inner corners `columns` x `rows`, squares of `square` m."""
+    """A chessboard: inner corners `columns` x `rows`, squares of `square` m; a ChArUco board
+    (kind "charuco") also has ArUco markers of side `marker` m from `dictionary` in its white squares,
+    its corner r0c0 OpenCV's corner id 0 (id = R columns + C)."""
 
     columns: int
     rows: int
     square: float
     source: str = ""
+    kind: str = "chessboard"
+    marker: float = 0.0
+    dictionary: str = ""
 
     @property
     def names(self) -> list[str]:
@@ -152,7 +159,7 @@ def read_board(path: str | Path) -> Board:
     """The board of a board file."""
     spec = _yaml(path, "board file")
     kind = spec.get("type", "chessboard")
-    require(kind in BOARD_TYPES, f"{path}, key 'type': {kind!r} is not supported; use chessboard")
+    require(kind in BOARD_TYPES, f"{path}, key 'type': {kind!r} is not supported; use chessboard or charuco")
     for key in ("columns", "rows"):
         value = spec.get(key)
         require(isinstance(value, int) and not isinstance(value, bool) and value >= 2,
@@ -160,4 +167,11 @@ def read_board(path: str | Path) -> Board:
     square = spec.get("square")
     require(isinstance(square, (int, float)) and not isinstance(square, bool) and 0 < square < 1,
             f"{path}, key 'square': {square!r}; give the square's side in m (e.g. 0.025)")
-    return Board(spec["columns"], spec["rows"], float(square), str(path))
+    if kind == "chessboard":
+        return Board(spec["columns"], spec["rows"], float(square), str(path))
+    marker, dictionary = spec.get("marker"), spec.get("dictionary")
+    require(isinstance(marker, (int, float)) and not isinstance(marker, bool) and 0 < marker < square,
+            f"{path}, key 'marker': {marker!r}; give the ArUco marker's side in m, smaller than the square")
+    require(dictionary in ARUCO_DICTIONARIES, f"{path}, key 'dictionary': {dictionary!r}; give OpenCV's name of "
+                                              f"the ArUco dictionary, e.g. DICT_5X5_100")
+    return Board(spec["columns"], spec["rows"], float(square), str(path), kind, float(marker), dictionary)

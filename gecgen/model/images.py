@@ -5,7 +5,8 @@ A readings file is a CSV with one row per image: `image` (its file name in the i
 wrench and auxiliary columns of a measurement file. Each image is one pose. The board's corners are
 found by `findChessboardCorners` and refined by `cornerSubPix`; OpenCV may number them from either
 end of the board, so corner r0c0 is taken as the end nearer the image's top-left (a camera turning
-more than 90 degrees about its axis between images would swap them: keep it within that). An image
+more than 90 degrees about its axis between images would swap them: keep it within that, or use a
+ChArUco board, whose markers name every corner and which may be partly out of view). An image
 where the board is not found gives no rows and is named, never dropped silently.
 """
 from __future__ import annotations
@@ -36,10 +37,27 @@ def _cv2():
     return cv2
 
 
-def find_corners(gray: np.ndarray, board: Board) -> np.ndarray | None:
-    """The board's inner corners in a grayscale image (H, W) uint8, (rows x columns, 2) px in
-    `Board.names` order, or None when the board is not found."""
+#: a ChArUco board with fewer corners found than this in an image counts as not found
+MIN_CHARUCO_CORNERS = 6
+
+
+def charuco_board(board: Board):
+    """OpenCV's ChArUco board for a board file's (its squares one more than the inner corners)."""
     cv2 = _cv2()
+    return cv2.aruco.CharucoBoard((board.columns + 1, board.rows + 1), board.square, board.marker,
+                                  cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary)))
+
+
+def find_corners(gray: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray] | None:
+    """The board's inner corners in a grayscale image (H, W) uint8: their indices in `Board.names`
+    (K,) and pixels (K, 2), or None when the board is not found. A chessboard gives all its corners
+    or none; a ChArUco board those its markers identify (at least MIN_CHARUCO_CORNERS)."""
+    cv2 = _cv2()
+    if board.kind == "charuco":
+        corners, ids, _, _ = cv2.aruco.CharucoDetector(charuco_board(board)).detectBoard(gray)
+        if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
+            return None
+        return ids.ravel().astype(np.int64), corners.reshape(-1, 2).astype(float)
     size = (board.columns, board.rows)
     found, corners = cv2.findChessboardCorners(gray, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH |
                                                cv2.CALIB_CB_NORMALIZE_IMAGE)
@@ -49,7 +67,7 @@ def find_corners(gray: np.ndarray, board: Board) -> np.ndarray | None:
     corners = corners.reshape(-1, 2).astype(float)
     if corners[-1].sum() < corners[0].sum():  # numbered from the far end: r0c0 nearer the top-left
         corners = corners[::-1].copy()
-    return corners
+    return np.arange(len(corners)), corners
 
 
 @dataclass(frozen=True)
@@ -116,12 +134,13 @@ def detect(readings, folder: str | Path, robot: Robot, cameras: dict[str, Camera
         require((w, h) == (camera.width, camera.height),
                 f"{path}: {w} x {h} px, but camera {c}'s intrinsics are for {camera.width} x {camera.height}: "
                 f"intrinsics of another resolution; calibrate the camera at this size or scale fx fy cx cy")
-        corners = find_corners(gray, board)
-        if corners is None:
+        found = find_corners(gray, board)
+        if found is None:
             not_found.append(name)
             continue
+        index, corners = found
         pose.append(np.full(len(corners), r)), cam.append(np.full(len(corners), cam_names.index(c)))
-        point.append(np.arange(len(corners))), uv.append(corners)
+        point.append(index), uv.append(corners)
     require(pose, f"{folder}: the {board.columns} x {board.rows} inner corners of the board were found in none "
                   f"of the {len(names)} images; check the board file's columns and rows (inner corners, not squares)")
     pose, cam, point, uv = (np.concatenate(a) for a in (pose, cam, point, uv))

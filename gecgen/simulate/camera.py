@@ -153,6 +153,8 @@ def eye_to_hand(robot: Robot, truth: Truth, cameras: list[Camera], eyes: np.ndar
 
 #: px between the pixels whose rays `render_board` computes exactly
 GRID = 8
+#: texture pixels per square of a rendered ChArUco board
+TEXTURE_PX = 120
 
 
 def render_board(camera: Camera, R: np.ndarray, t: np.ndarray, board: Board, rng: np.random.Generator,
@@ -187,7 +189,16 @@ def render_board(camera: Camera, R: np.ndarray, t: np.ndarray, board: Board, rng
     cell = np.floor(xy / board.square).astype(np.int64)
     inside = ((cell[:, 0] >= -1) & (cell[:, 0] < board.columns) & (cell[:, 1] >= -1) & (cell[:, 1] < board.rows)
               & (lam > 0))
-    white = np.where(inside, (cell[:, 0] + cell[:, 1]) % 2 == 1, True)
+    if board.kind == "charuco":  # OpenCV's drawing of the board, its corner id 0 at our r0c0
+        from gecgen.model.images import charuco_board
+
+        texture = charuco_board(board).generateImage(((board.columns + 1) * TEXTURE_PX,
+                                                      (board.rows + 1) * TEXTURE_PX), marginSize=0) > 127
+        at = np.floor((xy + board.square) / board.square * TEXTURE_PX).astype(np.int64)
+        at = np.clip(at, 0, [texture.shape[1] - 1, texture.shape[0] - 1])
+        white = np.where(inside, texture[at[:, 1], at[:, 0]], True)
+    else:
+        white = np.where(inside, (cell[:, 0] + cell[:, 1]) % 2 == 1, True)
     image = np.where(white, 230.0, 25.0).reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
     if blur_px > 0:
         image = cv2.GaussianBlur(image, (0, 0), blur_px)
