@@ -243,3 +243,17 @@ def test_eye_to_hand_places_a_marker_left_to_estimate(arm):
     # the tool frame's own errors shift where the fit puts it: within a few mm of where it is
     assert np.linalg.norm(fit.targets["m1"] - np.array(MARKERS["m1"])) < 5e-3
     assert fit.train["rms_px"] < 0.35
+
+
+def test_a_pixel_calibration_exports(arm, tmp_path):
+    from conftest import run_json
+    from gecgen.runtime.calibration import save
+    from gecgen.runtime.camera import calibration_of
+
+    robot, truth, model = arm
+    rig, *_, data = hand_rig(arm, n=40)
+    fit = fit_pixels(robot, model, data, rig.cameras, rig.board)
+    assert fit.ranges["q1"] == [data.q[:, 0].min(), data.q[:, 0].max()]
+    save(calibration_of(robot, model, fit), tmp_path / "cal.json")
+    out = run_json("export", tmp_path / "cal.json", "--c", tmp_path / "c")
+    assert (tmp_path / "c").is_dir() and out

@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.model.cameras import Board, Camera
 from gecgen.model.errors import ErrorModel
 from gecgen.model.pixels import Pixels
-from gecgen.model.robot import Robot
+from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime import robust
 from gecgen.runtime.compiled import CompiledModel
@@ -78,7 +78,8 @@ class PixelFit:
     targets: the tool-frame position (m) of every target left to estimate; before and train:
     {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
     eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
-    and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate."""
+    and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
+    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`)."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -96,6 +97,7 @@ class PixelFit:
     std: np.ndarray | None = None
     cov: np.ndarray | None = None
     sigma_px: float = np.nan
+    ranges: dict | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -411,8 +413,11 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     train = _summary(e) | {"rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
     if not np.isfinite(e).all():
         failures.append("a point lies behind its camera after the fit; check the camera file's mount and the data")
+    names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
+    values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
+    ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures), std, cov, sigma)
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges)
 
 
 def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -454,6 +459,7 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
               "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
               "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
+              "training_ranges": fit.ranges,
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
                  if fit.board is not None else {})}
