@@ -5,7 +5,7 @@ The Python API (docs/python-api.md) is importable from here: `gecgen.Calibrator`
 the results `gecgen.Score`, `gecgen.Errors`, `gecgen.Compensation`, `gecgen.Selection`, and the
 error type `gecgen.ModelError`.
 """
-__version__ = "0.1.0"
+from gecgen.version import __version__  # noqa: F401  (gecgen.__version__)
 
 _API = ("Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
         "load_calibration", "load_robot", "read_measurements")

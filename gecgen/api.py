@@ -664,17 +664,19 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
               register_val: bool = False, progress=None, keep_insignificant: bool = False,
-              noise_mm: float | None = None) -> Selection:
+              noise_mm: float | None = None, register: str = "auto") -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
-    per candidate. keep_insignificant, noise_mm: as for Calibrator."""
+    per candidate. keep_insignificant, noise_mm, register (the training data's registration: "auto",
+    "always" or "never"): as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
     names = model_names(NAMES if models is None else models)
+    register = _choice(register, "register", REGISTER)
     robot = _robot(robot)
     require(not register_val or val is not None, "register_val re-fits the tracker frame of the validation data: "
                                                  "pass val")
@@ -684,7 +686,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     fitted, data, val = on_points(robot, _length(orientation_length), data, raw_val)
     if default is not None:
         checked(default, fitted, data, val)
-    choice = choose(fitted, data, default, seed, progress=progress, names=names)
+    choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names)
     fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
     choice = replace(choice, fit=fit)
     calib = _calibration.from_fit(robot, choice.model, choice.fit, _ratio_loads(choice.cm, choice.fit, data))

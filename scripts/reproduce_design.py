@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from gecgen.model import load_error_model, load_robot  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402
 from gecgen.runtime.compiled import CompiledModel  # noqa: E402
-from gecgen.runtime.design import CRITERIA, NOISE_M, design_poses, uniform_candidates  # noqa: E402
+from gecgen.plan.design import CRITERIA, NOISE_M, design_poses, uniform_candidates  # noqa: E402
 from gecgen.runtime.identify import identify, position_errors, structural_analysis  # noqa: E402
 from gecgen.simulate import load_truth, random_design, simulate  # noqa: E402
 from gecgen.simulate.designs import Design  # noqa: E402
@@ -435,7 +435,7 @@ def write_doc(curves: list, fig: dict | None, seconds: float, quick: bool):
              f"Regenerate with `python scripts/reproduce_design.py` ({seconds / 60:.1f} minutes on the 2-core machine, "
              f"shared with other jobs{'; a --quick run: one seed, smallest sizes' if quick else ''}). "
              "Everything here is simulated with `gecgen/simulate` and measured by the code the command runs "
-             "(`gecgen/runtime/design.py`).", "",
+             "(`gecgen/plan/design.py`).", "",
              "## Method", "",
              "`gecgen design ROBOT --poses N -o POSES.csv` chooses N of K candidate poses (uniform within the joint "
              "limits, or the rows of `--from CSV`, less those the constraints exclude) by a criterion on the "

@@ -117,7 +117,7 @@ def designed(args, robot, truth, errors, lines):
     at random from the same pool, scored on the same held-out fixtures."""
     from gecgen.model import load_error_model
     from gecgen.runtime.compiled import CompiledModel
-    from gecgen.runtime.fixture_design import design_fixtures, recorded_candidates
+    from gecgen.plan.fixture_design import design_fixtures, recorded_candidates
 
     cm = CompiledModel(robot, load_error_model(errors, robot))
     lines += ["## Designed configurations", "",

@@ -409,7 +409,7 @@ def test_orientations_in_the_wrong_unit_fail_the_fit(tmp_path, capsys):
 def test_a_file_written_into_an_output_folder_never_replaces_an_input(tmp_path):
     """Files an output folder receives are known only as they are written: one that would land on
     a file the command reads is refused there, and the input is left as it was."""
-    from gecgen.files import reading, write_atomically
+    from gecgen.model.files import reading, write_atomically
     from gecgen.model import ModelError
 
     source = write(tmp_path, "errors.yaml", "frames: {}\n")

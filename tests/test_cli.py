@@ -57,7 +57,7 @@ def test_every_argument_is_explained_with_its_default():
                    if not isinstance(a, argparse._HelpAction)
                    and (not a.help or (a.option_strings and a.default not in (None, False) and "default" not in a.help))]
     assert unexplained == []
-    assert len(commands) == 16
+    assert len(commands) == 17
 
 
 @pytest.mark.parametrize("args", [["--version"], ["--help"], ["simulat"]])
@@ -89,3 +89,21 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     print_human({"suspect_poses": [], "placement": None, "val": {"rms_mm": 0.2, "cv_rms_mm": None}, "warnings": ["x"]})
     assert capsys.readouterr().out.splitlines() == ["suspect_poses: none", "placement: -",
                                                     "val: rms_mm 0.2, cv_rms_mm -"]
+
+
+def test_a_librarys_resource_warning_is_not_shown_but_gecgens_own_warnings_are(monkeypatch, capsys):
+    """Python hides ResourceWarning (a socket closed late, as Dask's are) unless asked; the CLI,
+    which turns every other warning into a line, hides it too."""
+    import warnings
+
+    import gecgen.cli.redundancy as command
+    from gecgen.cli import main
+
+    def warn_both(args):
+        warnings.warn("unclosed <socket.socket fd=6>", ResourceWarning)
+        warnings.warn("a warning of gecgen's own")
+        return {"done": True}
+
+    monkeypatch.setattr(command, "run", warn_both)
+    assert main(["redundancy", str(ROBOTS / "puma560.yaml"), "--json"]) == 0
+    assert capsys.readouterr().err == "gecgen redundancy: warning: a warning of gecgen's own\n"

@@ -1,4 +1,4 @@
-"""gecgen design: D- and I-optimal choice of the poses to measure (gecgen/runtime/design.py)."""
+"""gecgen design: D- and I-optimal choice of the poses to measure (gecgen/plan/design.py)."""
 import csv
 import json
 import warnings
@@ -11,7 +11,7 @@ from test_cli import gecgen
 from gecgen.cli import main
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.measurements import read_measurements, write_measurements
-from gecgen.runtime import design as D
+from gecgen.plan import design as D
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import identify, position_errors, rows_H_and_residual
 from gecgen.simulate import load_truth, random_design, simulate
@@ -261,3 +261,27 @@ def test_the_i_gain_of_a_pose_that_spans_every_direction_is_finite():
             search.greedy(10)
             search.exchange()
         assert len(set(search.chosen)) == 10
+
+
+def test_the_summary_says_what_each_figure_is_beside_the_random_poses(tmp_path, capsys):
+    """Without --json: every figure of the comparison on a line of its own with its meaning (which
+    way is better, its unit), the designed value beside the random one, the same numbers as --json."""
+    from gecgen.cli.human import scalar
+
+    args = ["design", str(ROBOTS / "puma560.yaml"), "--poses", "12", "--candidates", "300", "-o", str(tmp_path / "p.csv")]
+    assert main(args + ["--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    lines = text.splitlines()
+    assert max(len(ln) for ln in lines if str(ROBOTS) not in ln and str(tmp_path) not in ln) <= 120, text
+    figures = {**result, **result["observability"], **result["predicted_std"]}
+    for key, label, means in [("log_det", "log det of the information (D)", "higher is better"),
+                              ("mean_variance", "mean prediction variance (I)", "per unit noise variance; lower is better"),
+                              ("rms_mm", "predicted position std, RMS (mm)", "at 0.05 mm noise per coordinate"),
+                              ("O2", "O2: condition number", "lower is better")]:
+        line = next(ln for ln in lines if ln.strip().startswith(label))
+        assert f"{scalar(figures[key]):>10}{scalar(figures[f'random_{key}']):>10}  {means}" in line, line
+    # the bare keys of the record are not what a person reads
+    assert not any(ln.startswith(("value:", "log_det:", "observability:", "swaps:", "history:")) for ln in lines)
+    assert f"then {result['swaps']} exchanges in {result['passes']} passes" in text

@@ -266,3 +266,79 @@ def test_a_cache_lock_that_cannot_be_taken_does_not_fail_the_build(tmp_path, mon
     monkeypatch.setattr(fcntl, "flock", lambda *args: (_ for _ in ()).throw(OSError(37, "No locks available")))
     assert compiled._built(tmp_path / "b.bin", lambda: b"built too").read_bytes() == b"built too"
     assert compiled._built(tmp_path / "b.bin", lambda: b"not again").read_bytes() == b"built too"  # an entry is kept
+
+
+def _folder(root, files: dict) -> dict:
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return {str(p.relative_to(root)): p.read_text() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_an_output_folder_is_replaced_whole_keeping_the_users_own_files(tmp_path):
+    from gecgen.model.files import output_folder
+
+    out = tmp_path / "cal"
+    _folder(out, {"calibration.json": "old", "old_figure.png": "old", "generated/a.c": "old",
+                  "notes.txt": "mine", "controller/x.c": "mine"})
+    with output_folder(out, "calibration folder") as build:
+        assert not (out / "new_figure.png").exists()  # nothing of the new run is seen before it is done
+        _folder(build, {"calibration.json": "new", "new_figure.png": "new", "generated/b.c": "new"})
+    got = {str(p.relative_to(out)): p.read_text() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert got == {"calibration.json": "new", "new_figure.png": "new", "generated/b.c": "new",
+                   "notes.txt": "mine", "controller/x.c": "mine"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cal"]  # no lock, no build folder left
+
+
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt(), ModelError("bad")])
+@pytest.mark.parametrize("existed", [True, False])
+def test_an_output_folder_whose_writing_fails_is_left_as_it_was(tmp_path, error, existed):
+    from gecgen.model.files import output_folder
+
+    out = tmp_path / "cal"
+    before = _folder(out, {"calibration.json": "old", "report.md": "old"}) if existed else None
+    with pytest.raises(type(error)):
+        with output_folder(out, "calibration folder") as build:
+            (build / "calibration.json").write_text("new")  # the report not yet written
+            raise error
+    assert (_folder(out, {}) if existed else out.exists()) == (before if existed else False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["cal"] if existed else [])
+
+
+def test_a_second_writer_of_an_output_folder_is_refused_naming_it(tmp_path):
+    from gecgen.model.files import output_folder, output_lock
+
+    out = tmp_path / "cal"
+    with output_lock(out, "calibration folder"):
+        with pytest.raises(ModelError) as exc:
+            with output_folder(out, "calibration folder"):
+                pass
+        assert str(exc.value) == (f"{out}: another gecgen run is writing this calibration folder now; wait for it "
+                                  f"to finish, or give another folder")
+    with output_folder(out, "calibration folder") as build:  # released: taken again
+        (build / "x").write_text("x")
+    assert (out / "x").is_file()
+
+
+def test_what_a_killed_run_left_beside_a_folder_goes_with_the_next_run(tmp_path):
+    from gecgen.model.files import output_folder
+
+    out = tmp_path / "cal"
+    _folder(out, {"calibration.json": "old"})
+    _folder(tmp_path / ".cal.gecgen-build-1-abcd", {"calibration.json": "half"})
+    (tmp_path / ".cal.gecgen-lock").write_text("")  # its lock file, no longer held by anyone
+    with output_folder(out, "calibration folder") as build:
+        (build / "calibration.json").write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cal"] and (out / "calibration.json").read_text() == "new"
+
+
+def test_an_output_folder_reached_through_a_link_is_replaced_where_it_is(tmp_path):
+    from gecgen.model.files import output_folder
+
+    real = tmp_path / "disk" / "cal"
+    _folder(real, {"calibration.json": "old"})
+    (tmp_path / "cal").symlink_to(real, target_is_directory=True)
+    with output_folder(tmp_path / "cal", "calibration folder") as build:
+        (build / "calibration.json").write_text("new")
+    assert (tmp_path / "cal").is_symlink() and (real / "calibration.json").read_text() == "new"
+    assert sorted(p.name for p in real.parent.iterdir()) == ["cal"]

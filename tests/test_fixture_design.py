@@ -1,4 +1,4 @@
-"""Designs for calibration without a tracker (gecgen/runtime/fixture_design.py, `gecgen design
+"""Designs for calibration without a tracker (gecgen/plan/fixture_design.py, `gecgen design
 --fixtures`): which configurations to record in each socket and on each plane.
 
 Checked against independent computation: the exchange's incremental gain against the log det of the
@@ -22,9 +22,9 @@ from gecgen.model.fixture_file import Fixture
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import read_measurements
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.runtime import fixture_design as FD
+from gecgen.plan import fixture_design as FD
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.design import logdet
+from gecgen.plan.design import logdet
 from gecgen.simulate import load_truth
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
@@ -189,3 +189,20 @@ def test_fixture_options_without_fixtures_are_refused(tmp_path, capsys, option):
 
     assert main(["design", str(ROBOT), "--poses", "10", "-o", str(tmp_path / "d.csv"), *option]) == 2
     assert f"{option[0]} goes with --fixtures" in capsys.readouterr().err
+
+
+def test_the_summary_of_a_fixture_design_says_what_each_figure_is(fixture_design, tmp_path, capsys):
+    from gecgen.cli import main
+    from gecgen.cli.human import scalar
+
+    _, _, _, _, folder = fixture_design
+    args = ["design", str(ROBOT), "--errors", str(CONSTANT), "--fixtures", str(folder / "fx.csv"), "--poses", "24",
+            "--candidates", "40", "-o", str(tmp_path / "d.csv")]
+    out = run_json(*args[:-1], tmp_path / "e.csv")
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert (f"log det of the information (D)        {scalar(out['log_det']):>10}{scalar(out['random_log_det']):>10}"
+            f"  higher is better") in text
+    assert f"{scalar(out['predicted']['rms_mm']):>10}{scalar(out['predicted']['random_rms_mm']):>10}  by the " in text
+    assert "\nswaps:" not in text and "\nlog_det:" not in text
+    assert f"then {out['swaps']} exchanges in {out['passes']} passes" in text

@@ -70,3 +70,44 @@ def test_bad_manifests_are_refused(tmp_path, text, message):
     with pytest.raises(ModelError) as exc:
         read_manifest(tmp_path / "m.csv")
     assert message in str(exc.value)
+
+
+@pytest.mark.parametrize("name", ["fleet.json", "FLEET.CSV", "fleet.incomplete"])
+def test_a_robot_named_as_a_fleet_file_is_refused_before_any_work(tmp_path, name):
+    (tmp_path / "m.csv").write_text(f"name,robot,train\n{name},r.yaml,t.csv\n")
+    with pytest.raises(ModelError) as exc:
+        read_manifest(tmp_path / "m.csv")
+    assert f"row 2, column 'name': {name} is a file the fleet writes" in str(exc.value)
+
+
+@pytest.mark.parametrize("workers", [0, -1, 1.5, True])
+def test_a_local_cluster_of_no_workers_is_refused_naming_the_keyword(tmp_path, workers):
+    (tmp_path / "m.csv").write_text("name,robot,train\nx,r.yaml,t.csv\n")
+    with pytest.raises(ModelError, match=r"^workers=.*\(the workers keyword; --workers on the command line\)"):
+        calibrate_fleet(tmp_path / "m.csv", tmp_path / "out", workers=workers)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_fleet_with_a_failed_robot_exits_1_naming_it_and_says_nothing_of_dask(tmp_path):
+    """Run as a user runs it (its own process, so that what Dask's processes print is seen too),
+    with the dashboard's usual port taken."""
+    import socket
+    import subprocess
+    import sys
+
+    (tmp_path / "m.csv").write_text(f"name,robot,train\ngone,{_root()}/robots/puma560.yaml,missing.csv\n")
+    with socket.socket() as taken:
+        taken.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            taken.bind(("", 8787))
+            taken.listen()
+        except OSError:  # taken already, by something else
+            pass
+        run = subprocess.run([sys.executable, "-m", "gecgen.cli", "fleet", str(tmp_path / "m.csv"), "-o",
+                              str(tmp_path / "out"), "--workers", "1", "--json"], capture_output=True, text=True)
+    assert run.returncode == 1
+    assert run.stderr.splitlines() == [
+        f"gecgen fleet: gone: {tmp_path}/missing.csv: no such measurement file",
+        "gecgen fleet: 1 of 1 robots failed: gone"]
+    assert json.loads(run.stdout)["failed"] == 1
+    assert (tmp_path / "out" / "fleet.csv").is_file() and not (tmp_path / "out" / "fleet.incomplete").exists()

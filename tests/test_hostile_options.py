@@ -25,6 +25,7 @@ def files(tmp_path_factory):
         assert main(["identify", PUMA, str(t / "d.csv"), "-o", str(t / "c.json")]) == 0
     (t / "v.yaml").write_text("angle_unit: deg\nsamples: 5\n")
     (t / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,0.2,-0.3,0.4,0.5,-0.6\n")
+    (t / "p.script").write_text("def p():\n  movej([0.1, 0.2, -0.3, 0.4, 0.5, -0.6], a=1.2, v=0.5)\nend\n")
     (t / "q.csv").write_text("q1,q2,q3,q4,q5,q6,q7,q8,q9,q10,q11,q12,q13,q14,q15,q16\n" + ",".join(["0.1"] * 16) + "\n")
     (t / "wide.csv").write_text("a,b,c,d,e,f,x,y,z\n0.1,0.2,0.3,0.1,0.2,0.3,0.5,0.1,0.4\n")
     (t / "map.yaml").write_text("pose: row\njoints: {q1: a, q2: b, q3: c, q4: d, q5: e, q6: f}\n"
@@ -39,6 +40,7 @@ def invocations(t):
         "identify": [PUMA, str(t / "d.csv"), "-o", str(t / "c2.json")],
         "evaluate": [str(t / "c.json"), str(t / "d.csv")],
         "compensate": [str(t / "c.json"), str(t / "cmd.csv"), "-o", str(t / "fixed.csv")],
+        "filter": [str(t / "c.json"), str(t / "p.script"), "-o", str(t / "fixed.script")],
         "export": [str(t / "c.json"), "--table"],
         "redundancy": [PUMA],
         "simulate": [PUMA, "--poses", "4", "-o", str(t / "s.csv")],

@@ -116,6 +116,25 @@ def test_mapping_by_joint_index_pose_column_and_wrench(tiago, tmp_path):
     assert data.xyz[0].tolist() == [float(table[c][0]) for c in ("x3", "y3", "z3")]
 
 
+def test_a_table_in_degrees_and_millimetres_converts_to_rad_and_m(tiago, tmp_path):
+    """The same poses written as a controller exports them (revolute readings in deg; the prismatic
+    torso lift and the points in mm) import to the same numbers as the table in rad and m."""
+    table = wide_table(tiago)
+    plain = import_wide(write_table(tmp_path / "t.csv", table), tiago,
+                        write_mapping(tmp_path / "m.yaml", shipped_mapping()))
+    prismatic = [j.kind == "P" for j in tiago.joints]
+    assert any(prismatic) and not all(prismatic)
+    for col, p in zip(shipped_mapping()["joints"].values(), prismatic):
+        table[col] = [repr(float(v) * (1e3 if p else 180 / np.pi)) for v in table[col]]
+    for col in (c for c in table if c[0] in "xyz" and c[1:].isdigit()):
+        table[col] = [repr(float(v) * 1e3) for v in table[col]]
+    converted = import_wide(write_table(tmp_path / "u.csv", table), tiago,
+                            write_mapping(tmp_path / "u.yaml", shipped_mapping() | {"units": {"angles": "deg",
+                                                                                              "lengths": "mm"}}))
+    np.testing.assert_allclose(converted.q, plain.q, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(converted.xyz, plain.xyz, rtol=1e-12, atol=1e-15)
+
+
 def cell(column: str, text: str):
     """Table edit: the second data row (file row 3) of `column` becomes `text`."""
     return lambda table: table[column].__setitem__(1, text)
@@ -146,6 +165,8 @@ BAD = {
     "mapped and ignored": (None, lambda s: s["ignore"].append("x1"), "column 'x1' is used twice"),
     "aux with a contract name": (add_column("x"), lambda s: s["aux"].append("x"), "aux: 'x' cannot be an auxiliary"),
     "unknown key": (None, lambda s: s.update(columns={}), "unknown key 'columns'"),
+    "unknown unit": (None, lambda s: s.update(units={"angles": "grad"}), "units.angles: 'grad'; use rad or deg"),
+    "unknown unit key": (None, lambda s: s.update(units={"forces": "kN"}), "unknown key 'forces'"),
     "repeated pose id": (cell("shipped_row", "0"), pose_column, "row 3, column 'shipped_row': pose id repeats"),
     "fractional pose id": (cell("shipped_row", "1.5"), pose_column, "row 3, column 'shipped_row': not an integer"),
 }

@@ -111,3 +111,24 @@ def test_a_run_or_plan_that_is_not_the_test_is_refused(tmp_path, capsys):
                               (",1,5,", ",1,9,", "row 3, column 'point': 9 is not a point of the test (1..5)")):
         (tmp_path / "bad.csv").write_text("\n".join(plan).replace(old, new, 1) + "\n")
         assert message in refused(tmp_path / "bad.csv", everything)
+
+
+def test_a_simulated_run_of_the_plan_from_the_command_line(tmp_path):
+    """The documented way to simulate an ISO 9283 run: the plan's joints through `simulate --commands`
+    (pose ids the plan's) are scored as measured; the same plan compensated by a calibration of the
+    truth and simulated again scores closer to the commanded poses."""
+    robot_file = "robots/industrial6r.yaml"
+    run_json("iso9283", robot_file, "-o", tmp_path / "plan.csv", "--tool-rpy", "180,0,0", "--cycles", 3)
+    before = run_json("simulate", robot_file, "--commands", tmp_path / "plan.csv", "-o", tmp_path / "run.csv")
+    plan = np.genfromtxt(tmp_path / "plan.csv", delimiter=",", names=True)
+    run = np.genfromtxt(tmp_path / "run.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    assert before["design"] == "commands" and before["poses"] == len(plan)
+    assert sorted(set(run["pose"].tolist())) == sorted(plan["pose"].astype(int).tolist())
+    run_json("simulate", robot_file, "--poses", 150, "--seed", 3, "-o", tmp_path / "train.csv")
+    run_json("identify", robot_file, tmp_path / "train.csv", "-o", tmp_path / "calib.json")
+    run_json("compensate", tmp_path / "calib.json", tmp_path / "plan.csv", "-o", tmp_path / "compensated.csv")
+    run_json("simulate", robot_file, "--commands", tmp_path / "compensated.csv", "-o", tmp_path / "after.csv",
+             "--seed", 1)
+    scored = run_json("iso9283", robot_file, "--plan", tmp_path / "plan.csv", "--measured", tmp_path / "run.csv",
+                      "--after", tmp_path / "after.csv")
+    assert scored["after"]["worst"]["AP_p"] < 0.5 * scored["worst"]["AP_p"]

@@ -197,3 +197,26 @@ def test_the_fast_reader_reads_and_refuses_as_the_csv_module(folder, content):
         careful = outcome(path)
     with mock.patch("gecgen.model.table.SMALL_BYTES", 0):  # pandas reads every file it can vouch for
         assert outcome(path) == careful
+
+
+def test_a_wide_table_is_read_by_the_fast_reader(folder):
+    """Lines far longer than a cell may be (2,000 extra columns: 24 kB a line) but short cells: the
+    fast reader takes it (once, such lines sent every file to the csv module, and each of its columns
+    was looked up through the whole header), and reads it as the csv module does."""
+    from gecgen.model.table import MAX_CELL, read_table
+
+    rng = np.random.default_rng(0)
+    header = ["pose", "target", "x", "y", "z", *[f"q{k + 1}" for k in range(PPS.n)]]
+    extra = [f"extra_{k}" for k in range(2000)]
+    lines = [",".join(header + extra)]
+    for r in range(3):
+        cells = [str(r), next(iter(PPS.targets)), "0.5", "0.25", "0.125", *["0.0"] * PPS.n]
+        lines.append(",".join(cells + [repr(v) for v in rng.normal(size=len(extra)).tolist()]))
+    path = folder / "wide.csv"
+    path.write_text("\n".join(lines) + "\n")
+    assert max(map(len, lines)) > MAX_CELL
+    with mock.patch("gecgen.model.table.SMALL_BYTES", 0):
+        assert read_table(path, "measurement file", "", text=("target",))._columns is not None
+        fast = outcome(path)
+    with mock.patch("gecgen.model.table._plain_columns", return_value=None):
+        assert outcome(path) == fast

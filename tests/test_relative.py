@@ -248,6 +248,20 @@ def test_one_recording_given_as_both_sockets_is_refused(tmp_path, capsys):
             f"configuration cannot seat the ball in two sockets") in capsys.readouterr().err
 
 
+def test_a_pose_file_among_the_socket_files_is_refused(tmp_path, capsys):
+    """A recorder that also writes the ball's pose per configuration (x, y, z and a quaternion: seven
+    numbers, as many as the Panda's joints) beside each socket's readings: given with the socket files,
+    it is refused at its first reading beyond the joint limits, not read as joints with a warning."""
+    from gecgen.cli import main
+
+    poses = tmp_path / "hole_0_pose.csv"
+    poses.write_text("0.45,0.02,0.31,0.0,0.92,0.38,0.0\n0.46,0.02,0.30,0.0,0.91,0.41,0.0\n")
+    args = ["import", ROBOT, MUKCA / "front" / "hole_0.csv", poses, "--sockets", "-o", tmp_path / "x.csv"]
+    assert main([str(a) for a in args]) == 2 and not (tmp_path / "x.csv").exists()
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{poses}: line 1, column 4 (" in err[0] and "a file of poses or points" in err[0], err
+
+
 def test_socket_files_of_one_id_and_a_distance_in_millimetres_are_refused(tmp_path, capsys):
     """Two folders of one name give one socket id twice: said as such, not as a file given twice; a
     distance of 50 (mm meant) is far from where the nominal model puts the sockets (57 mm apart)."""

@@ -164,7 +164,7 @@ def test_the_residual_grid_names_each_joint_under_its_panel_at_its_scale(monkeyp
     import gecgen.report.plots as plots
     from gecgen.model import load_robot
     from gecgen.model.measurements import Measurements
-    from gecgen.report.content import DataSet, Residuals, joint_label
+    from gecgen.report.blocks import DataSet, Residuals, joint_label
 
     robot = load_robot(ROBOTS / "puma560.yaml")
     P = 20

@@ -131,3 +131,25 @@ def test_random_design_writes_validation_poses_of_the_same_truth(tmp_path, capsy
     assert main(["simulate", str(robot), "--design", "one-at-a-time", "-o", str(tmp_path / "o.csv"),
                  "--val-out", str(tmp_path / "ov.csv")]) == 2
     assert "--val-out with --design one-at-a-time" in capsys.readouterr().err
+
+
+def test_seed_draws_poses_and_noise_and_truth_seed_draws_the_robot(tmp_path, capsys):
+    """--seed leaves the truth file's draws alone (data of two seeds are of one robot); --truth-seed
+    replaces the truth file's seed (another robot), and is refused without a truth file."""
+    robot, truth = ROBOTS / "industrial6r.yaml", ROBOTS / "industrial6r.truth.yaml"
+
+    def drawn(name, *options):
+        assert main(["simulate", str(robot), "--truth", str(truth), "--poses", "5", "-o", str(tmp_path / f"{name}.csv"),
+                     "--truth-out", str(tmp_path / f"{name}.yaml"), "--json", *options]) == 0
+        return read_yaml(tmp_path / f"{name}.yaml", "truth"), (tmp_path / f"{name}.csv").read_text()
+
+    base, data = drawn("a", "--seed", "1")
+    other_poses, other_data = drawn("b", "--seed", "2")
+    assert base == other_poses and data != other_data
+    other_robot, _ = drawn("c", "--seed", "1", "--truth-seed", "8")
+    assert other_robot["constant"] != base["constant"] and other_robot["joint_offsets"] != base["joint_offsets"]
+    assert drawn("d", "--seed", "1", "--truth-seed", "8")[0] == other_robot
+    capsys.readouterr()
+    assert main(["simulate", str(ROBOTS / "puma560.yaml"), "--truth-seed", "7", "-o", str(tmp_path / "p.csv")]) == 2
+    assert capsys.readouterr().err == (f"gecgen simulate: --truth-seed 7: there is no truth file to draw "
+                                       f"({ROBOTS / 'puma560.truth.yaml'} does not exist); give --truth FILE\n")

@@ -424,3 +424,36 @@ def test_compensate_names_its_option_and_why_a_two_joint_arm_cannot_place_its_to
         code = main(["compensate", str(t / "c.json"), str(t / "cmd.csv"), "-o", str(t / "out.csv"), *branch])
         err = capsys.readouterr().err.splitlines()
         assert code != 0 and len(err) == 1 and message in err[0], err
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_diagnose_json_holds_each_hands_figures_as_its_report_does(tmp_path, capsys):
+    """diagnose --json on a tree: train_branches and val_branches, each hand's uncalibrated, declared
+    (before) and diagnosed (after) errors; pooled over the hands they are the whole data's figures."""
+    import json
+
+    from gecgen.cli import main
+
+    dh_tree(tmp_path)
+    robot = str(tmp_path / "tree.yaml")
+    (tmp_path / "truth.yaml").write_text("seed: 3\nconstant: {translation_std: 1.0e-3, rotation_std: 1.0e-3}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 1.0e-5}\n")
+    for name, seed in (("t", "1"), ("v", "2")):
+        assert main(["simulate", robot, "--truth", str(tmp_path / "truth.yaml"), "--poses", "60", "--seed", seed,
+                     "-o", str(tmp_path / f"{name}.csv"), "--json"]) == 0
+    capsys.readouterr()
+    assert main(["diagnose", robot, str(tmp_path / "t.csv"), "--val", str(tmp_path / "v.csv"), "--errors",
+                 str(ROOT / "robots" / "constant.errors.yaml"), "--max-rounds", "1", "-o",
+                 str(tmp_path / "d.errors.yaml"), "--report", str(tmp_path / "report"), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for key, overall in (("train_branches", "train_rms_mm"), ("val_branches", "val_rms_mm")):
+        hands = result[key]
+        assert set(hands) == {"left", "right"} and all(set(h) == {"uncalibrated", "before", "after"}
+                                                       for h in hands.values())
+        points = 60  # one target per hand, one row per pose
+        pooled = np.sqrt(sum(points * h["after"]["rms_mm"] ** 2 for h in hands.values()) / (2 * points))
+        assert pooled == pytest.approx(result["after"][overall], rel=1e-9)
+        assert all(h["uncalibrated"]["rms_mm"] > h["after"]["rms_mm"] for h in hands.values())
+    report = (tmp_path / "report" / "report.md").read_text()
+    for hand in ("left", "right"):
+        assert f"{result['val_branches'][hand]['after']['rms_mm']:.3g}" in report

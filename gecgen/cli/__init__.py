@@ -6,39 +6,45 @@ with a one-line reason on stderr when it cannot do its job.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
-from gecgen import __version__
+from gecgen.version import __version__
+from gecgen.cli.register import bare_register
 from gecgen.cli.human import print_human, warning_lines
-from gecgen.files import check_output_dir, check_output_file, reading, same_file
+from gecgen.model.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
 
-#: command -> (its module in this package, its line in `gecgen --help`), in the order listed there
+#: command -> (its module in this package, its line in `gecgen --help`), in the order of the work, as
+#: listed there: plan the measurement, bring it in, fit, verify, deliver to the controller
 COMMANDS = {
-    "generate": ("generate", "write C, CasADi and a manifest for a robot and error model"),
-    "identify": ("identify", "fit the error model to measured data and write a calibration"),
-    "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
-    "compensate": ("compensate", "corrected joint commands for nominal commands"),
-    "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
-    "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
+    "design": ("design", "choose the poses to measure (optimal experiment design)"),
     "simulate": ("simulate", "simulated measurements of a robot with physical error sources"),
+    "redundancy": ("redundancy", "which coefficients are eliminated and what they merge into"),
     "import": ("import_", "convert a wide table (points side by side), or socket files, into a measurement CSV"),
     "gravity": ("gravity", "append the static gravity torques of joints (URDF masses) as aux columns"),
-    "design": ("design", "choose the poses to measure (optimal experiment design)"),
-    "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
     "calibrate": ("calibrate", "choose a model on the training data, fit it, write calibration, code and report"),
+    "identify": ("identify", "fit the error model to measured data and write a calibration"),
+    "diagnose": ("diagnose", "trace the residual to missing effects, add them, refit, report"),
     "fleet": ("fleet", "calibrate many robots at once (a manifest of robot and data files) on Dask"),
+    "evaluate": ("evaluate", "position errors of new data before and after the calibration"),
     "iso9283": ("iso9283", "plan the ISO 9283 pose test, or its accuracy and repeatability from a measured run"),
     "check": ("check", "a QA check: a short measurement against the calibration, pass or fail, and what changed"),
     "accuracy": ("accuracy", "the worst compensated error over a declared volume, with a confidence, against a "
                              "tolerance"),
+    "export": ("export", "a calibration as C with its coefficients, as a URDF, or as a table"),
+    "compensate": ("compensate", "corrected joint commands for nominal commands"),
+    "filter": ("filter", "a robot program (KUKA, ABB, FANUC, UR) with its targets corrected"),
+    "generate": ("generate", "write C, CasADi and a manifest for a robot and error model"),
 }
 
 #: per command, the options naming what it writes: option -> (what, is a folder)
@@ -47,6 +53,7 @@ OUTPUTS = {
     "identify": {"output": ("calibration", False), "report": ("report", True)},
     "evaluate": {"report": ("report", True)},
     "compensate": {"output": ("corrected commands", False)},
+    "filter": {"output": ("corrected program", False)},
     "export": {"c": ("generated code", True), "urdf": ("URDF", False)},
     "diagnose": {"output": ("error model", False), "generated": ("generated code", True), "report": ("report", True)},
     "simulate": {"output": ("measurements", False), "val_out": ("validation measurements", False),
@@ -80,7 +87,11 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     one command need not pay for the others."""
     parser = _Parser(
         prog="gecgen", description="Calibrate a robot from measurements of it (GEC method) and generate the C code "
-                                   "that corrects its commands. `gecgen COMMAND --help` explains each command; the "
+                                   "that corrects its commands. The commands are listed in the order of the work: plan "
+                                   "the measurement (design, simulate, redundancy), bring it in (import, gravity), "
+                                   "fit (calibrate, identify, diagnose, fleet), verify (evaluate, iso9283, check, "
+                                   "accuracy), deliver (export, compensate, generate). `gecgen COMMAND --help` "
+                                   "explains each command; the "
                                    "README has a walk-through, docs/guide.md the user guide and docs/reference.md the "
                                    "file formats.")
     parser.add_argument("--version", action="version", version=f"gecgen {__version__}")
@@ -175,27 +186,54 @@ class Incomplete(Exception):
         self.result = result
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a service manager, `kill`, a CI timeout), raised where the command is, so that it
+    ends as on Ctrl-C: its half-written output removed, its worker processes ended."""
+
+
+def _terminated(signum, frame):
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """While the command runs, SIGTERM raises `Terminated` (only the main thread may set handlers:
+    a command run from another thread, as fleet's robots are, keeps its process's handling)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv = bare_register(sys.argv[1:] if argv is None else list(argv))
     args = build_parser(argv).parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the
     # failure's reason is then the one line on stderr
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _sigterm_interrupts():
         warnings.simplefilter("always")
+        # as Python does by default: a library's socket or file closed late (Dask's) is not the user's business
+        warnings.simplefilter("ignore", ResourceWarning)
         try:
             code, result = _run(args)
-        except KeyboardInterrupt:  # Ctrl-C: what was being written is cleaned up (files.write_atomically)
-            print(f"gecgen {args.command}: interrupted; nothing was written for this command's unfinished step",
+        except KeyboardInterrupt as exc:  # what was being written is cleaned up (files.write_atomically,
+            # files.output_folder), unless the command says what it leaves (the exception's text)
+            how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+            print(f"gecgen {args.command}: {how}; {str(exc) or 'nothing was written for its unfinished step'}",
                   file=sys.stderr)
-            return 130
+            return code
     if code and result is None:
         return code
     for message in warning_lines(caught):
         print(f"gecgen {args.command}: warning: {message}", file=sys.stderr)
     if args.json:
         print(json.dumps(result, allow_nan=False))
-    else:
-        print_human(result)
+    else:  # a command may print its own summary (`human`, set by its parser)
+        getattr(args, "human", print_human)(result)
     return code
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, warned, whole
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, progress_status, say, warned, whole
 from gecgen.cli.human import warning_lines
 
 #: Monte Carlo draws of the coefficient and unmodelled errors
@@ -48,12 +48,14 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    with warned() as caught:
-        return _stated(args, caught)
+    with warned() as caught, progress_status(not args.json) as status:
+        say(status, f"reading {args.calibration} and the data")
+        return _stated(args, caught, status)
 
 
-def _stated(args, caught: list) -> dict:
-    """The statement, its result, map and report; caught: the warnings said on the way (`warned`)."""
+def _stated(args, caught: list, status) -> dict:
+    """The statement, its result, map and report; caught: the warnings said on the way (`warned`);
+    says how far it is on `status` (`common.progress_status`)."""
     import numpy as np
 
     from gecgen.api import load_calibration
@@ -70,6 +72,7 @@ def _stated(args, caught: list) -> dict:
     volume = load_volume(args.volume, calib.robot)
     data, y = _positions(args.data, calib)
     held_out = _positions(args.val, calib) if args.val else None
+    say(status, f"bounding the compensated error over {args.volume} ({args.draws} draws of the coefficients)")
     samples, statement, _ = accuracy(calib, volume, data, y, held_out,
                                      None if args.noise_mm is None else 1e-3 * args.noise_mm,
                                      1e-3 * args.repeatability_mm, args.tolerance_mm,
@@ -88,9 +91,10 @@ def _stated(args, caught: list) -> dict:
     assessment = accuracy_next_step(result, args.calibration, args.volume, args.data)
     result["next_step"], result["warnings"] = assessment.next_step, warning_lines(caught)
     if args.plot or args.report:
-        from gecgen.files import write_atomically
+        from gecgen.model.files import write_atomically
         from gecgen.report import content, plots, write
 
+        say(status, "drawing the map of the bound over the volume, writing the outputs")
         figure = plots.volume_map(calib.robot, volume, samples, statement)
         if args.plot:
             write_atomically(Path(args.plot), figure.png)

@@ -8,8 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
-                               next_commands, progress_status, warned, whole)
+                               next_commands, progress_status, say, warned, whole)
 from gecgen.cli.human import warning_lines
+from gecgen.cli.register import REGISTER, add_register
 from gecgen.loop.calibrate import NAMES
 
 
@@ -22,9 +23,10 @@ def add_parser(command):
     held.add_argument("--val", help="validation measurement CSV, scored after the choice (never used to choose)")
     held.add_argument("--holdout", type=float, help="share of TRAIN's poses to hold out for validation instead "
                                                     "(split by pose, seeded by --seed), e.g. 0.2")
-    p.add_argument("--register", action="store_true",
-                   help="--val was measured from another tracker stationing: fit its frame (the calibration's "
-                        "coefficients held) before scoring it, as evaluate --register does (default: off)")
+    add_register(p, REGISTER, bare="val", default="auto",
+                 lead="registration of TRAIN onto the nominal model: auto (when far apart), always or never; val: "
+                      "auto, and --val, measured from another tracker stationing, gets its frame fitted (the "
+                      "coefficients held) before it is scored, as evaluate --register does")
     p.add_argument("--errors", help="the robot's default error model among the candidates (default: "
                                     "robots/NAME.errors.yaml beside the robot file, if any)")
     p.add_argument("--models", default=",".join(NAMES),
@@ -42,40 +44,50 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    with warned() as caught:
-        return _calibrated(args, caught)
+    from gecgen.model.files import output_folder
+
+    out = Path(args.output)
+    try:
+        # the folder is held from the start (a second run into it is refused at once) and written
+        # aside, replacing the old one whole at the end (files.output_folder)
+        with output_folder(out, "calibration folder") as build, progress_status(not args.json) as status, \
+                warned() as caught:
+            return _calibrate(args, out, build, status, caught)
+    except KeyboardInterrupt as exc:
+        raise type(exc)(f"{out} is as it was before this run") from None
 
 
-def _calibrated(args, caught: list) -> dict:
-    """The calibration, its files and report; caught: the warnings said on the way (`warned`), which
-    the result and the report carry."""
+def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
+    """The command's work, its files written into `build`, which becomes `out`: the paths the result
+    names are those under `out`. Says how far it is on `status` (`common.progress_status`); caught:
+    the warnings said on the way (`warned`), which the result and the report carry."""
     from gecgen import report
     from gecgen.api import calibrate, model_names
-    from gecgen.files import write_atomically
+    from gecgen.model.files import write_atomically
     from gecgen.loop.diagnose import write_error_model
     from gecgen.runtime import export
     from gecgen.runtime.compiled import CompiledModel
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
-    with progress_status(not args.json) as status:
-        def progress(name):
-            if status:
-                status.update(f"cross-validating the {name} model on the training poses")
-
-        sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
-                        seed=args.seed, orientation_length=args.orientation_length, register_val=args.register,
-                        progress=progress, keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
-    out = Path(args.output)
+    register_val = args.register == "val"
+    say(status, "reading the robot and the data, compiling the candidate models")
+    sel = calibrate(args.robot, args.train, args.val, holdout=args.holdout, errors=args.errors, models=names,
+                    seed=args.seed, orientation_length=args.orientation_length, register_val=register_val,
+                    register="auto" if register_val else args.register,
+                    progress=lambda name: say(status, f"cross-validating the {name} model on the training poses"),
+                    keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
+    say(status, f"writing the calibration, its code and the report into {out}")
     cal, choice = sel.calibrator, sel.choice
-    cal.save(out / "calibration.json")
-    write_error_model(cal.robot_, choice.model, sel.effects, out / "errors.yaml")
+    # the same depth beside `out`: the robot file's path relative to the calibration is the same
+    cal.save(build / "calibration.json")
+    write_error_model(cal.robot_, choice.model, sel.effects, build / "errors.yaml")
     # the code, the coefficient header and an example program: what `gecgen export --c` writes, its
     # example command chosen on the calibration's own targets (the fit's model of pose data has the
     # measured frames' vertices as targets, which the emitted code does not)
     calib = cal.calibration_
     code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
     for name, text in code.items():
-        write_atomically(out / "generated" / name, text)
+        write_atomically(build / "generated" / name, text)
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
               "model": sel.model, "error_model": str(out / "errors.yaml"), "candidates": sel.table,
               "n_params": len(choice.model.coefficients),
@@ -89,7 +101,7 @@ def _calibrated(args, caught: list) -> dict:
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
         if sel.val_inside:  # the held-out poses inside every training range: where the model is validated
             result["val_inside"] = sel.val_inside.to_dict()
-        result["val_registered"] = args.register
+        result["val_registered"] = register_val
         if sel.val_branches:
             result["val_branches"] = sel.val_branches
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
@@ -97,9 +109,9 @@ def _calibrated(args, caught: list) -> dict:
     result["files"] = {k: str(v) for k, v in files.items()}
     result["assessment"] = (assessment := _assessment(args, sel, result)).to_dict()
     result["warnings"] = warning_lines(caught)
-    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, args.register,
-                                                    assessment), out)
-    result["files"].update({k: str(v) for k, v in written.items()})
+    written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, register_val,
+                                                    assessment), build)
+    result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in written.items()})
     return result
 
 

@@ -116,7 +116,7 @@ def _baseline(path: str, calib, data):
 
 def _append(path: Path, label: str, result: dict) -> dict:
     """Append the check to the history CSV at path and plot the history beside it (path.png)."""
-    from gecgen.files import write_atomically
+    from gecgen.model.files import write_atomically
     from gecgen.model.validation import read_text, require
 
     rows = []
@@ -159,7 +159,7 @@ def _plot(rows: list[list[str]], path: Path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from gecgen.files import write_atomically
+    from gecgen.model.files import write_atomically
 
     k = range(1, len(rows) + 1)
     fig, ax = plt.subplots(figsize=(8, 3.2))

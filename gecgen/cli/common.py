@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 import warnings
 from contextlib import contextmanager
 
@@ -27,36 +26,23 @@ def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str,
 
 
 def progress_status(enabled: bool):
-    """Where long steps say how far they are (`status.update(text)`): a rich status line on a
-    terminal; log lines on stderr when stderr is a file or a pipe (a CI log, `2> log`), at most one
-    every LOG_EVERY_S seconds; nothing under --json, whose stderr holds only warnings and the
-    one-line reason of a failure."""
+    """Where long steps say how far they are (`status.update(text)`): a rich status line on stderr
+    when stderr is a terminal, which is cleared when the block ends; None (say nothing) when it is
+    not (a file, a pipe, a CI log: stderr then holds only warnings and the one-line reason of a
+    failure) and under --json."""
     from contextlib import nullcontext
 
-    if not enabled:
+    if not (enabled and sys.stderr.isatty()):
         return nullcontext(None)
-    if not sys.stderr.isatty():
-        return nullcontext(_LogLines())
     from rich.console import Console
 
     return Console(stderr=True).status("working")
 
 
-#: seconds between two progress log lines when stderr is not a terminal
-LOG_EVERY_S = 2.0
-
-
-class _LogLines:
-    """status.update(text) as time-stamped lines on stderr, rate-limited."""
-
-    def __init__(self):
-        self.last = -math.inf
-
-    def update(self, text: str):
-        now = time.monotonic()
-        if now - self.last >= LOG_EVERY_S:
-            self.last = now
-            print(f"{time.strftime('%H:%M:%S')} gecgen: {text}", file=sys.stderr, flush=True)
+def say(status, text: str):
+    """`status.update(text)` when there is a status line (`progress_status`)."""
+    if status is not None:
+        status.update(text)
 
 
 #: the most poses a command draws or designs: far beyond any measurement campaign, far below memory

@@ -1,13 +1,13 @@
 """`gecgen design ROBOT [--errors FILE] --poses N -o POSES.csv [--json]`: choose the poses to measure.
 
 Candidates are uniform samples within the joint limits (`--candidates K`, `--seed`) or the rows
-of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/runtime/design.py`
+of `--from CSV`; constraints drop those a tracker cannot measure; `gecgen/plan/design.py`
 chooses N of the rest (`--criterion`: D- or I-optimal). POSES.csv holds `pose`, `q1..qn` and, when the wrench is part
 of the pose, `fx..mz` and `payload_kg`: the commands to send, and the measurement file's joint
 columns once `target x y z` are filled in.
 
 With `--fixtures FILE.csv` (sockets and planes, `model/fixture_file.py`) the configurations are chosen
-for calibration without a tracker instead (`gecgen/runtime/fixture_design.py`): POSES.csv is then a
+for calibration without a tracker instead (`gecgen/plan/fixture_design.py`): POSES.csv is then a
 measurement file's rows, `point` or `plane` named and `x y z` empty, to be recorded with the joints
 read once the ball is seated or the probe touches.
 """
@@ -21,11 +21,11 @@ import numpy as np
 from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, robot_and_model, whole
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
-from gecgen.model.robot import WRENCH
+from gecgen.model.robot import GRAVITY, WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime import design as D
-from gecgen.runtime import fixture_design as FD
+from gecgen.plan import design as D
+from gecgen.plan import fixture_design as FD
 
 DEFAULT_CANDIDATES = 5000
 
@@ -33,6 +33,7 @@ DEFAULT_CANDIDATES = 5000
 def add_parser(command):
     """Register `design` through the CLI's `command(name, fn, help)` helper (it adds --json)."""
     p = command("design", run)
+    p.set_defaults(human=human)
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("--poses", type=int, required=True, help="number of poses to choose")
@@ -48,7 +49,7 @@ def add_parser(command):
                                      "else every target of the robot)")
     p.add_argument("--payload-kg", help="comma-separated payloads (kg) at the tool origin, as gecgen simulate: the "
                                         "wrench the sensor reads of their weight is part of each pose")
-    p.add_argument("--gravity", default="0,0,-9.81", help="gravity in the world frame for the payload wrench, m/s^2 "
+    p.add_argument("--gravity", default=",".join(f"{v:g}" for v in GRAVITY), help="gravity in the world frame for the payload wrench, m/s^2 "
                                                           "(default: %(default)s)")
     p.add_argument("--min-z", type=number(), help="every measured target at world z >= this (m)")
     p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
@@ -206,3 +207,79 @@ def _run_fixtures(args) -> dict:
     write_csv(args.output, header, rows)
     return {"robot": robot.name, "error_model": model.source, "output": str(args.output),
             **result.to_dict(fixtures), "target": names[target], "seed": args.seed}
+
+
+#: the tracker design's comparison table: (JSON key, its figure for the random poses, label, what it means)
+COMPARED = (("log_det", "random_log_det", "log det of the information (D)", "higher is better"),
+            ("mean_variance", "random_mean_variance", "mean prediction variance (I)",
+             "per unit noise variance; lower is better"),
+            ("rms_mm", "random_rms_mm", "predicted position std, RMS (mm)", "at {noise} mm noise per coordinate, over "
+                                                                             "{n} candidate poses"),
+            ("max_mm", "random_max_mm", "predicted position std, max (mm)", ""),
+            ("O1", "random_O1", "O1: geometric mean singular value", "divided by sqrt(rows); higher is better"),
+            ("O2", "random_O2", "O2: condition number", "lower is better"),
+            ("O3", "random_O3", "O3: smallest singular value", "higher is better"))
+
+
+def human(result: dict):
+    """design's summary for a person: what each figure is and which way is better, the designed
+    poses beside as many random ones of the same candidates (a fixture design's: `_fixtures_human`);
+    --json has every figure."""
+    from gecgen.cli.human import scalar
+
+    if "predicted_std" not in result:
+        _fixtures_human(result)
+        return
+    figures = {**{k: result[k] for k in ("log_det", "random_log_det", "mean_variance", "random_mean_variance")},
+               **result["observability"], **result["predicted_std"]}
+    constraints = ", ".join(f"{k} {v}" for k, v in result["constraints"].items()) or "none"
+    print(f"robot: {result['robot']} (error model {result['error_model']})")
+    print(f"output: {result['output']}")
+    print(f"poses: {result['n_poses']}, chosen among {result['n_candidates']} candidate poses ({result['n_sampled']} "
+          f"sampled with seed {result['seed']}; constraints: {constraints})")
+    print(f"targets measured: {', '.join(result['targets'])}")
+    if result["given"]:
+        print(f"added to the poses of {result['given']}, whose information is counted")
+    chosen = {"D": "D-optimal (the largest log det of the information", "I": "I-optimal (the smallest mean "
+              "variance of the predicted positions"}[result["criterion"]]
+    print(f"criterion: {chosen} on the {result['n_identifiable']} identifiable coefficients)")
+    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many poses drawn from the same candidates)")
+    for key, random, label, means in COMPARED:
+        means = means.format(noise=scalar(figures["noise_mm"]), n=figures["n_validation_poses"])
+        print(f"  {label:<38}{scalar(figures[key]):>10}{scalar(figures[random]):>10}  {means}".rstrip())
+    _volume(result)
+    print(f"not excited by any candidate: {', '.join(result['unexcitable']) or 'none'}")
+    history = result["history"]
+    refreshed = f"; the pool of candidates refreshed {result['rounds']} times" if result["rounds"] else ""
+    print(f"search: a greedy start, then {result['swaps']} exchanges in {result['passes']} passes (criterion "
+          f"{scalar(history[0])} -> {scalar(history[-1])}){refreshed}")
+
+
+def _volume(result: dict):
+    """The designed poses' log det against the random ones', as what a person can picture."""
+    if result["log_det"] is not None and result["random_log_det"] is not None:
+        gain = result["log_det"] - result["random_log_det"]
+        print(f"  with the designed poses the coefficients' confidence region is {math.exp(abs(gain) / 2):.3g} times "
+              f"{'smaller' if gain >= 0 else 'larger'} in volume (e^(gain in log det / 2))")
+
+
+def _fixtures_human(result: dict):
+    """A fixture design's summary (`human`): the same comparison, then each fixture's share."""
+    from gecgen.cli.human import print_human, scalar
+
+    predicted = result["predicted"]
+    print(f"robot: {result['robot']} (error model {result['error_model']})")
+    print(f"output: {result['output']}")
+    print(f"configurations: {result['n_poses']} for target {result['target']} (seed {result['seed']})")
+    print(f"criterion: D-optimal (the largest log det of the information on the {result['n_identifiable']} "
+          f"identifiable coefficients)")
+    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many configurations drawn from the same candidates)")
+    print(f"  {'log det of the information (D)':<38}{scalar(result['log_det']):>10}"
+          f"{scalar(result['random_log_det']):>10}  higher is better")
+    print(f"  {'predicted RMS error added (mm)':<38}{scalar(predicted['rms_mm']):>10}"
+          f"{scalar(predicted['random_rms_mm']):>10}  by the coefficients' uncertainty at {scalar(predicted['noise_mm'])}"
+          f" mm noise")
+    _volume(result)
+    print_human({k: result[k] for k in ("fixtures", "by_fixtures")})
+    print(f"directions of the coefficients no configuration shows: {result['unseen']}")
+    print(f"search: a greedy start, then {result['swaps']} exchanges in {result['passes']} passes")

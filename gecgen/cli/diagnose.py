@@ -7,6 +7,7 @@ from pathlib import Path
 from gecgen.cli.common import (MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, add_tolerance, next_commands,
                                number, progress_status, warned, whole)
 from gecgen.cli.human import warning_lines
+from gecgen.cli.register import REGISTER, add_register
 from gecgen.model import ModelError
 
 
@@ -26,10 +27,10 @@ def add_parser(command):
     p.add_argument("--generated", help="folder for the regenerated code (default: beside the new error model)")
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
-    p.add_argument("--register", nargs="?", const="val", choices=["auto", "always", "never", "val"], default="auto",
-                   help="registration of DATA onto the nominal model: auto (default; when far apart), always or never; "
-                        "--register alone (or val): auto, and each round's model also re-fits the tracker frame of "
-                        "the --val file, measured from another stationing, before scoring it")
+    add_register(p, REGISTER, bare="val", default="auto",
+                 lead="registration of DATA onto the nominal model: auto (when far apart), always or never; val: "
+                      "auto, and each round's model also re-fits the tracker frame of --val, measured from another "
+                      "stationing, before scoring it")
     p.add_argument("--max-rounds", type=whole(1, 10_000), default=50,
                    help="rounds at most (default 50); diagnose stops earlier when nothing passes the statistics")
     p.add_argument("--noise-mm", type=number(0, above=True),
@@ -37,6 +38,10 @@ def add_parser(command):
                         "from repeated poses, if any)")
     add_orientation_length(p)
     add_tolerance(p)
+
+
+#: the report's stages -> their keys in the JSON's per-branch figures: before and after as diagnose's own
+STAGES = {"uncalibrated": "uncalibrated", "calibrated (declared model)": "before", "diagnosed": "after"}
 
 
 def run(args) -> dict:
@@ -76,6 +81,14 @@ def _diagnosed(args, caught: list) -> dict:
               "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
               if args.holdout is not None else "internal hold-out of 1/5 of the poses",
               "val_registered": register_val, "placement": placement.to_dict() if placement else None}
+    if robot.branches:  # a tree: each hand's figures, as the report's table and calibrate's val_branches
+        from gecgen.report.content import branch_figures, diagnosed_sets
+
+        figures = branch_figures(robot, diagnosed_sets(diag, diagnoser.data_, diagnoser.val_, register_val,
+                                                       "auto" if register_val else args.register))
+        for key, name in (("train_branches", "training"), ("val_branches", "validation")):
+            if figures and name in figures:
+                result[key] = {b: {STAGES[stage]: v for stage, v in by.items()} for b, by in figures[name].items()}
     # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
     calib = Path(out).with_name(f"{robot.name}.calib.json")  # beside the error model, not in the working folder
     result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}"

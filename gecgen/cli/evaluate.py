@@ -1,8 +1,9 @@
-"""`gecgen evaluate CALIB DATA [--register]`: position errors of new data before and after the calibration."""
+"""`gecgen evaluate CALIB DATA [--register [always|never]]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
 from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned
 from gecgen.cli.human import warning_lines
+from gecgen.cli.register import add_register
 
 
 def add_parser(command):
@@ -10,9 +11,10 @@ def add_parser(command):
     p = command("evaluate", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("data", help=DATA_HELP)
-    p.add_argument("--register", action="store_true",
-                   help="DATA was measured from a new tracker stationing: fit only the tracker frame on it (the "
-                        "calibration's coefficients held), and score the uncalibrated model in its own fitted frame")
+    add_register(p, ("always", "never"), bare="always", default="never",
+                 lead="always: DATA was measured from a new tracker stationing: fit only its frame (the "
+                      "calibration's coefficients held) and score the uncalibrated model in its own fitted frame; "
+                      "never: DATA is in the calibration's tracker frame")
     add_orientation_length(p, calibration_first=True)
     add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
@@ -32,12 +34,13 @@ def _evaluated(args, caught: list) -> dict:
     from gecgen.report.verdict import Noise, assess
 
     cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
-    score = cal.score(args.data, register=args.register)
+    registered = args.register == "always"
+    score = cal.score(args.data, register=registered)
     result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data),
               "n_poses": score.n_poses, "n_points": score.n_points,
               **({"n_orientations": score.n_orientations} if score.n_orientations else {}),
-              "registered": args.register}
-    if args.register:
+              "registered": registered}
+    if registered:
         first = score.registrations[min(score.registrations)]
         result.update(before_registration="the nominal model's, fitted on DATA", registration=first,
                       registrations={str(k): v for k, v in score.registrations.items()},

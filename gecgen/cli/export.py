@@ -26,7 +26,7 @@ def add_parser(command):
 
 def run(args) -> dict:
     from gecgen.emit import robot_model_hash
-    from gecgen.files import write_atomically
+    from gecgen.model.files import write_atomically
     from gecgen.runtime import calibration, export
     from gecgen.runtime.compiled import CompiledModel
 

@@ -15,20 +15,27 @@ Each row is `gecgen calibrate ROBOT TRAIN [--val VAL | --holdout F] [--errors E]
 by the same entry point as the command itself, so its folder and figures are those of running it
 alone. The rows are tasks on Dask (`dask.distributed`): a local cluster of `--workers` processes by
 default, or the scheduler at `--scheduler` (a real cluster: every worker must see the files at the
-same paths). A robot that fails is reported with its one-line reason and the others go on. DIR gets
-`fleet.json` and `fleet.csv`, one row per robot. Python: `calibrate_fleet(manifest, out)`.
+same paths). A robot that fails is reported with its one-line reason and the others go on; the
+command then exits 1 naming them. DIR gets `fleet.json` and `fleet.csv`, one row per robot. While
+its tasks run DIR holds `fleet.incomplete` (and no summary of an earlier run): a run that is
+interrupted or killed then leaves the folder marked so. A second fleet into DIR while one runs is
+refused. Python: `calibrate_fleet(manifest, out)`.
 """
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import json
+import logging
 import re
+import signal
 import sys
 import time
 from pathlib import Path
 
-from gecgen.cli.common import MAX_SEED, number, whole
+from gecgen.cli.common import MAX_SEED, number, progress_status, say, whole
+from gecgen.model.files import output_lock, write_atomically
 from gecgen.model.measurements import write_csv
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, excerpt, require
@@ -38,6 +45,8 @@ COLUMNS = ("name", "robot", "train", "val", "holdout", "errors", "models")
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 #: a scheduler's address as Dask takes it: protocol://host:port, or host:port
 ADDRESS = re.compile(r"^([a-z]+://)?[^\s:/]+(:\d+)?$")
+#: what the fleet itself writes into DIR beside the robots' folders: no robot may be named so
+SUMMARY, TABLE, MARK = "fleet.json", "fleet.csv", "fleet.incomplete"
 
 
 def add_parser(command):
@@ -78,6 +87,9 @@ def read_manifest(path) -> list[dict]:
         require(row["name"] not in seen,
                 f"{where}: row {line}: name {row['name']} is also row {seen.get(row['name'])}'s; give each robot its "
                 f"own name (its results folder)")
+        require(row["name"].lower() not in (SUMMARY, TABLE, MARK),
+                f"{where}: row {line}, column 'name': {row['name']} is a file the fleet writes beside the robots' "
+                f"folders ({SUMMARY}, {TABLE}, {MARK}); name the robot otherwise")
         seen[row["name"]] = line
         require(row["robot"] and row["train"], f"{where}: row {line}: give the robot file and its training data")
         require(not (row["val"] and row["holdout"]), f"{where}: row {line}: val and holdout both given; one of them")
@@ -124,22 +136,47 @@ def calibrate_one(row: dict, out: str, seed: int = 0) -> dict:
 
 
 def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 2, seed: int = 0,
-                    timeout: float | None = None) -> list[dict]:
+                    timeout: float | None = None, progress=None) -> list[dict]:
     """Calibrate every robot of the manifest (`read_manifest`) into out/NAME as tasks on Dask: the
     scheduler at `scheduler`, else a local cluster of `workers` processes (one thread each: a fit
     uses one BLAS thread). Returns `calibrate_one`'s results in manifest order, and writes
-    out/fleet.json and out/fleet.csv."""
-    try:
-        import dask
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise ModelError("gecgen fleet runs on Dask: pip install 'gecgen[fleet]' (dask[distributed])") from None
+    out/fleet.json and out/fleet.csv. progress(done, failed, robots) is called as each robot ends."""
+    require(importlib.util.find_spec("distributed") is not None,  # what is missing, said before any work
+            "gecgen fleet runs on Dask: pip install 'gecgen[fleet]' (dask[distributed])")
     require(scheduler is None or ADDRESS.match(scheduler), f"--scheduler {excerpt(scheduler)}: give a Dask "
                                                            f"scheduler's address, e.g. tcp://10.0.0.5:8786")
+    require(isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1,
+            f"workers={workers!r}: give the local cluster's processes as a whole number, 1 or more (the workers "
+            f"keyword; --workers on the command line)")
     robots = read_manifest(manifest)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with output_lock(out, "fleet folder"):
+        try:
+            results = _run_tasks(robots, out, scheduler, workers, seed, timeout, progress)
+        except KeyboardInterrupt as exc:
+            state = f"is marked incomplete ({out / MARK})" if (out / MARK).exists() else "is as it was before this run"
+            raise type(exc)(f"{out} {state}: run the fleet again") from None
+        write_atomically(out / SUMMARY, json.dumps(results, indent=1))
+        write_csv(out / TABLE, ["name", "status", "model", "train_rms_mm", "val_rms_mm", "seconds", "reason"],
+                  ([r["name"], r["status"], r.get("result", {}).get("model", ""), _figure(r, "train"),
+                    _figure(r, "val"), f"{r['seconds']:.3g}", r.get("reason", "")] for r in results))
+        (out / MARK).unlink()
+    return results
+
+
+def _run_tasks(robots: list[dict], out: Path, scheduler: str | None, workers: int, seed: int,
+               timeout: float | None, progress=None) -> list[dict]:
+    """`calibrate_one` of every robot as a task on Dask (see `calibrate_fleet`), the results in
+    manifest order; progress(done, failed, robots) as each robot ends."""
+    import dask
+    from dask.distributed import Client, LocalCluster, as_completed
+
     with contextlib.ExitStack() as stack:
+        # Dask's own log lines (a socket closed late, a port in use) are not the user's business:
+        # a failure reaches the user as a robot's reason or an exception
+        # (nor is what asyncio says of the client's gather when Ctrl-C cut it short)
+        stack.enter_context(_quiet("distributed"))
+        stack.enter_context(_quiet("asyncio"))
         if scheduler:
             try:
                 client = stack.enter_context(Client(scheduler, timeout=timeout) if timeout else Client(scheduler))
@@ -150,18 +187,53 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
             # no dashboard, so no use for the workers' statistical profiler, which samples the task's
             # stack every 10 ms, holding the interpreter the task runs in
             stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
-            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                       dashboard_address=None))
+            # the scheduler's HTTP server (health checks) listens even without a dashboard: on a free
+            # port, not on the dashboard's 8787, which another cluster may hold
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                scheduler_kwargs={"dashboard_address": ":0"}, silence_logs=logging.CRITICAL,
+                preload=[*dask.config.get("distributed.worker.preload"), __name__]))
             client = stack.enter_context(Client(cluster))
+        _begin(out)
         # pure=False: two rows with the same files are two robots, each run
         futures = [client.submit(calibrate_one, row, str(out), seed, key=f"calibrate-{row['name']}", pure=False)
                    for row in robots]
-        results = client.gather(futures)
-    (out / "fleet.json").write_text(json.dumps(results, indent=1))
-    write_csv(out / "fleet.csv", ["name", "status", "model", "train_rms_mm", "val_rms_mm", "seconds", "reason"],
-              ([r["name"], r["status"], r.get("result", {}).get("model", ""),
-                _figure(r, "train"), _figure(r, "val"), f"{r['seconds']:.3g}", r.get("reason", "")] for r in results))
-    return results
+        done, failed = 0, 0
+        for future in as_completed(futures):
+            done, failed = done + 1, failed + (future.result()["status"] != "ok")
+            if progress:
+                progress(done, failed, len(futures))
+        return [f.result() for f in futures]
+
+
+def _begin(out: Path):
+    """Mark the fleet folder as being written, once the cluster is there to write it (a scheduler
+    that does not answer leaves the folder as it was): `fleet.incomplete` in, the summary of an
+    earlier run, which would not describe the folder, out."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomically(out / MARK, "a gecgen fleet run into this folder has not finished (or was interrupted): its "
+                                 "robots' folders may be of different runs; run the fleet again\n")
+    for name in (SUMMARY, TABLE):
+        (out / name).unlink(missing_ok=True)
+
+
+def dask_setup(worker):
+    """Dask's preload hook (`_run_tasks`), run in each process of the local cluster as it starts:
+    Ctrl-C, which a terminal sends to every process of the command, is the fleet's to handle (it
+    closes the cluster); a worker told it too would print its own traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def _quiet(name: str):
+    """The logger `name` and its children say nothing below CRITICAL while the block runs."""
+    logger = logging.getLogger(name)
+    before = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(before)
 
 
 def _figure(result: dict, key: str) -> str:
@@ -170,15 +242,25 @@ def _figure(result: dict, key: str) -> str:
 
 
 def run(args) -> dict:
+    from gecgen.cli import Incomplete
+
     start = time.perf_counter()
-    results = calibrate_fleet(args.manifest, args.output, args.scheduler, args.workers, args.seed, args.timeout)
+    with progress_status(not args.json) as status:
+        say(status, f"starting the Dask cluster and {args.manifest}'s robots")
+        results = calibrate_fleet(args.manifest, args.output, args.scheduler, args.workers, args.seed, args.timeout,
+                                  lambda done, failed, n: say(status, f"{done} of {n} robots done ({failed} failed)"))
     failed = [r for r in results if r["status"] != "ok"]
     for r in failed:
         print(f"gecgen fleet: {r['name']}: {r['reason']}", file=sys.stderr)
-    return {"manifest": str(args.manifest), "output": str(args.output), "robots": len(results),
+    result = {"manifest": str(args.manifest), "output": str(args.output), "robots": len(results),
             "ok": len(results) - len(failed), "failed": len(failed), "seconds": time.perf_counter() - start,
             "results": [{k: v for k, v in r.items() if k != "result"} | (
                 {"model": r["result"]["model"], "train": r["result"]["train"],
                  **({"val": r["result"]["val"]} if "val" in r["result"] else {})} if "result" in r else {})
                 for r in results],
-            "files": {"json": str(Path(args.output) / "fleet.json"), "csv": str(Path(args.output) / "fleet.csv")}}
+            "files": {"json": str(Path(args.output) / SUMMARY), "csv": str(Path(args.output) / TABLE)}}
+    if failed:
+        others = "; the others are calibrated" if len(failed) < len(results) else ""
+        raise Incomplete(f"{len(failed)} of {len(results)} robots failed: {', '.join(r['name'] for r in failed)}"
+                         f"{others}", result)
+    return result

@@ -6,6 +6,7 @@ from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, ad
                                fit_options, next_commands, progress_status, warned)
 from gecgen.cli import pixels
 from gecgen.cli.human import warning_lines
+from gecgen.cli.register import add_register
 
 
 def add_parser(command):
@@ -16,9 +17,9 @@ def add_parser(command):
                                 "(docs/reference.md, \"Files\")")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     p.add_argument("-o", "--output", help="calibration JSON (default: NAME.calib.json)")
-    p.add_argument("--register", choices=["auto", "always", "never"], default="auto",
-                   help="register the measurement frame onto the robot world first: auto (default; when over 1 degree "
-                        "or 20 mm apart), always, or never (the data is in the robot's world frame)")
+    add_register(p, ("auto", "always", "never"), bare="always", default="auto",
+                 lead="registration of DATA's measurement frame onto the robot world first: auto (when over 1 "
+                      "degree or 20 mm apart), always, or never (DATA is in the robot's world frame)")
     p.add_argument("--ridge", default="0", help="ridge prior on the column-scaled coefficients: a number, or auto "
                                                "(5-fold cross-validation on DATA); default 0, plain least squares")
     p.add_argument("--loss", choices=["cauchy", "huber", "l2"], default="cauchy",

@@ -2,19 +2,21 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, whole
-from gecgen.files import write_atomically
+from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, progress_status, say, whole
+from gecgen.model.files import write_atomically
 from gecgen.model import load_robot
 from gecgen.model.kinematics import target_positions
-from gecgen.model.measurements import write_measurements
+from gecgen.model.measurements import pose_id_column, read_commands, write_measurements
+from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
-from gecgen.simulate.designs import constant_orientation
+from gecgen.simulate.designs import Design, constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
@@ -34,6 +36,10 @@ def add_parser(command):
                    help="random poses within the limits, one joint at a time, the seed paper's PPS design, or a "
                         "grid the tool visits keeping the orientation it has at --home, as a laser tracker's "
                         "reflector is kept facing the tracker (default %(default)s)")
+    p.add_argument("--commands",
+                   help="instead of --design: the joints of this CSV (q1..qn a row, the pose ids its pose column's, "
+                        "else 0, 1, ...), as a robot commanded to them is measured: an ISO 9283 plan "
+                        "(`gecgen iso9283 --plan`) for the run before, its compensated commands for the run after")
     p.add_argument("--home", type=numbers(),
                    help="--design tool-grid: comma-separated joint values (rad or m) whose tool orientation the "
                         "grid keeps, and whose tool origin is its centre (default: the middle of each joint's range)")
@@ -48,7 +54,11 @@ def add_parser(command):
     p.add_argument("--payload-kg", type=numbers(0),
                    help="comma-separated payloads (kg), at the tool origin (default 0; with --design paper 0,70)")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
-                   help="seed of the poses, the truth's draws and the noise (default %(default)s)")
+                   help="seed of the poses and the noise (default %(default)s); the truth's random errors come from "
+                        "the truth file's own seed, so files drawn with two --seed values are of one robot")
+    p.add_argument("--truth-seed", type=whole(0, MAX_SEED),
+                   help="draw the truth's random errors with this seed instead of the truth file's: another robot "
+                        "of the same error budget")
     p.add_argument("-o", "--output", required=True, help="measurement CSV (with --design paper: the training part)")
     p.add_argument("--val-out", help="validation CSV: with --design paper the validation half of set a; with "
                                       "--design random --val-poses new random poses of the same truth")
@@ -95,6 +105,10 @@ def run(args) -> dict:
     if not spec:
         warnings.warn(f"no truth file ({truth_path} does not exist, and no --truth): the simulated robot is the "
                       f"nominal one, without errors or noise; give --truth FILE to simulate a robot as built")
+    if args.truth_seed is not None:
+        require(spec, f"--truth-seed {args.truth_seed}: there is no truth file to draw ({truth_path} does not exist); "
+                      f"give --truth FILE")
+        spec = {**spec, "seed": args.truth_seed}
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
     if args.plates or args.planes:
@@ -107,7 +121,12 @@ def run(args) -> dict:
     payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
-    if args.design == "paper":
+    ids = None
+    if args.commands:
+        require(args.design == "random" and args.poses is None and not args.val_out and len(payloads) == 1,
+                "--commands gives the poses: no --design, --poses or --val-out, and one --payload-kg")
+        design, ids = _commanded(args.commands, robot, payloads[0])
+    elif args.design == "paper":
         require("isocenter" in robot.points, f"{args.robot}: the paper design needs points: isocenter")
         design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
     elif args.design == "tool-grid":
@@ -121,6 +140,8 @@ def run(args) -> dict:
     else:
         design = random_design(robot, args.poses or POSES, rng, payloads)
     data = simulate(robot, truth, design, rng, args.orientation)
+    if ids is not None:
+        data = replace(data, pose_ids=ids)
     files = {"data": args.output}
     if args.design == "paper":
         train, val = paper_split(design, rng)
@@ -143,9 +164,25 @@ def run(args) -> dict:
         files["truth"] = args.truth_out
     nominal = target_positions(robot, data.q)[data.pose, data.target]
     err = np.linalg.norm(data.xyz - nominal, axis=1)
-    return {"robot": robot.name, "design": args.design, "poses": data.n_poses, "rows": len(data.xyz),
+    return {"robot": robot.name, "design": "commands" if args.commands else args.design, "poses": data.n_poses,
+            "rows": len(data.xyz),
             "uncompensated": {"rms_mm": float(1e3 * np.sqrt(np.mean(err ** 2))), "max_mm": float(1e3 * err.max())},
             "files": files}
+
+
+def _commanded(path: str, robot, payload_kg: float) -> tuple[Design, np.ndarray | None]:
+    """The design of --commands (every target measured at each row's joints, the payload at the tool
+    origin) and its pose ids (P,), the file's pose column when it has one (None: 0, 1, ...)."""
+    q = read_commands(path, robot).q
+    table = read_table(path, "file of joint commands", "q1..qn")
+    ids = pose_id_column(table, "pose") if "pose" in table.header else None
+    if ids is not None:
+        _, first = np.unique(ids, return_index=True)
+        again = np.setdiff1d(np.arange(len(ids)), first)
+        require(not len(again), f"{path}: row {again[0] + 2 if len(again) else 0}: pose id {ids[again[0]] if len(again) else 0} "
+                                f"repeats an earlier row's; one row per pose")
+    n = len(q)
+    return Design(q, np.full(n, payload_kg), np.zeros(3), tuple(robot.targets), np.array(["commands"] * n)), ids
 
 
 def _tool_grid(args, robot):
@@ -172,12 +209,16 @@ def _fixtures(args, robot, truth, rng) -> dict:
                         value["socket_distance"], value["distance_std"], args.planes, value["touches"],
                         value["seating_noise"], value["encoder_noise"], args.plane_relations, args.block_width,
                         not args.no_distance)
-    data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+    with progress_status(not args.json) as status:
+        say(status, "placing the fixtures and solving the robot's configurations in them")
+        data, floor = simulate_fixtures(robot, truth, fixtures, rng)
+        if args.val_out:
+            say(status, "placing the validation fixtures and solving the configurations in them")
+            val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
     write_measurements(args.output, robot, data, wrench=False)
     out = {"robot": robot.name, "design": "fixtures", "poses": data.n_poses, "rows": len(data.xyz),
            **data.relative.summary(), "noise_floor": floor, "files": {"data": args.output}}
     if args.val_out:
-        val, val_floor = simulate_fixtures(robot, truth, fixtures, rng)
         write_measurements(args.val_out, robot, val, wrench=False)
         out["files"]["val"] = args.val_out
         out["val_noise_floor"] = val_floor

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import jinja2
 
-from gecgen import __version__
+from gecgen.version import __version__
 from gecgen.emit.c.printer import CPrinter
 from gecgen.emit.c.printer import element as c_element
 from gecgen.emit.casadi.printer import CasadiPrinter
 from gecgen.emit.casadi.printer import element as casadi_element
 from gecgen.emit.printing import straight_line
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot

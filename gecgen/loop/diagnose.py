@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 from scipy import special
 
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.loop.confounding import ratio_load_confounding
 from gecgen.loop.dictionary import candidates, refine_period, shown_family
 from gecgen.loop.linear import Round, linear_system, pose_rows, weighted_J

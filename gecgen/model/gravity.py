@@ -18,12 +18,12 @@ from __future__ import annotations
 import numpy as np
 
 from gecgen.model.kinematics import frames, joint_motion, joint_values
-from gecgen.model.robot import Robot
+from gecgen.model.robot import GRAVITY, Robot
 from gecgen.model.urdf import MassTree, load_mass_tree
 from gecgen.model.validation import require
 
 #: standard gravity in the base link's frame when the robot stands upright (z up), m/s^2
-UPRIGHT = (0.0, 0.0, -9.80665)
+UPRIGHT = tuple(float(v) for v in GRAVITY)
 #: postures per block: every link's transforms are held for a block, a few MB whatever the table's length
 BLOCK = 2048
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.model import relative as rel
 from gecgen.model.orientation import PREFIXES, QUATERNION, Convention, file_convention, quaternions, rotations
 from gecgen.model.robot import WRENCH, Robot

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.model.kinematics import target_positions
-from gecgen.model.measurements import Measurements
+from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements
 from gecgen.model.relative import POINT, Distance, Relative
 from gecgen.model.robot import Robot
 from gecgen.model.table import parse_float
@@ -92,8 +92,20 @@ def read_socket_files(paths, robot: Robot, target: str | None = None, distance_m
                              f"own); rename one folder or file")
     loaded = [_readings(p, robot, sep, decimal) for p in paths]
     q, first_line = [qk for qk, _ in loaded], [line for _, line in loaded]
-    for p, qk in zip(paths, q):
+    lo = np.array([j.lower for j in robot.joints]) - LIMIT_TOLERANCE
+    hi = np.array([j.upper for j in robot.joints]) + LIMIT_TOLERANCE
+    for p, qk, line in zip(paths, q, first_line):
         require(len(qk) >= 2, f"{p}: one configuration: a socket seen once says nothing; record more")
+        # a ball seated by hand is at joint readings the robot reached: beyond its limits, the file
+        # holds something else (a pose or a point per row, or degrees), which must not pass for joints
+        out = np.argwhere((qk < lo) | (qk > hi))
+        if len(out):
+            r, j = out[0]
+            joint = robot.joints[j]
+            raise ModelError(f"{p}: line {line + r}, column {j + 1} ({joint.name}): {qk[r, j]:g} is outside the joint "
+                             f"limits [{joint.lower:g}, {joint.upper:g}] (m or rad): a socket file holds the joint "
+                             f"readings of each configuration; is it a file of poses or points, or in degrees? "
+                             f"Leave it out or convert it")
     distances = []
     if distance_m is not None:
         folders: dict[Path, list[int]] = {}

@@ -14,9 +14,12 @@ joint names as headers. A small YAML mapping says which column is what:
     wrench: {fz: force_z}          # optional: fx fy fz mx my mz -> column (sensor frame, N and N m)
     aux: [marker_std_mm]           # optional: columns kept as auxiliary signals
     ignore: [shipped_row]          # optional: columns deliberately dropped (absent ones are fine)
+    units: {angles: deg, lengths: mm}   # optional: the table's units (default rad and m)
 
 Every column of the table must be mapped, kept as aux or ignored: nothing is dropped silently.
-Values are copied exactly (no unit conversion, no clipping); `read_measurements` applies the
+Values are copied exactly but for `units` (no clipping): a controller's export in degrees and
+millimetres (revolute readings in deg; prismatic readings and target coordinates in mm) is
+converted to the contract's rad and m, and nothing else is; `read_measurements` applies the
 contract's checks (limits, millimetres) to the written file. An orientation (the target frame's,
 parallel to the tool frame, in the measuring frame; `model.orientation`) has a `convention`:
 `quaternion` (columns w, x, y, z), `matrix` (nine columns, row by row), `rpy` (roll, pitch, yaw:
@@ -42,6 +45,8 @@ from gecgen.model.validation import excerpt, read_yaml, require, require_keys
 
 #: columns of the contract's measurement file, which an aux column must not shadow
 CONTRACT_COLUMNS = ("pose", "target", "x", "y", "z", *WRENCH)
+#: the units a table may be in: each in rad (angles) or m (lengths)
+UNITS = {"angles": {"rad": 1.0, "deg": math.pi / 180}, "lengths": {"m": 1.0, "mm": 1e-3}}
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,10 @@ class ColumnMap:
     ignore: tuple[str, ...]
     source: str  # the mapping file, for messages
     orientations: dict[str, tuple[tuple[str, ...], Convention]] | None = None  # target -> its columns, convention
+    #: what one unit of the table's revolute readings and of its lengths (prismatic readings, target
+    #: coordinates) is in rad and m
+    angle_scale: float = 1.0
+    length_scale: float = 1.0
 
     def columns(self) -> list[str]:
         """Every column the mapping reads (ignored ones excluded), in mapping order."""
@@ -82,7 +91,11 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
     spec = read_yaml(path, "column-mapping")
     require(isinstance(spec, dict), f"{where}: expected a mapping with pose, joints, targets, aux, ignore")
     require_keys(spec, where, required={"joints", "targets"},
-                 optional={"pose", "wrench", "aux", "ignore", "description", "orientations"})
+                 optional={"pose", "wrench", "aux", "ignore", "description", "orientations", "units"})
+    units = _mapping(spec["units"], f"{where}: units", "{angles: deg or rad, lengths: mm or m}") if "units" in spec else {}
+    require_keys(units, f"{where}: units", optional=set(UNITS))
+    for key, value in units.items():
+        require(value in UNITS[key], f"{where}: units.{key}: {excerpt(value)}; use {' or '.join(UNITS[key])}")
 
     qnames = [f"q{i + 1}" for i in range(robot.n)]
     joints: dict[str, str] = {}
@@ -133,7 +146,9 @@ def load_mapping(path: str | Path, robot: Robot) -> ColumnMap:
 
     mapping = ColumnMap(pose=spec.get("pose", "row"), joints=tuple(joints[q] for q in qnames), targets=targets,
                         wrench=dict(wrench), aux=tuple(aux), ignore=tuple(ignore), source=where,
-                        orientations=orientations or None)
+                        orientations=orientations or None,
+                        angle_scale=UNITS["angles"][units.get("angles", "rad")],
+                        length_scale=UNITS["lengths"][units.get("lengths", "m")])
     require(isinstance(mapping.pose, str) and mapping.pose,
             f"{where}: pose: expected 'row' or the name of the pose-id column, got {excerpt(mapping.pose)}")
     used = mapping.columns()
@@ -170,7 +185,8 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path,
         return table.numbers(col, limit=limit)
 
     P = len(table)
-    q = np.column_stack([column(c) for c in mapping.joints])
+    q = np.column_stack([column(c) * (mapping.angle_scale if j.kind == "R" else mapping.length_scale)
+                         for c, j in zip(mapping.joints, robot.joints)])
     w = np.zeros((P, 6))
     for k, col in mapping.wrench.items():
         w[:, WRENCH.index(k)] = column(col, MAX_WRENCH)
@@ -184,7 +200,8 @@ def import_wide(path: str | Path, robot: Robot, mapping: ColumnMap | str | Path,
         require(not len(again), f"{at(where, again[0] + 2 if len(again) else 0, mapping.pose)}: "
                                 f"pose id repeats an earlier row; one row per pose")
     names = list(robot.targets)
-    xyz = np.stack([np.column_stack([column(c) for c in cols]) for cols in mapping.targets.values()], axis=1)
+    xyz = mapping.length_scale * np.stack([np.column_stack([column(c) for c in cols])
+                                           for cols in mapping.targets.values()], axis=1)
     nt = len(mapping.targets)
     orientation = None
     if mapping.orientations:

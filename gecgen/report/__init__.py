@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.report.content import Report, drawn
+from gecgen.report.blocks import Report
+from gecgen.report.content import drawn
 
 
 def write(report: Report, outdir: str | Path) -> dict[str, str]:

@@ -5,95 +5,15 @@ residuals are the modelled points at coefficients already fitted, never a new fi
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Callable
-
 import numpy as np
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
+from gecgen.report.blocks import (Bullets, DataSet, Drawing, Figure, Report, Residuals, Section, Table, frame_label,
+                                  joint_label, joint_scale, joint_unit, joint_values, term_unit, variable)
 from gecgen.runtime.identify import filled, fit_frames, summary, to_world
 from gecgen.runtime.processes import mapped
 from gecgen.runtime.significance import rms_interval
-
-
-@dataclass(frozen=True)
-class Table:
-    header: tuple[str, ...]
-    rows: list[tuple[str, ...]]
-
-
-@dataclass(frozen=True)
-class Figure:
-    name: str  # file stem of the Markdown report's PNG
-    caption: str
-    png: bytes
-    axes: tuple[str, ...] = ()  # the labels of its axes
-
-
-@dataclass(frozen=True)
-class Drawing:
-    """A figure still to draw: a `plots` function and its arguments. A report's figures are most of its
-    time, and independent, so they are drawn together, side by side, as it is written (`drawn`)."""
-
-    fn: Callable[..., Figure]
-    args: tuple
-
-
-@dataclass(frozen=True)
-class Bullets:
-    items: list[str]
-
-
-@dataclass
-class Section:
-    """A titled part of a report; blocks are paragraphs (str, `code` in backticks), Bullets, Table, Figure or
-    a Drawing, a Figure to come."""
-
-    title: str
-    blocks: list = field(default_factory=list)
-
-
-@dataclass
-class Report:
-    title: str
-    intro: list[str]
-    sections: list[Section]
-
-
-def drawn(report: Report) -> Report:
-    """The report with every Drawing drawn (`runtime.processes`: side by side, each exactly as alone)."""
-    sections = [Section(section.title, list(section.blocks)) for section in report.sections]
-    at = [(section, k) for section in sections for k, block in enumerate(section.blocks) if isinstance(block, Drawing)]
-    with mapped([(section.blocks[k].fn, section.blocks[k].args) for section, k in at]) as figures:
-        for (section, k), figure in zip(at, figures):
-            section.blocks[k] = figure
-    return Report(report.title, report.intro, sections)
-
-
-@dataclass(frozen=True)
-class Residuals:
-    """One model state (stage) on one data set, per measured row (G of them): the pose index (G,),
-    measured - modelled position (G, 3) mm in the robot world, and the orientation error as a
-    rotation vector about the world x, y, z (G, 3) mrad, NaN for position-only rows; None when no
-    row measures a frame."""
-
-    stage: str
-    pose: np.ndarray
-    position_mm: np.ndarray
-    rotation_mrad: np.ndarray | None
-
-    def summary(self) -> dict:
-        """{rms_mm, max_mm} and with orientations {rot_rms_mrad, rot_max_mrad} (`identify.summary`)."""
-        rot = None if self.rotation_mrad is None else 1e-3 * np.linalg.norm(self.rotation_mrad, axis=1)
-        return summary(1e-3 * np.linalg.norm(self.position_mm, axis=1), rot)
-
-
-@dataclass(frozen=True)
-class DataSet:
-    name: str  # "training" or "validation"
-    data: Measurements
-    stages: list[Residuals]
 
 
 def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> Residuals:
@@ -105,55 +25,14 @@ def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray |
     return Residuals(stage, data.pose[rows.first], 1e3 * d, 1e3 * rot if rows.oriented.any() else None)
 
 
-def variable(data: Measurements, name: str) -> np.ndarray:
-    """Values (P,) of a term variable (q<k>, a wrench component, payload, an auxiliary signal) per pose."""
-    if name.startswith("q") and name[1:].isdigit():
-        return data.q[:, int(name[1:]) - 1]
-    if name in WRENCH:
-        return data.w[:, WRENCH.index(name)]
-    if name == "payload":
-        return np.linalg.norm(data.w[:, :3], axis=1)
-    return data.aux[:, data.aux_names.index(name)]
-
-
-def joint_unit(robot: Robot, k: int) -> str:
-    """The unit reports show joint variable k (0-based) in: the robot file's angle unit for a
-    revolute joint, m for a prismatic one (as the robot file states lengths)."""
-    return robot.angle_unit if robot.joints[k].kind == "R" else "m"
-
-
-def joint_label(robot: Robot, k: int) -> str:
-    """'q2 shoulder (deg)': joint variable k (0-based) with its name and its unit (`joint_unit`)."""
-    j = robot.joints[k]
-    name = "" if j.name == f"q{k + 1}" else f" {j.name}"
-    return f"q{k + 1}{name} ({joint_unit(robot, k)})"
-
-
-def joint_scale(robot: Robot, k: int) -> float:
-    """Factor from joint k's internal unit (rad or m) to `joint_unit`."""
-    return 180 / np.pi if joint_unit(robot, k) == "deg" else 1.0
-
-
-def joint_values(robot: Robot, data: Measurements, k: int) -> np.ndarray:
-    """Joint k (0-based) per pose in `joint_unit`."""
-    return joint_scale(robot, k) * data.q[:, k]
-
-
-def term_unit(robot: Robot, term: str) -> str:
-    """What a coefficient of `term` is per: 'rad of q2' or 'm of q3' for a joint variable (terms take
-    joints in rad or m, whatever unit the robot file states angles in), 'N of fz' or 'N m of mx' for
-    a wrench component, else 'unit of TERM'."""
-    names = {**{f"q{k + 1}": k for k in range(robot.n)}, **{j.name: k for k, j in enumerate(robot.joints)}}
-    if term in names:
-        return f"{'rad' if robot.joints[names[term]].kind == 'R' else 'm'} of {term}"
-    if term in WRENCH:
-        return f"{'N' if term in WRENCH[:3] else 'N m'} of {term}"
-    return f"unit of {term}"
-
-
-def frame_label(robot: Robot, i: int) -> str:
-    """'0 base' or '2 after a2': frame i with the joint it follows."""
-    return f"{i} base" if i == 0 else f"{i} after {robot.chain[i - 1].name}"
+def drawn(report: Report) -> Report:
+    """The report with every Drawing drawn (`runtime.processes`: side by side, each exactly as alone)."""
+    sections = [Section(section.title, list(section.blocks)) for section in report.sections]
+    at = [(section, k) for section in sections for k, block in enumerate(section.blocks) if isinstance(block, Drawing)]
+    with mapped([(section.blocks[k].fn, section.blocks[k].args) for section, k in at]) as figures:
+        for (section, k), figure in zip(at, figures):
+            section.blocks[k] = figure
+    return Report(report.title, report.intro, sections)
 
 
 # -- sections every report shares ---------------------------------------------------------------
@@ -264,19 +143,32 @@ def _fixtures_fact(relative) -> str:
             f"fitted plane), {n['distances']} known distance(s) between points")
 
 
+def branch_figures(robot: Robot, sets: list[DataSet]) -> dict | None:
+    """Point errors per branch of a tree: {data set name: {branch: {stage: {rms_mm, max_mm}}}} over
+    each branch's measured points, the branches a set does not measure left out; {} on a chain, None
+    for measured frames (rows are frames, not points)."""
+    if not robot.branches:
+        return {}
+    if any(len(ds.stages[0].pose) != len(ds.data.target) for ds in sets):
+        return None
+    out = {}
+    for ds in sets:
+        side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
+        out[ds.name] = {b.name: {st.stage: summary(1e-3 * np.linalg.norm(st.position_mm[side == k], axis=1))
+                                 for st in ds.stages}
+                        for k, b in enumerate(robot.branches) if (side == k).any()}
+    return out
+
+
 def branch_table(robot: Robot, sets: list[DataSet]) -> Table | str:
     """RMS point error per branch of a tree, per data set and stage (a hand's accuracy is its own)."""
-    header, rows = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)], []
-    if any(len(ds.stages[0].pose) != len(ds.data.target) for ds in sets):
+    figures = branch_figures(robot, sets)
+    if figures is None:
         return "Per branch: not shown for measured frames (rows are frames, not points)."
-    for k, st in enumerate(sets[0].stages):
-        row = [st.stage]
-        for ds in sets:
-            side = np.array([robot.branch_of(robot.target_names[t]) for t in ds.data.target])
-            d = np.linalg.norm(ds.stages[k].position_mm, axis=1)
-            row += [f"{np.sqrt(np.mean(d[side == b] ** 2)):.3g}" if (side == b).any() else "-"
-                    for b in range(len(robot.branches))]
-        rows.append(tuple(row))
+    header = ["model", *(f"{ds.name} {b.name} RMS (mm)" for ds in sets for b in robot.branches)]
+    rows = [tuple([st.stage, *(f"{figures[ds.name][b.name][st.stage]['rms_mm']:.3g}" if b.name in figures[ds.name]
+                               else "-" for ds in sets for b in robot.branches)])
+            for st in sets[0].stages]
     return Table(tuple(header), rows)
 
 
@@ -497,7 +389,7 @@ def _scored(stage: str, cm, data: Measurements, c, frames, register: bool) -> Re
     return residuals(stage, cm, data, to_world(fit_frames(cm, data, c) if register else frames, data), c)
 
 
-def _diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
+def diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_val: bool,
                     registration_mode: str) -> list[DataSet]:
     """Uncalibrated, declared model and diagnosed model on the training and validation data, each
     scored as diagnose scored it."""
@@ -520,7 +412,7 @@ def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str
     from gecgen.runtime.calibration import from_fit
 
     robot = diag.robot
-    sets = _diagnosed_sets(diag, data, val, register_val, registration_mode)
+    sets = diagnosed_sets(diag, data, val, register_val, registration_mode)
     calib = from_fit(robot, diag.final.model, diag.final.fit, diag.ratio_loads)
     found = [f"{diag.candidates_tested} candidate effects screened in {diag.rounds} rounds; an effect is added only "
              "when it passes a Bonferroni-corrected chi-square test and lowers the 5-fold cross-validated RMS on the "
@@ -560,7 +452,7 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     fit, cm = choice.fit, choice.cm
     diag = choice.diagnosis
     if diag is not None:
-        sets = _diagnosed_sets(diag, data, val, register_val, "auto")
+        sets = diagnosed_sets(diag, data, val, register_val, "auto")
     else:
         sets = [DataSet("training", data, [
             residuals("uncalibrated", cm, data, _nominal_world(cm, data, fit.loss, "auto"), None),

@@ -9,8 +9,8 @@ from pathlib import Path
 import jinja2
 from markupsafe import Markup, escape
 
-from gecgen.files import write_atomically
-from gecgen.report.content import Bullets, Figure, Report, Table
+from gecgen.model.files import write_atomically
+from gecgen.report.blocks import Bullets, Figure, Report, Table
 
 HERE = Path(__file__).resolve().parent
 

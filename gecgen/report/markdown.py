@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.files import write_atomically
-from gecgen.report.content import Bullets, Figure, Report, Table
+from gecgen.model.files import write_atomically
+from gecgen.report.blocks import Bullets, Figure, Report, Table
 
 
 def _block(block, outdir: Path) -> list[str]:

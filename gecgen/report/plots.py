@@ -15,8 +15,8 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 from gecgen.model.robot import Robot  # noqa: E402
-from gecgen.report.content import (DataSet, Figure, Residuals, joint_label, joint_scale, joint_values,  # noqa: E402
-                                   variable)
+from gecgen.report.blocks import (DataSet, Figure, Residuals, joint_label, joint_scale, joint_values,  # noqa: E402
+                                  variable)
 
 #: one colour per stage, in order: uncalibrated, calibrated, diagnosed
 COLOURS = ("tab:red", "tab:blue", "tab:green")

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen import __version__
-from gecgen.files import write_atomically
+from gecgen.version import __version__
+from gecgen.model.files import write_atomically
 from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.robot_file import load_robot

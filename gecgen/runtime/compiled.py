@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.files import write_atomically
+from gecgen.model.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot

@@ -12,11 +12,18 @@ worker of a fleet, which already runs robots side by side and may not fork).
 A forked worker inherits the parent's locks as they were at the fork: a terminal's progress spinner
 writing to stderr at that moment would leave the worker's stderr locked for good. Workers therefore
 write to fresh streams of their own (`_own_streams`), never to the inherited ones.
+
+Workers live and die with the parent: Ctrl-C (which a terminal sends to every process of the
+command) is the parent's to handle, and the parent ending for any reason (an error, Ctrl-C,
+SIGTERM, SIGKILL) ends them, where they would otherwise wait for good on the pipe to a parent that
+is gone, each holding the memory it inherited (`_worker_start`, `_stop`).
 """
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
+import signal
 import sys
 import warnings
 from concurrent.futures import ProcessPoolExecutor
@@ -57,13 +64,45 @@ def mapped(calls: list[tuple[Callable, tuple]]) -> Iterator[Iterable]:
     if n <= 1:
         yield (fn(*args) for fn, args in calls)
         return
-    pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_own_streams)
+    pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start,
+                               initargs=(os.getpid(),))
     try:
         yield (_reissued(*out) for out in pool.map(_call, *zip(*calls)))
     except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
+        _stop(pool)
         raise
     pool.shutdown(wait=True)
+
+
+def _stop(pool: ProcessPoolExecutor):
+    """End the pool now: its workers killed, not left to finish their tasks (a fold can take
+    minutes), whose results nobody will read."""
+    kill = getattr(pool, "kill_workers", None)  # Python 3.14
+    if kill is not None:
+        kill()
+    else:  # before 3.14 the executor keeps its processes in `_processes` and offers no public way
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.kill()
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
+#: prctl's option that sends the calling process a signal when its parent ends (linux/prctl.h)
+PR_SET_PDEATHSIG = 1
+
+
+def _worker_start(parent: int):
+    """A worker's set-up (see the module docstring): killed by the system when the parent ends,
+    Ctrl-C left to the parent, the parent's SIGTERM handler (the CLI's) not inherited, and stdout and
+    stderr of its own."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (AttributeError, OSError):  # no prctl here: the parent's `_stop` is all there is
+        pass
+    if os.getppid() != parent:  # the parent ended before the request above was made
+        os._exit(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _own_streams()
 
 
 def _own_streams():

@@ -9,7 +9,7 @@ repeatability and tracker noise.
 A truth file (YAML) looks like
 
     seed: 1
-    gravity: [0, -9.81, 0]                 # world, m/s^2
+    gravity: [0, -9.80665, 0]              # world, m/s^2 (default: 0, 0, -9.80665)
     constant: {translation_std: 1.0e-3, rotation_std: 5.0e-4}   # or values: {"1.ex": 0.001}
     joint_offsets: {std: 2.0e-4}            # or values: [..] per joint (m or rad)
     masses: [{frame: 4, mass: 60, at: [0, 0, 0]}]              # link masses, kg, frame coordinates
@@ -46,7 +46,7 @@ import numpy as np
 
 from gecgen.model.gravity import robot_frame_wrenches, robot_gravity_torques
 from gecgen.model.kinematics import constant, frames
-from gecgen.model.robot import ERROR_NAMES, MATCHING, WRENCH, Robot
+from gecgen.model.robot import ERROR_NAMES, GRAVITY, MATCHING, WRENCH, Robot
 from gecgen.model.robot_file import with_couplings
 from gecgen.model.validation import require, require_keys
 
@@ -241,7 +241,7 @@ def load_truth(spec: dict, robot: Robot, where: str = "<truth>") -> Truth:
     resolved = dict(spec)
     resolved["constant"] = {"values": {n: float(v) for n, v in zip(robot.error_names(), const)}}
     resolved["joint_offsets"] = {"values": offsets.tolist()}
-    return Truth(const, offsets, tuple(sources), np.array(spec.get("gravity", [0.0, 0.0, -9.81]), float), masses,
+    return Truth(const, offsets, tuple(sources), np.array(spec.get("gravity", GRAVITY), float), masses,
                  float(noise.get("repeatability", 0.0)), float(noise.get("tracker", 0.0)), resolved,
                  float(noise.get("orientation", 0.0)), built)
 

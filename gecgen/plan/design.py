@@ -40,7 +40,7 @@ import numpy as np
 
 from gecgen.model.kinematics import sensor_wrench, tool_poses
 from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_commands
-from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.robot import GRAVITY, WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structural_analysis
@@ -74,7 +74,6 @@ EXCHANGE_BUDGET = 2e7
 DEFAULT_CRITERION = "D"
 N_VALIDATION = 500
 NOISE_M = 5e-5
-GRAVITY = (0.0, 0.0, -9.81)
 
 
 @dataclass(frozen=True)

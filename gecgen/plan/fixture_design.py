@@ -43,7 +43,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.design import MAX_PASSES, PASS_TOL, RIDGE, SWAP_TOL, logdet
+from gecgen.plan.design import MAX_PASSES, PASS_TOL, RIDGE, SWAP_TOL, logdet
 from gecgen.runtime.identify import structural_analysis
 from gecgen.simulate.fixtures import reach
 

@@ -1,0 +1,38 @@
+"""Robot programs corrected through a calibration, for controllers that take neither generated C nor a
+URDF: KUKA KRL, ABB RAPID, FANUC TP (ASCII .ls) and UR script, one module each over a shared core."""
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, write_program
+from gecgen.model.validation import ModelError
+
+#: format name -> (its module, the file suffixes it reads)
+FORMATS = {"krl": ("kuka", (".src",)), "rapid": ("abb", (".mod", ".modx", ".prg")), "tp": ("fanuc", (".ls",)),
+           "ur": ("ur", (".script", ".urscript"))}
+
+
+def program_format(path: str | Path, name: str | None = None) -> Format:
+    """The format named, or the one the program's suffix says; a one-line refusal otherwise."""
+    if name is None:
+        suffix = Path(path).suffix.lower()
+        name = next((k for k, (_, suffixes) in FORMATS.items() if suffix in suffixes), None)
+        if name is None:
+            known = ", ".join(f"{s} ({k})" for k, (_, suffixes) in FORMATS.items() for s in suffixes)
+            raise ModelError(f"{path}: no program format reads {suffix or 'a file without suffix'}; give one of "
+                             f"{known}, or name the format with --format")
+    if name not in FORMATS:
+        raise ModelError(f"--format {name}: unknown; give one of {', '.join(FORMATS)}")
+    return importlib.import_module(f"gecgen.deliver.programs.{FORMATS[name][0]}").FORMAT
+
+
+def filter_program(cal, program: str | Path, output: str | Path, frames: str | Path | None = None,
+                   format: str | None = None, max_iter: int = 50) -> tuple[Outcome, dict[Path, Path], Path]:
+    """Read `program`, correct its targets through the fitted Calibrator `cal`, and write the corrected
+    program to `output` (KRL: its .dat beside it) with the change log beside it (OUTPUT.log.csv): the
+    outcome of every target, where each file went, and the log's path."""
+    fmt = program_format(program, format)
+    parsed = fmt.parse(Path(program))
+    outcome = correct(fmt, parsed, cal, read_frames(frames, fmt), max_iter=max_iter)
+    return (outcome, *write_program(fmt, parsed, outcome, Path(output)))

@@ -1,0 +1,171 @@
+"""Robot programs corrected by `gecgen filter`, run on simulated truth robots: for each controller format,
+a calibration fitted on simulated tracker data, a program of mixed joint and Cartesian targets on the
+nominal robot, and both the program and its filtered copy executed on the truth robot through the
+controller's nominal model (target -> nominal inverse kinematics in the target's configuration ->
+joints -> the truth's tool). Writes docs/program-filters.md.
+
+    python scripts/reproduce_program_filters.py [--targets 60] [--train 100] [--val 50] [--seeds 3]
+"""
+import argparse
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import gecgen
+from gecgen.deliver.programs import abb, fanuc, filter_program, kuka, trial, ur
+from gecgen.deliver.programs.core import read_frames
+from gecgen.deliver.programs.kinematics import arm_of
+from gecgen.model import load_robot
+from gecgen.model.validation import read_yaml
+from gecgen.simulate import load_truth, random_design, simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOTS, PROGRAM_ROBOTS = ROOT / "robots", ROOT / "tests" / "data" / "programs" / "robots"
+#: the target: the filtered program's tool within this multiple of the calibration's held-out RMS
+WITHIN = 1.2
+
+
+def _krl(folder: Path, arm, q, rng):
+    kinds = list(rng.choice(["axis", "pos", "inline-axis", "inline-pos"], len(q), p=[0.25, 0.45, 0.1, 0.2]))
+    tool, base = [0, 0, 320, 0, -90, 0], [1800, -400, 650, 90, 0, 0]
+    src, dat = trial.krl_program("cell", arm, q, kinds, (1, kuka.pose(tool)), (2, kuka.pose(base)))
+    (folder / "cell.src").write_bytes(src.encode())
+    (folder / "cell.dat").write_bytes(dat.encode())
+    (folder / "frames.yaml").write_text(f"tools:\n  1: {tool}\nbases:\n  2: {base}\n")
+    return folder / "cell.src", folder / "frames.yaml", kinds
+
+
+def _rapid(folder: Path, arm, q, rng):
+    kinds = list(rng.choice(["jointtarget", "robtarget", "inline"], len(q), p=[0.3, 0.5, 0.2]))
+    text = trial.rapid_program("Cell", arm, q, kinds, abb.pose([0, 0, 250, 1, 0, 0, 0]),
+                               abb.pose([1400, -300, 450, 0.9238795, 0, 0, 0.3826834]))
+    (folder / "Cell.mod").write_text(text)
+    return folder / "Cell.mod", None, kinds
+
+
+def _tp(folder: Path, arm, q, rng):
+    kinds = list(rng.choice(["joint", "cartesian"], len(q), p=[0.35, 0.65]))
+    tool, frame = [0, 0, 280, 0, -90, 180], [1500, 200, 300, 0, 0, -30]
+    text = trial.tp_program("cell", arm, q, kinds, (1, fanuc.pose(tool)), (2, fanuc.pose(frame)))
+    (folder / "cell.ls").write_text(text)
+    (folder / "frames.yaml").write_text(f"tools:\n  1: {tool}\nbases:\n  2: {frame}\n")
+    return folder / "cell.ls", folder / "frames.yaml", kinds
+
+
+def _ur(folder: Path, arm, q, rng):
+    # a cycle of nearby postures: a UR pose goes to the solution nearest the target before
+    q = q[0] + np.cumsum(rng.normal(0.0, 0.12, q.shape), axis=0)
+    kinds = ["movej"] + list(rng.choice(["movej", "movel", "movep", "movej-pose", "variable"], len(q) - 1,
+                                        p=[0.3, 0.3, 0.15, 0.1, 0.15]))
+    (folder / "cell.script").write_text(trial.ur_program("cell", arm, q, kinds, ur.pose([0, 0, 0.18, 0, 0, 0])))
+    return folder / "cell.script", None, kinds
+
+
+CASES = [
+    # name, format module, robot file, truth file, error model, program writer
+    ("KUKA KRL", kuka, ROBOTS / "industrial6r.yaml", ROBOTS / "industrial6r.truth.yaml",
+     ROBOTS / "industrial6r.errors.yaml", _krl),
+    ("ABB RAPID", abb, PROGRAM_ROBOTS / "irb6700.yaml", PROGRAM_ROBOTS / "irb6700.truth.yaml",
+     ROBOTS / "constant.errors.yaml", _rapid),
+    ("FANUC TP", fanuc, ROBOTS / "fanuc.yaml", ROBOTS / "fanuc.truth.yaml", ROBOTS / "fanuc.errors.yaml", _tp),
+    ("UR script", ur, PROGRAM_ROBOTS / "ur10.yaml", PROGRAM_ROBOTS / "ur10.truth.yaml",
+     ROBOTS / "constant.errors.yaml", _ur),
+]
+
+
+def one(name, module, robot_file, truth_file, errors, writer, args, seed) -> dict:
+    rng = np.random.default_rng(seed)
+    robot = load_robot(robot_file)
+    truth = load_truth(read_yaml(truth_file, "truth"), robot)
+    train, val = (simulate(robot, truth, random_design(robot, n, rng), rng) for n in (args.train, args.val))
+    cal = gecgen.Calibrator(errors=str(errors)).fit(robot, train)
+    score = cal.score(val)
+    arm = arm_of(robot, np.eye(4))
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        (folder / "out").mkdir()
+        program, frames_file, _ = writer(folder, arm, trial.postures(arm, args.targets, rng), rng)
+        outcome, written, _ = filter_program(cal, program, folder / "out" / program.name, frames_file)
+        frames = read_frames(frames_file, module.FORMAT)
+        original, filtered = module.parse(program), module.parse(folder / "out" / program.name)
+        before = trial.execute(module.FORMAT, original, original, frames, arm, robot, truth)
+        after = trial.execute(module.FORMAT, original, filtered, frames, arm, robot, truth)
+    done = np.array([c.after is not None for c in outcome.changes])
+    joint = np.array([t.kind == "joint" for t in original.targets])
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)
+    rms = lambda x: float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")  # noqa: E731
+    reached = before.reached & after.reached
+    return dict(name=name, seed=seed, robot=robot.name, n=len(done), n_joint=int(joint.sum()), corrected=int(done.sum()),
+                kept=outcome.counts(), held_out=score.after.rms_mm, uncalibrated=score.before.rms_mm,
+                before_rms=rms(miss_before[reached]), before_max=float(miss_before[reached].max()),
+                after_rms=rms(miss_after[done]), after_max=float(miss_after[done].max()),
+                after_all=rms(miss_after[reached]),
+                after_joint=rms(miss_after[done & joint]), after_pose=rms(miss_after[done & ~joint]))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--targets", type=int, default=60)
+    ap.add_argument("--train", type=int, default=100)
+    ap.add_argument("--val", type=int, default=50)
+    ap.add_argument("--seeds", type=int, default=3, help="seeds 1..N: data, calibration and program each")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")  # insignificant coefficients held at zero, extrapolation notes
+    rows = [one(*case, args, seed) for case in CASES for seed in range(1, args.seeds + 1)]
+    lines = [
+        "# Corrected robot programs on simulated truth robots",
+        "",
+        "Written by `scripts/reproduce_program_filters.py` "
+        f"(`--targets {args.targets} --train {args.train} --val {args.val} --seeds {args.seeds}`).",
+        "",
+        "For each controller format: a truth robot (geometric errors and joint offsets, the KUKA-like arm also "
+        "gravity compliance) measured at random poses by a simulated tracker; a calibration fitted on "
+        f"{args.train} poses and scored on {args.val} held-out ones; a program of {args.targets} mixed joint and "
+        "Cartesian targets taught on the nominal robot (Cartesian targets in a tool and, for KRL, a base frame, "
+        "with the configuration of the posture they were taught in); `gecgen filter` run on it. Both the "
+        "original and the filtered program are then executed on the truth robot the way its controller would: "
+        "each target through the nominal inverse kinematics in its configuration (UR: nearest the target "
+        "before), the joints so found sent to the truth robot, and its tool point compared with where the "
+        "original program meant it to be.",
+        "",
+        "Robots and error models: `robots/industrial6r.yaml` (KUKA-like; its default model, quadratic in each joint "
+        "and linear in the wrench, against a truth with gravity compliance it does not describe exactly), "
+        "`tests/data/programs/robots/irb6700.yaml` (ABB-like; constant errors), `robots/fanuc.yaml` (FANUC-like, "
+        "J3 coupled to J2, the truth's ratio 0.3 % off; its default model) and "
+        "`tests/data/programs/robots/ur10.yaml` (UR-like; constant errors). KRL and TP programs give their "
+        "Cartesian targets in a base or user frame and a tool from a frames file, RAPID in a tooldata and wobjdata "
+        "of the module, UR with the TCP of `set_tcp`.",
+        "",
+        "| format | robot | seed | targets (joint) | corrected | held-out RMS mm (uncalibrated) | original program RMS / max mm "
+        "| filtered program RMS / max mm (corrected targets) | filtered / held-out |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['name']} | {r['robot']} | {r['seed']} | {r['n']} ({r['n_joint']}) | {r['corrected']} | "
+                     f"{r['held_out']:.3f} ({r['uncalibrated']:.3f}) | {r['before_rms']:.3f} / {r['before_max']:.3f} | "
+                     f"{r['after_rms']:.3f} / {r['after_max']:.3f} | {r['after_rms'] / r['held_out']:.2f} |")
+    lines += ["", "Targets kept as written, and why:", ""]
+    for r in rows:
+        kept = {k: v for k, v in r["kept"].items() if k != "corrected"}
+        lines.append(f"- {r['name']}, seed {r['seed']}: " + ("none" if not kept else "; ".join(f"{v} {k}" for k, v in kept.items())))
+    lines += ["", "Corrected joint and Cartesian targets apart (filtered RMS, mm):", ""]
+    for r in rows:
+        lines.append(f"- {r['name']}, seed {r['seed']}: joint {r['after_joint']:.3f}, Cartesian {r['after_pose']:.3f}; every "
+                     f"reached target, kept ones included: {r['after_all']:.3f}")
+    passed = [f"{r['name']} (seed {r['seed']})" for r in rows if r["after_rms"] <= WITHIN * r["held_out"]]
+    failed = [f"{r['name']} (seed {r['seed']})" for r in rows if r["after_rms"] > WITHIN * r["held_out"]]
+    lines += ["", f"Against the target (the filtered program's tool within {WITHIN}x the calibration's held-out "
+                  f"RMS): met by {', '.join(passed) or 'none'}"
+                  + (f"; not met by {', '.join(failed)}" if failed else "") + ".",
+              "",
+              "The held-out RMS is measured at the calibration's reflectors (tracker noise included); the programs' "
+              "tool points sit elsewhere on the tool, so their error is not bound to be below it.", ""]
+    (ROOT / "docs" / "program-filters.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

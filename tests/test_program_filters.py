@@ -1,0 +1,560 @@
+"""gecgen filter: robot programs corrected through a calibration (gecgen/deliver/programs).
+
+Checked against independent computation: the controllers' angle conventions built by hand from
+elementary rotations; a zero calibration leaves every byte; every byte outside the target numbers
+is unchanged after a real correction; and the corrected program, executed on the simulated truth
+robot through the controller's nominal model, lands nearer the intended targets than the original.
+"""
+import contextlib
+import io
+import json
+import shutil
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+import yaml
+
+from gecgen.api import Calibrator, load_robot
+from gecgen.cli import main
+from gecgen.deliver.programs import abb, fanuc, filter_program, kuka, program_format, trial, ur
+from gecgen.deliver.programs.core import correct, read_frames
+from gecgen.deliver.programs.kinematics import arm_of
+from gecgen.model import ModelError
+from gecgen.simulate import load_truth, random_design, simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data" / "programs"
+
+
+def _rz(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rx(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _calibrated(robot_file, truth_file, errors, seed=1, n=80):
+    """A Calibrator fitted on simulated measurements of the truth robot, the robot and its truth."""
+    robot = load_robot(robot_file)
+    truth = load_truth(yaml.safe_load(Path(truth_file).read_text()), robot)
+    rng = np.random.default_rng(seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cal = Calibrator(errors).fit(robot, simulate(robot, truth, random_design(robot, n, rng), rng))
+    return cal, robot, truth
+
+
+@pytest.fixture(scope="module")
+def kuka_cal():
+    return _calibrated(ROOT / "robots" / "industrial6r.yaml", ROOT / "robots" / "industrial6r.truth.yaml",
+                       str(ROOT / "robots" / "industrial6r.errors.yaml"))
+
+
+@pytest.fixture(scope="module")
+def ur_cal():
+    return _calibrated(DATA / "robots" / "ur10.yaml", DATA / "robots" / "ur10.truth.yaml",
+                       str(ROOT / "robots" / "constant.errors.yaml"))
+
+
+def _zero(cal):
+    """The same calibration with every coefficient zero: the nominal robot."""
+    out = Calibrator()
+    out._set(replace(cal.calibration_, c=np.zeros_like(cal.calibration_.c)))
+    return out
+
+
+def _copy_krl(tmp_path):
+    for name in ("palletize.src", "palletize.dat", "frames.yaml"):
+        shutil.copy(DATA / "krl" / name, tmp_path / name)
+    return tmp_path / "palletize.src"
+
+
+def _outside_targets(program, texts):
+    """Each file's text with the numbers of every target cut out: what must not change."""
+    out = {}
+    for path, text in texts.items():
+        spans = sorted((n.start, n.end) for t in program.targets if t.file == path for n in t.numbers)
+        pieces, at = [], 0
+        for start, end in spans:
+            pieces.append(text[at:start])
+            at = end
+        out[path.suffix] = pieces + [text[at:]]
+    return out
+
+
+def _round_trips(fmt, cal, source, out, frames=None):
+    """Filter `source` with a zero calibration (every byte of every file kept), then with `cal`: only
+    target numbers change, every target keeps its configuration. The outcome of the real filtering."""
+    filter_program(_zero(cal), source, out, frames)
+    original = fmt.parse(source)
+    for path in original.texts:
+        assert out.with_suffix(path.suffix).read_bytes() == path.read_bytes()
+    outcome, _, _ = filter_program(cal, source, out, frames)
+    filtered = fmt.parse(out)
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    assert [t.config for t in original.targets] == [t.config for t in filtered.targets]
+    return outcome
+
+
+def _lands_nearer(fmt, source, out, frames, calibrated, outcome):
+    """Run the original and the filtered program on the truth robot through the controller's nominal
+    model: the corrected targets' tool RMS must drop to under 0.35 of the original's (the calibrations
+    here remove about 90 % of the error), and a kept target misses as before. Returns the done mask."""
+    _, robot, truth = calibrated
+    arm = arm_of(robot, frames.flange)
+    original, filtered = fmt.parse(source), fmt.parse(out)
+    done = np.array([c.after is not None for c in outcome.changes])
+    before = trial.execute(fmt, original, original, frames, arm, robot, truth)
+    after = trial.execute(fmt, original, filtered, frames, arm, robot, truth)
+    assert after.reached[done].all()
+    miss_before = 1e3 * np.linalg.norm(before.placed - before.intended, axis=1)[done]
+    miss_after = 1e3 * np.linalg.norm(after.placed - after.intended, axis=1)[done]
+    assert np.sqrt(np.mean(miss_after ** 2)) < 0.35 * np.sqrt(np.mean(miss_before ** 2))
+    kept = ~done & before.reached
+    assert np.allclose(after.placed[kept], before.placed[kept])
+    return done
+
+
+# -- conventions, by hand ------------------------------------------------------------------------
+
+def test_kuka_abc_is_z_y_x_euler_in_mm_and_deg():
+    T = kuka.pose((100.0, -20.0, 5.0, 30.0, -50.0, 70.0))
+    assert np.allclose(T[:3, :3], _rz(np.radians(30)) @ _ry(np.radians(-50)) @ _rx(np.radians(70)))
+    assert np.allclose(T[:3, 3], [0.1, -0.02, 0.005])
+    target = kuka.Target("P", Path("p"), 1, "pose", tuple(
+        kuka.numbers_in("100 -20 5 31 -50 69", 0, 19, ["mm"] * 3 + ["deg"] * 3)))
+    assert np.allclose(kuka.numbers(T, target), [100, -20, 5, 30, -50, 70])
+
+
+def test_ur_pose_is_a_rotation_vector_in_m_and_rad():
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    angle = 0.7
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K  # Rodrigues
+    T = ur.pose((0.4, -0.1, 0.3, *(angle * axis)))
+    assert np.allclose(T[:3, :3], R) and np.allclose(T[:3, 3], [0.4, -0.1, 0.3])
+
+
+def test_kuka_turn_and_status_follow_the_joint_signs_and_the_wrist():
+    arm = arm_of(load_robot(ROOT / "robots" / "industrial6r.yaml"), np.eye(4))
+    q = np.radians([[-10, -60, -40, 20, -30, -90], [10, -60, -140, -20, 30, 90]])
+    s, t = kuka.config(arm)(q).T
+    assert list(t) == [0b110111, 0b001110]  # bit k: axis k+1 negative
+    assert list(s & 4) == [0, 4]  # A5 > 0
+    # the stretched arm (contract: q = 0, -90, -90) divides elbow up from down, at the offset of a3
+    assert list(s & 2) == [2, 0]
+
+
+# -- round trips -----------------------------------------------------------------------------------
+
+def test_zero_calibration_leaves_a_krl_program_byte_identical(kuka_cal, tmp_path):
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, written, log = filter_program(_zero(kuka_cal[0]), source, out, tmp_path / "frames.yaml")
+    assert outcome.corrected == 0
+    assert out.read_bytes() == source.read_bytes()
+    assert out.with_suffix(".dat").read_bytes() == source.with_suffix(".dat").read_bytes()
+    assert log.is_file()
+
+
+def test_krl_program_corrected_changes_only_target_numbers(kuka_cal, tmp_path):
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, _, log = filter_program(kuka_cal[0], source, out, tmp_path / "frames.yaml")
+    original, filtered = kuka.parse(source), kuka.parse(out)
+    assert [t.name for t in original.targets] == [t.name for t in filtered.targets]
+    assert _outside_targets(original, original.texts) == _outside_targets(filtered, filtered.texts)
+    assert b"\r\n" in out.read_bytes() and b"\n" not in out.read_bytes().replace(b"\r\n", b"")
+    reasons = {c.target.name: c.reason for c in outcome.changes}
+    assert reasons["LIN_REL line 25"].startswith("a relative motion")
+    assert reasons["XHOME (line 14)"].startswith("declared outside")
+    corrected = [c for c in outcome.changes if c.after is not None]
+    assert len(corrected) >= 10
+    # the log names every target, with the corrections it made
+    rows = log.read_text().splitlines()
+    assert len(rows) == 1 + len(outcome.changes)
+    assert all(0.05 < c.position_mm < 20 for c in corrected)
+    # the configuration is kept: S and T as written
+    for a, b in zip(original.targets, filtered.targets):
+        assert a.config == b.config
+
+
+def test_corrected_krl_program_lands_on_its_targets_on_the_truth_robot(kuka_cal, tmp_path):
+    """The filtered program run through the controller's nominal inverse kinematics on the truth
+    robot: its tool lands nearer the intended targets than the original's, by the calibration's
+    gain."""
+    cal = kuka_cal[0]
+    source = _copy_krl(tmp_path)
+    out = tmp_path / "out" / "palletize.src"
+    outcome, _, _ = filter_program(cal, source, out, tmp_path / "frames.yaml")
+    _lands_nearer(kuka.FORMAT, source, out, read_frames(tmp_path / "frames.yaml", kuka.FORMAT), kuka_cal, outcome)
+
+
+def test_ur_script_zero_and_real_calibration(ur_cal, tmp_path):
+    source, out = DATA / "ur" / "pick_place.script", tmp_path / "pick_place.script"
+    outcome = _round_trips(ur.FORMAT, ur_cal[0], source, out)
+    done = _lands_nearer(ur.FORMAT, source, out, read_frames(None, ur.FORMAT), ur_cal, outcome)
+    assert done.sum() >= len(done) - 1
+
+
+# -- what is kept, and what is refused ---------------------------------------------------------------
+
+@pytest.mark.parametrize("old, new, name, reason", [
+    (b"XP1={A1 -142.53669", b"XP1={A1 -192.53669", "XP1", "outside the joint limits"),
+    # XP2 names S 2; given S 3 (the wrist behind axis 1) its pose is out of reach in that configuration
+    (b"C -135.36718,S 2,T 27", b"C -135.36718,S 3,T 27", "XP2",
+     "unreachable by the nominal model in its configuration"),
+])
+def test_a_target_that_cannot_be_corrected_is_kept_and_listed(kuka_cal, tmp_path, old, new, name, reason):
+    source = _copy_krl(tmp_path)
+    dat = source.with_suffix(".dat")
+    dat.write_bytes(dat.read_bytes().replace(old, new))
+    outcome, _, log = filter_program(kuka_cal[0], source, tmp_path / "out" / "palletize.src", tmp_path / "frames.yaml")
+    change = next(c for c in outcome.changes if c.target.name == name)
+    assert change.after is None and change.reason == reason
+    line = next(ln for ln in dat.read_bytes().split(b"\r\n") if new in ln)
+    assert line in (tmp_path / "out" / "palletize.dat").read_bytes()
+    assert f"{name},palletize.dat,{change.target.line},{change.target.kind},{reason}" in log.read_text()
+
+
+def _cli(*args):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([*map(str, args), "--json"])
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def kuka_cal_file(kuka_cal, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cal") / "calibration.json"
+    kuka_cal[0].save(path)
+    return path
+
+
+def test_cli_filter_writes_program_dat_and_log(kuka_cal_file, tmp_path):
+    source = _copy_krl(tmp_path)
+    code, out, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "out" / "palletize.src",
+                          "--frames", tmp_path / "frames.yaml")
+    result = json.loads(out)
+    # two motions have no target of this program's own: listed, and the command says so
+    assert code == 1 and "kept as written" in err and len(err.strip().splitlines()) == 1
+    assert result["n_targets"] == 15 and result["corrected"] + len(result["kept"]) == 15
+    assert {k["target"] for k in result["kept"]} >= {"LIN_REL line 25", "XHOME (line 14)"}
+    assert (tmp_path / "out" / "palletize.dat").is_file() and Path(result["log"]).is_file()
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (lambda d: (d / "frames.yaml").write_text("tools:\n  1: [0, 0, 320, 0, -90, 0]\n"),
+     "palletize.src:26: target PTP line 26 is in base 2, which neither the program nor a frames file describes; "
+     "give its pose under bases: 2 in a frames file (--frames)"),
+    (lambda d: (d / "palletize.dat").unlink(),
+     "palletize.src:14: PTP to XHOME, and no palletize.dat beside the program declares it; copy palletize.dat "
+     "beside it"),
+    (lambda d: (d / "palletize.dat").write_bytes((d / "palletize.dat").read_bytes().replace(b"Y 1702.63624,", b"")),
+     "palletize.dat:13: E6POS XP2 lacks Y; give every component of the target"),
+])
+def test_cli_filter_refuses_bad_programs_in_one_line(kuka_cal_file, tmp_path, edit, expected):
+    source = _copy_krl(tmp_path)
+    edit(tmp_path)
+    code, out, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "out" / "palletize.src",
+                          "--frames", tmp_path / "frames.yaml")
+    assert code == 2 and out == ""
+    assert err.strip() == f"gecgen filter: {tmp_path / expected}"
+    assert not (tmp_path / "out").exists()
+
+
+def test_krl_output_must_keep_the_program_name(kuka_cal_file, tmp_path):
+    source = _copy_krl(tmp_path)
+    code, _, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "other.src", "--frames",
+                        tmp_path / "frames.yaml")
+    assert code == 2 and "write it as palletize.src in another folder" in err
+
+
+def test_ur_move_to_an_expression_is_refused(tmp_path):
+    bad = tmp_path / "bad.script"
+    bad.write_text("def p():\n  movel(pose_trans(base, p[0, 0, 0.1, 0, 0, 0]), a=1, v=0.1)\nend\n")
+    with pytest.raises(ModelError, match=r"bad.script:2: movel to 'pose_trans\(base, p\[0, 0, 0.1, 0, 0, 0\]\)'"):
+        ur.parse(bad)
+
+
+def test_unknown_suffix_is_refused_naming_the_formats(tmp_path):
+    with pytest.raises(ModelError, match=r"x.txt: no program format reads .txt; give one of .src \(krl\)"):
+        program_format(tmp_path / "x.txt")
+
+
+def test_ur_first_pose_without_an_earlier_target_is_kept(ur_cal, tmp_path):
+    program = tmp_path / "first.script"
+    program.write_text("def first():\n  set_tcp(p[0, 0, 0.15, 0, 0, 0])\n  movel(p[0.5, -0.3, 0.4, 3.0, 0.5, 0.1], "
+                       "a=1.2, v=0.25)\nend\n")
+    outcome = correct(ur.FORMAT, ur.parse(program), ur_cal[0], read_frames(None, ur.FORMAT))
+    assert outcome.changes[0].after is None and outcome.changes[0].reason.startswith("no earlier target")
+
+
+# -- ABB RAPID -------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def abb_cal():
+    return _calibrated(DATA / "robots" / "irb6700.yaml", DATA / "robots" / "irb6700.truth.yaml",
+                       str(ROOT / "robots" / "constant.errors.yaml"))
+
+
+def test_abb_quaternion_is_w_x_y_z_and_keeps_its_sign():
+    half = np.radians(40) / 2
+    T = abb.pose((10.0, 20.0, 30.0, np.cos(half), 0.0, 0.0, np.sin(half)))
+    assert np.allclose(T[:3, :3], _rz(np.radians(40))) and np.allclose(T[:3, 3], [0.01, 0.02, 0.03])
+    negative = abb.Target("p", Path("p"), 1, "pose", tuple(
+        abb.numbers_in("10 20 30 -0.9 0 0 -0.3", 0, 23, ["mm"] * 3 + ["1"] * 4)))
+    assert np.allclose(abb.numbers(T, negative), [10, 20, 30, -np.cos(half), 0, 0, -np.sin(half)])
+
+
+def test_abb_confdata_quadrants_and_cfx_by_hand():
+    arm = arm_of(load_robot(DATA / "robots" / "irb6700.yaml"), np.eye(4))
+    q = np.radians([[10, 20, -30, -100, 40, 185], [-95, 10, -120, 30, -40, -5]])
+    cf = abb.config(arm)(q)
+    assert cf[:, :3].tolist() == [[0, -2, 2], [-2, 0, -1]]
+    assert list(cf[:, 3] & 1) == [0, 1]  # axis 5 negative
+
+
+def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
+    source, out = DATA / "rapid" / "Cell.mod", tmp_path / "Cell.mod"
+    outcome = _round_trips(abb.FORMAT, abb_cal[0], source, out)
+    assert outcome.corrected == 10 and outcome.changes[-1].reason.startswith("a target computed")
+    _lands_nearer(abb.FORMAT, source, out, read_frames(None, abb.FORMAT), abb_cal, outcome)
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    (b"PERS tooldata tGripper:=[TRUE,", b"PERS tooldata tGripper:=[FALSE,",
+     "Cell.mod:8: tooldata tGripper is a stationary tool (robhold FALSE); correct programs of a tool the robot holds"),
+    (b"MoveJ p3, v1000, z10, tGripper", b"MoveJ p3, v1000, z10, tWelder",
+     "Cell.mod:15: target p3 is in tool tWelder, which neither the program nor a frames file describes; give its "
+     "pose under tools: tWelder in a frames file (--frames)"),
+])
+def test_rapid_refusals_name_the_line_and_the_fix(abb_cal, tmp_path, old, new, expected):
+    bad = tmp_path / "Cell.mod"
+    bad.write_bytes((DATA / "rapid" / "Cell.mod").read_bytes().replace(old, new))
+    with pytest.raises(ModelError) as err:
+        filter_program(abb_cal[0], bad, tmp_path / "out" / "Cell.mod")
+    assert str(err.value) == f"{tmp_path / expected}"
+
+
+# -- FANUC TP ----------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def fanuc_cal():
+    return _calibrated(ROOT / "robots" / "fanuc.yaml", ROOT / "robots" / "fanuc.truth.yaml",
+                       str(ROOT / "robots" / "fanuc.errors.yaml"))
+
+
+def test_fanuc_wpr_are_fixed_x_y_z_angles_and_turns_count_from_180():
+    T = fanuc.pose((1.0, 2.0, 3.0, 30.0, -50.0, 70.0))
+    assert np.allclose(T[:3, :3], _rz(np.radians(70)) @ _ry(np.radians(-50)) @ _rx(np.radians(30)))
+    assert fanuc.turns(np.radians([180.0, 180.5, -180.0, -179.5, 539.0, -541.0])).tolist() == [0, 1, -1, 0, 1, -2]
+
+
+def _copy_tp(tmp_path):
+    for name in ("weld_seam.ls", "frames.yaml"):
+        shutil.copy(DATA / "tp" / name, tmp_path / name)
+    return tmp_path / "weld_seam.ls"
+
+
+def test_tp_program_zero_real_and_untouched_bytes(fanuc_cal, tmp_path):
+    """On the coupled arm (the controller's J3 is the forearm's angle: couplings J3 = J2 + J3, the truth
+    1.003 J2 + J3): joint positions corrected in the controller's readings, Cartesian ones in their
+    user frame and tool; the aligned columns of the /POS section stay aligned."""
+    source, out = _copy_tp(tmp_path), tmp_path / "out" / "weld_seam.ls"
+    outcome = _round_trips(fanuc.FORMAT, fanuc_cal[0], source, out, tmp_path / "frames.yaml")
+    original, filtered = fanuc.parse(source), fanuc.parse(out)
+    assert all(len(a.text) <= len(b.text) <= len(a.text) + 1 for s, f in zip(original.targets, filtered.targets)
+               for a, b in zip(s.numbers, f.numbers))
+    assert outcome.corrected == 8 and outcome.changes[-1].reason.startswith("a position register")
+    _lands_nearer(fanuc.FORMAT, source, out, read_frames(tmp_path / "frames.yaml", fanuc.FORMAT), fanuc_cal,
+                  outcome)
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    (b"\t\tCONFIG : 'N U T, 0, 0, 0',\r\n\tX = -1994.919", b"\r\n\tX = -1994.919",
+     "weld_seam.ls:38: P[2] has no CONFIG; write it as CONFIG : 'N U T, 0, 0, 0'"),
+    (b"   7:L P[3] 500mm/sec", b"   7:L P[9] 500mm/sec",
+     "weld_seam.ls:22: motion to P[9], which the /POS section does not define; export the program with its "
+     "positions"),
+    (b"UF : 2, UT : 1,\t\tCONFIG : 'F U T, 0, 0, 0',\r\n\tX =   832.008",
+     b"UF : 3, UT : 1,\t\tCONFIG : 'F U T, 0, 0, 0',\r\n\tX =   832.008",
+     "weld_seam.ls:44: target P[3] is in base 3, which neither the program nor a frames file describes; give its "
+     "pose under bases: 3 in a frames file (--frames)"),
+])
+def test_tp_refusals_name_the_line_and_the_fix(fanuc_cal, tmp_path, old, new, expected):
+    source = _copy_tp(tmp_path)
+    text = source.read_bytes()
+    assert old in text
+    source.write_bytes(text.replace(old, new))
+    with pytest.raises(ModelError) as err:
+        filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
+    assert str(err.value) == f"{tmp_path / expected}"
+
+
+# -- details ---------------------------------------------------------------------------------------
+
+def test_the_controller_arm_is_the_robot_files_chain(rng):
+    """Arm.frames (the solver's own evaluation, constants folded once) equals the model's exact chain."""
+    from gecgen.model.kinematics import frames
+
+    for robot_file in (ROOT / "robots" / "fanuc.yaml", DATA / "robots" / "ur10.yaml"):
+        robot = load_robot(robot_file)
+        arm = arm_of(robot, np.eye(4))
+        q = rng.uniform(-2, 2, (20, 6))
+        assert np.allclose(arm.fk(q), frames(robot, q)[robot.n_frames], atol=1e-12)
+
+
+def _krl_two_poses(tmp_path, arm, q, tool_line="$TOOL={X 0,Y 0,Z 200,A 0,B 0,C 0}"):
+    """A KRL program moving to the pose of each posture q (K, 6) rad, written in the motion, with
+    the tool set in the program itself."""
+    config = kuka.config(arm)
+    lines = ["DEF two( )", tool_line, "$BASE=$NULLFRAME"]
+    for qk in q:
+        tcp = arm.fk(qk)[0] @ kuka.pose((0, 0, 200, 0, 0, 0))
+        values = trial.pose_values(kuka.FORMAT, tcp, ("mm",) * 3 + ("deg",) * 3)
+        s, t = config(qk[None])[0]
+        lines.append("PTP {" + ",".join(f"{k} {v:.4f}" for k, v in zip(kuka.POSE_KEYS, values)) + f",S {s},T {t}}}")
+    (tmp_path / "two.src").write_text("\n".join(lines + ["END", ""]))
+    return tmp_path / "two.src"
+
+
+def test_a_correction_that_would_flip_a_turn_bit_is_kept(kuka_cal, tmp_path):
+    """A4 0.06 deg either side of zero: the correction (0.27 deg on A4 here) moves it the same way at
+    both, so at one of the two it crosses zero, T changes, and the controller would solve the written
+    pose in another configuration; that target is kept, the other corrected."""
+    cal, robot, _ = kuka_cal
+    arm = arm_of(robot, np.eye(4))
+    q = np.radians([[20.0, -70.0, -60.0, 0.0, 40.0, 30.0]] * 2)
+    q[:, 3] = [1e-3, -1e-3]
+    assert abs(cal.compensate(q).q[0, 3] - q[0, 3]) > 2e-3
+    outcome = correct(kuka.FORMAT, kuka.parse(_krl_two_poses(tmp_path, arm, q)), cal,
+                      read_frames(None, kuka.FORMAT))
+    reasons = sorted(c.reason for c in outcome.changes)
+    assert reasons == ["corrected", "the corrected pose would bring the controller to another configuration"]
+
+
+def test_krl_tool_set_in_the_program_and_a_pose_without_s_and_t(kuka_cal, tmp_path):
+    cal, robot, _ = kuka_cal
+    arm = arm_of(robot, np.eye(4))
+    q = np.radians([[20.0, -70.0, -60.0, 30.0, 40.0, 30.0]])
+    source = _krl_two_poses(tmp_path, arm, q)
+    program = kuka.parse(source)
+    assert program.targets[0].tool == "$TOOL line 2"
+    assert np.allclose(program.tools["$TOOL line 2"], kuka.pose((0, 0, 200, 0, 0, 0)))
+    assert correct(kuka.FORMAT, program, cal, read_frames(None, kuka.FORMAT)).corrected == 1
+    text = source.read_text()
+    source.write_text(text[:text.index(",S ")] + "}\nEND\n")
+    outcome = correct(kuka.FORMAT, kuka.parse(source), cal, read_frames(None, kuka.FORMAT))
+    assert outcome.changes[0].reason.startswith("names no configuration")
+
+
+def test_ur_installation_tcp_comes_from_the_frames_file(ur_cal, tmp_path):
+    program = tmp_path / "p.script"
+    program.write_text("def p():\n  movej([0.3, -1.2, 1.6, -1.9, -1.57, 0.4])\n  movel(p[-0.8, -0.4, 0.1, 2.2, 2.2, 0.0])\n"
+                       "end\n")
+    with pytest.raises(ModelError, match="p.script:3: target movel line 3 is in tool installation, which neither the "
+                                         "program nor a frames file describes; give its pose under tools: installation"):
+        correct(ur.FORMAT, ur.parse(program), ur_cal[0], read_frames(None, ur.FORMAT))
+    (tmp_path / "frames.yaml").write_text("tools:\n  installation: [0, 0, 0.18, 0, 0, 0]\n")
+    assert ur.parse(program).targets[1].tool == "installation"
+    frames = read_frames(tmp_path / "frames.yaml", ur.FORMAT)
+    assert np.allclose(frames.tools["installation"], ur.pose((0, 0, 0.18, 0, 0, 0)))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("tools:\n  1: [0, 0, 320]\n", "frames.yaml: tools: 1: give 6 numbers in the krl controller's pose convention"),
+    ("tool:\n  1: [0, 0, 320, 0, 0, 0]\n", "frames.yaml: unknown key tool; give flange, tools and bases"),
+])
+def test_a_bad_frames_file_is_refused_naming_the_key(tmp_path, text, message):
+    (tmp_path / "frames.yaml").write_text(text)
+    with pytest.raises(ModelError, match=message):
+        read_frames(tmp_path / "frames.yaml", kuka.FORMAT)
+
+
+@given(st.integers(-10 ** 7, 10 ** 7), st.integers(0, 6), st.floats(-5.0, 5.0), st.sampled_from(["mm", "deg", "m"]),
+       st.booleans())
+def test_a_number_keeps_its_style_and_says_the_new_value(mantissa, digits, change, unit, pad):
+    """A rewritten number has the original's decimals or the unit's minimum, whichever is more, and
+    says the value to half its last digit; an unchanged value keeps its text."""
+    from gecgen.deliver.programs.core import DECIMALS, Number, formatted
+
+    text = f"{mantissa / 10 ** digits:.{digits}f}"
+    number = Number(0, len(text) + 2 * pad, "  " * pad + text, unit, pad)
+    assert formatted(number, number.value) == number.text
+    new = formatted(number, number.value + change)
+    kept = max(digits, DECIMALS[unit])
+    assert abs(float(new) - (number.value + change)) <= 0.5 * 10.0 ** -kept * (1 + 1e-9) + 1e-12 * abs(float(new))
+    if new != number.text:
+        assert len(new.strip().split(".")[1]) == kept
+    if pad:
+        assert len(new) >= len(number.text) and new.strip() == new.lstrip()
+
+
+def test_a_turned_flange_with_its_tool_turned_back_changes_nothing(kuka_cal, tmp_path):
+    """`flange:` in the frames file: the controller's flange F in the robot file's frame n. The same
+    TCP given as F^-1 T on that flange must give the same corrected program as T on frame n."""
+    source = _copy_krl(tmp_path)
+    plain = filter_program(kuka_cal[0], source, tmp_path / "a" / "palletize.src", tmp_path / "frames.yaml")[0]
+    F = kuka.pose((0.0, 0.0, 50.0, 30.0, 10.0, 0.0))
+    tool = np.linalg.inv(F) @ kuka.pose((0, 0, 320, 0, -90, 0))
+    numbers = [*(1e3 * tool[:3, 3]), *Rotation.from_matrix(tool[:3, :3]).as_euler("ZYX", degrees=True)]
+    (tmp_path / "turned.yaml").write_text(f"flange: [0, 0, 50, 30, 10, 0]\ntools:\n  1: {[float(v) for v in numbers]}\n"
+                                          f"bases:\n  2: [1800, -400, 650, 90, 0, 0]\n")
+    turned = filter_program(kuka_cal[0], source, tmp_path / "b" / "palletize.src", tmp_path / "turned.yaml")[0]
+    assert [c.reason for c in plain.changes] == [c.reason for c in turned.changes]
+    for x, y in zip(plain.changes, turned.changes):
+        if x.after is not None and x.target.kind == "pose":
+            assert np.allclose([float(v) for v in x.after], [float(v) for v in y.after], atol=2e-3)
+
+
+def test_a_public_krl_program_round_trips(kuka_cal, tmp_path):
+    """ros-industrial's RSI program (BSD, tests/data/programs/krl/ros_rsi): no .dat, two inline joint
+    targets among RSI calls, LF line ends."""
+    source = DATA / "krl" / "ros_rsi" / "ros_rsi.src"
+    program = kuka.parse(source)
+    assert [(t.kind, t.values) for t in program.targets] == [("joint", (0, -90, 90, 0, 90, 0))] * 2
+    outcome = _round_trips(kuka.FORMAT, kuka_cal[0], source, tmp_path / "ros_rsi.src")
+    assert outcome.corrected == 2
+    assert (tmp_path / "ros_rsi.src").read_text().count("PTP {A1 ") == 2
+
+
+def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
+    program = tmp_path / "c.script"
+    program.write_text("def c():\n  movej(get_inverse_kin(p[0.5, -0.2, 0.3, 3.1, 0.1, 0.0], qnear=[0, -1.5, 1.5, -1.5, -1.5, 0]),"
+                       " a=1.4, v=1.05)\n  movec(p[0.5, -0.1, 0.3, 3.1, 0.1, 0.0], Via_p, a=1.2, v=0.25, r=0.05, mode=1)\n"
+                       "  movec(Via_p, p[0.4, 0.0, 0.3, 3.1, 0.1, 0.0], a=1.2, v=0.25)\nend\n")
+    with pytest.raises(ModelError, match=r"c.script:3: movec to 'Via_p': not a joint list"):
+        ur.parse(program)
+    program.write_text(program.read_text().replace("def c():\n", "def c():\n  global Via_p=p[0.45, -0.15, 0.3, 3.1, 0.1, 0.0]\n"))
+    targets = ur.parse(program).targets
+    assert [(t.name, t.kind, t.values[0]) for t in targets] == [
+        ("Via_p", "pose", 0.45), ("movej line 3", "pose", 0.5), ("movec line 4", "pose", 0.5),
+        ("movec line 5", "pose", 0.4)]
+
+
+def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
+    (tmp_path / "arc.src").write_text("DEF arc( )\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\n"
+                                      "CIRC XAUX1, {X 10,Y 20,Z 30,A 0,B 90,C 0,S 2,T 10} CA 180 C_DIS\n"
+                                      "SLIN XEND1 WITH $VEL = SVEL_CP(0.2, , LCPDAT1)\nSPTP {A1 1,A2 -90,A3 90,A4 0,A5 30,A6 0}\nEND\n")
+    (tmp_path / "arc.dat").write_text("DEFDAT arc\nDECL E6POS XAUX1={X 1,Y 2,Z 3,A 4,B 5,C 6,S 2,T 10,E1 0}\n"
+                                      "DECL E6POS XEND1={X 7,Y 8,Z 9,A 1,B 2,C 3,S 6,T 2,E1 0}\nDECL E6POS XUNUSED={X 7,Y 8,"
+                                      "Z 9,A 1,B 2,C 3,S 6,T 2}\nENDDAT\n")
+    found = {t.name: (t.kind, t.tool, t.base, t.config) for t in kuka.parse(tmp_path / "arc.src").targets}
+    assert found == {"CIRC line 4": ("pose", "1", "2", (2, 10)), "SPTP line 6": ("joint", None, None, None),
+                     "XAUX1": ("pose", "1", "2", (2, 10)), "XEND1": ("pose", "1", "2", (6, 2)),
+                     "XUNUSED": ("motion", None, None, None)}
