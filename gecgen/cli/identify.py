@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from gecgen.cli.common import (ROBOT_HELP, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
                                fit_options, next_commands, progress_status, warned)
+from gecgen.cli import pixels
 from gecgen.cli.human import warning_lines
 from gecgen.cli.register import add_register
 
@@ -34,9 +35,12 @@ def add_parser(command):
     add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
+    pixels.add_options(p)
 
 
 def run(args) -> dict:
+    if args.cameras or args.board:
+        return pixels.identified(args)
     with warned() as caught:
         return _identified(args, caught)
 

@@ -1,4 +1,5 @@
 """`gecgen import ROBOT WIDE.csv --mapping MAP.yaml -o OUT.csv [--targets m1,m2] [--sep ';'] [--decimal ','] [--json]`,
+`gecgen import ROBOT READINGS.csv --images FOLDER --board BOARD.yaml --cameras CAMERAS.yaml -o PIXELS.csv`,
 `gecgen import ROBOT SOCKET.csv... --sockets [--socket-distance M [--distance-std M]] [--target T] -o OUT.csv`.
 
 Converts a wide table (several points per row, see gecgen/model/wide.py), or socket recordings (one
@@ -47,6 +48,11 @@ def add_parser(command):
     p.add_argument("--sep", default=",", help="the table's column separator: ',' (default), ';', tab or '|'")
     p.add_argument("--decimal", default=".", choices=[".", ","],
                    help="the decimal mark of the table's numbers: '.' (default) or ',' (1,234 is 1.234)")
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): TABLE is a readings file, one row per "
+                             "image (image, camera, q1..qn)")
+    g.add_argument("--images", metavar="FOLDER", help="folder of the board's images; writes a pixel file")
+    g.add_argument("--board", metavar="FILE", help="with --images: the board file (chessboard or charuco: inner corners, square)")
+    g.add_argument("--cameras", metavar="FILE", help="with --images: the camera file")
 
 
 def keep_targets(robot: Robot, data: Measurements, option: str) -> Measurements:
@@ -85,6 +91,8 @@ def separator(option: str, decimal: str) -> str:
 def run(args) -> dict:
     sep = separator(args.sep, args.decimal)
     robot = load_robot(args.robot)
+    if args.images or args.board or args.cameras:
+        return _images(args, robot)
     if args.sockets:
         require(not args.mapping and not args.targets, "--sockets reads socket files: no --mapping or --targets")
         data = read_socket_files(args.table, robot, args.target, args.socket_distance, args.distance_std, sep,
@@ -118,3 +126,24 @@ def _warn_outside(robot: Robot, data: Measurements) -> list[dict]:
               f"(largest: {worst['joint']} = {worst['value']:g} beyond {worst['limit']:g} by {worst['excess']:.3g}, "
               f"row {worst['row']})", file=sys.stderr)
     return outside
+
+
+def _images(args, robot: Robot) -> dict:
+    """`import --images`: the board's corners in every image, as a pixel file; the images where the
+    board is not found named on stderr and in the JSON (`not_found`)."""
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.images import detect
+    from gecgen.model.pixels import write_pixels
+
+    require(args.images and args.board and args.cameras, "--images, --board and --cameras go together: the folder "
+                                                          "of images, the board file and the camera file")
+    require(not (args.mapping or args.sockets or args.targets), "--images reads a readings file: no --mapping, "
+                                                                "--sockets or --targets")
+    require(len(args.table) == 1, f"{len(args.table)} tables: give one readings file (a row per image)")
+    found = detect(args.table[0], args.images, robot, read_cameras(args.cameras), read_board(args.board))
+    write_pixels(args.output, robot, found.pixels)
+    if found.not_found:
+        print(f"gecgen import: warning: the board was not found in {len(found.not_found)} images, which give no "
+              f"rows: {', '.join(found.not_found)}", file=sys.stderr)
+    return {"robot": robot.name, "output": str(args.output), "images": found.pixels.n_poses + len(found.not_found),
+            "poses": found.pixels.n_poses, "rows": len(found.pixels.uv), "not_found": list(found.not_found)}

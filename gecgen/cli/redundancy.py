@@ -12,9 +12,14 @@ def add_parser(command):
     p.add_argument("data", nargs="?", help="measurement CSV: also report what it leaves unexcited")
     p.add_argument("--errors", help="error-model file (default: robots/NAME.errors.yaml)")
     add_orientation_length(p)
+    p.add_argument("--cameras", metavar="FILE", help="DATA is a pixel file of these cameras (docs/reference.md, "
+                                                     "\"Cameras\"): also what pixels cannot give")
+    p.add_argument("--board", metavar="FILE", help="with --cameras: the board a camera on the tool sees")
 
 
 def run(args) -> dict:
+    if args.cameras or args.board:
+        return _pixels(args)
     from gecgen.runtime.inputs import checked, on_points, placed
     from gecgen.runtime.identify import redundancy
 
@@ -29,3 +34,18 @@ def run(args) -> dict:
         robot, data = on_points(robot, args.orientation_length, data)
     result = redundancy(checked(model, robot, data), data).to_dict()
     return {"robot": robot.name, "error_model": model.source, "data": args.data, **result}
+
+
+def _pixels(args) -> dict:
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.model.validation import require
+    from gecgen.runtime.camera import pixel_redundancy
+
+    require(args.cameras and args.data, "--cameras needs DATA, a pixel file, and --board goes with --cameras")
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    robot, model = robot_and_model(args.robot, args.errors)
+    data = read_pixels(args.data, robot, cameras, board)
+    return {"robot": robot.name, "error_model": model.source, "data": args.data,
+            **pixel_redundancy(robot, model, data, cameras, board)}

@@ -1,0 +1,483 @@
+"""Identification from pixels: the robot's error coefficients and the cameras' poses from image points.
+
+Why a Gauss-Newton of its own rather than `runtime.identify`: identify fits 3-D points, and the
+measuring frame it registers is a rigid motion solved in closed form beside the linear steps in the
+coefficients. A pixel is a perspective projection: the camera's pose enters the residual as
+nonlinearly as the coefficients do and must be stepped with them, in one system, and the residual
+is in pixels, not metres. What is shared is reused: H_e from the compiled model (`model_targets`
+with_H), the structural analysis of the error model (`identify.structural_analysis`) and the robust
+losses (`runtime.robust`).
+
+The chain: the compiled model of the robot with four virtual targets, the tool origin and points
+FRAME_ARM along its axes, gives the tool pose of every image and its H_e; a point on the tool and
+its rows of H_e are affine in those four. Then
+* eye-to-hand (cameras mount: world): X_cam = R_k X_w + t_k for camera k, X_w the robot target;
+* eye-in-hand (mount: tool): X_cam = R_c X_tool + t_c, X_tool the board corner X_w = R_b x_b + t_b
+  seen from the tool frame.
+The unknowns are the coefficients the data determine and, per camera, (R, t) (and the board's pose,
+and any target the robot file leaves to `estimate`). The residual is observed minus projected
+pixels (`model.cameras.Camera.project`, OpenCV's model); its Jacobian in the coefficients is the
+projection's d(u, v)/dX times dX/dc from H_e, in the poses by central differences (cheap: no call of
+the generated code).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gecgen.model.cameras import Board, Camera
+from gecgen.model.errors import ErrorModel
+from gecgen.model.pixels import Pixels
+from gecgen.model.robot import WRENCH, Robot
+from gecgen.model.validation import ModelError, require
+from gecgen.runtime import robust
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.identify import RSS_TOL, structural_analysis
+from gecgen.runtime.redundancy import Eliminated
+
+#: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
+FRAME_ARM = 0.1
+#: a coefficient whose scaled column keeps less than this share outside the poses' and the kept
+#: coefficients' columns is not determined by pixels
+RANK_TOL = 1e-7
+#: median of a chi variable with 2 degrees of freedom (an image point's residual length)
+MEDIAN_CHI2 = float(np.sqrt(2 * np.log(2)))
+#: px: a Gauss-Newton step whose predicted change of the residual is below this per coordinate changes
+#: nothing a camera resolves (a corner is found to 0.05 px at best)
+STEP_TOL_PX = 1e-4
+#: step (rad, m) of the central differences in the poses
+STEP = 1e-7
+#: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
+CAMERA_POSE = "camera pose"
+SCALE = "scale"
+
+
+@dataclass(frozen=True)
+class Outlier:
+    """An image point the robust fit flagged: its file line, pose id, camera, point, residual (px)
+    and the weight it kept."""
+
+    row: int
+    pose: int
+    camera: str
+    point: str
+    residual_px: float
+    weight: float
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class PixelFit:
+    """Result of `fit_pixels`. c (nc,) the coefficients (0 where eliminated); poses: per camera, its
+    (R (3, 3), t (3,)) such that X_cam = R X + t, X in the world (mount world) or in the tool frame
+    (mount tool); board: the board's (R, t) in the world (X_w = R x_b + t), None for world cameras;
+    targets: the tool-frame position (m) of every target left to estimate; before and train:
+    {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
+    eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
+    and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
+    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`)."""
+
+    c: np.ndarray
+    poses: dict[str, tuple[np.ndarray, np.ndarray]]
+    board: tuple[np.ndarray, np.ndarray] | None
+    targets: dict[str, np.ndarray]
+    kept: tuple[int, ...]
+    eliminated: tuple[Eliminated, ...]
+    before: dict
+    train: dict
+    outliers: tuple[Outlier, ...]
+    iterations: int
+    converged: bool
+    loss: str
+    failures: tuple[str, ...] = ()
+    std: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    sigma_px: float = np.nan
+    ranges: dict | None = None
+
+    def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
+        """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
+        R, t = next(iter(self.poses.values()))
+        return R.T, -R.T @ t
+
+
+def frame_robot(robot: Robot) -> Robot:
+    """The robot with four virtual targets: the tool origin and FRAME_ARM along each tool axis."""
+    a = FRAME_ARM
+    return replace(robot, targets={"o": (0.0, 0.0, 0.0), "x": (a, 0.0, 0.0), "y": (0.0, a, 0.0), "z": (0.0, 0.0, a)},
+                   estimated=(), target_frames={}, vertex_of={})
+
+
+class _Problem:
+    """The residual of one pixel data set and its Jacobian (see the module docstring)."""
+
+    def __init__(self, cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None):
+        self.cm, self.robot, self.data, self.board = cm, robot, data, board
+        self.cams = [cameras[n] for n in data.cameras]
+        self.tool = data.mount == "tool"
+        self.inputs = (data.q, data.w, data.aux[:, [data.aux_names.index(a) for a in cm.model.aux]]
+                       if cm.model.aux else None)
+        seen = set(np.array(data.points)[data.point])
+        self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
+        # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
+        self.n_geom = 6 * len(self.cams) + (6 if self.tool else 0) + 3 * len(self.estimated)
+
+    def frames(self, c: np.ndarray, with_H: bool = False):
+        """Tool origin o (P, 3), rotation R (P, 3, 3) and, with_H, H_e of the four points (P, 4, 3, nc)."""
+        q, w, aux = self.inputs
+        out = self.cm.model_targets(q, w, aux, c, with_H=with_H)
+        p, H = out if with_H else (out, None)
+        o = p[:, 0]
+        R = np.stack([p[:, 1] - o, p[:, 2] - o, p[:, 3] - o], -1) / FRAME_ARM
+        return o, R, (None if H is None else H.reshape(len(q), 4, 3, -1))
+
+    def unpack(self, g: np.ndarray):
+        k = 6 * len(self.cams)
+        poses = [(Rotation.from_rotvec(g[6 * i:6 * i + 3]).as_matrix(), g[6 * i + 3:6 * i + 6])
+                 for i in range(len(self.cams))]
+        board = (Rotation.from_rotvec(g[k:k + 3]).as_matrix(), g[k + 3:k + 6]) if self.tool else None
+        k += 6 if self.tool else 0
+        targets = {t: g[k + 3 * i:k + 3 * i + 3] for i, t in enumerate(self.estimated)}
+        return poses, board, targets
+
+    def local_points(self, targets: dict) -> np.ndarray:
+        """(R, 3) each row's point: in the tool frame (robot targets) or the board frame (corners)."""
+        if self.tool:
+            return self.board.corners[self.data.point]
+        names = self.data.points
+        table = np.array([targets[n] if n in targets else self.robot.targets[n] for n in names], float)
+        return table[self.data.point]
+
+    def camera_points(self, g: np.ndarray, o: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """(R, 3) every row's point in its camera's frame."""
+        poses, board, targets = self.unpack(g)
+        d = self.data
+        x = self.local_points(targets)
+        Rp, op = R[d.pose], o[d.pose]
+        if self.tool:
+            Xw = x @ board[0].T + board[1]
+            Xt = np.einsum("rji,rj->ri", Rp, Xw - op)
+        else:
+            Xw = np.einsum("rij,rj->ri", Rp, x) + op
+        out = np.empty_like(x)
+        for k, (Rc, tc) in enumerate(poses):
+            rows = d.camera == k
+            out[rows] = (Xt[rows] if self.tool else Xw[rows]) @ Rc.T + tc
+        return out
+
+    def project(self, X: np.ndarray, jacobian: bool = False):
+        uv = np.empty((len(X), 2))
+        J = np.empty((len(X), 2, 3)) if jacobian else None
+        for k, cam in enumerate(self.cams):
+            rows = self.data.camera == k
+            if jacobian:
+                uv[rows], J[rows] = cam.project(X[rows], True)
+            else:
+                uv[rows] = cam.project(X[rows])
+        return (uv, J) if jacobian else uv
+
+    def residual(self, g: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """(R, 2) observed minus projected pixels."""
+        o, R, _ = self.frames(c)
+        return self.data.uv - self.project(self.camera_points(g, o, R))
+
+    def jacobian(self, g: np.ndarray, c: np.ndarray, columns: np.ndarray):
+        """Residual (R, 2) and its Jacobian (2R, n_geom + len(columns)) in (g, c[columns])."""
+        o, R, H = self.frames(c, with_H=True)
+        X = self.camera_points(g, o, R)
+        uv, P = self.project(X, jacobian=True)
+        d = self.data
+        Jg = np.empty((len(X), 2, self.n_geom))
+        for i in range(self.n_geom):
+            e = np.zeros(self.n_geom)
+            e[i] = STEP
+            Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R)) -
+                           self.project(self.camera_points(g - e, o, R))) / (2 * STEP)
+        Hc = H[d.pose][..., columns]  # (R, 4, 3, k)
+        dr = (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM  # d(tool axis k)/dc: (R, 3 axes, 3, k)
+        poses, board, targets = self.unpack(g)
+        x = self.local_points(targets)
+        if self.tool:
+            v = x @ board[0].T + board[1] - o[d.pose]  # X_w - o
+            # X_tool[k] = r_k . (X_w - o): d = dr_k . v - r_k . do
+            dXt = np.einsum("rkic,ri->rkc", dr, v) - np.einsum("rik,ric->rkc", R[d.pose], Hc[:, 0])
+            dX = np.empty_like(dXt)
+            for k, (Rc, _) in enumerate(poses):
+                rows = d.camera == k
+                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXt[rows])
+        else:
+            dXw = Hc[:, 0] + np.einsum("rk,rkic->ric", x, dr)  # d(o + sum_k x_k r_k)
+            dX = np.empty_like(dXw)
+            for k, (Rc, _) in enumerate(poses):
+                rows = d.camera == k
+                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXw[rows])
+        Jc = np.einsum("rij,rjc->ric", P, dX)
+        # the Jacobian of the residual: minus that of the projection
+        return d.uv - uv, -np.concatenate([Jg, Jc], axis=2).reshape(2 * len(X), -1)
+
+
+def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
+    """The poses' first values from the nominal robot: OpenCV's solvePnP per fixed camera; for a carried
+    camera, its pose on every image and the hand-eye solution (Tsai) for the camera on the tool."""
+    try:
+        import cv2
+    except ImportError:
+        raise ModelError("pixel data needs OpenCV: pip install 'gecgen[camera]' (opencv-python-headless)") from None
+    d, g = problem.data, []
+    o, R, _ = problem.frames(c0)
+    for k, cam in enumerate(problem.cams):
+        rows = np.nonzero(d.camera == k)[0]
+        if not problem.tool:
+            # targets left to estimate sit at the tool origin until fitted: kept out of the first guess
+            # unless nothing else is left
+            placed = rows[~np.isin(np.array(d.points)[d.point[rows]], problem.estimated)]
+            rows = placed if len(placed) >= 6 else rows
+            x = problem.local_points({t: np.zeros(3) for t in problem.estimated})[rows]
+            Xw = np.einsum("rij,rj->ri", R[d.pose[rows]], x) + o[d.pose[rows]]
+            ok, rvec, tvec = cv2.solvePnP(Xw, d.uv[rows], cam.K, np.array(cam.distortion), flags=cv2.SOLVEPNP_ITERATIVE)
+            require(ok, f"{d.source}: camera {cam.name}: no camera pose explains its points; check the camera file "
+                        f"and the point names")
+            g.extend([*rvec.ravel(), *tvec.ravel()])
+            continue
+        Rg, tg, Rb, tb = [], [], [], []
+        for p in np.unique(d.pose[rows]):
+            at = rows[d.pose[rows] == p]
+            if len(at) < 6:
+                continue
+            ok, rvec, tvec = cv2.solvePnP(problem.board.corners[d.point[at]], d.uv[at], cam.K,
+                                          np.array(cam.distortion))
+            if ok:
+                Rg.append(R[p]), tg.append(o[p]), Rb.append(cv2.Rodrigues(rvec)[0]), tb.append(tvec.ravel())
+        require(len(Rg) >= 3, f"{d.source}: camera {cam.name}: fewer than 3 images with 6 board corners or more; "
+                              f"take more images of the board")
+        Rcg, tcg = cv2.calibrateHandEye(Rg, tg, Rb, tb, method=cv2.CALIB_HAND_EYE_TSAI)
+        Rct, tct = Rcg.T, -Rcg.T @ tcg.ravel()  # tool -> camera
+        # the board in the world from the first image: X_w = R_g (R_cg (R_b x + t_b) + t_cg) + t_g
+        Rw = Rg[0] @ Rcg @ Rb[0]
+        tw = Rg[0] @ (Rcg @ tb[0] + tcg.ravel()) + tg[0]
+        g.extend([*Rotation.from_matrix(Rct).as_rotvec(), *tct])
+        g.extend([*Rotation.from_matrix(Rw).as_rotvec(), *tw])
+    for _ in problem.estimated:
+        g.extend([0.0, 0.0, 0.0])
+    return np.array(g, float)
+
+
+def _summary(e: np.ndarray) -> dict:
+    return {"rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max())}
+
+
+def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list[int], names: list[str],
+              poses_known: bool = False):
+    """The coefficients pixels determine (indices) and those they leave, each with why: the scale (a world
+    camera's distance trades against the robot's lengths), the camera's (or board's) pose, or no image
+    excites it. poses_known: the poses are given, not fitted (nothing merges with them)."""
+    _, J = problem.jacobian(g, c, np.array(struct_kept, int))
+    J = J / np.where(np.linalg.norm(J, axis=0) > 0, np.linalg.norm(J, axis=0), 1.0)
+    ng = problem.n_geom
+    kept, out, unexcited = [], [], []
+    scale_dir = None
+    if not problem.tool and not poses_known:  # does scaling the robot about the origin, cameras following, show?
+        o, R, H = problem.frames(c, with_H=True)
+        d = problem.data
+        x = problem.local_points({t: np.zeros(3) for t in problem.estimated})
+        Hc = H[d.pose][..., struct_kept]
+        A = (Hc[:, 0] + np.einsum("rk,rkic->ric", x, (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM)).reshape(-1, len(struct_kept))
+        p = (np.einsum("rij,rj->ri", R[d.pose], x) + o[d.pose]).ravel()
+        sol, *_ = np.linalg.lstsq(A, p, rcond=None)
+        if np.linalg.norm(A @ sol - p) < 1e-6 * np.linalg.norm(p):
+            scale_dir = sol
+    basis = np.zeros((len(J), 0)) if poses_known else np.linalg.qr(J[:, :ng])[0]
+    own = np.zeros((len(J), 0))  # the kept coefficients' columns alone
+    for i, j in enumerate(struct_kept):
+        col = J[:, ng + i]
+        rest = col - basis @ (basis.T @ col)
+        alone = col - own @ (own.T @ col)
+        if np.linalg.norm(rest) > np.sqrt(RANK_TOL):
+            kept.append(j)
+            basis = np.column_stack([basis, rest / np.linalg.norm(rest)])
+            own = np.column_stack([own, alone / np.linalg.norm(alone)])
+        elif np.linalg.norm(alone) > np.sqrt(RANK_TOL):
+            out.append(j)
+        else:
+            unexcited.append(j)
+    eliminated = []
+    if scale_dir is not None and out:  # the coefficient the scale direction leans on most is the scale's
+        weights = {j: abs(scale_dir[struct_kept.index(j)]) for j in out}
+        s = max(weights, key=weights.get)
+        if weights[s] > 0:
+            eliminated.append(Eliminated(names[s], s, "unexcited", f"{SCALE}: pixels fix no length; the robot's "
+                                         f"lengths and the cameras' distances trade off (give two targets a known "
+                                         f"distance apart, or see a board of known size)"))
+            out.remove(s)
+    what = ("the carried camera's pose on the tool or the board's pose in the world" if problem.tool else
+            "the cameras' poses in the world (pixels cannot tell a camera's pose from the robot base)")
+    eliminated += [Eliminated(names[j], j, "unexcited", f"{CAMERA_POSE}: merges with {what}") for j in out]
+    eliminated += [Eliminated(names[j], j, "unexcited", "not excited by these images") for j in unexcited]
+    return kept, eliminated
+
+
+def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+            fixed_poses: np.ndarray | None, backend: str):
+    """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
+    eliminated (structurally, and by `_analysis`), at the nominal model."""
+    require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
+    cm = CompiledModel(frame_robot(robot), model, backend)
+    problem = _Problem(cm, robot, data, cameras, board)
+    c = np.zeros(cm.dims.nc)
+    g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
+    struct = structural_analysis(cm, np.arange(4))
+    kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
+                                 fixed_poses is not None)
+    return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
+
+
+def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
+                     board: Board | None = None) -> dict:
+    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
+    `eliminated` (structural, and what pixels cannot give: `camera pose`, `scale`, not excited)."""
+    _, _, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+    return {"n_params": len(model.coefficients), "n_identifiable": len(kept),
+            "eliminated": [e.to_dict() for e in eliminated]}
+
+
+def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
+               loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
+               backend: str = "auto") -> PixelFit:
+    """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
+    module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
+    order of the fit) held at these values instead of fitted (an oracle that knows the cameras)."""
+    robust.check_loss(loss)
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend)
+    c = np.zeros(problem.cm.dims.nc)
+    cols = np.array(kept, int)
+    free_g = fixed_poses is None
+    e = np.linalg.norm(problem.residual(g, c), axis=1)
+    before = _summary(e)
+
+    def limit_of(e):
+        return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
+
+    limit = limit_of(e)
+    lam, converged, it = 0.0, False, 0
+    for it in range(1, max_iter + 1):
+        wr = robust.weights(e, limit, loss)
+        obj = robust.objective(e, limit, loss)
+        r, J = problem.jacobian(g, c, cols)
+        if not free_g:
+            J = J[:, problem.n_geom:]
+        root = np.repeat(np.sqrt(wr), 2)
+        A, b = J * root[:, None], r.ravel() * root
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        A = A / scale
+        predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
+        if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
+            converged = True  # a full step would change nothing a camera resolves
+            break
+        for _ in range(20):
+            M = A.T @ A + lam * np.eye(A.shape[1])
+            step = -np.linalg.solve(M, A.T @ b) / scale
+            g_t = g + step[:problem.n_geom] if free_g else g
+            c_t = c.copy()
+            c_t[cols] += step[problem.n_geom:] if free_g else step
+            e_t = np.linalg.norm(problem.residual(g_t, c_t), axis=1)
+            obj_t = robust.objective(e_t, limit, loss)
+            if np.isfinite(obj_t) and obj_t <= obj:
+                break
+            lam = 1e-6 if lam == 0 else 10 * lam
+        else:
+            break
+        g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
+        new_limit = limit_of(e)
+        settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
+        limit = new_limit
+        if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
+            converged = True
+            break
+    wr = robust.weights(e, limit, loss)
+    std, cov, sigma = _uncertainty(problem, g, c, cols, wr, free_g)
+    flagged = np.nonzero(e > limit)[0]
+    d = data
+    outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
+                             float(e[r]), float(wr[r])) for r in flagged[np.argsort(-e[flagged])])
+    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({_summary(e)['rms_px']:.3g} "
+                                     f"px rms left): the images may not determine this model (fewer terms, e.g. "
+                                     f"--errors with constant errors, or more images), or the camera file is not "
+                                     f"this camera's"]
+    poses, board_pose, targets = problem.unpack(g)
+    inliers = e <= limit
+    train = _summary(e) | {"rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
+    if not np.isfinite(e).all():
+        failures.append("a point lies behind its camera after the fit; check the camera file's mount and the data")
+    names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
+    values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
+    ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
+    return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges)
+
+
+def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
+    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+    r, J = problem.jacobian(g, c, cols)
+    if not free_g:
+        J = J[:, problem.n_geom:]
+    root = np.repeat(np.sqrt(wr), 2)
+    A, b = J * root[:, None], r.ravel() * root
+    dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
+    sigma = float(np.sqrt(b @ b / dof))
+    with np.errstate(all="ignore"):
+        try:
+            full = sigma ** 2 * np.linalg.inv(A.T @ A)
+        except np.linalg.LinAlgError:
+            full = np.full((A.shape[1],) * 2, np.inf)
+    k0 = A.shape[1] - len(cols)
+    cov = full[k0:, k0:]
+    std = np.full(problem.cm.dims.nc, np.nan)
+    std[cols] = np.sqrt(np.abs(np.diag(cov)))
+    return std, cov, sigma
+
+
+def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
+    """The calibration of a pixel fit (`runtime.calibration.Calibration`): coefficients in the robot's
+    world (the cameras' or the board's poses are in it, in `report`). Targets the robot file leaves to
+    estimate are placed where the fit put them; on a carried camera, at its optical centre."""
+    from gecgen.runtime.calibration import Calibration
+    from gecgen.runtime.placement import with_targets
+    from gecgen.runtime.registration import IDENTITY
+
+    placed = {n: tuple(map(float, t)) for n, t in fit.targets.items()}
+    if fit.board is not None:
+        centre = tuple(map(float, fit.tool_camera()[1]))
+        placed |= {n: centre for n in robot.estimated}
+    robot = with_targets(robot, placed)
+    report = {"n_params": len(fit.c), "n_identifiable": len(fit.kept), "n_carried": len(fit.kept),
+              "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
+              "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
+              "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
+              "training_ranges": fit.ranges,
+              "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
+              **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
+                 if fit.board is not None else {})}
+    return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
+
+
+def refuse_untrustworthy(fit: PixelFit, where: str):
+    """A fit with failures is refused with the first one."""
+    if fit.failures:
+        raise ModelError(f"{where}: {fit.failures[0]}")
+
+
+def fitted_tools(robot: Robot, model: ErrorModel, c: np.ndarray, q: np.ndarray, w: np.ndarray | None = None,
+                 aux: np.ndarray | None = None, backend: str = "auto") -> np.ndarray:
+    """(N, 4, 4) the tool poses the model with coefficients c (nc,) gives at joints q (N, n)."""
+    cm = CompiledModel(frame_robot(robot), model, backend)
+    p = cm.model_targets(q, w, aux, c)
+    T = np.zeros((len(p), 4, 4))
+    T[:, :3, :3] = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], -1) / FRAME_ARM
+    T[:, :3, 3], T[:, 3, 3] = p[:, 0], 1.0
+    return T

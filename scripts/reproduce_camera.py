@@ -1,0 +1,230 @@
+"""Calibrating with a camera instead of a tracker: measured on simulated industrial6r truths; writes
+docs/camera.md.
+
+    python scripts/reproduce_camera.py [--seeds 5]
+
+For each seed and pixel noise (0.1 and 0.3 px per coordinate):
+* eye-in-hand: a camera carried at a random pose near the tool sees a 9 x 6 chessboard (40 mm
+  squares) fixed in the world, from 40 training and 40 held-out poses;
+* eye-to-hand: two cameras fixed in the world see four markers on the tool (a plate 300 mm square,
+  100 mm out along tool z) from 60 training and 60 held-out poses.
+The truth is robots/industrial6r.truth.yaml (its constant errors, joint offsets and gravity
+compliance); the model is robots/constant.errors.yaml. Two fits on the same pixels: gecgen's, which
+fits the camera (and board) poses with the coefficients, and an oracle that is given the true camera
+(and board) poses and the true intrinsics. Held-out error: where the model puts the tool (eye-in-hand:
+the camera's optical centre; eye-to-hand: the tool origin) against the truth, in the world each fit
+defines (the board's, or the first camera's, fitted pose against its true one: no fitting on held-out
+data).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.cameras import Board, Camera
+from gecgen.model.validation import read_yaml
+from gecgen.runtime.camera import fit_pixels, fitted_tools
+from gecgen.simulate import load_truth
+from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
+
+ROOT = Path(__file__).resolve().parents[1]
+NOISES = (0.1, 0.3)
+DIST = (-0.12, 0.08, 0.0008, -0.0005, 0.0)
+MARKERS = {"m1": (0.15, 0.15, 0.1), "m2": (-0.15, 0.15, 0.1), "m3": (-0.15, -0.15, 0.1), "m4": (0.15, -0.15, 0.1)}
+
+
+def rotvec_t(R, t):
+    return [*Rotation.from_matrix(R).as_rotvec(), *t]
+
+
+def registered_mm(p: np.ndarray, y: np.ndarray, scaled: bool = False) -> float:
+    """RMS (mm) of p - y (N, 3) once y is moved rigidly onto p (least squares, Kabsch): the error a
+    tracker that registers itself on the held-out points would see; `scaled`: y also scaled (Umeyama),
+    what is left once the scale is taken out."""
+    pc, yc = p - p.mean(0), y - y.mean(0)
+    U, S, Vt = np.linalg.svd(yc.T @ pc)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = (U @ D @ Vt).T
+    s = float(np.sum(S * np.diag(D)) / np.sum(yc ** 2)) if scaled else 1.0
+    return 1e3 * float(np.sqrt(np.mean(np.sum((pc - s * yc @ R.T) ** 2, axis=1))))
+
+
+def hand(robot, truth, model, seed: int, noise: float) -> dict:
+    rng = np.random.default_rng(seed)
+    cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
+    board = Board(9, 6, 0.04)
+    q0 = np.radians([0, -90, -90, 0, 60, 0])
+    rig, q = eye_in_hand(robot, truth, cam, board, q0, np.radians([8, 6, 6, 25, 20, 30]), 80, rng)
+    train, held = q[:40], q[40:]
+    data = simulate_pixels(robot, truth, rig, train, noise, rng)
+    R, t = rig.poses["cam"]
+    Rb, tb = rig.board_pose
+    out = {}
+    for name, fixed in (("fit", None), ("oracle", np.array([*rotvec_t(R, t), *rotvec_t(Rb, tb)]))):
+        fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed)
+        Rbf, tbf = fit.board
+        Rf, tf = fit.tool_camera()  # X_tool = Rf X_cam + tf
+        T_true = true_tools(robot, truth, held)
+        c_true = np.einsum("nij,j->ni", T_true[:, :3, :3], -R.T @ t) + T_true[:, :3, 3]
+        W = Rbf @ Rb.T  # true world -> the fit's world (the board's)
+        c_true = (c_true - tb) @ W.T + tbf
+        T_fit = fitted_tools(robot, model, fit.c, held)
+        c_fit = np.einsum("nij,j->ni", T_fit[:, :3, :3], tf) + T_fit[:, :3, 3]
+        out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((c_fit - c_true) ** 2, axis=1))))
+        out[name + "_registered"] = registered_mm(c_fit, c_true)
+        if name == "fit":
+            out["train_px"] = fit.train["rms_px"]
+            # the camera on the tool against the truth's: directly, and as the fitted model's tool frame
+            # carries it (the truth's last-frame errors, which pixels cannot tell from the camera's pose, included)
+            out["direct_mm"] = 1e3 * float(np.linalg.norm(tf - (-R.T @ t)))
+            out["direct_mrad"] = 1e3 * float(Rotation.from_matrix(Rf @ R).magnitude())
+            Tc_true = T_true.copy()
+            Tc_true[:, :3, :3] = W @ T_true[:, :3, :3] @ R.T
+            Tc_true[:, :3, 3] = c_true
+            rel = np.linalg.inv(T_fit) @ Tc_true  # the true camera in the fitted tool frame, per held-out pose
+            out["carried_mm"] = 1e3 * float(np.sqrt(np.mean(np.sum((rel[:, :3, 3] - tf) ** 2, axis=1))))
+            turn = Rotation.from_matrix(rel[:, :3, :3] @ Rf.T).as_rotvec()
+            out["carried_mrad"] = 1e3 * float(np.sqrt(np.mean(np.sum(turn ** 2, axis=1))))
+            # the transform itself: the mean over the poses (the rest is the model's misfit, pose by pose)
+            out["mean_mm"] = 1e3 * float(np.linalg.norm(rel[:, :3, 3].mean(axis=0) - tf))
+            out["mean_mrad"] = 1e3 * float(np.linalg.norm(turn.mean(axis=0)))
+            out["eliminated"] = fit.eliminated
+    return out
+
+
+def world(robot, truth, model, seed: int, noise: float) -> dict:
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    robot = replace(robot, targets=MARKERS)
+    cams = [Camera(f"cam{k + 1}", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960) for k in range(2)]
+    eyes = np.array([[1.9, -2.4, 1.7], [1.9, 2.4, 1.7]])
+    q0 = np.radians([0, -80, -100, 0, 30, 0])
+    rig, q = eye_to_hand(robot, truth, cams, eyes, np.array([2.0, 0.0, 1.0]), q0,
+                         np.radians([12, 10, 10, 60, 40, 90]), 120, rng)
+    train, held = q[:60], q[60:]
+    data = simulate_pixels(robot, truth, rig, train, noise, rng)
+    fixed = np.array([v for c in cams for v in rotvec_t(*rig.poses[c.name])])
+    out = {}
+    for name, given in (("fit", None), ("oracle", fixed)):
+        fit = fit_pixels(robot, model, data, {c.name: c for c in cams}, fixed_poses=given)
+        (Rt, tt), (Rf, tf) = rig.poses["cam1"], fit.poses["cam1"]
+        p_true = true_tools(robot, truth, held)[:, :3, 3]
+        p_true = (p_true @ Rt.T + tt - tf) @ Rf  # into the fit's world (the first camera's)
+        p_fit = fitted_tools(robot, model, fit.c, held)[:, :3, 3]
+        out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((p_fit - p_true) ** 2, axis=1))))
+        out[name + "_registered"] = registered_mm(p_fit, p_true)
+        out[name + "_scaled"] = registered_mm(p_fit, p_true, scaled=True)
+        if name == "fit":
+            out["train_px"] = fit.train["rms_px"]
+            out["eliminated"] = fit.eliminated
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--write-only", action="store_true", help="write docs/camera.md from the last run's figures")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    robot = load_robot(ROOT / "robots" / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROOT / "robots" / "industrial6r.truth.yaml", "truth file"), robot)
+    model = load_error_model(ROOT / "robots" / "constant.errors.yaml", robot)
+    saved = ROOT / "out" / "camera" / "results.json"
+    if args.write_only:  # the document again from the last run's figures
+        write(json.loads(saved.read_text()), args.seeds)
+        return
+    rows = {"eye-in-hand": [], "eye-to-hand": []}
+    for noise in NOISES:
+        for seed in range(args.seeds):
+            for kind, run in (("eye-in-hand", hand), ("eye-to-hand", world)):
+                r = run(robot, truth, model, seed, noise)
+                r["eliminated"] = [[e.param, e.reason, e.detail] for e in r["eliminated"]]
+                rows[kind].append((noise, seed, r))
+                print(kind, noise, seed, {k: v for k, v in r.items() if k != "eliminated"}, flush=True)
+    saved.parent.mkdir(parents=True, exist_ok=True)
+    saved.write_text(json.dumps(rows))
+    write(rows, args.seeds)
+
+
+def write(rows: dict, seeds: int):
+    lines = ["# Calibrating with a camera", "",
+             "Written by `scripts/reproduce_camera.py` (its docstring gives the set-up). A simulated industrial6r "
+             "(robots/industrial6r.truth.yaml: constant errors, joint offsets, gravity compliance), the constant "
+             "error model, pixel noise per coordinate as in the first column; "
+             f"{seeds} seeds each. *fit*: gecgen's fit of the coefficients and the camera poses; *oracle*: the same "
+             "pixels fitted by a fit told the true camera (and board) poses and the true intrinsics. Held-out: RMS "
+             "position error (mm) of the tool on poses no fit saw, in the world each fit defines (the board's or the "
+             "first camera's fitted pose against its true one) and once registered rigidly on those points (what a "
+             "tracker that registers itself would see); the ratio is fit / oracle.", ""]
+    lines += ["## Eye-in-hand: a camera on the tool, a 9 x 6 chessboard (40 mm) in the world", "",
+              "40 training and 40 held-out poses. The camera on the tool against the truth's: *direct* compares the "
+              "two transforms; *carried* compares the fitted one with where the truth's camera sits in the fitted "
+              "model's tool frame on the held-out poses (the truth's last-frame errors, which pixels cannot tell "
+              "from the camera's pose, are in the fitted camera pose, not in the model), as an RMS over those poses "
+              "(the model's misfit, pose by pose, included) and as the mean over them (the transform itself).", "",
+              "| noise px | seed | train px | held-out fit mm | oracle mm | ratio | registered fit / oracle mm | "
+              "ratio | direct mm / mrad | carried RMS mm / mrad | carried mean mm / mrad |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for noise, seed, r in rows["eye-in-hand"]:
+        lines.append(f"| {noise} | {seed} | {r['train_px']:.3f} | {r['fit']:.3f} | {r['oracle']:.3f} | "
+                     f"{r['fit'] / r['oracle']:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
+                     f"{r['fit_registered'] / r['oracle_registered']:.2f} | "
+                     f"{r['direct_mm']:.3f} / {r['direct_mrad']:.3f} | "
+                     f"{r['carried_mm']:.3f} / {r['carried_mrad']:.3f} | "
+                     f"{r['mean_mm']:.3f} / {r['mean_mrad']:.3f} |")
+    lines += ["", "## Eye-to-hand: two fixed cameras, four markers on the tool", "",
+              "60 training and 60 held-out poses; the tool origin's error in the first camera's world.", "",
+              "| noise px | seed | train px | held-out fit mm | oracle mm | ratio | registered fit / oracle mm | "
+              "ratio | scale taken out too, fit / oracle mm | ratio |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for noise, seed, r in rows["eye-to-hand"]:
+        lines.append(f"| {noise} | {seed} | {r['train_px']:.3f} | {r['fit']:.3f} | {r['oracle']:.3f} | "
+                     f"{r['fit'] / r['oracle']:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
+                     f"{r['fit_registered'] / r['oracle_registered']:.2f} | "
+                     f"{r['fit_scaled']:.3f} / {r['oracle_scaled']:.3f} | {r['fit_scaled'] / r['oracle_scaled']:.2f} |")
+    lines += ["", "## Summary", ""]
+    for kind in rows:
+        keys = (("", "in the fit's world"), ("_registered", "registered on the held-out points"))
+        if kind == "eye-to-hand":
+            keys += (("_scaled", "registered and scaled on the held-out points"),)
+        for key, what in keys:
+            ratio = [r["fit" + key] / r["oracle" + key] for _, _, r in rows[kind]]
+            lines.append(f"- {kind}, {what}: fit / oracle median {np.median(ratio):.2f}, worst {max(ratio):.2f}; "
+                         f"{sum(x <= 1.2 for x in ratio)} of {len(ratio)} within 1.2")
+    hand_rows = [r for _, _, r in rows["eye-in-hand"]]
+    for key, what in (("carried", "RMS over the held-out poses"), ("mean", "mean over the held-out poses")):
+        ok = sum(r[key + "_mm"] <= 0.2 and r[key + "_mrad"] <= 0.5 for r in hand_rows)
+        lines.append(f"- eye-in-hand, the camera on the tool ({what}): {ok} of {len(hand_rows)} within 0.2 mm and "
+                     f"0.5 mrad; worst {max(r[key + '_mm'] for r in hand_rows):.3f} mm, "
+                     f"{max(r[key + '_mrad'] for r in hand_rows):.3f} mrad")
+    lines += ["", "## Reading the figures", "",
+              "- Eye-in-hand, fit and oracle agree to the digit: what the oracle is told (the camera's pose on the "
+              "tool, the board's in the world) is exactly what the base's and the last frame's constant errors "
+              "express, which the fit holds for that reason (below); the two fits span the same predictions of "
+              "where the camera is relative to the board.",
+              "- Eye-to-hand, the fit must find each camera's pose and the scale from a 300 mm marker plate seen "
+              "from about 3 m; the oracle is told both. In the robot's world (the first camera's fitted pose against "
+              "its true one) that costs most; registered on the held-out points, what is left is mostly the scale: "
+              "with the scale taken out too, fit and oracle nearly agree. The fit's scale comes from the markers' "
+              "known spacing alone.",
+              "- *direct* is far off by design: the truth's last-frame errors (0.5 mm, 0.3 mrad per axis) sit "
+              "between the flange and the camera, and pixels cannot tell them from the camera's pose."]
+    lines += ["", "## What pixels leave undetermined", "",
+              "Named in the fit's `eliminated` list, beside the error model's structural merges:", ""]
+    for kind in rows:
+        why: dict[str, list[str]] = {}
+        for param, reason, detail in rows[kind][0][2]["eliminated"]:
+            if reason != "structural":
+                why.setdefault(detail, []).append(f"`{param}`")
+        lines.append(f"- {kind}: " + "; ".join(f"{', '.join(p)}: {d}" for d, p in why.items()))
+    (ROOT / "docs" / "camera.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

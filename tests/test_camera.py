@@ -1,0 +1,259 @@
+"""Calibration from pixels: the projection against OpenCV, the fit's Jacobian against finite differences,
+the fit against simulated truths (eye-in-hand and eye-to-hand), the files and their refusals."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.cameras import Board, Camera, read_board, read_cameras
+from gecgen.model.pixels import read_pixels, write_pixels
+from gecgen.model.validation import ModelError, read_yaml
+from gecgen.runtime.camera import CAMERA_POSE, SCALE, _Problem, fit_pixels, fitted_tools, frame_robot
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.simulate import load_truth
+from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
+
+from conftest import ROBOTS
+
+cv2 = pytest.importorskip("cv2")
+
+DIST = (-0.12, 0.08, 0.0008, -0.0005, 0.01)
+MARKERS = {"m1": (0.15, 0.15, 0.1), "m2": (-0.15, 0.15, 0.1), "m3": (-0.15, -0.15, 0.1), "m4": (0.15, -0.15, 0.1)}
+
+
+@pytest.fixture(scope="module")
+def arm():
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
+    return robot, truth, load_error_model(ROBOTS / "constant.errors.yaml", robot)
+
+
+def hand_rig(arm, seed=3, n=40, noise=0.2):
+    robot, truth, _ = arm
+    rng = np.random.default_rng(seed)
+    cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
+    rig, q = eye_in_hand(robot, truth, cam, Board(9, 6, 0.04), np.radians([0, -90, -90, 0, 60, 0]),
+                         np.radians([8, 6, 6, 25, 20, 30]), 2 * n, rng)
+    return rig, q[:n], q[n:], simulate_pixels(robot, truth, rig, q[:n], noise, rng)
+
+
+def world_rig(arm, targets=MARKERS, seed=4, n=50, noise=0.2):
+    robot, truth, _ = arm
+    robot = replace(robot, targets=targets)
+    rng = np.random.default_rng(seed)
+    cams = [Camera(f"cam{k + 1}", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960) for k in range(2)]
+    rig, q = eye_to_hand(robot, truth, cams, np.array([[1.9, -2.4, 1.7], [1.9, 2.4, 1.7]]), np.array([2.0, 0, 1.0]),
+                         np.radians([0, -80, -100, 0, 30, 0]), np.radians([12, 10, 10, 60, 40, 90]), n, rng)
+    return robot, rig, q, simulate_pixels(robot, truth, rig, q, noise, rng)
+
+
+def test_projection_is_opencvs_and_its_jacobian_the_finite_differences(rng):
+    cam = Camera("c", 1400.0, 1350.0, 630.0, 470.0, DIST, 1280, 960)
+    X = np.column_stack([rng.uniform(-0.3, 0.3, (50, 2)), rng.uniform(0.5, 2.0, 50)])
+    uv, J = cam.project(X, jacobian=True)
+    ref = cv2.projectPoints(X, np.zeros(3), np.zeros(3), cam.K, np.array(DIST))[0].reshape(-1, 2)
+    assert np.abs(uv - ref).max() < 1e-9
+    h = 1e-6
+    fd = np.stack([(cam.project(X + h * e) - cam.project(X - h * e)) / (2 * h) for e in np.eye(3)], -1)
+    assert np.abs(J - fd).max() < 1e-5 * np.abs(J).max()
+    assert np.isnan(cam.project(np.array([[0.0, 0.0, -1.0]]))).all()  # behind the camera: no pixel
+
+
+@pytest.mark.parametrize("mount", ["tool", "world"])
+def test_fit_jacobian_in_the_coefficients_is_the_finite_differences(arm, mount, rng):
+    robot, truth, model = arm
+    if mount == "tool":
+        rig, q, _, data = hand_rig(arm, n=5)
+        board, poses = rig.board, [rig.poses["cam"], rig.board_pose]
+    else:
+        robot, rig, q, data = world_rig(arm, n=5)
+        board, poses = None, [rig.poses["cam1"], rig.poses["cam2"]]
+    g = np.array([v for R, t in poses for v in (*Rotation.from_matrix(R).as_rotvec(), *t)])
+    cm = CompiledModel(frame_robot(robot), model)
+    problem = _Problem(cm, robot, data, rig.cameras, board)
+    c = rng.normal(0, 1e-4, cm.dims.nc)
+    cols = np.arange(cm.dims.nc)
+    r, J = problem.jacobian(g, c, cols)
+    assert np.allclose(r, problem.residual(g, c))
+    h = 1e-7
+    fd = np.column_stack([(problem.residual(g, c + h * e) - problem.residual(g, c - h * e)).ravel() / (2 * h)
+                          for e in np.eye(cm.dims.nc)])
+    assert np.abs(J[:, problem.n_geom:] - fd).max() < 1e-4 * np.abs(fd).max()
+
+
+def test_eye_in_hand_finds_the_camera_on_the_tool_and_the_tool_on_held_out_poses(arm):
+    robot, truth, model = arm
+    rig, train, held, data = hand_rig(arm)
+    fit = fit_pixels(robot, model, data, rig.cameras, rig.board)
+    assert fit.converged and not fit.failures
+    assert fit.before["rms_px"] > 3 * fit.train["rms_px"]
+    assert 0.2 < fit.train["rms_px"] < 0.35  # noise 0.2 px per coordinate: a 2-D length of about 0.28
+    # the truth's camera in the fitted model's tool frame on poses the fit never saw (the truth's
+    # last-frame errors, which pixels cannot tell from the camera's pose, belong to the camera)
+    R, t = rig.poses["cam"]
+    Rb, tb = rig.board_pose
+    Rbf, tbf = fit.board
+    W = Rbf @ Rb.T
+    T = true_tools(robot, truth, held)
+    cam_true = T.copy()
+    cam_true[:, :3, :3] = W @ T[:, :3, :3] @ R.T
+    cam_true[:, :3, 3] = (T[:, :3, :3] @ (-R.T @ t) + T[:, :3, 3] - tb) @ W.T + tbf
+    rel = np.linalg.inv(fitted_tools(robot, model, fit.c, held)) @ cam_true
+    Rf, tf = fit.tool_camera()
+    # the mean over the held-out poses: the model's misfit (the truth's gravity compliance) moves it pose by
+    # pose about that. docs/camera.md measures it against 0.2 mm / 0.5 mrad over seeds, and some seeds miss
+    # that (this one does); here, a bound no wrong chain or pose convention meets (the truth's last-frame
+    # errors alone put it 0.9 mm off)
+    assert 1e3 * np.linalg.norm(rel[:, :3, 3].mean(axis=0) - tf) < 0.5
+    assert 1e3 * np.linalg.norm(Rotation.from_matrix(rel[:, :3, :3] @ Rf.T).as_rotvec().mean(axis=0)) < 0.5
+    named = {e.param: e.detail for e in fit.eliminated if e.reason != "structural"}
+    assert all(named[f"6.{e}:1"].startswith(CAMERA_POSE) for e in ("ex", "ey", "ez", "es", "er", "ep"))
+    assert named["0.ex:1"].startswith(CAMERA_POSE)
+
+
+def test_eye_to_hand_flags_a_glitch_by_image_and_point(arm):
+    robot, truth, model = arm
+    robot, rig, q, data = world_rig(arm)
+    uv = data.uv.copy()
+    uv[17] += [25.0, -10.0]
+    data = replace(data, uv=uv)
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    assert fit.converged and not fit.failures
+    assert fit.outliers and fit.outliers[0].row == 19
+    assert fit.outliers[0].pose == data.pose_ids[data.pose[17]]
+    assert fit.outliers[0].point == data.points[data.point[17]] and fit.outliers[0].residual_px > 20
+    clean = fit_pixels(robot, model, data, rig.cameras, loss="l2")
+    assert not clean.outliers and clean.train["rms_px"] > fit.train["rms_px_inliers"]
+
+
+def test_one_target_leaves_the_scale_and_says_so(arm):
+    robot, truth, model = arm
+    robot, rig, q, data = world_rig(arm, targets={"smr": (0.05, 0.0, 0.2)})
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    details = [e.detail for e in fit.eliminated]
+    assert sum(d.startswith(SCALE) for d in details) == 1
+    # four markers a known distance apart fix it
+    robot, rig, q, data = world_rig(arm)
+    assert not any(e.detail.startswith(SCALE) for e in fit_pixels(robot, model, data, rig.cameras).eliminated)
+
+
+def test_pixel_file_round_trip_and_refusals(arm, tmp_path):
+    robot, truth, _ = arm
+    rig, *_, data = hand_rig(arm, n=4)
+    path = tmp_path / "pixels.csv"
+    write_pixels(path, robot, data)
+    back = read_pixels(path, robot, rig.cameras, rig.board)
+    assert np.array_equal(back.uv, data.uv) and np.array_equal(back.point, data.point)
+    assert np.array_equal(back.q, data.q) and back.mount == "tool"
+    text = path.read_text().splitlines()
+    with pytest.raises(ModelError, match="give the board file"):
+        read_pixels(path, robot, rig.cameras)
+    bad = text[:1] + [text[1].replace(",r0c0,", ",r9c9,")] + text[2:]
+    (tmp_path / "bad.csv").write_text("\n".join(bad) + "\n")
+    with pytest.raises(ModelError, match=r"bad.csv: row 2, column 'point': unknown point 'r9c9'"):
+        read_pixels(tmp_path / "bad.csv", robot, rig.cameras, rig.board)
+    small = {"cam": replace(rig.cameras["cam"], width=640, height=480, cx=320.0, cy=240.0)}
+    with pytest.raises(ModelError, match="outside camera cam's 640 x 480 image; intrinsics of another resolution"):
+        read_pixels(path, robot, small, rig.board)
+
+
+def test_camera_and_board_files_refuse_what_they_cannot_use(tmp_path):
+    good = "cameras:\n  c1: {mount: world, fx: 1400, fy: 1400, cx: 640, cy: 480, " \
+           "distortion: [0.1, 0, 0, 0, 0], width: 1280, height: 960}\n"
+    (tmp_path / "c.yaml").write_text(good)
+    cams = read_cameras(tmp_path / "c.yaml")
+    assert cams["c1"].distortion == (0.1, 0, 0, 0, 0) and cams["c1"].width == 1280
+    for text, message in ((good.replace("cx: 640", "cx: 2000"), "outside the 1280 x 960 image"),
+                          (good.replace("mount: world", "mount: wrist"), "key 'mount'"),
+                          (good.replace("fx: 1400", "fx: -3"), "key 'fx'"),
+                          (good.replace("[0.1, 0, 0, 0, 0]", "[0.1, 0]"), "five OpenCV coefficients")):
+        (tmp_path / "bad.yaml").write_text(text)
+        with pytest.raises(ModelError, match=message):
+            read_cameras(tmp_path / "bad.yaml")
+    (tmp_path / "b.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.025\n")
+    assert read_board(tmp_path / "b.yaml").corners[-1].tolist() == pytest.approx([0.2, 0.125, 0.0])
+    (tmp_path / "b.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 25\n")
+    with pytest.raises(ModelError, match="square's side in m"):
+        read_board(tmp_path / "b.yaml")
+
+
+def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_path):
+    from conftest import run_json
+
+    robot, truth, model = arm
+    rig, *_, data = hand_rig(arm, n=40)
+    write_pixels(tmp_path / "pixels.csv", robot, data)
+    cam = rig.cameras["cam"]
+    (tmp_path / "cams.yaml").write_text(
+        f"cameras:\n  cam: {{mount: tool, fx: {cam.fx}, fy: {cam.fy}, cx: {cam.cx}, cy: {cam.cy}, "
+        f"distortion: {list(cam.distortion)}, width: {cam.width}, height: {cam.height}}}\n")
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    out = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "cams.yaml", "--board",
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+    fit = fit_pixels(robot, model, read_pixels(tmp_path / "pixels.csv", robot, rig.cameras, rig.board),
+                     rig.cameras, rig.board)
+    assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
+    assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
+    np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
+               header="q1,q2,q3,q4,q5,q6", comments="")
+    run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")
+    assert (tmp_path / "fixed.csv").read_text().count("\n") == 2
+
+
+def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
+    from gecgen.cli import main
+
+    robot, *_ = arm
+    rig, *_, data = hand_rig(arm, n=3)
+    write_pixels(tmp_path / "pixels.csv", robot, data)
+    assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
+    with pytest.raises(ModelError, match="a pixel file .*give the camera file with --cameras"):
+        from gecgen.model.measurements import read_measurements
+        read_measurements(tmp_path / "pixels.csv", robot)
+
+
+def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
+    from conftest import run_json
+
+    robot, truth, model = arm
+    one = {"smr": (0.05, 0.0, 0.2)}
+    robot1, rig, q, data = world_rig(arm, targets=one, n=30)
+    write_pixels(tmp_path / "pixels.csv", robot1, data)
+    cams = "cameras:\n" + "".join(
+        f"  {n}: {{mount: world, fx: {c.fx}, fy: {c.fy}, cx: {c.cx}, cy: {c.cy}, distortion: {list(c.distortion)}, "
+        f"width: {c.width}, height: {c.height}}}\n" for n, c in rig.cameras.items())
+    (tmp_path / "cams.yaml").write_text(cams)
+    out = run_json("redundancy", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "cams.yaml")
+    details = [e["detail"] for e in out["eliminated"]]
+    assert sum(d.startswith(SCALE) for d in details) == 1
+    assert any(d.startswith(CAMERA_POSE) for d in details)
+    assert out["n_identifiable"] + len(out["eliminated"]) == out["n_params"]
+
+
+def test_eye_to_hand_places_a_marker_left_to_estimate(arm):
+    robot, truth, model = arm
+    robot, rig, q, data = world_rig(arm)
+    estimated = replace(robot, targets={**MARKERS, "m1": (0.0, 0.0, 0.0)}, estimated=("m1",))
+    fit = fit_pixels(estimated, model, data, rig.cameras)
+    assert fit.converged and not fit.failures
+    # the tool frame's own errors shift where the fit puts it: within a few mm of where it is
+    assert np.linalg.norm(fit.targets["m1"] - np.array(MARKERS["m1"])) < 5e-3
+    assert fit.train["rms_px"] < 0.35
+
+
+def test_a_pixel_calibration_exports(arm, tmp_path):
+    from conftest import run_json
+    from gecgen.runtime.calibration import save
+    from gecgen.runtime.camera import calibration_of
+
+    robot, truth, model = arm
+    rig, *_, data = hand_rig(arm, n=40)
+    fit = fit_pixels(robot, model, data, rig.cameras, rig.board)
+    assert fit.ranges["q1"] == [data.q[:, 0].min(), data.q[:, 0].max()]
+    save(calibration_of(robot, model, fit), tmp_path / "cal.json")
+    out = run_json("export", tmp_path / "cal.json", "--c", tmp_path / "c")
+    assert (tmp_path / "c").is_dir() and out

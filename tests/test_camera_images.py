@@ -1,0 +1,130 @@
+"""Images -> corners -> calibration: boards rendered by the simulator (distortion, blur, noise), found by
+`gecgen import --images`, fitted; and the refusals of the images' import."""
+import shutil
+
+import numpy as np
+import pytest
+
+from gecgen.model import load_error_model, load_robot
+from gecgen.model.cameras import Board, Camera
+from gecgen.model.pixels import read_pixels
+from gecgen.model.validation import read_yaml
+from gecgen.runtime.camera import fit_pixels
+from gecgen.simulate import load_truth
+from gecgen.simulate.camera import camera_frame_points, eye_in_hand, render_board, true_tools
+
+from conftest import ROBOTS, run_json
+from gecgen.cli import main
+
+cv2 = pytest.importorskip("cv2")
+
+CAMERA = Camera("cam", 700.0, 700.0, 320.0, 240.0, (-0.1, 0.05, 0.0005, -0.0004, 0.0), 640, 480, "tool")
+BOARD = Board(9, 6, 0.04)
+
+
+def camera_yaml(cam: Camera, width=None, height=None) -> str:
+    return (f"cameras:\n  cam: {{mount: tool, fx: {cam.fx}, fy: {cam.fy}, cx: {cam.cx}, cy: {cam.cy}, "
+            f"distortion: {list(cam.distortion)}, width: {width or cam.width}, height: {height or cam.height}}}\n")
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    """Ten rendered images of the board, a blank one, their readings and the true corners (px)."""
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
+    rng = np.random.default_rng(8)
+    rig, q = eye_in_hand(robot, truth, CAMERA, BOARD, np.radians([0, -90, -90, 0, 60, 0]),
+                         np.radians([8, 6, 6, 25, 20, 30]), 10, rng)
+    folder = tmp_path_factory.mktemp("shots")
+    images = folder / "images"
+    images.mkdir()
+    T = true_tools(robot, truth, q)
+    R, t = rig.poses["cam"]
+    Rb, tb = rig.board_pose
+    truth_px = []
+    for k in range(len(q)):
+        Rt, pt = T[k, :3, :3], T[k, :3, 3]
+        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, BOARD, rng)
+        cv2.imwrite(str(images / f"img{k:02d}.png"), image)
+        truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
+    cv2.imwrite(str(images / "blank.png"), np.full((480, 640), 200, np.uint8))
+    lines = ["image,q1,q2,q3,q4,q5,q6"] + [f"img{k:02d}.png," + ",".join(map(repr, q[k].tolist()))
+                                          for k in range(len(q))]
+    lines.append("blank.png," + ",".join(map(repr, q[0].tolist())))
+    (folder / "readings.csv").write_text("\n".join(lines) + "\n")
+    (folder / "cams.yaml").write_text(camera_yaml(CAMERA))
+    (folder / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    return robot, folder, np.array(truth_px)
+
+
+def test_images_to_corners_to_a_calibration(shots, tmp_path):
+    robot, folder, truth_px = shots
+    out = run_json("import", ROBOTS / "industrial6r.yaml", folder / "readings.csv", "--images", folder / "images",
+                   "--board", folder / "board.yaml", "--cameras", folder / "cams.yaml", "-o", tmp_path / "px.csv")
+    assert out["not_found"] == ["blank.png"] and out["poses"] == 10 and out["rows"] == 10 * 54
+    cams = {"cam": CAMERA}
+    data = read_pixels(tmp_path / "px.csv", robot, cams, BOARD)
+    found = data.uv.reshape(10, 54, 2)
+    error = np.linalg.norm(found - truth_px, axis=2)
+    assert np.sqrt(np.mean(error ** 2)) < 0.15 and error.max() < 0.6  # px: sub-pixel corners, every one labelled alike
+    fit = fit_pixels(robot, load_error_model(ROBOTS / "constant.errors.yaml", robot), data, cams, BOARD)
+    assert fit.converged and not fit.failures and fit.train["rms_px"] < 0.3
+
+
+def _refused(args, capsys) -> str:
+    assert main([*map(str, args), "--json"]) != 0
+    return capsys.readouterr().err
+
+
+def test_image_import_refusals(shots, tmp_path, capsys):
+    robot, folder, _ = shots
+    base = ["import", ROBOTS / "industrial6r.yaml", folder / "readings.csv", "--images", folder / "images",
+            "--board", folder / "board.yaml", "--cameras", folder / "cams.yaml", "-o", tmp_path / "px.csv"]
+    (tmp_path / "b8.yaml").write_text("type: chessboard\ncolumns: 8\nrows: 6\nsquare: 0.04\n")
+    assert "check the board file's columns and rows" in _refused([*base[:6], tmp_path / "b8.yaml", *base[7:]], capsys)
+    (tmp_path / "big.yaml").write_text(camera_yaml(CAMERA, 1280, 960))
+    assert "intrinsics of another resolution" in _refused([*base[:8], tmp_path / "big.yaml", *base[9:]], capsys)
+    extra = tmp_path / "extra"
+    shutil.copytree(folder / "images", extra)
+    cv2.imwrite(str(extra / "stray.png"), np.zeros((480, 640), np.uint8))
+    assert "stray.png: an image without readings" in _refused([*base[:4], extra, *base[5:]], capsys)
+    mixed = tmp_path / "mixed"
+    shutil.copytree(folder / "images", mixed)
+    cv2.imwrite(str(mixed / "img03.png"), cv2.resize(cv2.imread(str(mixed / "img03.png")), (320, 240)))
+    assert "one camera's images share one size" in _refused([*base[:4], mixed, *base[5:]], capsys)
+    assert "--images, --board and --cameras go together" in _refused(base[:7] + base[-2:], capsys)
+
+
+def test_a_charuco_board_names_its_corners(tmp_path):
+    """ChArUco: rendered from OpenCV's own drawing, every corner found is where the truth projects the
+    corner its id names, and the images calibrate."""
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
+    board = Board(9, 6, 0.04, kind="charuco", marker=0.03, dictionary="DICT_5X5_100")
+    rng = np.random.default_rng(9)
+    rig, q = eye_in_hand(robot, truth, CAMERA, board, np.radians([0, -90, -90, 0, 60, 0]),
+                         np.radians([8, 6, 6, 25, 20, 30]), 8, rng)
+    images = tmp_path / "images"
+    images.mkdir()
+    T = true_tools(robot, truth, q)
+    R, t = rig.poses["cam"]
+    Rb, tb = rig.board_pose
+    truth_px = []
+    for k in range(len(q)):
+        Rt, pt = T[k, :3, :3], T[k, :3, 3]
+        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
+        cv2.imwrite(str(images / f"img{k}.png"), image)
+        truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
+    (tmp_path / "readings.csv").write_text("image,q1,q2,q3,q4,q5,q6\n" + "".join(
+        f"img{k}.png," + ",".join(map(repr, q[k].tolist())) + "\n" for k in range(len(q))))
+    (tmp_path / "cams.yaml").write_text(camera_yaml(CAMERA))
+    (tmp_path / "board.yaml").write_text("type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\n"
+                                         "dictionary: DICT_5X5_100\n")
+    out = run_json("import", ROBOTS / "industrial6r.yaml", tmp_path / "readings.csv", "--images", images,
+                   "--board", tmp_path / "board.yaml", "--cameras", tmp_path / "cams.yaml", "-o", tmp_path / "px.csv")
+    assert out["not_found"] == [] and out["poses"] == 8
+    data = read_pixels(tmp_path / "px.csv", robot, {"cam": CAMERA}, board)
+    error = np.linalg.norm(data.uv - np.array(truth_px)[data.pose, data.point], axis=1)
+    assert len(error) >= 8 * 40 and np.sqrt(np.mean(error ** 2)) < 0.15
+    fit = fit_pixels(robot, load_error_model(ROBOTS / "constant.errors.yaml", robot), data, {"cam": CAMERA}, board)
+    assert fit.converged and not fit.failures and fit.train["rms_px"] < 0.3
