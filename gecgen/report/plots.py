@@ -226,7 +226,8 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
 def volume_map(robot: Robot, volume, samples, statement) -> Figure:
     """Each sample's own bound (the confidence quantile of its error, `runtime.volume.Statement`)
     against every input the volume varies: the tool point's coordinates or the world position, each
-    ranged joint, the payload; the worst's bound in red, the tolerance dashed."""
+    ranged joint, the payload; the bound on the worst in red, circling the sample where it is reached;
+    the tolerance dashed."""
     where = samples.point if volume.tool_box is not None else samples.world
     frame = "tool point" if volume.tool_box is not None else "world"
     axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
@@ -237,6 +238,7 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
     fig, panels = plt.subplots(1, len(axes), figsize=(3 * len(axes), 3.2), sharey=True, squeeze=False)
     for ax, (label, x) in zip(panels[0], axes):
         ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
+        ax.plot(x[statement.worst], statement.per_point_mm[statement.worst], "o", mfc="none", color="C3", ms=7)
         if statement.tolerance_mm is not None:
             ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
         ax.axhline(statement.bound_mm, color="C3", lw=1)
@@ -246,4 +248,5 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
                  f"{statement.verdict}", fontsize=9)
     fig.tight_layout()
     return _figure(fig, "volume-map", "Each sample's own bound against every input the volume varies; the bound "
-                                      "on the worst over the volume in red, the tolerance dashed.")
+                                      "on the worst over the volume in red, the sample where it is reached circled, "
+                                      "the tolerance dashed.")
