@@ -279,6 +279,13 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     # training residuals alone cannot sign it
     assert bare["verdict"] == "cannot tell" and any("give them as --val" in r for r in bare["reasons"])
     write_measurements(tmp_path / "val.csv", pps, val)
+    held = run_json("accuracy", tmp_path / "c.json", volume, tmp_path / "train.csv", "--val", tmp_path / "val.csv",
+                    "--tolerance-mm", "0.5", "--noise-mm", "0.04", "--repeatability-mm", "0.05", "--share", "0.9",
+                    "--draws", "500")
+    m = held["measured"]  # 90 % of the volume at 95 %: 29 poses at least (0.9^29 = 0.047), 56 given
+    assert (m["n"], m["outside"], m["needed"], m["share"]) == (56, 0, 29, 0.9)
+    assert m["achieved_confidence"] >= 0.95 > stats.binom.cdf(56 - m["rank"] - 1, 56, 0.9)
+    assert m["error_mm"] <= m["largest_error_mm"] and held["verdict"] == "cannot tell"  # roll and pitch: not trained
     with pytest.raises(ModelError, match="not the data the calibration was fitted to"):
         accuracy(cal.calibration_, load_volume(volume, pps), val, to_world(cal.calibration_.frames, val), None, None,
                  0.0, 0.5, 0.95, 500, np.random.default_rng(0))

@@ -512,7 +512,7 @@ def _commanded_span(calib: Calibration, q_c: np.ndarray, names: dict[str, int]) 
     take on each named input, against the training range."""
     ranges = calib.report.get("training_ranges") or {}
     parts = []
-    for name in names:
+    for name in (n for n in names if n in ranges and n[0] == "q" and n[1:].isdigit()):
         k = int(name[1:]) - 1
         scale, unit = (np.degrees(1.0), "deg") if calib.robot.joints[k].kind == "R" else (1.0, "m")
         lo, hi = ranges[name]
