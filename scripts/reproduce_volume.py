@@ -190,8 +190,9 @@ def measured_table(results: list[dict], labels) -> list[str]:
             share = np.array([t for _, t in stated])
             rank = np.array([mm["rank"] for mm, _ in stated])
             row += (f"{np.median(rank):.0f} | {np.median([mm['achieved_confidence'] for mm, _ in stated]):.1%} | "
-                    f"{np.median([mm['error_mm'] for mm, _ in stated]):.3f} | {np.median(share):.1%} ({share.min():.1%}) "
-                    f"| {int((share >= m[0]['share']).sum())} of {len(stated)} |")
+                    f"{np.median([mm['error_mm'] for mm, _ in stated]):.3f} | "
+                    f"{np.median(share):.1%} ({share.min():.1%}) | "
+                    f"{int((share >= m[0]['share']).sum())} of {len(stated)} |")
         else:
             row += "- | - | - | - | - |"
         rows.append(row)

@@ -73,13 +73,13 @@ def run(args) -> dict:
     k = statement.worst
     units = [(180 / np.pi, "deg") if j.kind == "R" else (1.0, "m") for j in calib.robot.joints]
     worst = {"bound_mm": float(statement.per_point_mm[k]), "worst_in_draws": statement.worst_share,
-             "explanation": f"where the bound is reached: the bound, {statement.bound_mm:.3g} mm, is the "
-                            f"{statement.confidence:.0%} quantile of the worst error over all {len(samples.q)} "
+             "explanation": f"The sample where the bound is reached: the bound, {statement.bound_mm:.3g} mm, is "
+                            f"the {statement.confidence:.0%} quantile of the worst error over all {len(samples.q)} "
                             f"samples at once, and of the draws whose worst reaches it this sample is the worst in "
                             f"{statement.worst_share:.0%}. Its own {statement.confidence:.0%} quantile "
-                            f"({statement.per_point_mm[k]:.3g} mm, bound_mm here) is lower, as one sample's error "
-                            f"passes its own quantile in {1 - statement.confidence:.0%} of the draws and the worst of "
-                            f"all samples does so far more often",
+                            f"({statement.per_point_mm[k]:.3g} mm, bound_mm here) can be lower: one sample's error "
+                            f"passes its own quantile in {1 - statement.confidence:.0%} of the draws, the worst of all "
+                            f"samples passes it more often",
              "joints": {j.name: float(scale * v) for j, (scale, _), v in zip(calib.robot.joints, units, samples.q[k])},
              "joint_units": {j.name: unit for j, (_, unit) in zip(calib.robot.joints, units)},
              "payload_kg": float(samples.payload_kg[k]), "world_m": samples.world[k].tolist(),

@@ -613,6 +613,6 @@ def accuracy(result: dict, figure: Figure) -> Report:
                   [Section("Statement", [Table(("", "value"), rows)]),
                    Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
                                                         "Nothing keeps it from being signed."]),
-                   Section("Where it is worst", [f"The sample where the bound is reached: joints {at}; payload "
-                                                 f"{worst['payload_kg']:.3g} kg; {where}. The {worst['explanation']}.",
+                   Section("Where it is worst", [f"Joints {at}; payload {worst['payload_kg']:.3g} kg; {where}. "
+                                                 f"{worst['explanation']}.",
                                                  figure])])

@@ -484,7 +484,8 @@ def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, nois
                    f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)", *notes]
     else:
         short, said = _measured_reasons(held, tolerance_mm) if held is not None else ([], [])
-        over = [f"the bound, {bound:.3g} mm at {confidence:.0%}, is above the tolerance"] if bound > tolerance_mm else []
+        over = ([f"the bound, {bound:.3g} mm at {confidence:.0%}, is above the tolerance"]
+                if bound > tolerance_mm else [])
         reasons = over + doubts + short + said + notes
         verdict = "cannot tell" if over or doubts or short else "meets"
     rms_u = float(np.sqrt(np.einsum("nrd,nrd->", U, U) / (3 * len(U))))
@@ -694,5 +695,5 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
 
 
 __all__ = ["Measured", "Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "held_out_errors", "measured",
-           "order_statistic", "point_rows", "pose_covariance", "poses_needed", "random_poses", "read_wrench", "sample", "state",
-           "unmodelled", "worst_over_draws"]
+           "order_statistic", "point_rows", "pose_covariance", "poses_needed", "random_poses", "read_wrench",
+           "sample", "state", "unmodelled", "worst_over_draws"]
