@@ -158,6 +158,44 @@ WHY = {
 }
 
 
+#: the reasons that leave no verdict but "cannot tell", and those that keep a bound from being signed (`state`)
+BLOCKS = ("loop gain", "compensation does not converge", "too few poses for the covariance")
+DOUBTS = ("training residuals alone", "compensated commands leave the trained ranges",
+          "samples outside the trained ranges", "too few held-out poses in the volume")
+#: tolerances (mm) the verdicts are read again at, from the same statements: where some truths pass them
+TOLERANCES = (0.2, 0.25, 0.3, 0.4, 0.5)
+
+
+def verdict_at(case: dict, tolerance_mm: float) -> str:
+    """The verdict `gecgen accuracy` gives a statement of this run against another tolerance: its rule
+    (`runtime.volume.state`) on the bound, the low quantile, the measured error and the reasons that
+    do not depend on the tolerance."""
+    said = [r for r in case["reasons"]]
+    if any(WHY[n](r) for n in BLOCKS for r in said):
+        return "cannot tell"
+    if case["lower"] > tolerance_mm:
+        return "does not meet"
+    m = case["measured"]
+    if (any(WHY[n](r) for n in DOUBTS for r in said) or case["bound"] > tolerance_mm
+            or (m is not None and (m["error_mm"] is None or m["error_mm"] > tolerance_mm))):
+        return "cannot tell"
+    return "meets"
+
+
+def tolerance_table(results: list[dict], labels) -> list[str]:
+    """Per case and tolerance: *meets* signed, and wrongly (the truth's worst above the tolerance)."""
+    rows = []
+    for label in labels:
+        cells = []
+        for t in TOLERANCES:
+            meets = [x[label] for x in results if verdict_at(x[label], t) == "meets"]
+            above = sum(x[label]["true_worst"] > t for x in results)
+            cells.append(f"{len(meets)} ({sum(c['true_worst'] > t for c in meets)} wrong; {above} above)")
+        rows.append(f"| {label} | " + " | ".join(cells) + " |")
+    return ["| case | " + " | ".join(f"{t} mm" for t in TOLERANCES) + " |", "|---|" + "---|" * len(TOLERANCES),
+            *rows]
+
+
 def signed(results: list[dict], labels) -> tuple[int, int, int]:
     """(statements, signed *meets*, wrong *meets*) over the cases `labels`."""
     cases = [x[label] for x in results for label in labels]
@@ -250,6 +288,11 @@ def discussion(results: list[dict]) -> list[str]:
     sw = {k: _figures(results, label) | dict(zip(("n", "meets", "wrong"), signed(results, [label])))
           for k, label in swept.items()}
     total, meets, wrong = signed(results, [label for label in results[0]])
+    at = [(verdict_at(x[label], t), x[label]["true_worst"] > t) for x in results for label in x for t in TOLERANCES]
+    tight = (sum(v == "meets" for v, _ in at), sum(v == "meets" and above for v, above in at))
+    wrong_at = [(t, sum(verdict_at(x[swept["diagnosed"]], t) == "meets" for x in results),
+                 sum(verdict_at(x[swept["diagnosed"]], t) == "meets" and x[swept["diagnosed"]]["true_worst"] > t
+                     for x in results)) for t in TOLERANCES]
     edge = {k: _why(results, label, "compensated commands leave the trained ranges") for k, label in swept.items()}
     couch = {k: sum(x[label]["verdict"] != "meets" and any(re.search(r"per input: q4 \d+ \(of", r)
                                                             for r in x[label]["reasons"]) for x in results)
@@ -273,9 +316,9 @@ def discussion(results: list[dict]) -> list[str]:
         f"residuals holds the true worst in only "
         f"{diag['covered']:.0%} ({bare['covered']:.0%} without the noise stated). The true worst "
         f"({diag['worst']:.3f} mm in the median) sits in one corner of the volume: couch angle near +-90 deg, "
-        "longitudinal axis extended, 70 kg, the top of the box. There the effect reaches 0.3 to 0.7 mm, while at the "
-        "measured targets, over the whole design, it stays inside the 0.11 mm noise: no residual at the training "
-        "poses can show it. This is why `gecgen accuracy` never says *meets* from training residuals alone.",
+        "longitudinal axis extended, 70 kg, the top of the box, while at the measured targets, over the whole "
+        "design, the effect stays inside the noise: no residual at the training poses can show it. This is why "
+        "`gecgen accuracy` never says *meets* from training residuals alone.",
         f"- **With the paper's validation half** (`--val`: 56 poses, 28 configurations at the vertices of the "
         f"treatment volume with both payloads) the bound holds the true worst in {val['covered']:.0%} of the truths, "
         f"{val['ratio']:.1f} times it in the median, and the statement is signed in {val['meets_signed']} of {n}. "
@@ -306,6 +349,16 @@ def discussion(results: list[dict]) -> list[str]:
         "them only the couch angle leaves it, at a few samples of the volume's edge, where compensation asks for "
         "more than +-90 deg: the declared range is the joint's limit, so the controller cannot correct those "
         "samples, and the reasons say to narrow the declared range.",
+        "- **Where *meets* is wrong**: at 0.5 mm no truth of these cases passes the tolerance, so no *meets* can be "
+        "wrong there. Read against tighter tolerances, where the diagnosed model's true worst passes it in some "
+        "truths, *meets* is wrong in "
+        + ", ".join(f"{w} of {m} signed at {t} mm" for t, m, w in wrong_at if w)
+        + ": the measured statement covers 95 % of the volume (it held in every truth, so where *meets* is wrong "
+        "the true worst lies in the 5 % it leaves out), and the bound, read from the same held-out poses, holds "
+        f"the true worst in {sw['diagnosed']['covered']:.0%} of the truths: the worst over the whole volume is "
+        "what neither pins where the model misses an effect."
+        if any(w for _, _, w in wrong_at) else
+        "- **Where *meets* is wrong**: in none of the truths, at 0.5 mm or at the tighter tolerances.",
         "",
         "## Against the target",
         "",
@@ -314,7 +367,12 @@ def discussion(results: list[dict]) -> list[str]:
         "paper's design. Measured above:",
         "",
         f"- *meets* is signed in {meets} of {total} statements, wrongly in {wrong}"
-        + (f" ({wrong / meets:.1%})." if meets else "."),
+        + (f" ({wrong / meets:.1%})" if meets else "") + f"; read against {min(TOLERANCES)} to "
+        f"{max(TOLERANCES)} mm, wrongly in {tight[1]} of the {tight[0]} signed"
+        + (f" ({tight[1] / tight[0]:.1%})" if tight[0] else "") + ". The 5 % target holds at 0.5 mm, where no "
+        "truth could make *meets* wrong, and over the tolerances pooled; it does not hold for the model that misses "
+        "an effect at each tighter tolerance where it is signed and wrong (above). Stating a larger share of the "
+        "volume (`--share 0.99` needs 299 poses inside it) is what would reach further into its corners.",
         f"- 95 % coverage is reached where the model describes the robot ({geo['covered']:.0%}), not where it misses "
         f"an effect the design cannot see ({diag['covered']:.0%} from the training residuals, {val['covered']:.0%} "
         f"with the validation half, {sw['diagnosed']['covered']:.0%} with roll and pitch swept and poses held out "
@@ -421,6 +479,14 @@ def main():
         "95 % confidence, by order statistics), against the truth:",
         "",
         *measured_table(results, list(cases)),
+        "",
+        f"At {TOLERANCE_MM} mm every truth but the default model's is truly within the tolerance, so no *meets* "
+        "there could be wrong. The same statements read against tighter tolerances (the verdict's rule applied to "
+        "the bound, the measured error and the reasons of this run, which do not depend on the tolerance), where "
+        "the truth's worst passes the tolerance in some truths: *meets* signed (of them wrong; truths whose true "
+        "worst is above the tolerance):",
+        "",
+        *tolerance_table(results, list(cases)),
         "",
         *discussion(results),
     ]
