@@ -688,7 +688,9 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
         checked(default, fitted, data, val)
     choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names)
     fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
-    choice = replace(choice, fit=fit)
+    # the report's diagnosed stage is the delivered fit (insignificant coefficients held), not diagnose's own
+    diagnosis = replace(choice.diagnosis, final=replace(choice.diagnosis.final, fit=fit)) if choice.diagnosis else None
+    choice = replace(choice, fit=fit, diagnosis=diagnosis)
     calib = _calibration.from_fit(robot, choice.model, choice.fit, _ratio_loads(choice.cm, choice.fit, data))
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
                          "placement": placement.to_dict() if placement else None, "significance": verdict})

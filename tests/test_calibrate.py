@@ -49,6 +49,57 @@ def test_the_elastic_model_is_chosen_when_a_payload_bends_the_arm(payload_data, 
         assert (d / "elastic" / f).is_file(), f
     assert "| elastic (chosen) |" in (d / "elastic" / "report.md").read_text()
     assert "elastic (chosen)" in (d / "elastic" / "report.html").read_text()
+    assert _summary_row(d / "elastic" / "report.md", "calibrated") == _figures(out, ev)
+
+
+def _summary_row(report, stage: str) -> list[str]:
+    """The report's Summary row of a stage: training RMS and max, validation RMS and max (mm)."""
+    row = next(line for line in report.read_text().splitlines() if line.startswith(f"| {stage} |"))
+    return [c.strip() for c in row.strip("|").split("|")][1:5]
+
+
+def _figures(out: dict, ev: dict) -> list[str]:
+    """The same four figures as calibrate's JSON gives the training data and evaluate the validation data."""
+    return [f"{out['train']['rms_mm']:.3g}", f"{out['train']['max_mm']:.3g}", f"{ev['after']['rms_mm']:.3g}",
+            f"{ev['after']['max_mm']:.3g}"]
+
+
+def test_the_report_gives_the_delivered_diagnosed_calibration_s_figures(payload_data, capsys):
+    """Coefficients the data do not determine are held at zero after diagnose: the report's diagnosed row
+    is that delivered fit, as the JSON and evaluate of the written calibration give it, not diagnose's own."""
+    d = payload_data
+    out = run(capsys, "calibrate", ROBOT, d / "train.csv", "--val", d / "val.csv", "--models", "diagnosed",
+              "-o", d / "delivered")
+    assert out["significance"]["held"]  # else the delivered fit would be diagnose's own
+    ev = run(capsys, "evaluate", d / "delivered" / "calibration.json", d / "val.csv")
+    assert _summary_row(d / "delivered" / "report.md", "diagnosed") == _figures(out, ev)
+    assert ev["after"]["rms_mm"] == pytest.approx(out["val"]["rms_mm"], rel=1e-9)
+    (row,) = out["candidates"]
+    assert row["n_params_delivered"] == out["n_params"] > row["n_params"]
+
+
+def test_a_tie_goes_to_the_smaller_model_as_delivered(payload_data, monkeypatch):
+    """Elastic and diagnosed tie within 1 %; diagnose starts smaller than elastic but delivers a larger
+    model: the elastic one is chosen (counting diagnose's start size would choose it instead)."""
+    from types import SimpleNamespace
+
+    import gecgen.loop.calibrate as loop
+    from gecgen.model.errors import error_model_from_dict
+
+    monkeypatch.setenv("GECGEN_WORKERS", "1")
+    robot = load_robot(ROBOT)
+    data = read_measurements(payload_data / "train.csv", robot)
+    cv_mm = {"geometric": 1.0, "elastic": 0.500, "diagnosed": 0.498}
+    big = error_model_from_dict({"default": ["1", "q1", "q2"]}, robot, "<big>")
+    monkeypatch.setattr(loop, "_scored", lambda robot, p, *_: ((cv_mm[p.name] / 1e3) ** 2, 1.0))
+    monkeypatch.setattr(loop, "run_pipeline", lambda robot, p, *_: (big if p.diagnose else p.model, None,
+                                                                     SimpleNamespace(failures=[]), None))
+    choice = loop.choose(robot, data, None, names=("geometric", "elastic", "diagnosed"))
+    sizes = {row["model"]: row for row in choice.table}
+    assert sizes["diagnosed"]["n_params"] < sizes["elastic"]["n_params"] < sizes["diagnosed"]["n_params_delivered"]
+    assert choice.chosen.name == "elastic"
+    cv_mm["elastic"] = 0.504  # no longer within 1 %: the lowest wins
+    assert loop.choose(robot, data, None, names=("geometric", "elastic", "diagnosed")).chosen.name == "diagnosed"
 
 
 def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):

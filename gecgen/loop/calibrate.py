@@ -14,7 +14,9 @@ The rule (docs/real-data-tiago.md used it first): every candidate is run whole i
 folds of the training poses (the poses split at random, seeded), so that diagnose's choices are
 made again on each fold's other poses alone, and is scored on all measured points of the
 held-out poses. The lowest cross-validated RMS is the choice; ties within 1% go to the candidate
-with fewer coefficients. The chosen candidate is then fitted on all the training poses.
+with fewer coefficients, counted in the model it delivers: a diagnosed candidate's is what diagnose
+builds on all the training poses, not its start. The chosen candidate is then fitted on all the
+training poses.
 """
 from __future__ import annotations
 
@@ -149,6 +151,10 @@ def _fitted_ahead(robot: Robot, pipeline: Pipeline, data: Measurements, registra
             return exc, said
 
 
+def _row(table: list[dict], p: Pipeline) -> dict:
+    return next(r for r in table if r["model"] == p.name)
+
+
 def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
            registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES) -> Choice:
     """Score the named pipelines that apply (see the module docstring) on the training data, fit
@@ -190,14 +196,29 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
             table.append({"model": p.name, "cv_rms_mm": cv, "n_params": len(p.model.coefficients),
                           "diagnose": p.diagnose, **({"refused": refused} if refused is not None else {})})
             if cv is not None:  # else too few poses for it, or an untrustworthy fold fit
-                scored.append((cv, len(p.model.coefficients), p))
+                scored.append((cv, p))
     if not scored:
         raise RuntimeError(f"no candidate model could be fitted in every fold ({table[0]['refused']})")
-    best = min(cv for cv, _, _ in scored)
-    # diagnose only ever adds to its start model: in a tie it counts as the larger one
-    chosen = min((s for s in scored if s[0] <= best * (1 + TIE)), key=lambda s: (s[1] + s[2].diagnose / 2, s[0]))[2]
-    if ahead and ahead[0] is chosen:
-        _, fitted, said = ahead
+    best = min(cv for cv, _ in scored)
+    tied = [s for s in scored if s[0] <= best * (1 + TIE)]
+    # the size that breaks a tie is the delivered model's: diagnose's is known once it has run on all the data
+    full = {ahead[0].name: ahead[1:]} if ahead else {}
+    for _, p in tied:
+        if p.diagnose and len(tied) > 1 and p.name not in full:
+            full[p.name] = _fitted_ahead(robot, p, data, registration_mode)
+    for _, p in tied:
+        fitted = full.get(p.name, (None,))[0]
+        if p.diagnose and fitted is not None and not isinstance(fitted, Exception):
+            _row(table, p)["n_params_delivered"] = len(fitted[0].coefficients)
+
+    def size(p: Pipeline) -> float:
+        delivered = _row(table, p).get("n_params_delivered")
+        # diagnose only ever adds to its start model: at the same size it counts as the larger one
+        return (len(p.model.coefficients) if delivered is None else delivered) + p.diagnose / 2
+
+    chosen = min(tied, key=lambda s: (size(s[1]), s[0]))[1]
+    if chosen.name in full:
+        fitted, said = full[chosen.name]
         for w in said:  # what the fit says, said now that it is the choice's
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         if isinstance(fitted, Exception):
@@ -205,6 +226,8 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
         model, cm, fit, diag = fitted
     else:
         model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
+    if chosen.diagnose:
+        _row(table, chosen)["n_params_delivered"] = len(model.coefficients)
     if fit.failures:
         raise RuntimeError(f"the chosen model ({chosen.name}) cannot be trusted on all the data: {fit.failures[0]}")
     return Choice(table, chosen, model, cm, fit, diag)

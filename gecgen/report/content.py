@@ -463,12 +463,18 @@ def calibrate(result: dict, choice, calib, data: Measurements, val: Measurements
     rows = []
     for c in result["candidates"]:
         cv = f"{c['cv_rms_mm']:.3g}" if c["cv_rms_mm"] is not None else f"not fitted: {c['refused']}"
-        size = f"{c['n_params']} + what diagnose adds" if c["diagnose"] else str(c["n_params"])
+        size = str(c["n_params"])
+        if c["diagnose"]:
+            delivered = c.get("n_params_delivered")
+            size = (f"{c['n_params']} + what diagnose adds" if delivered is None else
+                    f"{delivered} ({c['n_params']} + {delivered - c['n_params']} diagnose added on all the training "
+                    f"poses)")
         rows.append((c["model"] + (" (chosen)" if c["model"] == result["model"] else ""), size, cv))
     choose = Section("Model choice", [
         "The model is chosen on the training data alone: each candidate is fitted whole (diagnose's choices "
         "included) on four fifths of the training poses and scored on the fifth left out, in turn; the lowest "
-        "cross-validated RMS wins, a tie within 1% going to the smaller model.",
+        "cross-validated RMS wins, a tie within 1% going to the smaller model, counted as delivered (for diagnose, "
+        "what it builds on all the training poses).",
         Table(("model", "coefficients", "training CV RMS (mm)"), rows),
         f"Chosen: **{result['model']}**, {result['n_identifiable']} identifiable of {result['n_params']} "
         f"coefficients, {result['n_carried']} of them determined by the data and carried (see \"Eliminated "
@@ -545,8 +551,15 @@ def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] 
             ("residual it was read from, per coordinate", f"{result['residual_sigma_mm']:.3g} mm"),
             ("stated noise per coordinate", "not stated" if result["noise_mm"] is None else
              f"{result['noise_mm']:.3g} mm"),
-            ("tolerance", "none given" if tol is None else f"{tol:.3g} mm"),
-            ("verdict", result["verdict"])]
+            ("tolerance", "none given" if tol is None else f"{tol:.3g} mm")]
+    m = result["measured"]
+    if m is not None:
+        rows.append(("measured at held-out poses inside the volume, without a model",
+                     f"{m['share']:.0%} of the volume within {m['error_mm']:.3g} mm at {m['achieved_confidence']:.1%} "
+                     f"({m['n']} poses)" if m["rank"] is not None else
+                     f"{m['n']} poses inside the volume, {m['needed']} needed for {m['share']:.0%} at "
+                     f"{m['confidence']:.0%}"))
+    rows.append(("verdict", result["verdict"]))
     worst = result["worst_at"]
     at = ", ".join(f"{k} {v:.4g} {worst['joint_units'][k]}" for k, v in worst["joints"].items())
     where = (f"tool point {', '.join(f'{v:.3g}' for v in worst['tool_point_m'])} m" if "tool_point_m" in worst
@@ -559,6 +572,6 @@ def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] 
                   [*verdict_sections(assessment, warnings), Section("Statement", [Table(("", "value"), rows)]),
                    Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
                                                         "Nothing keeps it from being signed."]),
-                   Section("Where it is worst", [f"The sample with the largest own bound ({worst['bound_mm']:.3g} "
-                                                 f"mm): joints {at}; payload {worst['payload_kg']:.3g} kg; {where}.",
+                   Section("Where it is worst", [f"Joints {at}; payload {worst['payload_kg']:.3g} kg; {where}. "
+                                                 f"{worst['explanation']}.",
                                                  figure])])

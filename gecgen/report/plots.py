@@ -72,7 +72,9 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
         a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         a.set_xlabel(f"{what} ({unit})")
         a.grid(alpha=0.3, which="both")
-        a.legend(fontsize=8)
+        # a fixed place: loc="best" searches, and warns when the search is slow, so that a report's
+        # warnings would depend on the machine's load
+        a.legend(fontsize=8, loc="upper right" if a is ax else "lower right")
     ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts
     ax.set_ylabel("measured frames" if orientation else "measured rows")
     cx.set_ylabel("share of them at or below" if orientation else "share of rows at or below")
@@ -128,7 +130,7 @@ def per_pose(robot: Robot, ds: DataSet) -> Figure:
     ax.set_ylabel("RMS point error (mm)")
     ax.set_title(f"{robot.name}, {ds.name} data: error per pose")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right")  # a fixed place, as in error_distribution
     fig.subplots_adjust(**MARGINS)
     return _figure(fig, f"poses_{ds.name}", f"RMS point error of each pose, {ds.name} data, each model")
 
@@ -253,7 +255,7 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_ylabel(f"{'xyz'[a]} residual (mm)", fontsize=8)
         ax.set_title(f"{'xyz'[a]} residual", fontsize=9)
-    axes[1].legend(fontsize=7)
+    axes[1].legend(fontsize=7, loc="upper right")  # a fixed place, as in error_distribution
     for ax in axes:
         ax.set_xlabel(label, fontsize=8)
         ax.tick_params(labelsize=7)
@@ -267,7 +269,8 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
 def volume_map(robot: Robot, volume, samples, statement) -> Figure:
     """Each sample's own bound (the confidence quantile of its error, `runtime.volume.Statement`)
     against every input the volume varies: the tool point's coordinates or the world position, each
-    ranged joint, the payload; the worst's bound in red, the tolerance dashed."""
+    ranged joint, the payload; the bound on the worst in red, circling the sample where it is reached;
+    the tolerance dashed."""
     where = samples.point if volume.tool_box is not None else samples.world
     frame = "tool point" if volume.tool_box is not None else "world"
     axes = [(f"{frame} {a} (m)", where[:, i]) for i, a in enumerate("xyz")]
@@ -279,6 +282,7 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
     fig, panels = plt.subplots(rows, columns, figsize=(12, 2.8 * rows + 0.6), sharey=True, squeeze=False)
     for ax, (label, x) in zip(panels.flat, axes):
         ax.plot(x, statement.per_point_mm, ".", ms=2, alpha=0.5)
+        ax.plot(x[statement.worst], statement.per_point_mm[statement.worst], "o", mfc="none", color="C3", ms=7)
         if statement.tolerance_mm is not None:
             ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
         ax.axhline(statement.bound_mm, color="C3", lw=1)
@@ -293,4 +297,5 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
                  f"{statement.verdict}", fontsize=9)
     fig.tight_layout()
     return _figure(fig, "volume-map", "Each sample's own bound against every input the volume varies; the bound "
-                                      "on the worst over the volume in red, the tolerance dashed.")
+                                      "on the worst over the volume in red, the sample where it is reached circled, "
+                                      "the tolerance dashed.")

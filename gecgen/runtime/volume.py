@@ -11,8 +11,14 @@ no single pose's standard deviation bounds: it is drawn jointly, by Monte Carlo.
 coefficient error from N(0, cov) and an unmodelled error independently at every sample, and records
 the worst |e| over the samples. The bound is the `confidence` quantile of those worsts. "Does not
 meet" is said only when the coefficients' uncertainty alone puts the worst past the tolerance in all
-but a (1 - confidence) share of the draws: the unmodelled error is drawn pessimistically, so the low
-quantile of the full worst is no evidence of failure.
+but a (1 - confidence) share of the draws (the unmodelled error is drawn pessimistically, so the low
+quantile of the full worst is no evidence of failure), and nothing undermines the model's figures.
+
+A bound read from residuals cannot see an effect the data never excited, so "meets" also needs a
+statement that rests on no model (`Measured`): the errors the calibration leaves at held-out poses
+measured inside the volume, read by order statistics. With n such poses drawn over the volume, the
+k-th largest error is at least the share-p quantile of the volume's error with confidence
+P(Binomial(n, p) <= n - k) (k = 1: 1 - p^n). The verdict is signed with the more cautious of the two.
 
 The unmodelled error is read from measured residuals, less the measurement noise the user states
 (instrument and repeatability). Where every pose measures three or more targets, it is a rigid motion
@@ -29,7 +35,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import special, stats
 
 from gecgen.model.kinematics import sensor_wrench, tool_pose
 from gecgen.model.measurements import Measurements
@@ -137,6 +143,16 @@ def sample(robot: Robot, volume: Volume, rng: np.random.Generator) -> Samples:
     payload = np.repeat(np.array(volume.payload_kg, float), len(q) // m)
     w = sensor_wrench(robot, q, payload, volume.payload_at, np.array(robot.gravity, float))
     return Samples(q, w, payload, point, target, _placed(robot, q, point), unreachable)
+
+
+def random_poses(robot: Robot, volume: Volume, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Poses to hold out, drawn at random over the volume as its statement needs them: n configurations
+    (`sample`; fewer when some cannot be placed), each with one payload drawn from the volume's. Returns
+    joints (m, n_joints) and payloads (m,) kg."""
+    s = sample(robot, dataclasses.replace(volume, samples=n), rng)
+    m = len(s.q) // len(volume.payload_kg)
+    rows = rng.integers(len(volume.payload_kg), size=m) * m + np.arange(m)
+    return s.q[rows], s.payload_kg[rows]
 
 
 def read_wrench(cm: CompiledModel, c: np.ndarray, samples: Samples, volume: Volume) -> tuple[np.ndarray, float]:
@@ -304,14 +320,72 @@ def unmodelled(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarr
     return Unmodelled(residual, point, Wi @ (V * excess) @ V.T @ Wi.T)
 
 
+def poses_needed(share: float, confidence: float) -> int:
+    """The fewest poses n whose largest error bounds the share-quantile with the confidence: the
+    smallest n with 1 - share^n >= confidence."""
+    n = max(1, int(np.ceil(np.log1p(-confidence) / np.log(share))))
+    while 1 - share ** n < confidence:  # rounding of the logarithms
+        n += 1
+    return n
+
+
+def order_statistic(errors: np.ndarray, share: float, confidence: float) -> tuple[int, float, float] | None:
+    """(k, the k-th largest of errors (n,), the confidence that it is at least the share-quantile of the
+    distribution they were drawn from): the largest k whose confidence P(Binomial(n, share) <= n - k)
+    is at least `confidence` (k = 1: 1 - share^n); None when even the largest has less."""
+    n = len(errors)
+    k = 0
+    while k < n and stats.binom.cdf(n - k - 1, n, share) >= confidence:
+        k += 1
+    if not k:
+        return None
+    return k, float(np.sort(errors)[::-1][k - 1]), float(stats.binom.cdf(n - k, n, share))
+
+
+@dataclass(frozen=True)
+class Measured:
+    """The distribution-free statement from held-out poses measured inside the volume: poses (how many
+    are inside; outside: how many are not), each pose's error the largest distance (mm) between a
+    measured stated point and where the calibrated model puts it; share of the volume within error_mm
+    (the rank-th largest error) with confidence `achieved` (at least the requested `confidence`);
+    needed: the poses inside the volume the share needs at that confidence (rank 1). error_mm, rank
+    and achieved are None when fewer than `needed` poses are inside."""
+
+    poses: int
+    outside: int
+    share: float
+    confidence: float
+    needed: int
+    rank: int | None
+    error_mm: float | None
+    achieved: float | None
+    largest_mm: float | None
+
+    def to_dict(self) -> dict:
+        return {"n": self.poses, "outside": self.outside, "share": self.share, "confidence": self.confidence,
+                "needed": self.needed, "rank": self.rank, "error_mm": self.error_mm,
+                "achieved_confidence": self.achieved, "largest_error_mm": self.largest_mm}
+
+
+def measured(errors_mm: np.ndarray, outside: int, share: float, confidence: float) -> Measured:
+    """The distribution-free statement from the errors (n,) of the held-out poses inside the volume."""
+    found = order_statistic(errors_mm, share, confidence)
+    rank, error, achieved = found if found else (None, None, None)
+    return Measured(len(errors_mm), outside, share, confidence, poses_needed(share, confidence), rank, error,
+                    achieved, float(errors_mm.max()) if len(errors_mm) else None)
+
+
 @dataclass(frozen=True)
 class Statement:
     """The worst compensated error over the samples (mm): bound (the confidence quantile of the worst
     over Monte Carlo draws), lower (the 1 - confidence quantile of the worst the coefficients'
     uncertainty alone makes), parametric (the confidence quantile of that worst); per_point (N,) the
-    confidence quantile of each sample's own error, for the map; unmodelled_mm the unmodelled error's
+    confidence quantile of each sample's own error, for the map; worst (the sample where the bound is
+    reached: the one most often the worst in the draws whose worst is the bound or more) and
+    worst_share (the share of those draws it is the worst in); unmodelled_mm the unmodelled error's
     RMS per coordinate over the samples, read as a rigid tool motion or a point error
-    (`unmodelled_as`); verdict against tolerance_mm."""
+    (`unmodelled_as`); measured: the distribution-free statement from held-out poses (None without
+    them); verdict against tolerance_mm."""
 
     bound_mm: float
     lower_mm: float
@@ -326,13 +400,17 @@ class Statement:
     tolerance_mm: float | None
     verdict: str
     reasons: tuple[str, ...]
+    worst: int
+    worst_share: float
+    measured: Measured | None
 
     def to_dict(self) -> dict:
         return {"bound_mm": self.bound_mm, "lower_mm": self.lower_mm, "parametric_bound_mm": self.parametric_mm,
                 "unmodelled_rms_mm": self.unmodelled_mm, "unmodelled_as": self.unmodelled_as,
                 "residual_sigma_mm": self.residual_mm, "noise_mm": self.noise_mm, "confidence": self.confidence,
                 "draws": self.draws, "tolerance_mm": self.tolerance_mm, "verdict": self.verdict,
-                "reasons": list(self.reasons)}
+                "reasons": list(self.reasons),
+                "measured": None if self.measured is None else self.measured.to_dict()}
 
 
 def worst_over_draws(G: np.ndarray, cov: np.ndarray, U: np.ndarray, draws: int,
@@ -355,34 +433,67 @@ def worst_over_draws(G: np.ndarray, cov: np.ndarray, U: np.ndarray, draws: int,
     return np.concatenate(worst), np.concatenate(worst_param), np.hstack(norms)
 
 
+def _ordinal(k: int) -> str:
+    return {1: "largest", 2: "2nd largest", 3: "3rd largest"}.get(k, f"{k}th largest")
+
+
+def _measured_reasons(m: Measured, tolerance_mm: float) -> tuple[list[str], list[str]]:
+    """(what keeps the measured statement from signing, what it states)."""
+    where = f"{m.poses} held-out poses lie inside the volume" + (f" ({m.outside} outside it)" if m.outside else "")
+    if m.rank is None:
+        return [f"{where}: a statement that rests on no model, {m.share:.0%} of the volume within the largest "
+                f"measured error at {m.confidence:.0%} confidence, needs at least {m.needed} (1 - {m.share:g}^n >= "
+                f"{m.confidence:g}); measure {m.needed - m.poses} more held-out poses inside the volume, drawn at "
+                f"random over it"], []
+    said = (f"measured, without a model: {m.share:.0%} of the volume within {m.error_mm:.3g} mm (the "
+            f"{_ordinal(m.rank)} error of the {m.poses} held-out poses inside it) with {m.achieved:.1%} confidence, "
+            f"taking those poses as drawn at random over the volume; their errors include the instrument's noise")
+    if m.error_mm > tolerance_mm:
+        return [f"{where}: the {_ordinal(m.rank)} of their errors is {m.error_mm:.3g} mm, above the tolerance, so "
+                f"the measured poses do not support it"], [said]
+    return [], [said]
+
+
 def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
           tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
-          doubts: list[str], notes: list[str]) -> Statement:
+          blocks: list[str], doubts: list[str], notes: list[str], held: Measured | None = None) -> Statement:
     """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
     maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated noise per coordinate (None: unknown).
-    doubts: what keeps the bound from being signed (the verdict is then "cannot tell" unless even
-    the lower bound fails the tolerance); notes: what the reader must know."""
+    blocks: what undermines the model's figures (the verdict is then "cannot tell", whatever they
+    say); doubts: what keeps the bound from being signed ("cannot tell" unless the coefficients'
+    uncertainty alone fails the tolerance, when they are left out as moot); notes: what the reader
+    must know; held: the distribution-free statement from held-out poses inside the volume, which
+    "meets" needs beside the bound."""
     worst, worst_param, norms = worst_over_draws(G, cov, U, draws, rng)
     # the bound takes the unmodelled error pessimistically, so its low quantile is no evidence of failure:
     # "does not meet" needs the coefficients' own uncertainty to push the worst past the tolerance
     bound, lower = 1e3 * float(np.quantile(worst, confidence)), 1e3 * float(np.quantile(worst_param, 1 - confidence))
+    # where the bound is reached: the sample most often the worst in the draws at or past it
+    at = np.argmax(norms[:, worst >= np.quantile(worst, confidence)], axis=0)
+    counts = np.bincount(at, minlength=len(G))
     if noise_m is None:
         notes = ["no measurement noise stated (--noise-mm): the whole residual is counted as error the model does "
                  "not describe, so the bound is pessimistic", *notes]
     if tolerance_mm is None:
-        verdict = "no tolerance given"
+        verdict, reasons = "no tolerance given", blocks + doubts + notes
+    elif blocks:
+        verdict, reasons = "cannot tell", blocks + doubts + notes
     elif lower > tolerance_mm:
         verdict = "does not meet"
-    elif doubts or bound > tolerance_mm:
-        verdict = "cannot tell"
+        reasons = [f"the coefficients' uncertainty alone puts the worst error above the tolerance in all but "
+                   f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)", *notes]
     else:
-        verdict = "meets"
+        short, said = _measured_reasons(held, tolerance_mm) if held is not None else ([], [])
+        over = ([f"the bound, {bound:.3g} mm at {confidence:.0%}, is above the tolerance"]
+                if bound > tolerance_mm else [])
+        reasons = over + doubts + short + said + notes
+        verdict = "cannot tell" if over or doubts or short else "meets"
     rms_u = float(np.sqrt(np.einsum("nrd,nrd->", U, U) / (3 * len(U))))
     return Statement(bound, lower, 1e3 * float(np.quantile(worst_param, confidence)),
                      1e3 * np.quantile(norms, confidence, axis=1), 1e3 * rms_u,
                      "point" if unmod.twist_cov is None else "rigid tool motion", 1e3 * unmod.residual_m,
                      None if noise_m is None else 1e3 * noise_m, confidence, draws, tolerance_mm, verdict,
-                     tuple(doubts + notes))
+                     tuple(reasons), int(np.argmax(counts)), float(counts.max() / len(at)), held)
 
 
 def _outside(calib: Calibration, q: np.ndarray, w: np.ndarray) -> dict[str, int]:
@@ -397,10 +508,26 @@ def _per_input(counts: dict[str, int], n: int, what: str) -> str:
     return f"{what}, per input: {', '.join(f'{k} {v}' for k, v in counts.items())} (of {n})"
 
 
+def _commanded_span(calib: Calibration, q_c: np.ndarray, names: dict[str, int]) -> str:
+    """The span (joint units of the robot file's kind: deg or m) the compensated commands q_c (N, n)
+    take on each named input, against the training range."""
+    ranges = calib.report.get("training_ranges") or {}
+    parts = []
+    for name in (n for n in names if n in ranges and n[0] == "q" and n[1:].isdigit()):
+        k = int(name[1:]) - 1
+        scale, unit = (np.degrees(1.0), "deg") if calib.robot.joints[k].kind == "R" else (1.0, "m")
+        lo, hi = ranges[name]
+        parts.append(f"{calib.robot.joints[k].name} {scale * q_c[:, k].min():.4g} to {scale * q_c[:, k].max():.4g} "
+                     f"{unit} (trained over {scale * lo:.4g} to {scale * hi:.4g})")
+    return "; ".join(parts)
+
+
 def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.ndarray, status: np.ndarray,
-              gain: float, held_out: bool, n_columns: int, n_declared: int) -> tuple[list[str], list[str]]:
-    """(doubts, notes) about a statement: what keeps it from being signed, and what it assumes."""
-    doubts, notes, n = [], [], len(samples.q)
+              gain: float, held_out: bool, n_columns: int,
+              n_declared: int) -> tuple[list[str], list[str], list[str]]:
+    """(blocks, doubts, notes) about a statement: what undermines the model's figures (no verdict but
+    "cannot tell"), what keeps it from being signed, and what it assumes."""
+    blocks, doubts, notes, n = [], [], [], len(samples.q)
     outside = _outside(calib, samples.q, samples.w)
     if outside:
         doubts.append(_per_input(outside, n, "samples outside the ranges the calibration was fitted over") +
@@ -412,20 +539,21 @@ def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.
                       f"{force.max():.4g} N against {carried.min():.4g} to {carried.max():.4g} N measured): the "
                       f"model's load terms are not validated there")
     if gain >= LOOP_GAIN:
-        doubts.append(f"the model turns the tool by the force its own tilt makes the sensor read (loop gain "
+        blocks.append(f"the model turns the tool by the force its own tilt makes the sensor read (loop gain "
                       f"{gain:.2g}): what it predicts depends on a reading it cannot settle; drop the force terms "
                       f"gravity does not excite (e.g. fx, fz when the tool stays level)")
     failed = int(np.isin(status, FAILED).sum())
     if failed:
-        doubts.append(f"the calibration's compensation does not converge at {failed} of {n} samples (singular, or "
+        blocks.append(f"the calibration's compensation does not converge at {failed} of {n} samples (singular, or "
                       f"the model's correction not settling there): the robot cannot be corrected there")
     if data.n_poses < 2 * n_columns:
-        doubts.append(f"{data.n_poses} poses for {n_columns} coefficients: the covariance taken pose by pose needs "
-                      f"at least twice as many poses as coefficients")
+        blocks.append(f"{data.n_poses} poses for {n_columns} coefficients: the covariance taken pose by pose needs "
+                      f"at least twice as many poses as coefficients ({2 * n_columns}); until then neither bound can "
+                      f"be trusted")
     if not held_out:
         doubts.append("the bound rests on the training residuals alone, which cannot show an effect the model lacks "
                       "where the poses did not reach (docs/volume.md): measure held-out poses inside the volume, at "
-                      "its extremes, and give them as --val to sign it")
+                      "random over it, and give them as --val to sign it")
     limits = ((q_c < [j.lower for j in calib.robot.joints]) | (q_c > [j.upper for j in calib.robot.joints]))
     beyond = {j.name: int(k) for j, k in zip(calib.robot.joints, limits[status == OUTSIDE_LIMITS].sum(axis=0)) if k}
     if beyond:
@@ -434,14 +562,58 @@ def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.
                      "ranges otherwise")
     moved = {k: v for k, v in _outside(calib, q_c, samples.w).items() if k not in outside}
     if moved:
-        notes.append(_per_input(moved, n, "samples whose compensated command leaves the ranges the calibration was "
-                                          "fitted over") +
-                     ": compensation moves joints the data never moved, and the second-order error of their unseen "
-                     "axes is not in the bound; measure with them moving")
+        doubts.append(_per_input(moved, n, "samples whose compensated command leaves the ranges the calibration was "
+                                           "fitted over") +
+                      ": compensation moves joints beyond what the data moved, and the error of that motion is not "
+                      "in the bound; measure with them moving over what compensation needs: " +
+                      _commanded_span(calib, q_c, moved))
     if samples.unreachable:
         notes.append(f"{samples.unreachable} of {n_declared} declared samples cannot be placed within the joint "
                      f"limits; the statement covers the others")
-    return doubts, notes
+    return blocks, doubts, notes
+
+
+#: held-out poses count as inside the volume within this of its declared joint ranges and tool box (m or rad)
+INSIDE = 1e-6
+#: ... and within this of the forces its samples carry (N: the sensor's tilt, as for the payload check)
+INSIDE_N = 1.0
+
+
+def held_out_errors(calib: Calibration, volume: Volume, samples: Samples, data: Measurements,
+                    y: np.ndarray) -> tuple[np.ndarray, int]:
+    """The error (mm) at each held-out pose inside the volume, and how many poses are not inside: a
+    pose is inside when its joints listed in the volume lie in their ranges, its force within those
+    the samples carry, and, with place_at, the stated point placed there lies in the tool box (or is
+    the stated target); its error is the largest distance between a measured stated point (a target
+    in the tool box, or a stated target) and where the calibrated model puts it. y (R, 3): data's
+    measured points in the calibration's world, m."""
+    robot = calib.robot
+    names = list(robot.targets)
+    points = np.array(list(robot.targets.values()), float)
+    if volume.tool_box is not None:
+        lo, hi = volume.tool_box
+        stated = ((points >= lo - INSIDE) & (points <= hi + INSIDE)).all(axis=1)
+    else:
+        stated = np.isin(names, volume.targets)
+    ok = np.ones(data.n_poses, bool)
+    for k, (a, b) in volume.joints.items():
+        ok &= (data.q[:, k] >= a - INSIDE) & (data.q[:, k] <= b + INSIDE)
+    force, carried = (np.linalg.norm(x[:, :3], axis=1) for x in (data.w, samples.w))
+    ok &= (force >= carried.min() - INSIDE_N) & (force <= carried.max() + INSIDE_N)
+    if volume.place_at is not None:
+        T = tool_pose(robot, data.q)
+        there = np.einsum("nji,nj->ni", T[:, :3, :3], volume.place_at - T[:, :3, 3])  # place_at in the tool frame
+        if volume.tool_box is not None:
+            ok &= ((there >= volume.tool_box[0] - INSIDE) & (there <= volume.tool_box[1] + INSIDE)).all(axis=1)
+        else:
+            ok &= (np.linalg.norm(there[:, None] - points[stated], axis=2) <= INSIDE).any(axis=1)
+    cm = CompiledModel(robot, calib.model)
+    model = cm.model_targets(data.q, data.w, data.aux_columns(cm.model.aux), calib.c)[data.pose, data.target]
+    err = np.where(stated[data.target], np.linalg.norm(y - model, axis=1), -np.inf)
+    per_pose = np.full(data.n_poses, -np.inf)
+    np.maximum.at(per_pose, data.pose, err)
+    inside = ok & np.isfinite(per_pose)
+    return 1e3 * per_pose[inside], int((~inside).sum())
 
 
 #: DATA is taken for the data the calibration was fitted to when its RMS residual is within this share
@@ -473,13 +645,14 @@ def _inliers(calib: Calibration, data: Measurements, y: np.ndarray) -> tuple[Mea
 def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarray,
              held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, repeatability_m: float,
              tolerance_mm: float | None, confidence: float, draws: int,
-             rng: np.random.Generator) -> tuple[Samples, Statement, CompiledModel]:
+             rng: np.random.Generator, share: float = 0.95) -> tuple[Samples, Statement, CompiledModel]:
     """The statement for a calibration over a declared volume from the data it was fitted to (world
     points y (R, 3), m): the coefficients' covariance by pose (`pose_covariance`), and the unmodelled
     error (`unmodelled`) from a held-out set (data, world points) when given, else from the fit's
     residuals scaled up for the coefficients fitted to them; less the stated instrument noise and
-    robot repeatability per coordinate (m). Returns the samples, the statement, and the compiled
-    model whose targets are the stated points (the tool box's affine basis, or the robot's)."""
+    robot repeatability per coordinate (m); with held-out data, the share of the volume the measured
+    statement (`Measured`) is about. Returns the samples, the statement, and the compiled model whose
+    targets are the stated points (the tool box's affine basis, or the robot's)."""
     require(draws >= 20 / (1 - confidence) if confidence < 1 else False,
             f"{draws} draws for a {confidence:g} confidence: give at least {20 / max(1 - confidence, 1e-12):.0f} "
             f"(20 beyond the quantile), or a lower confidence")
@@ -506,8 +679,10 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     unmod = unmodelled(fitted, *residuals, calib.c, noise_m, repeatability_m, shrink)
     U = unmod.maps(tool_pose(calib.robot, samples.q)[:, :3, :3], samples.point)
     q_c, status = cm.compensate(samples.q, samples.w, None, calib.c)
-    doubts, notes = _findings(calib, data, samples, q_c, status, gain, held_out is not None, len(columns),
-                              volume.samples)
+    blocks, doubts, notes = _findings(calib, data, samples, q_c, status, gain, held_out is not None, len(columns),
+                                      volume.samples)
+    held = None if held_out is None else measured(*held_out_errors(calib, volume, samples, *held_out), share,
+                                                  confidence)
     if dropped:
         notes.append(f"{dropped} measured rows the fit found to be outliers are left out of the covariance and the "
                      f"unmodelled error")
@@ -515,9 +690,10 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
         notes.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
                      "poses): a tilt's growth with the lever arm to the tool box is not in it")
     statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, doubts, notes)
+                      confidence, draws, rng, blocks, doubts, notes, held)
     return samples, statement, cm
 
 
-__all__ = ["Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "point_rows", "pose_covariance",
-           "read_wrench", "sample", "state", "unmodelled", "worst_over_draws"]
+__all__ = ["Measured", "Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "held_out_errors", "measured",
+           "order_statistic", "point_rows", "pose_covariance", "poses_needed", "random_poses", "read_wrench",
+           "sample", "state", "unmodelled", "worst_over_draws"]

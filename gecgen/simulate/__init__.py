@@ -16,11 +16,12 @@ from scipy.spatial.transform import Rotation
 from gecgen.model.kinematics import sensor_wrench, target_positions, tool_pose, tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
-from gecgen.simulate.designs import Design, approach_directions, one_at_a_time, paper_pps, paper_split, random_design
+from gecgen.simulate.designs import (Design, approach_directions, joined, one_at_a_time, paper_pps, paper_split,
+                                     random_design)
 from gecgen.simulate.truth import Truth, load_truth, thermal_profile, true_state
 
-__all__ = ["Design", "Truth", "load_truth", "one_at_a_time", "paper_data", "paper_pps", "paper_split", "random_design",
-           "simulate", "true_tool_points"]
+__all__ = ["Design", "Truth", "joined", "load_truth", "one_at_a_time", "paper_data", "paper_pps", "paper_split",
+           "random_design", "simulate", "true_tool_points"]
 
 
 def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generator,

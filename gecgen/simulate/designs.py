@@ -42,6 +42,13 @@ def _limits(robot: Robot):
     return lo, hi
 
 
+def joined(*designs: Design) -> Design:
+    """The designs' poses one after the other (their payload_at and targets: the first's)."""
+    first = designs[0]
+    return Design(np.vstack([d.q for d in designs]), np.concatenate([d.payload_kg for d in designs]),
+                  first.payload_at, first.targets, np.concatenate([d.group for d in designs]))
+
+
 def with_payloads(q: np.ndarray, payloads_kg, group: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every configuration once per payload."""
     payloads_kg = list(payloads_kg)
