@@ -27,16 +27,11 @@ def camera_yaml(cam: Camera, width=None, height=None) -> str:
             f"distortion: {list(cam.distortion)}, width: {width or cam.width}, height: {height or cam.height}}}\n")
 
 
-@pytest.fixture(scope="module")
-def shots(tmp_path_factory):
-    """Ten rendered images of the board, a blank one, their readings and the true corners (px)."""
-    robot = load_robot(ROBOTS / "industrial6r.yaml")
-    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
-    rng = np.random.default_rng(8)
-    rig, q = eye_in_hand(robot, truth, CAMERA, BOARD, np.radians([0, -90, -90, 0, 60, 0]),
-                         np.radians([8, 6, 6, 25, 20, 30]), 10, rng)
-    folder = tmp_path_factory.mktemp("shots")
-    images = folder / "images"
+def _render(robot, truth, board: Board, n: int, images, name: str, rng) -> tuple[np.ndarray, list]:
+    """n images of `board` seen by the wrist camera (named `name`.format(k) in the new folder
+    `images`): the joint readings (n, 6) and the true corners of each (px)."""
+    rig, q = eye_in_hand(robot, truth, CAMERA, board, np.radians([0, -90, -90, 0, 60, 0]),
+                         np.radians([8, 6, 6, 25, 20, 30]), n, rng)
     images.mkdir()
     T = true_tools(robot, truth, q)
     R, t = rig.poses["cam"]
@@ -44,9 +39,21 @@ def shots(tmp_path_factory):
     truth_px = []
     for k in range(len(q)):
         Rt, pt = T[k, :3, :3], T[k, :3, 3]
-        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, BOARD, rng)
-        cv2.imwrite(str(images / f"img{k:02d}.png"), image)
+        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
+        cv2.imwrite(str(images / name.format(k)), image)
         truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
+    return q, truth_px
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    """Ten rendered images of the board, a blank one, their readings and the true corners (px)."""
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
+    rng = np.random.default_rng(8)
+    folder = tmp_path_factory.mktemp("shots")
+    images = folder / "images"
+    q, truth_px = _render(robot, truth, BOARD, 10, images, "img{:02d}.png", rng)
     cv2.imwrite(str(images / "blank.png"), np.full((480, 640), 200, np.uint8))
     lines = ["image,q1,q2,q3,q4,q5,q6"] + [f"img{k:02d}.png," + ",".join(map(repr, q[k].tolist()))
                                           for k in range(len(q))]
@@ -102,19 +109,8 @@ def test_a_charuco_board_names_its_corners(tmp_path):
     truth = load_truth(read_yaml(ROBOTS / "industrial6r.truth.yaml", "truth file"), robot)
     board = Board(9, 6, 0.04, kind="charuco", marker=0.03, dictionary="DICT_5X5_100")
     rng = np.random.default_rng(9)
-    rig, q = eye_in_hand(robot, truth, CAMERA, board, np.radians([0, -90, -90, 0, 60, 0]),
-                         np.radians([8, 6, 6, 25, 20, 30]), 8, rng)
     images = tmp_path / "images"
-    images.mkdir()
-    T = true_tools(robot, truth, q)
-    R, t = rig.poses["cam"]
-    Rb, tb = rig.board_pose
-    truth_px = []
-    for k in range(len(q)):
-        Rt, pt = T[k, :3, :3], T[k, :3, 3]
-        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
-        cv2.imwrite(str(images / f"img{k}.png"), image)
-        truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
+    q, truth_px = _render(robot, truth, board, 8, images, "img{}.png", rng)
     (tmp_path / "readings.csv").write_text("image,q1,q2,q3,q4,q5,q6\n" + "".join(
         f"img{k}.png," + ",".join(map(repr, q[k].tolist())) + "\n" for k in range(len(q))))
     (tmp_path / "cams.yaml").write_text(camera_yaml(CAMERA))

@@ -46,6 +46,16 @@ def pose_id_column(table: Table, col: str, what: str = "pose id",
     return ids.astype(np.int64)
 
 
+def pose_subset(pose: np.ndarray, n_poses: int, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For rows whose poses are `pose` (R,) among n_poses: the chosen pose indices (as an array), which
+    rows are theirs (R,) and those rows' pose indices among the chosen."""
+    poses = np.asarray(poses)
+    keep = np.isin(pose, poses)
+    remap = -np.ones(n_poses, int)
+    remap[poses] = np.arange(len(poses))
+    return poses, keep, remap[pose[keep]]
+
+
 @dataclass(frozen=True)
 class Measurements:
     """Poses (P of them) and measured target positions (R rows).
@@ -100,12 +110,9 @@ class Measurements:
 
     def subset(self, poses: np.ndarray) -> "Measurements":
         """The measurements of the given pose indices (rows follow their poses)."""
-        poses = np.asarray(poses)
-        keep = np.isin(self.pose, poses)
-        remap = -np.ones(self.n_poses, int)
-        remap[poses] = np.arange(len(poses))
+        poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)
         return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
-                            remap[self.pose[keep]], self.target[keep], self.xyz[keep], self.source,
+                            pose, self.target[keep], self.xyz[keep], self.source,
                             self.file_rows[keep], self.station[keep],
                             None if self.orientation is None else self.orientation[keep],
                             None if self.relative is None else self.relative.take(keep),

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.cameras import Board, Camera
-from gecgen.model.measurements import MAX_AUX, MAX_WRENCH, pose_id_column, within_limits, write_csv
+from gecgen.model.measurements import MAX_AUX, MAX_WRENCH, pose_id_column, pose_subset, within_limits, write_csv
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, require
@@ -51,12 +51,8 @@ class Pixels:
 
     def subset(self, poses: np.ndarray) -> "Pixels":
         """The image points of the given pose indices."""
-        poses = np.asarray(poses)
-        keep = np.isin(self.pose, poses)
-        remap = -np.ones(self.n_poses, int)
-        remap[poses] = np.arange(len(poses))
-        return Pixels(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
-                      remap[self.pose[keep]], self.camera[keep], self.point[keep], self.uv[keep], self.row[keep],
+        poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)
+        return Pixels(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses], pose, self.camera[keep], self.point[keep], self.uv[keep], self.row[keep],
                       self.cameras, self.points, self.mount, self.source)
 
 
