@@ -60,25 +60,28 @@ def test_the_python_calibrate_refuses_an_unknown_registration():
 
 
 def test_gravity_is_one_constant_wherever_a_default_is_taken():
-    """Standard gravity, 9.80665 m/s^2, in design's --gravity, the simulator's truth, the URDF
-    gravity torques and the robot file's default alike."""
-    import inspect
-
+    """Standard gravity, 9.80665 m/s^2, in the simulator's truth, the URDF gravity torques and the
+    robot file's default alike; design takes the robot file's own (a Y-up PPS's payload weighs along
+    -y)."""
     import numpy as np
 
     from gecgen.model import gravity as urdf_gravity
     from gecgen.model import load_robot
+    from gecgen.model.kinematics import sensor_wrench
     from gecgen.model.robot import GRAVITY
     from gecgen.plan import design
     from gecgen.simulate import load_truth
 
     assert np.linalg.norm(np.array(GRAVITY, float)) == 9.80665
     puma = load_robot(ROBOTS / "puma560.yaml")
-    given = [[float(v) for v in _parsed("design", "r.yaml", "--poses", "3", "-o", "p.csv").gravity.split(",")],
-             list(load_truth({}, puma).gravity), list(urdf_gravity.UPRIGHT),
-             list(inspect.signature(design.uniform_candidates).parameters["gravity"].default),
-             [float(v) for v in puma.gravity]]
+    given = [list(load_truth({}, puma).gravity), list(urdf_gravity.UPRIGHT), [float(v) for v in puma.gravity]]
     assert all(g == [float(v) for v in GRAVITY] for g in given), given
+    assert _parsed("design", "r.yaml", "--poses", "3", "-o", "p.csv").gravity is None  # the robot file's
+    pps = load_robot(ROBOTS / "pps.yaml")
+    assert [float(v) for v in pps.gravity] == [0.0, -9.80665, 0.0]
+    cands = design.uniform_candidates(pps, 5, np.random.default_rng(0), [70.0])
+    expected = sensor_wrench(pps, cands.q, cands.payload_kg, np.zeros(3), np.array([0.0, -9.80665, 0.0]))
+    np.testing.assert_array_equal(cands.w, expected)
 
 
 def test_help_lists_the_commands_in_the_order_of_the_work(capsys):

@@ -21,7 +21,7 @@ import numpy as np
 from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, robot_and_model, whole
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
-from gecgen.model.robot import GRAVITY, WRENCH
+from gecgen.model.robot import WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
 from gecgen.plan import design as D
@@ -49,8 +49,8 @@ def add_parser(command):
                                      "else every target of the robot)")
     p.add_argument("--payload-kg", help="comma-separated payloads (kg) at the tool origin, as gecgen simulate: the "
                                         "wrench the sensor reads of their weight is part of each pose")
-    p.add_argument("--gravity", default=",".join(f"{v:g}" for v in GRAVITY), help="gravity in the world frame for the payload wrench, m/s^2 "
-                                                          "(default: %(default)s)")
+    p.add_argument("--gravity", help="gravity in the world frame for the payload wrench, m/s^2 (default: the robot "
+                                     "file's `gravity`, standard gravity along -z unless it says otherwise)")
     p.add_argument("--min-z", type=number(), help="every measured target at world z >= this (m)")
     p.add_argument("--tracker", help="tracker position x,y,z in the world (m); with --max-incidence-deg")
     p.add_argument("--max-incidence-deg", type=number(0, 180, above=True),
@@ -85,7 +85,7 @@ def _numbers(text: str, option: str, count: int | None, unit: str) -> list[float
 
 
 def _candidates(args, robot, model):
-    gravity = _numbers(args.gravity, "gravity", 3, "m/s^2")
+    gravity = robot.gravity if args.gravity is None else _numbers(args.gravity, "gravity", 3, "m/s^2")
     payloads = _numbers(args.payload_kg, "payload-kg", None, "kg") if args.payload_kg else None
     require(payloads is None or min(payloads) >= 0, f"--payload-kg {args.payload_kg}: payloads are masses, >= 0 kg")
     if args.from_csv:

@@ -40,7 +40,7 @@ import numpy as np
 
 from gecgen.model.kinematics import sensor_wrench, tool_poses
 from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_commands
-from gecgen.model.robot import GRAVITY, WRENCH, Robot
+from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structural_analysis
@@ -97,18 +97,24 @@ class Candidates:
 
 
 def uniform_candidates(robot: Robot, n: int, rng: np.random.Generator, payloads_kg=None,
-                       gravity=GRAVITY) -> Candidates:
+                       gravity=None) -> Candidates:
     """n poses uniform within the joint limits (continuous joints within +-pi), as `gecgen simulate
     --design random` draws them: with payloads (kg), each pose carries one drawn at random, at the
-    tool origin, and the wrench is what the sensor reads of its weight (gravity (3,), m/s^2, world)."""
+    tool origin, and the wrench is what the sensor reads of its weight (gravity (3,), m/s^2, world;
+    None: the robot file's)."""
     design = random_design(robot, n, rng, payloads_kg if payloads_kg is not None else (0.0,))
     if payloads_kg is None:
         return Candidates(design.q, np.zeros((n, 6)), np.zeros((n, 0)))
     return Candidates(design.q, sensor_wrench(robot, design.q, design.payload_kg, design.payload_at,
-                                              np.asarray(gravity, float)), np.zeros((n, 0)), design.payload_kg, True)
+                                              _gravity(robot, gravity)), np.zeros((n, 0)), design.payload_kg, True)
 
 
-def file_candidates(path, robot: Robot, aux_names: tuple[str, ...], payloads_kg=None, gravity=GRAVITY) -> Candidates:
+def _gravity(robot: Robot, gravity) -> np.ndarray:
+    """The gravity (3,) m/s^2 in the world: the given one, else the robot file's."""
+    return np.array([float(v) for v in (robot.gravity if gravity is None else gravity)])
+
+
+def file_candidates(path, robot: Robot, aux_names: tuple[str, ...], payloads_kg=None, gravity=None) -> Candidates:
     """The allowed configurations of a CSV: q1..qn, optional wrench fx..mz and the model's aux
     columns. With payloads (kg) and no wrench columns, every row is offered with every payload
     (the wrench as in `uniform_candidates`). A joint outside its limits is refused with its row."""
@@ -125,7 +131,7 @@ def file_candidates(path, robot: Robot, aux_names: tuple[str, ...], payloads_kg=
         return Candidates(c.q, c.w, c.aux, None, has_wrench)
     require(not has_wrench, f"--payload-kg: {path} has wrench columns already; drop them or the option")
     q, payload, _ = with_payloads(c.q, payloads_kg, "from")
-    w = sensor_wrench(robot, q, payload, np.zeros(3), np.asarray(gravity, float))
+    w = sensor_wrench(robot, q, payload, np.zeros(3), _gravity(robot, gravity))
     return Candidates(q, w, np.vstack([c.aux] * len(payloads_kg)), payload, True)
 
 
