@@ -37,13 +37,13 @@ from gecgen.runtime.identify import Fit
 SHIFT = 3.0
 
 
-def _matched_loads(cm: CompiledModel, data: Measurements, error: int) -> tuple[list[str], np.ndarray]:
+def _matched_loads(signals: tuple[list[str], np.ndarray], error: int) -> tuple[list[str], np.ndarray]:
     """The load signals (names, values (P, l)) that act on `error` about or along its own axis: the
     matched component of the frame's wrench, from the URDF's masses when the robot has them, else the
     gravity regressor's columns, with the measured wrench's when the data has one. Signals that do
-    not vary over the data are left out."""
+    not vary over the data are left out. signals: `CompiledModel.load_signals` at the data."""
     frame, k = divmod(error, 6)
-    names, values = cm.load_signals(data.q, data.w)
+    names, values = signals
     found: dict[str, list[int]] = {}
     for j, name in enumerate(names):
         m = FRAME_SIGNAL.match(name)
@@ -72,14 +72,15 @@ def ratio_load_confounding(cm: CompiledModel, fit: Fit, data: Measurements) -> l
     rows_pose, _, order = pose_rows(data)
     J = weighted_J(rnd, data, order)
     loads = set(catalog(robot).names) | set(WRENCH)
-    out = []
+    out, signals = [], None
     for error in sorted({coefs[j].error for j in wanted}):
         own = [i for i, j in enumerate(kept) if coefs[j].error == error
                and {s.name for s in coefs[j].term.expr.free_symbols} & loads]
         if own:  # the model carries loads on this error: compare with the fit that drops them
             X, L, names = H, own, [coefs[kept[i]].term.label for i in own]
         else:
-            names, values = _matched_loads(cm, data, error)
+            signals = signals or cm.load_signals(data.q, data.w)  # once, for every error that needs them
+            names, values = _matched_loads(signals, error)
             if not names:
                 continue
             X = np.hstack([H, J[:, error:error + 1] * values[rows_pose]])
