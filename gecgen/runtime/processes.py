@@ -83,7 +83,10 @@ def _stop(pool: ProcessPoolExecutor):
     else:  # before 3.14 the executor keeps its processes in `_processes` and offers no public way
         for process in list((getattr(pool, "_processes", None) or {}).values()):
             process.kill()
-    pool.shutdown(wait=False, cancel_futures=True)
+    # the futures are not cancelled here: with its workers gone the executor fails every pending one
+    # itself, and before Python 3.12 it raised InvalidStateError from its own thread (a traceback on
+    # stderr) on any that had been cancelled meanwhile
+    pool.shutdown(wait=False)
 
 
 #: prctl's option that sends the calling process a signal when its parent ends (linux/prctl.h)
