@@ -212,6 +212,9 @@ IN_PROCESS = {
     # issue 22: an option of sockets and planes, or of a design, is never silently ignored
     "a socket option without sockets": (lambda t: ["simulate", pps(t), "--per-socket", "30", "-o", t / "s.csv"],
                                         "--per-socket", "goes with --plates or --planes"),
+    "a calibration for an ISO 9283 plan": (lambda t: ["iso9283", str(ROBOTS / "puma560.yaml"), "-o", t / "plan.csv",
+                                                   "--calibration", t / "c.json"],
+                                         "--calibration", "goes with --plan and --measured"),
     "poses with sockets": (lambda t: ["simulate", str(ROBOTS / "panda_ball.yaml"), "--plates", "1", "--poses",
                                       "10", "-o", t / "s.csv"], "--poses", "--plates and --planes simulate sockets"),
     "YAML that does not parse": (lambda t: ["redundancy", write(t, "bad.yaml", "name: x\nangle_unit: rad\n  b: [1\n")],

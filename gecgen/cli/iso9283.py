@@ -52,6 +52,8 @@ def run(args) -> dict:
     require((args.plan is None) == (args.measured is None), "--plan and --measured go together: the plan the "
                                                              "measured test ran")
     require(args.after is None or args.measured, "--after goes with --plan and --measured (the run before)")
+    require(args.calibration is None or args.measured, "--calibration goes with --plan and --measured: the "
+                                                       "calibration whose tracker frame the measurements are in")
     require(args.report is None or args.measured, "--report goes with --plan and --measured: it reports a "
                                                   "measured test")
     require(args.tolerance_mm is None or args.measured, "--tolerance-mm goes with --plan and --measured: it judges "

@@ -79,8 +79,8 @@ def fixture_candidates(robot: Robot, fixtures: tuple[Fixture, ...], target: int,
     lo, hi = (np.array(v) for v in robot.sampling_box())
     lo, hi = lo + LIMIT_MARGIN * (hi - lo), hi - LIMIT_MARGIN * (hi - lo)
 
-    def position(q: np.ndarray) -> np.ndarray:
-        return target_positions(robot, q)[:, target]
+    def position(q: np.ndarray, rows: np.ndarray = slice(None)) -> np.ndarray:
+        return target_positions(robot, q[rows])[:, target]
 
     qs, goals = [], []
     for f in fixtures:

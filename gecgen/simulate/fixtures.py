@@ -134,8 +134,10 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
         N = len(goals)
         aux = thermal_profile(truth, N)
 
-        def reached(q: np.ndarray) -> np.ndarray:
-            q_true, eps = true_state(built, truth, q, np.zeros(N), np.zeros(3), aux, approach_directions(q))
+        def reached(q: np.ndarray, rows: np.ndarray = slice(None)) -> np.ndarray:
+            k = q[rows]  # each joint approaches a pose from the one before it in q, stepped or not
+            q_true, eps = true_state(built, truth, k, np.zeros(len(k)), np.zeros(3),
+                                     {a: v[rows] for a, v in aux.items()}, approach_directions(q)[rows])
             return target_positions(built, q_true, eps)[:, t]
 
         q, ok = reach(built, reached, lambda q: target_positions(built, q)[:, t], goals, rng)
@@ -157,28 +159,35 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
 
 
 def reach(robot: Robot, reached, nominal, goals: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Joint readings (N, n) at which `reached` (readings -> true target positions, (N, 3)) meets each
-    goal (N, 3) within REACHED_M, within the joint limits: damped Newton steps from random starts,
-    restarted where a start does not get there; and which goals were reached (N,). The steps take
-    the Jacobian of the `nominal` kinematics (readings -> positions): a robot's errors change it by a
-    part in a thousand, which slows no step noticeably, and it is far cheaper than the truth's
-    (gravity, compliance)."""
+    """Joint readings (N, n) at which `reached` (readings (N, n), row indices rows (k,) -> the true
+    target positions of those rows, (k, 3)) meets each goal (N, 3) within REACHED_M, within the joint
+    limits: damped Newton steps from random starts, restarted where a start does not get there; and
+    which goals were reached (N,). Only the goals not yet reached are stepped: the truth's gravity
+    and compliance are the simulator's dearest part. The steps take the Jacobian of the `nominal`
+    kinematics (readings -> positions): a robot's errors change it by a part in a thousand, which
+    slows no step noticeably, and it is far cheaper than the truth's."""
     lo, hi = _box(robot)
     full_lo, full_hi = (np.array(v) for v in robot.sampling_box())
     q = rng.uniform(lo, hi, (len(goals), robot.n))
-    todo = np.ones(len(goals), bool)
+    todo = np.arange(len(goals))
     h = 1e-7
     for _ in range(RESTARTS):
         for _ in range(60):
-            x = reached(q)
-            err = goals - x
-            todo = np.linalg.norm(err, axis=1) > REACHED_M
-            if not todo.any():
-                return q, ~todo
-            x0 = nominal(q)
-            J = np.stack([(nominal(q + h * np.eye(robot.n)[j]) - x0) / h for j in range(robot.n)], axis=2)
+            err = goals[todo] - reached(q, todo)
+            far = np.linalg.norm(err, axis=1) > REACHED_M
+            todo, err = todo[far], err[far]
+            if not len(todo):  # a joint's play may have moved a reached goal when the pose before it moved
+                todo = np.flatnonzero(np.linalg.norm(goals - reached(q), axis=1) > REACHED_M)
+                if not len(todo):
+                    return q, np.ones(len(goals), bool)
+                continue
+            qt = q[todo]
+            x0 = nominal(qt)
+            J = np.stack([(nominal(qt + h * np.eye(robot.n)[j]) - x0) / h for j in range(robot.n)], axis=2)
             JJ = np.einsum("nij,nkj->nik", J, J) + 1e-8 * np.eye(3)
             step = np.einsum("nji,nj->ni", J, np.linalg.solve(JJ, err[..., None])[..., 0])
-            q = np.where(todo[:, None], np.clip(q + step, full_lo, full_hi), q)
-        q[todo] = rng.uniform(lo, hi, (int(todo.sum()), robot.n))
-    return q, np.linalg.norm(goals - reached(q), axis=1) <= REACHED_M
+            q[todo] = np.clip(qt + step, full_lo, full_hi)
+        q[todo] = rng.uniform(lo, hi, (len(todo), robot.n))
+    ok = np.ones(len(goals), bool)
+    ok[todo] = np.linalg.norm(goals[todo] - reached(q, todo), axis=1) <= REACHED_M
+    return q, ok
