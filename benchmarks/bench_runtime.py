@@ -67,7 +67,7 @@ import json, resource, sys, time, warnings
 from gecgen.model import load_robot, load_error_model
 from gecgen.model.measurements import read_measurements
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify
+from gecgen.fit.identify import identify
 from gecgen.loop.diagnose import diagnose
 t0 = time.perf_counter()  # in-process: the interpreter and imports are already there
 kind, robot_file, errors, data_file, loss = sys.argv[1:6]

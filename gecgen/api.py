@@ -24,10 +24,10 @@ from gecgen.model.checks import check_terms_finite
 from gecgen.model.measurements import Commands, Measurements, read_commands
 from gecgen.model.measurements import read_measurements as _read_measurements
 from gecgen.model.validation import excerpt, nearest, require
-from gecgen.runtime import calibration as _calibration
-from gecgen.runtime import significance
+from gecgen.fit import calibration as _calibration
+from gecgen.fit import significance
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, STATUS_NAMES, CompiledModel
-from gecgen.runtime.inputs import checked, error_model, measured_counts, on_points, placed
+from gecgen.fit.inputs import checked, error_model, measured_counts, on_points, placed
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
            "load_calibration", "load_robot", "read_measurements"]
@@ -114,7 +114,7 @@ class Errors:
     rot_max_mrad: float | None = None
     #: the 95 % confidence interval of rms_mm for poses drawn like these (`significance.rms_interval`)
     rms_mm_ci95: tuple[float, float] | None = None
-    #: with sockets and planes (`runtime.relative.measures`): the RMS distance of a socket's rows from
+    #: with sockets and planes (`fit.relative.measures`): the RMS distance of a socket's rows from
     #: their mean, of a plane's from their plane, and the known distances' errors (mm)
     consistency_mm: float | None = None
     flatness_mm: float | None = None
@@ -125,7 +125,7 @@ class Errors:
 
     @classmethod
     def of(cls, summary: dict) -> "Errors":
-        """From `runtime.identify.summary`'s dict."""
+        """From `fit.identify.summary`'s dict."""
         return cls(**summary)
 
     def to_dict(self) -> dict:
@@ -259,13 +259,13 @@ class Calibrator:
     for data with orientation columns, an orientation error of 1 mrad counts as L * 1 mrad of
     position error (m; None: 0.1 when fitting, the calibration's when scoring). keep_insignificant:
     carry every identifiable coefficient into the calibration; by default those the data do not
-    determine (|value| / std below 2 after backward elimination, `runtime.significance`) are held
+    determine (|value| / std below 2 after backward elimination, `fit.significance`) are held
     at zero and the rest refitted, and the report lists them (`report_["significance"]`). noise_mm:
     the instrument's noise per coordinate (mm), when known: `report_["significance"]["overall"]`
-    says whether the fit leaves more than it (`runtime.significance.overall`), with a warning.
+    says whether the fit leaves more than it (`fit.significance.overall`), with a warning.
 
-    Fitted attributes: calibration_ (runtime.calibration.Calibration, what `save` writes), fit_
-    (runtime.identify.Fit), report_ (the report the calibration file holds: metrics in mm, outliers,
+    Fitted attributes: calibration_ (fit.calibration.Calibration, what `save` writes), fit_
+    (fit.identify.Fit), report_ (the report the calibration file holds: metrics in mm, outliers,
     eliminated coefficients...), robot_ (the robot with its targets placed), placement_ (where the
     data placed the targets, or None), cv_ (the cross-validation table of ridge/rank_tol "auto"),
     counts_ ({n_poses, n_points[, n_orientations]} of the training data).
@@ -291,7 +291,7 @@ class Calibrator:
         Measurements. progress(iteration, rms_mm) is called after each Gauss-Newton step. Raises
         RuntimeError when the fit cannot be trusted (the Calibrator is left as it was). Returns
         self."""
-        from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
+        from gecgen.fit.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
 
         loss, register = _choice(self.loss, "loss", LOSSES), _choice(self.register, "register", REGISTER)
         options, grids = {"loss": loss}, {}
@@ -313,7 +313,7 @@ class Calibrator:
             options.update(chosen)
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
-            # the stated noise decides which directions the data determine (`runtime.weak`)
+            # the stated noise decides which directions the data determine (`fit.weak`)
             fit = identify(cm, data, registration_mode=register, progress=progress, noise_m=_noise(self.noise_mm),
                            **options)
         if fit.failures:
@@ -328,7 +328,7 @@ class Calibrator:
         calib.report["significance"] = verdict
         calib.report.update({**options, "cv": cv, "placement": placement.to_dict() if placement else None})
         if robot.branches:
-            from gecgen.runtime.identify import to_world
+            from gecgen.fit.identify import to_world
 
             calib.report["branches"] = by_branch(cm, data, to_world(fit.registrations, data),
                                                  {"before": None, "train": fit.c})
@@ -419,7 +419,7 @@ class Calibrator:
         """Refuse (RuntimeError) to score or predict with generalized errors no real robot has at these
         poses: an edited file (a coefficient of 1e300) or a calibration of another robot. (compensate
         names the rows whose correction overflows or fails instead.)"""
-        from gecgen.runtime.identify import absurd_error
+        from gecgen.fit.identify import absurd_error
 
         absurd = absurd_error(cm, q, w, aux, self.calibration_.c)
         if absurd:
@@ -470,7 +470,7 @@ class Calibrator:
         calibration, in the calibration's tracker frames. register=True: the data was measured from
         a new tracker stationing; each side is scored in the frame fitted on the data (the
         calibration's coefficients held), so before and after differ by the calibration alone."""
-        from gecgen.runtime.identify import fit_frames, to_world
+        from gecgen.fit.identify import fit_frames, to_world
 
         calib = self._fitted()
         data = read_measurements(data, calib.robot)
@@ -522,9 +522,9 @@ def _ratio_loads(cm, fit, data) -> list[dict]:
 
 
 def _summary(cm, data, y, c, interval: bool = False) -> dict:
-    """`runtime.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
+    """`fit.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
     confidence interval by pose (mm) too."""
-    from gecgen.runtime.identify import fixture_measures, row_errors, summary
+    from gecgen.fit.identify import fixture_measures, row_errors, summary
 
     position, rotation, _ = row_errors(cm, data, y, c)
     out = summary(position, rotation)

@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.cameras import Board, Camera
 from gecgen.model.validation import read_yaml
-from gecgen.runtime.camera import fit_pixels, fitted_tools
+from gecgen.fit.camera import fit_pixels, fitted_tools
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
 

@@ -32,7 +32,7 @@ from gecgen.model import load_error_model, load_robot  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402
 from gecgen.runtime.compiled import CompiledModel  # noqa: E402
 from gecgen.plan.design import CRITERIA, NOISE_M, design_poses, uniform_candidates  # noqa: E402
-from gecgen.runtime.identify import identify, position_errors, structural_analysis  # noqa: E402
+from gecgen.fit.identify import identify, position_errors, structural_analysis  # noqa: E402
 from gecgen.simulate import load_truth, random_design, simulate  # noqa: E402
 from gecgen.simulate.designs import Design  # noqa: E402
 

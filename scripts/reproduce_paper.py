@@ -30,7 +30,7 @@ from gecgen.model.kinematics import target_positions  # noqa: E402
 from gecgen.model.measurements import Measurements, read_measurements  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402
 from gecgen.runtime.compiled import FAILED, CompiledModel  # noqa: E402
-from gecgen.runtime.identify import identify, position_errors, summary  # noqa: E402
+from gecgen.fit.identify import identify, position_errors, summary  # noqa: E402
 from gecgen.simulate import load_truth, simulate  # noqa: E402
 from gecgen.simulate.designs import Design  # noqa: E402
 

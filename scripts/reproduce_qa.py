@@ -8,7 +8,7 @@ the model `gecgen diagnose` builds on it from constant errors (the default model
 treatment volume's vertices by up to 0.6 mm, so a check there measures the model, not the robot).
 A daily check then measures the targets at 10 fixed configurations of the treatment volume among the
 calibration's (no patient), each day with new repeatability and tracker noise, and is scored by
-`runtime.drift.check` against the calibration, as `gecgen check` does. Each situation runs --checks
+`verify.drift.check` against the calibration, as `gecgen check` does. Each situation runs --checks
 times: the robot unchanged; a joint's zero shifted (0.2 mm on the lateral axis; 0.4 mrad on the couch
 angle, 0.2 mm at half a metre); the couch's sag changed by 0.3 mm at full extension; the tracker moved
 (0.05 deg and 0.5 mm). Check poses drawn at random, or half at the longest extension; judged
@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.api import Calibrator, Diagnoser
 from gecgen.model import load_robot
 from gecgen.model.validation import read_yaml
-from gecgen.runtime.drift import check
+from gecgen.verify.drift import check
 from gecgen.simulate import load_truth, paper_pps, paper_split, simulate
 from gecgen.simulate.designs import Design
 

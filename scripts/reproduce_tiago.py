@@ -23,7 +23,7 @@ from gecgen.loop.diagnose import diagnose
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.measurements import Measurements, read_measurements
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify, position_errors
+from gecgen.fit.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify, position_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "tiago-mocap"
@@ -130,7 +130,7 @@ def main():
                          for o in files[(day, "outside")])
              + " (inside the reader's 1 mm / 1 mrad tolerance; reported, not clipped). "
              "The motion-capture-to-base transform is registered (closed form on the nominal model, then frame 0's "
-             "errors); the marker points start from gecgen's placement estimate on the training file (`gecgen/runtime/placement.py`, nominal model) "
+             "errors); the marker points start from gecgen's placement estimate on the training file (`gecgen/fit/placement.py`, nominal model) "
              "and frame 8's errors refine them. `gecgen gravity` then appends the static gravity torque on arm_2..arm_7 "
              "(`tau_<joint>`, N m: the URDF's link masses at the measured joints, nominal kinematics), the load "
              "signal of the elastic model and of diagnose; over the training postures: "
@@ -360,9 +360,9 @@ def _target_verdict(rows, by_tol, diags, by_split) -> list[str]:
 
 
 def _errors_by_range(calib_path: Path, val_csv: Path, outside: np.ndarray) -> tuple[float, float]:
-    from gecgen.runtime import calibration
+    from gecgen.fit import calibration
     from gecgen.runtime.compiled import CompiledModel
-    from gecgen.runtime.identify import position_errors
+    from gecgen.fit.identify import position_errors
 
     calib = calibration.load(calib_path)
     val = read_measurements(val_csv, calib.robot)

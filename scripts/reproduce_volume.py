@@ -31,9 +31,9 @@ from gecgen.api import Calibrator
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.validation import read_yaml
 from gecgen.model.volume import load_volume
-from gecgen.runtime.identify import to_world
+from gecgen.fit.identify import to_world
 from gecgen.runtime.processes import mapped
-from gecgen.runtime.volume import accuracy, random_poses
+from gecgen.verify.volume import accuracy, random_poses
 from gecgen.simulate import (Design, joined, load_truth, one_at_a_time, paper_data, paper_pps, paper_split, simulate,
                              true_tool_points)
 
@@ -168,7 +168,7 @@ TOLERANCES = (0.2, 0.25, 0.3, 0.4, 0.5)
 
 def verdict_at(case: dict, tolerance_mm: float) -> str:
     """The verdict `gecgen accuracy` gives a statement of this run against another tolerance: its rule
-    (`runtime.volume.state`) on the bound, the low quantile, the measured error and the reasons that
+    (`verify.volume.state`) on the bound, the low quantile, the measured error and the reasons that
     do not depend on the tolerance."""
     said = [r for r in case["reasons"]]
     if any(WHY[n](r) for n in BLOCKS for r in said):
@@ -461,7 +461,7 @@ def main():
         "last two cases sweep roll and pitch as well in the training design (each alone from home, "
         f"{np.degrees(ROLL_PITCH_STEP):.0f} deg steps over its limits, both payloads: compensation moves them, the "
         f"paper's design never does), and hold out {IN_VOLUME} poses drawn at random over the volume "
-        "(`gecgen.runtime.volume.random_poses`: a configuration and one payload each), measured at the three targets.",
+        "(`gecgen.verify.volume.random_poses`: a configuration and one payload each), measured at the three targets.",
         "",
         *signed_summary(results, list(cases)),
         "",

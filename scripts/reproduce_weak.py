@@ -17,8 +17,8 @@ from gecgen.model import load_robot
 from gecgen.model.validation import read_yaml
 from gecgen.simulate import load_truth, simulate
 from gecgen.simulate.designs import constant_orientation
-from gecgen.runtime.identify import identify
-from gecgen.runtime.weak import PLAUSIBLE_M, PLAUSIBLE_RAD
+from gecgen.fit.identify import identify
+from gecgen.fit.weak import PLAUSIBLE_M, PLAUSIBLE_RAD
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,8 +10,8 @@ from conftest import ROBOTS
 
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.measurements import read_measurements
-from gecgen.runtime import calibration
-from gecgen.runtime.registration import IDENTITY
+from gecgen.fit import calibration
+from gecgen.fit.registration import IDENTITY
 
 PPS = (ROBOTS / "pps.yaml").read_text()
 TIAGO = (ROBOTS / "tiago.yaml").read_text()

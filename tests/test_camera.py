@@ -10,7 +10,7 @@ from gecgen.model import load_error_model, load_robot
 from gecgen.model.cameras import Board, Camera, read_board, read_cameras
 from gecgen.model.pixels import read_pixels, write_pixels
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.runtime.camera import CAMERA_POSE, SCALE, _Problem, fit_pixels, fitted_tools, frame_robot
+from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, fit_pixels, fitted_tools, frame_robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
@@ -247,8 +247,8 @@ def test_eye_to_hand_places_a_marker_left_to_estimate(arm):
 
 def test_a_pixel_calibration_exports(arm, tmp_path):
     from conftest import run_json
-    from gecgen.runtime.calibration import save
-    from gecgen.runtime.camera import calibration_of
+    from gecgen.fit.calibration import save
+    from gecgen.fit.camera import calibration_of
 
     robot, truth, model = arm
     rig, *_, data = hand_rig(arm, n=40)

@@ -9,7 +9,7 @@ from gecgen.model import load_error_model, load_robot
 from gecgen.model.cameras import Board, Camera
 from gecgen.model.pixels import read_pixels
 from gecgen.model.validation import read_yaml
-from gecgen.runtime.camera import fit_pixels
+from gecgen.fit.camera import fit_pixels
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import camera_frame_points, eye_in_hand, render_board, true_tools
 

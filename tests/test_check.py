@@ -1,4 +1,4 @@
-"""`gecgen check`: a short QA measurement against a calibration (gecgen/runtime/drift.py): pass or fail,
+"""`gecgen check`: a short QA measurement against a calibration (gecgen/verify/drift.py): pass or fail,
 beyond noise or not, and what a change looks like - a moved tracker, a joint that slipped."""
 from __future__ import annotations
 

@@ -261,7 +261,7 @@ def test_simulate_identify_and_compensate_through_the_cli(tmp_path, capsys):
 def test_the_table_gives_the_readings_zero_offsets_through_the_couplings(fanuc):
     """An offset of reading J2 turns joints 2 and 3 (J3 = J2 + J3): the table's J2 holds it and J3
     stays zero, as the controller needs them."""
-    from gecgen.runtime.export import table
+    from gecgen.deliver.export import table
 
     spec = {"seed": 1, "joint_offsets": {"values": [0.0, 1e-3, 0.0, -5e-4, 0.0, 0.0]},
             "noise": {"repeatability": 1e-6, "tracker": 1e-6}}

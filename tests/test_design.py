@@ -13,7 +13,7 @@ from gecgen.model import load_error_model, load_robot
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.plan import design as D
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify, position_errors, rows_H_and_residual
+from gecgen.fit.identify import identify, position_errors, rows_H_and_residual
 from gecgen.simulate import load_truth, random_design, simulate
 
 CONTRACT_KEYS = {"n_poses", "criterion", "value", "random_value"}

@@ -16,9 +16,9 @@ from gecgen.cli import main
 from gecgen.model import load_robot
 from gecgen.model.kinematics import constant, error_transform, frames, target_positions
 from gecgen.model.urdf import folded_copy
-from gecgen.runtime import calibration
+from gecgen.fit import calibration
 from gecgen.runtime.compiled import compiler
-from gecgen.runtime.export import MDEG_PER_RAD, constant_errors
+from gecgen.deliver.export import MDEG_PER_RAD, constant_errors
 
 pin = pytest.importorskip("pinocchio")
 
@@ -272,7 +272,7 @@ def test_urdf_of_an_elastic_calibration_states_what_leaving_the_load_terms_out_c
     calibration, and its figures are pinocchio's forward kinematics of the written URDF, scored
     against the measured points by hand."""
     from gecgen.api import read_measurements
-    from gecgen.runtime.identify import to_world
+    from gecgen.fit.identify import to_world
 
     robot_file = ur10_file(tmp_path)
     (tmp_path / "truth.yaml").write_text("seed: 3\nmasses: urdf\nconstant: {translation_std: 5.0e-4, rotation_std: "

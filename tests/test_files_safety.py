@@ -15,9 +15,9 @@ from gecgen.cli import main
 from gecgen.emit import render
 from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.kinematics import target_positions
-from gecgen.runtime import calibration
+from gecgen.fit import calibration
 from gecgen.runtime.compiled import CompiledModel, load_casadi_module, model_key, shared_library
-from gecgen.runtime.identify import redundancy
+from gecgen.fit.identify import redundancy
 
 
 @pytest.fixture

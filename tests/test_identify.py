@@ -13,9 +13,9 @@ from gecgen.cli import main
 from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, read_measurements, write_measurements
-from gecgen.runtime import calibration
+from gecgen.fit import calibration
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify, redundancy
+from gecgen.fit.identify import identify, redundancy
 
 
 def simulate(robot, n_poses, rng, eps, targets=None, noise=0.0, fixed=(), offset=None):
@@ -88,7 +88,7 @@ def test_truth_within_three_sigma_and_chi_square(rng):
     q = random_q(robot, rng, 50)
     p_true = target_positions(robot, q, truth)
     p_fit = cm.model_targets(q, None, None, fit.c)
-    from gecgen.runtime.identify import prediction_std
+    from gecgen.fit.identify import prediction_std
 
     sd = prediction_std(cm, fit, q)
     err = np.linalg.norm(p_true - p_fit, axis=2)
@@ -114,7 +114,7 @@ def test_streaming_blocks_give_the_same_fit(rng):
     robot = load_robot(ROBOTS / "industrial6r.yaml")
     cm = CompiledModel(robot, load_error_model(ROBOTS / "industrial6r.errors.yaml", robot))
     data = simulate(robot, 150, rng, rng.normal(0, 5e-4, robot.n_errors), noise=2e-5)
-    import gecgen.runtime.identify as ident
+    import gecgen.fit.identify as ident
 
     whole = identify(cm, data)
     old = ident.BLOCK_POSES

@@ -1,4 +1,4 @@
-"""ISO 9283 pose characteristics (gecgen/runtime/iso9283.py): the standard's formulas against hand
+"""ISO 9283 (gecgen/plan/iso9283.py, gecgen/verify/iso9283.py): the standard's formulas against hand
 computations on small tables, the test cube of the PUMA 560, and a simulated perfect robot."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 from gecgen.model import load_robot
 from gecgen.model.kinematics import tool_poses
 from gecgen.model.validation import ModelError
-from gecgen.runtime.iso9283 import (CYCLES, PLANES, command_table, cube_corners, distance_characteristics, plan_cube,
-                                    plane_points, pose_characteristics)
+from gecgen.plan.iso9283 import CYCLES, PLANES, command_table, cube_corners, plan_cube, plane_points
+from gecgen.verify.iso9283 import distance_characteristics, pose_characteristics
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 #: the tool pointing down (its z along the world's -z), x along the world's x

@@ -11,7 +11,8 @@ from pathlib import Path
 
 GECGEN = Path(__file__).resolve().parents[1] / "gecgen"
 #: the packages from the bottom up (docs/reference.md, "Layout"): each may import those before it
-LAYERS = ("version", "model", "symbolic", "emit", "runtime", "loop", "simulate", "plan", "deliver", "report", "api", "cli")
+LAYERS = ("version", "model", "symbolic", "emit", "runtime", "fit", "loop", "simulate", "plan", "verify", "deliver", "report",
+          "api", "cli")
 
 
 def _modules() -> dict[str, set[str]]:

@@ -16,7 +16,7 @@ from gecgen.cli import main
 from gecgen.model import ModelError, load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, read_measurements, write_measurements
-from gecgen.runtime.placement import estimate_placement
+from gecgen.fit.placement import estimate_placement
 from scipy.spatial.transform import Rotation
 
 ROBOT = ROBOTS / "industrial6r.yaml"
@@ -143,7 +143,7 @@ def test_large_data_is_placed_from_rows_spread_through_every_stationing():
     them, each stationing and target keeping its share and at least MIN_STATION_ROWS (all of fewer),
     so that a small station still gets its frame and a rarely measured target its place; only the
     chosen rows of the chosen poses are kept; smaller data is used whole."""
-    from gecgen.runtime.placement import MIN_STATION_ROWS, PLACEMENT_ROWS, spread_sample
+    from gecgen.fit.placement import MIN_STATION_ROWS, PLACEMENT_ROWS, spread_sample
 
     n = 3 * PLACEMENT_ROWS // 2
     station = np.r_[np.zeros(n - 600, int), np.ones(600, int)]

@@ -19,7 +19,7 @@ from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.model.pose_targets import as_points, with_pose_targets
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify, row_errors, summary
+from gecgen.fit.identify import identify, row_errors, summary
 from gecgen.simulate import load_truth, random_design, simulate
 
 UR10 = ROBOTS.parent / "tests" / "data" / "ur10"
@@ -144,7 +144,7 @@ def test_robots_that_differ_only_in_their_targets_compile_apart(tmp_path, monkey
     derived robot (virtual targets) or placed targets once loaded the library of the robot file's
     targets, and with it their positions."""
     monkeypatch.setenv("GECGEN_CACHE", str(tmp_path))
-    from gecgen.runtime.placement import with_targets
+    from gecgen.fit.placement import with_targets
 
     robot = load_robot(UR10 / "ur10.yaml")
     model = load_error_model(None, robot)

@@ -1,5 +1,5 @@
 """Calibration without a tracker: sockets, known distances and planes (gecgen/model/relative.py,
-gecgen/runtime/relative.py, gecgen/simulate/fixtures.py).
+gecgen/fit/relative.py, gecgen/simulate/fixtures.py).
 
 The simulated robot is a Panda with geometric errors and joints that twist under gravity
 (robots/panda.truth.yaml), a ball on its hand (robots/panda_ball.yaml). The figures each test pins

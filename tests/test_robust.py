@@ -18,9 +18,9 @@ from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, write_measurements
 from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime import influence
-from gecgen.runtime.identify import _fit_failures, identify, position_errors, redundancy
-from gecgen.runtime.registration import Registration
+from gecgen.fit import influence
+from gecgen.fit.identify import _fit_failures, identify, position_errors, redundancy
+from gecgen.fit.registration import Registration
 from gecgen.simulate import load_truth, random_design, simulate
 
 DATA = ROBOTS.parent / "tests" / "data"
@@ -146,7 +146,7 @@ def test_absurd_or_undetermined_values_are_failures(arm):
 def test_an_absurd_error_at_one_pose_of_many_is_found_block_by_block(arm):
     """absurd_error reads the poses in blocks (its memory does not grow with the data): one pose in
     the last block, where a joint term's coefficient makes a 1 m translation error, is enough."""
-    from gecgen.runtime.identify import BLOCK_POSES, absurd_error
+    from gecgen.fit.identify import BLOCK_POSES, absurd_error
 
     robot, cm, train, val = arm
     names = cm.model.coefficient_names(robot)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from gecgen.model import ModelError
-from gecgen.runtime import significance
+from gecgen.fit import significance
 
 
 def brute_force(A, b):
@@ -105,7 +105,7 @@ def test_the_refit_begins_from_the_fits_own_analysis_and_finds_the_same():
 
     from gecgen.model import load_error_model, load_robot
     from gecgen.runtime.compiled import CompiledModel
-    from gecgen.runtime.identify import identify
+    from gecgen.fit.identify import identify
     from gecgen.model.validation import read_yaml
     from gecgen.simulate import load_truth, random_design, simulate
 

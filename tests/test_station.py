@@ -14,7 +14,7 @@ from gecgen.model import ModelError, load_error_model, load_robot
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, read_measurements, write_measurements
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import identify, position_errors
+from gecgen.fit.identify import identify, position_errors
 
 ROBOT = ROBOTS / "industrial6r.yaml"
 CONSTANT = ROBOTS / "constant.errors.yaml"

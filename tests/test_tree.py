@@ -108,7 +108,7 @@ def test_the_identifiable_count_of_the_tree_is_its_structural_count(talos, rng):
     the redundancy analysis's greedy rank test), and it is what the tree's structure gives: a chain's
     4 per revolute joint and 6 per tip point set (here 3 per single-point tip, 6 with two points), less
     nothing for the shared trunk, whose errors both branches see."""
-    from gecgen.runtime.identify import structural_analysis
+    from gecgen.fit.identify import structural_analysis
 
     model = load_error_model(None, talos)
     cm = CompiledModel(talos, model, backend="c")
@@ -339,8 +339,8 @@ def test_export_of_a_tree(talos, tmp_path, capsys):
     urdf = json.loads(capsys.readouterr().out)["urdf"]
     assert urdf["tip_links"] == {"left": "arm_left_7_link", "right": "arm_right_7_link"}
     assert urdf["tool_links"] == {t: f"{talos.branches[talos.branch_of(t)].tip_link}_{t}" for t in talos.targets}
-    from gecgen.runtime.calibration import load as load_calibration
-    from gecgen.runtime.export import constant_errors
+    from gecgen.fit.calibration import load as load_calibration
+    from gecgen.deliver.export import constant_errors
 
     eps = constant_errors(load_calibration(tmp_path / "c.json"))
     model = pin.buildModelFromUrdf(str(tmp_path / "x.urdf"))

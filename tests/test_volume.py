@@ -1,4 +1,4 @@
-"""Accuracy over a declared volume (`gecgen accuracy`, gecgen/runtime/volume.py): the volume file, its
+"""Accuracy over a declared volume (`gecgen accuracy`, gecgen/verify/volume.py): the volume file, its
 sampling, the rows of a tool-box point, the Monte Carlo bound against a closed form, the unmodelled
 error read as a tool motion, and the statement against the true worst error of simulated robots."""
 from __future__ import annotations
@@ -19,8 +19,8 @@ from gecgen.model.measurements import write_measurements
 from gecgen.model.validation import read_yaml
 from gecgen.model.volume import load_volume
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import to_world
-from gecgen.runtime.volume import (Unmodelled, _placed, accuracy, affine_model, measured, order_statistic,
+from gecgen.fit.identify import to_world
+from gecgen.verify.volume import (Unmodelled, _placed, accuracy, affine_model, measured, order_statistic,
                                    point_rows, poses_needed, random_poses, sample, state, unmodelled,
                                    worst_over_draws)
 from gecgen.simulate import (Design, joined, load_truth, one_at_a_time, paper_data, paper_pps, paper_split, simulate,

@@ -1,10 +1,10 @@
-"""Weakly determined directions (gecgen/runtime/weak.py): what the data and the noise cannot hold is
+"""Weakly determined directions (gecgen/fit/weak.py): what the data and the noise cannot hold is
 found, held and named, and the fit converges on what they determine.
 
 The measurement designs are those that leave such directions (gecgen/simulate/designs.py): a laser
 tracker measuring one reflector while the tool keeps its orientation (a grid in space, or a plane),
 a joint that barely moves, sockets without a known distance; and a tool that turns by only a few
-mrad, which places its target weakly (gecgen/runtime/placement.py).
+mrad, which places its target weakly (gecgen/fit/placement.py).
 """
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ from gecgen import api
 from gecgen.model import load_error_model, load_robot
 from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import _fit_failures, absurd_error, identify
-from gecgen.runtime.inputs import placed
-from gecgen.runtime.weak import PLAUSIBLE_M, PLAUSIBLE_RAD, tool_turn
+from gecgen.fit.identify import _fit_failures, absurd_error, identify
+from gecgen.fit.inputs import placed
+from gecgen.fit.weak import PLAUSIBLE_M, PLAUSIBLE_RAD, tool_turn
 from gecgen.simulate import load_truth, simulate
 from gecgen.simulate.designs import barely_moving, constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures

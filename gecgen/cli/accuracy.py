@@ -1,7 +1,7 @@
 """`gecgen accuracy CALIB VOLUME DATA [--val VAL] [--tolerance-mm T] [--noise-mm S] [--plot MAP.png]`.
 
 The accuracy statement over a declared volume (gecgen/model/volume.py for the file,
-gecgen/runtime/volume.py for the method): the volume is sampled, the compensated error's worst over it
+gecgen/verify/volume.py for the method): the volume is sampled, the compensated error's worst over it
 is bounded with a stated confidence from the coefficients' covariance and the residual the model
 leaves, and judged against the tolerance: meets, does not meet, or cannot tell; and where in the
 volume the error is largest.
@@ -66,7 +66,7 @@ def _stated(args, caught: list, status) -> dict:
     from gecgen.model.validation import require
     from gecgen.model.volume import load_volume
     from gecgen.report.verdict import accuracy_next_step
-    from gecgen.runtime.volume import accuracy
+    from gecgen.verify.volume import accuracy
 
     cal = load_calibration(args.calibration)
     calib = cal.calibration_
@@ -119,7 +119,7 @@ def _positions(path: str, calib):
     """Measurements at path and their points in the calibration's world (m); positions only."""
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
-    from gecgen.runtime.identify import to_world
+    from gecgen.fit.identify import to_world
 
     data = read_measurements(path, calib.robot)
     require(data.relative is None and data.orientation is None,

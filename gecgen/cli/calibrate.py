@@ -65,7 +65,7 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     from gecgen.api import calibrate, model_names
     from gecgen.model.files import write_atomically
     from gecgen.loop.diagnose import write_error_model
-    from gecgen.runtime import export
+    from gecgen.deliver import export
     from gecgen.runtime.compiled import CompiledModel
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")

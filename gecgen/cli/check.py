@@ -2,7 +2,7 @@
 a QA check of a calibrated robot.
 
 A short measurement taken later (5 to 10 poses: a daily check of a patient positioner) against the
-calibration, in its tracker frame (gecgen/runtime/drift.py): pass or fail against the tolerance,
+calibration, in its tracker frame (gecgen/verify/drift.py): pass or fail against the tolerance,
 whether the difference is beyond the calibration's noise, and what it looks like (the tracker moved:
 a rigid motion; the robot changed: the joint whose offset explains it). With --history, the check is
 appended to a CSV of checks and the history is plotted beside it (H.png).
@@ -45,9 +45,9 @@ def run(args) -> dict:
     from gecgen.api import load_calibration
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
-    from gecgen.runtime.drift import at_check_joints, check
-    from gecgen.runtime.identify import to_world
-    from gecgen.runtime.inputs import checked
+    from gecgen.verify.drift import at_check_joints, check
+    from gecgen.fit.identify import to_world
+    from gecgen.fit.inputs import checked
 
     cal = load_calibration(args.calibration)
     calib = cal.calibration_
@@ -89,7 +89,7 @@ def _baseline(path: str, calib, data):
 
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import ModelError, require
-    from gecgen.runtime.identify import to_world
+    from gecgen.fit.identify import to_world
 
     base = read_measurements(path, calib.robot)
     require(base.relative is None and base.orientation is None,

@@ -19,7 +19,7 @@ CALIBRATION_HELP = "calibration JSON written by gecgen identify or calibrate"
 
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
     """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
-    from gecgen.runtime.inputs import error_model
+    from gecgen.fit.inputs import error_model
 
     robot = load_robot(robot_path)
     return robot, error_model(errors, robot, aux_columns)

@@ -27,7 +27,8 @@ def add_parser(command):
 def run(args) -> dict:
     from gecgen.emit import robot_model_hash
     from gecgen.model.files import write_atomically
-    from gecgen.runtime import calibration, export
+    from gecgen.fit import calibration
+    from gecgen.deliver import export
     from gecgen.runtime.compiled import CompiledModel
 
     if not (args.c or args.urdf or args.table):
@@ -65,7 +66,7 @@ def _cost(args) -> dict:
     --val against the full calibration: {data set: {data, calibration_rms_mm, exported_rms_mm,
     calibration_max_mm, exported_max_mm}}, each scored in the calibration's tracker frame."""
     from gecgen.api import load_calibration
-    from gecgen.runtime import export
+    from gecgen.deliver import export
 
     full, exported = load_calibration(args.calibration), load_calibration(args.calibration)
     exported._set(export.rigid_part(exported.calibration_))

@@ -2,7 +2,7 @@
 `gecgen iso9283 ROBOT --plan PLAN.csv --measured DATA.csv [--after DATA2.csv] [--calibration CALIB.json]`: its
 characteristics, before and after compensation.
 
-The plan (gecgen/runtime/iso9283.py) is the standard's test cube, its five points and the cycles, as
+The plan (gecgen/plan/iso9283.py) is the standard's test cube, its five points and the cycles, as
 joint commands in visiting order (`cycle, point, q1..qn`, plus `pose`, the row's pose id). Run it on
 the robot as it is (the "before" test), or its compensated commands (`gecgen compensate CALIB
 PLAN.csv`, the "after" test, `--after`), and measure a target at every row: a measurement file whose
@@ -79,7 +79,7 @@ def _plan(robot, args) -> dict:
 
     from gecgen.model.measurements import write_csv
     from gecgen.model.validation import ModelError
-    from gecgen.runtime.iso9283 import command_table, plan_cube
+    from gecgen.plan.iso9283 import command_table, plan_cube
 
     try:
         rpy = [float(v) for v in args.tool_rpy.split(",")]
@@ -101,7 +101,7 @@ def _characteristics(robot, args) -> dict:
     from gecgen.model.measurements import pose_id_column
     from gecgen.model.table import at, read_table
     from gecgen.model.validation import ModelError, require
-    from gecgen.runtime.iso9283 import ORDER
+    from gecgen.plan.iso9283 import ORDER
 
     table = read_table(args.plan, "ISO 9283 plan", "pose, cycle, point, q1..qn")
     for col in ("pose", "cycle", "point", *(f"q{j + 1}" for j in range(robot.n))):
@@ -138,7 +138,7 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
     from gecgen.model.kinematics import target_positions, tool_poses
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import ModelError, require
-    from gecgen.runtime.iso9283 import distance_characteristics, pose_characteristics
+    from gecgen.verify.iso9283 import distance_characteristics, pose_characteristics
 
     data = read_measurements(measured, robot)
     require(data.relative is None, f"{data.source}: the ISO 9283 test compares measured positions; give x y z on "
@@ -163,7 +163,7 @@ def _run_characteristics(robot, calibration: str | None, measured, plan_where: s
     y = data.xyz
     if calibration:
         from gecgen.api import load_calibration
-        from gecgen.runtime.identify import to_world
+        from gecgen.fit.identify import to_world
 
         y = to_world(load_calibration(calibration).calibration_.frames, data)
     row = np.array([plan_row[int(p)] for p in data.pose_ids])[data.pose]  # the plan row of every measured point

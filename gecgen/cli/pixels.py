@@ -1,5 +1,5 @@
 """`gecgen identify ROBOT PIXELS.csv --cameras CAMERAS.yaml [--board BOARD.yaml]`: a calibration from image
-points (`runtime.camera`), written as identify writes one."""
+points (`fit.camera`), written as identify writes one."""
 from __future__ import annotations
 
 from gecgen.model.validation import require
@@ -17,8 +17,8 @@ def identified(args) -> dict:
     from gecgen.cli.common import robot_and_model
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
-    from gecgen.runtime.calibration import save
-    from gecgen.runtime.camera import calibration_of, fit_pixels, refuse_untrustworthy
+    from gecgen.fit.calibration import save
+    from gecgen.fit.camera import calibration_of, fit_pixels, refuse_untrustworthy
 
     require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
     for option in ("ridge", "rank_tol", "noise_mm", "report"):

@@ -20,8 +20,8 @@ def add_parser(command):
 def run(args) -> dict:
     if args.cameras or args.board:
         return _pixels(args)
-    from gecgen.runtime.inputs import checked, on_points, placed
-    from gecgen.runtime.identify import redundancy
+    from gecgen.fit.inputs import checked, on_points, placed
+    from gecgen.fit.identify import redundancy
 
     data = None
     if args.data:
@@ -40,7 +40,7 @@ def _pixels(args) -> dict:
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
-    from gecgen.runtime.camera import pixel_redundancy
+    from gecgen.fit.camera import pixel_redundancy
 
     require(args.cameras and args.data, "--cameras needs DATA, a pixel file, and --board goes with --cameras")
     cameras = read_cameras(args.cameras)

@@ -32,7 +32,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, MATCHING, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, identify, squared_error
+from gecgen.fit.identify import Fit, identify, squared_error
 from gecgen.runtime.processes import mapped, side_by_side
 
 FOLDS = 5

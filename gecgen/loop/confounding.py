@@ -30,7 +30,7 @@ from gecgen.model.loads import catalog
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import MATCHING, WRENCH
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit
+from gecgen.fit.identify import Fit
 
 #: a ratio coefficient whose value moves by this many of its standard deviations when the loads
 #: acting on its error are modelled (or not) absorbs load

@@ -40,8 +40,8 @@ from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import fit_frames, identify, row_errors, summary, to_world
-from gecgen.runtime.significance import T_MIN
+from gecgen.fit.identify import fit_frames, identify, row_errors, summary, to_world
+from gecgen.fit.significance import T_MIN
 from gecgen.runtime.threads import one_blas_thread
 
 #: rounds at most: a safety net, not the stopping rule (that is the statistics)

@@ -11,7 +11,7 @@ import numpy as np
 from gecgen.model.errors import ErrorModel
 from gecgen.model.measurements import Measurements
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import Fit, rows_H_and_residual
+from gecgen.fit.identify import Fit, rows_H_and_residual
 
 
 @dataclass

@@ -121,7 +121,7 @@ class Robot:
     targets: dict[str, tuple[float, float, float]]
     wrench_frame: str = "tool"
     #: targets whose placement the robot file leaves to the data (`estimate`); they sit at the tool
-    #: origin until `runtime.placement` places them, and nothing is fitted or compensated before
+    #: origin until `fit.placement` places them, and nothing is fitted or compensated before
     estimated: tuple[str, ...] = ()
     points: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     source: str = ""
@@ -136,7 +136,7 @@ class Robot:
     pose_length: float = 0.0  # m: 1 rad of orientation error counts as this much position error
     #: the frames pose measurements give, where they are not parallel to the tool frame: target ->
     #: rotation vector (rad) of the measured frame in the tool frame; estimated by
-    #: `runtime.placement` from the measured orientations, none in a robot file
+    #: `fit.placement` from the measured orientations, none in a robot file
     target_frames: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     #: trees: the parent frame of frames 1..m, the branches and each target's branch (index); all
     #: empty on a serial chain (one branch: the tool after frame m)

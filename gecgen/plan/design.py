@@ -43,8 +43,8 @@ from gecgen.model.measurements import LIMIT_TOLERANCE, Measurements, read_comman
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import qr_accumulate, rows_H_and_residual, structural_analysis
-from gecgen.runtime.redundancy import Redundancy, unexcited
+from gecgen.fit.identify import qr_accumulate, rows_H_and_residual, structural_analysis
+from gecgen.fit.redundancy import Redundancy, unexcited
 from gecgen.runtime.threads import one_blas_thread
 from gecgen.simulate.designs import random_design, with_payloads
 

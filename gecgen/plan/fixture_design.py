@@ -1,7 +1,7 @@
 """Designs for calibration without a tracker: which configurations to record in each socket and on
 each plane (`gecgen design --fixtures`).
 
-A socket's or plane's position is a nuisance the fit eliminates (`runtime.relative`), so what a set
+A socket's or plane's position is a nuisance the fit eliminates (`fit.relative`), so what a set
 of configurations tells about the coefficients is what is left once each fixture's own unknowns have
 taken their share. For fixture g with rows A_g (r per configuration over the k coefficients: a
 socket's three coordinates of H_e, a plane's normal component n^T H_e) and nuisance regressors B_g
@@ -44,7 +44,7 @@ from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.plan.design import MAX_PASSES, PASS_TOL, RIDGE, SWAP_TOL, logdet
-from gecgen.runtime.identify import structural_analysis
+from gecgen.fit.identify import structural_analysis
 from gecgen.simulate.fixtures import reach
 
 #: configurations tried per fixture (inverse kinematics from random starts)

@@ -10,7 +10,7 @@ import numpy as np
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
-from gecgen.runtime.identify import summary
+from gecgen.fit.identify import summary
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,9 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.report.blocks import (Bullets, DataSet, Drawing, Figure, Report, Residuals, Section, Table, frame_label,
                                   joint_label, joint_scale, joint_unit, joint_values, term_unit, variable)
-from gecgen.runtime.identify import filled, fit_frames, summary, to_world
+from gecgen.fit.identify import filled, fit_frames, summary, to_world
 from gecgen.runtime.processes import mapped
-from gecgen.runtime.significance import rms_interval
+from gecgen.fit.significance import rms_interval
 
 
 def residuals(stage: str, cm, data: Measurements, y: np.ndarray, c: np.ndarray | None) -> Residuals:
@@ -409,7 +409,7 @@ def diagnosed_sets(diag, data: Measurements, val: Measurements | None, register_
 def diagnose(diag, data: Measurements, val: Measurements | None, errors_out: str, register_val: bool = False,
              registration_mode: str = "auto", assessment=None, warnings: list[str] | None = None) -> Report:
     from gecgen.loop.diagnose import verdict
-    from gecgen.runtime.calibration import from_fit
+    from gecgen.fit.calibration import from_fit
 
     robot = diag.robot
     sets = diagnosed_sets(diag, data, val, register_val, registration_mode)

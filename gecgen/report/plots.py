@@ -267,7 +267,7 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
 
 
 def volume_map(robot: Robot, volume, samples, statement) -> Figure:
-    """Each sample's own bound (the confidence quantile of its error, `runtime.volume.Statement`)
+    """Each sample's own bound (the confidence quantile of its error, `verify.volume.Statement`)
     against every input the volume varies: the tool point's coordinates or the world position, each
     ranged joint, the payload; the bound on the worst in red, circling the sample where it is reached;
     the tolerance dashed."""

@@ -1,0 +1,1 @@
+"""Running the generated code: loading it, worker processes and BLAS threads."""

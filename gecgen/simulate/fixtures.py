@@ -19,7 +19,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.relative import PLANE, POINT, Distance, Relation, Relative
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime.relative import measures
+from gecgen.fit.relative import measures
 from gecgen.simulate.designs import approach_directions
 from gecgen.simulate.truth import Truth, thermal_profile, true_state
 
@@ -123,7 +123,7 @@ def simulate_fixtures(robot: Robot, truth: Truth, fixtures: Fixtures,
                       rng: np.random.Generator) -> tuple[Measurements, dict]:
     """Measurements of the fixtures on the truth robot, one pose per configuration (in the order
     sockets and planes are listed), and what seating and encoder noise alone leave of the relative
-    measures (consistency, flatness, distance errors in mm; `runtime.relative.measures` of the true
+    measures (consistency, flatness, distance errors in mm; `fit.relative.measures` of the true
     targets at the recorded joints): the floor a perfect calibration reaches."""
     require(fixtures.target in robot.targets, f"--target {fixtures.target}: not a target of {robot.name} "
                                               f"({', '.join(robot.targets)})")

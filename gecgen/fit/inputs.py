@@ -24,10 +24,10 @@ def error_model(errors, robot: Robot, aux: tuple[str, ...] = (), constant: bool 
 
 
 def placed(robot: Robot, data: Measurements):
-    """The robot with the targets the data must place placed (runtime.placement), and the placement
+    """The robot with the targets the data must place placed (fit.placement), and the placement
     or None; a warning says which targets moved and how far, and which the data would move further
     than they support (held where the robot file puts them)."""
-    from gecgen.runtime.placement import FAR_M, FAR_RAD, place_targets
+    from gecgen.fit.placement import FAR_M, FAR_RAD, place_targets
 
     robot, placement = place_targets(robot, data)
     if placement:

@@ -1,12 +1,12 @@
 """Identification from pixels: the robot's error coefficients and the cameras' poses from image points.
 
-Why a Gauss-Newton of its own rather than `runtime.identify`: identify fits 3-D points, and the
+Why a Gauss-Newton of its own rather than `fit.identify`: identify fits 3-D points, and the
 measuring frame it registers is a rigid motion solved in closed form beside the linear steps in the
 coefficients. A pixel is a perspective projection: the camera's pose enters the residual as
 nonlinearly as the coefficients do and must be stepped with them, in one system, and the residual
 is in pixels, not metres. What is shared is reused: H_e from the compiled model (`model_targets`
 with_H), the structural analysis of the error model (`identify.structural_analysis`) and the robust
-losses (`runtime.robust`).
+losses (`fit.robust`).
 
 The chain: the compiled model of the robot with four virtual targets, the tool origin and points
 FRAME_ARM along its axes, gives the tool pose of every image and its H_e; a point on the tool and
@@ -32,10 +32,10 @@ from gecgen.model.errors import ErrorModel
 from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime import robust
+from gecgen.fit import robust
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.identify import RSS_TOL, structural_analysis
-from gecgen.runtime.redundancy import Eliminated
+from gecgen.fit.identify import RSS_TOL, structural_analysis
+from gecgen.fit.redundancy import Eliminated
 
 #: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
 FRAME_ARM = 0.1
@@ -443,12 +443,12 @@ def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarr
 
 
 def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
-    """The calibration of a pixel fit (`runtime.calibration.Calibration`): coefficients in the robot's
+    """The calibration of a pixel fit (`fit.calibration.Calibration`): coefficients in the robot's
     world (the cameras' or the board's poses are in it, in `report`). Targets the robot file leaves to
     estimate are placed where the fit put them; on a carried camera, at its optical centre."""
-    from gecgen.runtime.calibration import Calibration
-    from gecgen.runtime.placement import with_targets
-    from gecgen.runtime.registration import IDENTITY
+    from gecgen.fit.calibration import Calibration
+    from gecgen.fit.placement import with_targets
+    from gecgen.fit.registration import IDENTITY
 
     placed = {n: tuple(map(float, t)) for n, t in fit.targets.items()}
     if fit.board is not None:

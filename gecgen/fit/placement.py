@@ -40,8 +40,8 @@ from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime import robust
-from gecgen.runtime.registration import kabsch
+from gecgen.fit import robust
+from gecgen.fit.registration import kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02

@@ -49,7 +49,7 @@ class Eliminated:
     param: str
     index: int
     # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes), (identify's
-    # hold) "insignificant" or (weakly determined against the noise, `runtime.weak`) "held"
+    # hold) "insignificant" or (weakly determined against the noise, `fit.weak`) "held"
     reason: str
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()

@@ -1,6 +1,6 @@
 """Weakly determined directions: what the data and the noise cannot hold, found and held.
 
-Identifiable (`runtime.redundancy`) says the data can separate a coefficient from the others at
+Identifiable (`fit.redundancy`) says the data can separate a coefficient from the others at
 all; it does not say by how much. A laser tracker measuring one reflector while the tool keeps its
 orientation separates the wrist's rotation errors from the rest only through the tool's tiny
 deviations from that orientation: the column of H_e is independent, but so nearly dependent that

@@ -23,11 +23,11 @@ from scipy.linalg import solve_triangular
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH
 from gecgen.model.validation import ModelError
-from gecgen.runtime import influence, relative, robust, weak
+from gecgen.fit import influence, relative, robust, weak
 from gecgen.runtime.compiled import CompiledModel, cache_dir, write_atomically
-from gecgen.runtime.redundancy import (RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited,
+from gecgen.fit.redundancy import (RANK_TOL, Eliminated, Redundancy, generic_design, structural, unexcited,
                                       unmeasured_frames)
-from gecgen.runtime.registration import IDENTITY, Registration, register
+from gecgen.fit.registration import IDENTITY, Registration, register
 from gecgen.runtime.threads import one_blas_thread
 
 BLOCK_POSES = 2000
@@ -67,7 +67,7 @@ class Outlier:
 
 @dataclass(frozen=True)
 class Suspect:
-    """A pose the other poses do not predict (`runtime.influence`): the file line of its first row
+    """A pose the other poses do not predict (`fit.influence`): the file line of its first row
     (header = 1), its pose id, its residual under the fit to the other poses (mm per point: a
     measured frame's orientation counted through the length scale), its F statistic and the next
     largest pose's, and the reading whose change best explains it ("q2"), that change in `unit`
@@ -131,7 +131,7 @@ class Fit:
     must not be used: each says why. suspects: the poses the other poses do not predict, each
     named in `warnings` (and in `failures`, when the fit has any). analysis: the data analysis its
     first round began from, which a refit of the same data begins from too (`Analysis`). held: the
-    weakly determined coefficients held at zero (`runtime.weak`), each named in `warnings`."""
+    weakly determined coefficients held at zero (`fit.weak`), each named in `warnings`."""
 
     c: np.ndarray
     std: np.ndarray
@@ -158,7 +158,7 @@ class Fit:
     suspects: tuple[Suspect, ...] = ()
     analysis: Analysis | None = field(default=None, repr=False, compare=False)
     #: the coefficients held at zero because the data and the noise leave their direction weakly
-    #: determined (`runtime.weak`), each with why; each is also in `redundancy.eliminated` ("held")
+    #: determined (`fit.weak`), each with why; each is also in `redundancy.eliminated` ("held")
     held: tuple[weak.Held, ...] = ()
 
     @property
@@ -191,7 +191,7 @@ def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c:
                         projected: bool = True):
     """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c; with
     point weights (R,), each point's three rows are scaled by the square root of its weight.
-    Relative rows (`runtime.relative`) have y NaN: their y is filled and, when `projected`, their
+    Relative rows (`fit.relative`) have y NaN: their y is filled and, when `projected`, their
     columns projected (else their residual is 0: the columns as absolute data would have them);
     with known_sigma_m (m) the rows of the known distances and plane relations follow the last
     block's."""
@@ -302,7 +302,7 @@ def position_errors(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.
 
 def filled(data: Measurements, y: np.ndarray, p: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """Measured points y (R, 3) with the relative rows' filled in from the modelled points p (R, 3)
-    (`runtime.relative.fill`, point weights (R,)); y itself for data without relative rows."""
+    (`fit.relative.fill`, point weights (R,)); y itself for data without relative rows."""
     return y if data.relative is None else relative.fill(data.relative, y, p, weights)
 
 
@@ -339,7 +339,7 @@ def summary(errors_m: np.ndarray, rotation_rad: np.ndarray | None = None) -> dic
 
 def fixture_measures(cm: CompiledModel, data: Measurements, c: np.ndarray | None) -> dict:
     """What the relative rows of `data` say of the model at coefficients c (None: nominal):
-    `runtime.relative.measures` (consistency, flatness, distance errors, mm)."""
+    `fit.relative.measures` (consistency, flatness, distance errors, mm)."""
     q, w, aux = _poses_inputs(cm, data)
     p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
     return relative.measures(data.relative, p)
@@ -365,8 +365,8 @@ def structural_analysis(cm: CompiledModel, targets: np.ndarray) -> Redundancy:
     is cached by content (the model's key, the analysis code, numpy's version, the targets): a
     warm run skips an H_e evaluation at generic poses, its QR, the rank test and the merges."""
     h = hashlib.sha256(json.dumps([cm.key, np.__version__, targets.tolist()]).encode())
-    runtime = Path(__file__).resolve().parent
-    for source in (runtime / "identify.py", runtime / "redundancy.py", runtime.parent / "model" / "kinematics.py"):
+    fit = Path(__file__).resolve().parent
+    for source in (fit / "identify.py", fit / "redundancy.py", fit.parent / "model" / "kinematics.py"):
         h.update(source.read_bytes())
     path = cache_dir() / f"{cm.robot.name}-structural-{h.hexdigest()[:24]}.json"
     try:
@@ -409,7 +409,7 @@ def _relative_analysis(cm: CompiledModel, data: Measurements, y: np.ndarray, c: 
                        struct: Redundancy, blocks: list, R0: np.ndarray, rank_tol: float) -> Redundancy:
     """`unexcited` for data with relative rows (their blocks and R factor R0 at coefficients c over
     the structurally kept columns): first what the same rows would excite as absolute measurements,
-    then, of that, the directions relative rows cannot see (`runtime.relative.unseen`) taken out, so
+    then, of that, the directions relative rows cannot see (`fit.relative.unseen`) taken out, so
     that a coefficient is eliminated for each, named as invisible to relative data."""
     n_targets, columns = len(np.unique(data.target)), np.array(struct.kept, int)
     unprojected = list(rows_H_and_residual(cm, data, y, c, weights=weights, projected=False))  # one block (_blocks)
@@ -450,7 +450,7 @@ def _unseen_by_relative(cm: CompiledModel, data: Measurements, red: Redundancy, 
     invisible to relative data, and why. Without a known distance or offset, the one of them that
     carries the scale is named as such (SCALE_HELD; `Fit.held` lists it): H (rows, s) the
     unprojected rows over the structurally kept columns, moves (rows, 7) what a motion and a scaling of the whole set do to
-    them (`runtime.relative.rigid`), at the column of each of red's eliminated coefficients in H."""
+    them (`fit.relative.rigid`), at the column of each of red's eliminated coefficients in H."""
     seen = set(absolute.kept)
     names = [e.split(".")[0] for e in cm.robot.error_names()]
     scale = ("" if data.relative.distances or any(x.kind == "offset" for x in data.relative.relations) else
@@ -605,7 +605,7 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
 
     Stops when a Gauss-Newton step changes the modelled points by less than step_tol_m (rms) or
     lowers the objective by a negligible share; `progress(iteration, rms_mm)` is called after each
-    step when given. `loss` (see `runtime.robust`): with `cauchy` (default) or `huber` every step
+    step when given. `loss` (see `fit.robust`): with `cauchy` (default) or `huber` every step
     is a reweighted least-squares step, the registration too is robust, and the points beyond the
     outlier limit are down-weighted and listed in `Fit.outliers`; `l2` is plain least squares.
     `ridge` > 0 adds ridge * |x|^2 to the least squares, x the coefficients scaled by their
@@ -615,12 +615,12 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
     `redundancy.unexcited`). Choose either with `choose`. The result is never silently wrong:
     `Fit.failures` says why it must not be used (non-convergence, undetermined or absurd values).
     `hold` ({coefficient index: why}) holds those coefficients at zero, listed as eliminated for
-    being insignificant (`runtime.significance`), or, where why is a `weak.Held`, as weakly determined
+    being insignificant (`fit.significance`), or, where why is a `weak.Held`, as weakly determined
     (a refit keeps what its fit held, `Fit.held`); `analysis`, the `Fit.analysis` of an earlier fit
     of the same compiled model and data, spares the first round's analysis where it would repeat it.
     hold_weak (default): when the fit cannot be trusted (it does not converge, or carries an absurd
     or undetermined value), it is redone with the coefficients whose direction the data determine too
-    weakly against the noise to hold a plausible value held at zero (`runtime.weak`; noise_m the
+    weakly against the noise to hold a plausible value held at zero (`fit.weak`; noise_m the
     instrument's noise per coordinate, m, when known, else estimated), each listed in `Fit.held`
     with why; that fit is returned when it holds some and fails for fewer reasons. Not when the
     failure names a pose the others do not predict (`Fit.suspects`): a glitch is fixed in the data.
@@ -746,10 +746,10 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     """`identify` with the station frames held: Gauss-Newton on the coefficients, robustly weighted,
     from c = 0, the redundancy analysed at coefficients `at` (default 0; at 0, `analysis` where it serves).
     The robust unit is the measured row (`model.rows.Rows`): a point, or a frame whose
-    residual length is scaled to three degrees of freedom and counts twice (`runtime.robust`).
+    residual length is scaled to three degrees of freedom and counts twice (`fit.robust`).
     With hold_weak, the coefficients whose direction the data determine weakly against the noise
     (noise_m, m per coordinate; None: the linearised fit's residual) are held at zero first
-    (`runtime.weak`)."""
+    (`fit.weak`)."""
     notes = []
     y = to_world(frames, data)
     nc = cm.dims.nc
@@ -921,7 +921,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
 
 def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.ndarray, scale: np.ndarray, m: float,
                noise_m: float | None) -> tuple[Redundancy, list[int], tuple[weak.Held, ...]]:
-    """`red` with the weakly determined coefficients (`runtime.weak`) moved from kept to eliminated
+    """`red` with the weakly determined coefficients (`fit.weak`) moved from kept to eliminated
     ("held"), the positions in red.kept of those left, and the held coefficients with why. R (k+1,
     k+1): the R factor of [H / scale | r] over red.kept at the fit's start, from m degrees of
     freedom. The noise is noise_m (m per coordinate) or, unknown, what the linearised fit over
@@ -947,7 +947,7 @@ def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.nda
 @dataclass(frozen=True)
 class _Known:
     """The rows of the known distances and plane relations of relative data in a fit
-    (`runtime.relative.known_rows`): n of them, weighed against rows of per-coordinate noise sigma_m
+    (`fit.relative.known_rows`): n of them, weighed against rows of per-coordinate noise sigma_m
     (m; None without any)."""
 
     cm: CompiledModel
@@ -978,7 +978,7 @@ READING_STEP = 1e-6
 
 def _suspects(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, w: np.ndarray, kept: np.ndarray,
               scale: np.ndarray, Rk: np.ndarray, rss: float, m: float, dof: np.ndarray) -> tuple[Suspect, ...]:
-    """The poses the other poses do not predict (`runtime.influence`) in the fit at coefficients c
+    """The poses the other poses do not predict (`fit.influence`) in the fit at coefficients c
     (point weights w (R,), kept columns scaled by scale, R factor Rk, residual sum of squares rss
     (m^2) over m degrees of freedom, dof (R,) per point), each with the reading that explains it."""
     order = np.argsort(data.pose, kind="stable")  # the point order of rows_H_and_residual

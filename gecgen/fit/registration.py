@@ -5,7 +5,7 @@ the robot world. The closed form (Kabsch/Umeyama without scale) on the nominal m
 data into the robot world; what is left is small and belongs to frame 0's generalized errors.
 A few gross points (a row swapped with another pose's, metres away) would tilt a least-squares
 registration and every residual with it, so the closed form is iterated with robust weights
-(`runtime.robust`): the gross points fall out of it before the fit starts.
+(`fit.robust`): the gross points fall out of it before the fit starts.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.validation import ModelError
-from gecgen.runtime import robust
+from gecgen.fit import robust
 
 #: beyond these the measurement frame counts as "far" and is registered before the fit
 FAR_ANGLE_RAD = np.radians(1.0)
@@ -85,7 +85,7 @@ ROBUST_PASSES = 20
 
 
 def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str, prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """`kabsch` iterated with robust point weights (`runtime.robust`) times the prior weights (N,)
+    """`kabsch` iterated with robust point weights (`fit.robust`) times the prior weights (N,)
     (default 1; the vertices of a measured frame have 1/4); plain weighted Kabsch for l2."""
     prior = np.ones(len(p)) if prior is None else prior
     R, t = kabsch(p, y, prior)
@@ -117,7 +117,7 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
     """Registration of measured points y onto nominal model points (N, 3), weighted by `prior` (N,).
 
     mode: "auto" applies it when the frames are far apart (over 1 degree or 20 mm), "always",
-    or "never" (the data is already in the robot world frame). loss: see `runtime.robust`.
+    or "never" (the data is already in the robot world frame). loss: see `fit.robust`.
     """
     if mode not in ("auto", "always", "never"):
         raise ValueError(f"registration mode {mode!r}: use auto, always or never")

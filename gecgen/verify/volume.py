@@ -42,7 +42,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import require
 from gecgen.model.volume import Volume
-from gecgen.runtime.calibration import Calibration, extrapolation
+from gecgen.fit.calibration import Calibration, extrapolation
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, CompiledModel
 
 #: place_at: a sample is solved when the point is this close to its place (m) within the limits

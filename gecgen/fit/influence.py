@@ -3,7 +3,7 @@
 A joint-encoder glitch (one pose's reading off by a few hundredths of a radian) moves every target
 of that pose along the joint's column of the pose Jacobian. The fit has k coefficients for m
 measured coordinates, so it bends towards the pose (its leverage) and the residual left at the pose
-can stay below the outlier limit (`runtime.robust`) while the coefficients carry the glitch: on
+can stay below the outlier limit (`fit.robust`) while the coefficients carry the glitch: on
 figaroh's 23 UR10 poses a 0.02 rad glitch of one reading leaves a 14 mm residual, under the 15 mm
 limit, and raises the RMS from 2.7 to 4.6 mm.
 
@@ -28,7 +28,7 @@ pose: 2.9 times), as it is hard to tell from misfit.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special  # not scipy.stats: see runtime.robust
+from scipy import special  # not scipy.stats: see fit.robust
 from scipy.linalg import solve_triangular
 
 #: Bonferroni-corrected p-value below which a pose's deleted residual is significant

@@ -24,9 +24,9 @@ import numpy as np
 from gecgen.model.kinematics import constant, error_transform
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import require
-from gecgen.runtime.calibration import Calibration, model_hash
+from gecgen.fit.calibration import Calibration, model_hash
 from gecgen.runtime.compiled import OK, CompiledModel, rendered
-from gecgen.runtime.redundancy import generic_design
+from gecgen.fit.redundancy import generic_design
 
 #: the example program's compensation settings: `gecgen compensate`'s (Newton steps, residual m),
 #: and how many random commands it tries when the middle of the training ranges is singular

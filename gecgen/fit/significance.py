@@ -1,6 +1,6 @@
 """Which identified coefficients the data determine: t statistics and backward elimination.
 
-Identifiable (`runtime.redundancy`) says the data can separate a coefficient from the others;
+Identifiable (`fit.redundancy`) says the data can separate a coefficient from the others;
 it does not say they hold its value. A coefficient whose value is within two standard deviations
 of zero (t = |c| / std below 2) is not determined: its value is what noise and misfit put there
 (on figaroh's 23 real UR10 poses, 26 of the 30 identifiable coefficients, 22 of them with a std at
@@ -23,7 +23,7 @@ import warnings
 import numpy as np
 from scipy import special
 
-from gecgen.runtime.identify import identify
+from gecgen.fit.identify import identify
 
 #: a coefficient is determined by the data when |value| / std is at least this (about 95 % two-sided)
 T_MIN = 2.0

@@ -23,7 +23,7 @@ from scipy import special
 
 from gecgen.model.measurements import Measurements
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.runtime.registration import kabsch
+from gecgen.fit.registration import kabsch
 
 #: a difference is beyond noise when noise alone makes one as large with less than this probability
 ALPHA = 0.01

@@ -24,9 +24,9 @@ from gecgen.model.errors import ErrorModel, error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.robot_file import load_robot
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime.identify import Fit
-from gecgen.runtime.placement import with_targets
-from gecgen.runtime.registration import Registration
+from gecgen.fit.identify import Fit
+from gecgen.fit.placement import with_targets
+from gecgen.fit.registration import Registration
 
 
 def model_hash(robot: Robot, model: ErrorModel) -> str:
@@ -177,7 +177,7 @@ def _robot(d: dict, path: Path) -> Robot:
 
 def _targets(robot: Robot, d, where: str, frames=None) -> Robot:
     """The robot with the targets the calibration was fitted with: those the robot file leaves to
-    estimate, or that the data placed elsewhere (runtime.placement), and the measured frames of
+    estimate, or that the data placed elsewhere (fit.placement), and the measured frames of
     pose data the data turned (`frames`, target -> rotation vector, rad). A file written before
     targets were recorded holds the robot file's."""
     turned = {}

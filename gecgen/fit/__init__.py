@@ -1,0 +1,1 @@
+"""Fitting a calibration to measurements: registration, placement, redundancy, identification, significance."""
