@@ -7,6 +7,7 @@ function alike: a function-level import defers the circle, it does not remove it
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 GECGEN = Path(__file__).resolve().parents[1] / "gecgen"
@@ -67,3 +68,25 @@ def test_no_import_circle():
         if m not in state:
             visit(m, [m])
     assert not circles, circles
+
+
+def test_every_command_imports_only_the_packages_of_its_work():
+    """docs/reference.md's table "Where each command's work happens" is the rule: a command's module
+    imports the packages of its row, the nouns (model), the reports and the API, nothing else; the
+    modules not named after a command are the ones several share."""
+    from gecgen.cli import COMMANDS
+
+    text = (GECGEN.parent / "docs" / "reference.md").read_text()
+    rows = text[text.index("| command | package of its work |"):].split("\n\n")[0].splitlines()[2:]
+    allowed = {}
+    for row in rows:
+        commands, work = row.strip("|").split("|")
+        for command in re.findall(r"`([a-z0-9]+)`", commands):
+            allowed[command] = set(re.findall(r"`([a-z]+)`", work)) | {"model", "report", "api", "cli", "version"}
+    assert set(allowed) == set(COMMANDS), set(allowed) ^ set(COMMANDS)
+    graph = _modules()
+    for command, (module, _) in COMMANDS.items():
+        used = {_layer(m) for m in graph[f"gecgen.cli.{module}"]}
+        assert used <= allowed[command], (command, used - allowed[command])
+    shared = {m.split(".")[2] for m in graph if m.startswith("gecgen.cli.")} - {m for m, _ in COMMANDS.values()}
+    assert shared == {"__main__", "common", "human", "register", "pixels"}, shared

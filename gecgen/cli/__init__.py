@@ -90,7 +90,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                                    "that corrects its commands. The commands are listed in the order of the work: plan "
                                    "the measurement (design, simulate, redundancy), bring it in (import, gravity), "
                                    "fit (calibrate, identify, diagnose, fleet), verify (evaluate, iso9283, check, "
-                                   "accuracy), deliver (export, compensate, generate). `gecgen COMMAND --help` "
+                                   "accuracy), deliver (export, compensate, filter, generate). `gecgen COMMAND --help` "
                                    "explains each command; the "
                                    "README has a walk-through, docs/guide.md the user guide and docs/reference.md the "
                                    "file formats.")
