@@ -57,11 +57,31 @@ def pose_subset(pose: np.ndarray, n_poses: int, poses) -> tuple[np.ndarray, np.n
 
 
 @dataclass(frozen=True)
-class Measurements:
-    """Poses (P of them) and measured target positions (R rows).
+class Poses:
+    """P poses of the robot as a file gives them: q (P, n) joint readings, m/rad; w (P, 6) N and N m
+    in the sensor frame; aux (P, len(aux_names)) the auxiliary signals; pose_ids (P,) the file's pose
+    ids. What is measured at them (points, image points) is the subclasses'."""
 
-    q (P, n) m/rad; w (P, 6) N and N m in the sensor frame; aux (P, len(aux_names));
-    pose_ids (P,) the file's pose ids; pose (R,) index into the poses; target (R,) index into
+    q: np.ndarray
+    w: np.ndarray
+    aux: np.ndarray
+    aux_names: tuple[str, ...]
+    pose_ids: np.ndarray
+
+    @property
+    def n_poses(self) -> int:
+        return self.q.shape[0]
+
+    def poses_at(self, poses: np.ndarray) -> tuple:
+        """The pose fields (q, w, aux, aux_names, pose_ids) of the given pose indices, in field order."""
+        return self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses]
+
+
+@dataclass(frozen=True)
+class Measurements(Poses):
+    """Poses (P of them, `Poses`) and measured target positions (R rows).
+
+    pose (R,) index into the poses; target (R,) index into
     robot.targets; xyz (R, 3) measured world positions in m; row (R,) the line of each point in
     its file (header = 1), None when the points were never read from a file (then they are
     numbered as `write_measurements` would write them); station (R,) the integer id of the tracker
@@ -74,11 +94,6 @@ class Measurements:
     (`model.pose_targets.as_points`), None for point data.
     """
 
-    q: np.ndarray
-    w: np.ndarray
-    aux: np.ndarray
-    aux_names: tuple[str, ...]
-    pose_ids: np.ndarray
     pose: np.ndarray
     target: np.ndarray
     xyz: np.ndarray
@@ -94,10 +109,6 @@ class Measurements:
             object.__setattr__(self, "station", np.zeros(len(self.xyz), np.int64))
 
     @property
-    def n_poses(self) -> int:
-        return self.q.shape[0]
-
-    @property
     def file_rows(self) -> np.ndarray:
         """(R,) the file line of each measured point (header = 1)."""
         return self.row if self.row is not None else np.arange(len(self.xyz)) + 2
@@ -111,8 +122,7 @@ class Measurements:
     def subset(self, poses: np.ndarray) -> "Measurements":
         """The measurements of the given pose indices (rows follow their poses)."""
         poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)
-        return Measurements(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses],
-                            pose, self.target[keep], self.xyz[keep], self.source,
+        return Measurements(*self.poses_at(poses), pose, self.target[keep], self.xyz[keep], self.source,
                             self.file_rows[keep], self.station[keep],
                             None if self.orientation is None else self.orientation[keep],
                             None if self.relative is None else self.relative.take(keep),

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.cameras import Board, Camera
-from gecgen.model.measurements import MAX_AUX, MAX_WRENCH, pose_id_column, pose_subset, within_limits, write_csv
+from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Poses, pose_id_column, pose_subset, within_limits,
+                                       write_csv)
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, require
@@ -23,18 +24,12 @@ PIXEL_COLUMNS = ("camera", "point", "u", "v")
 
 
 @dataclass(frozen=True)
-class Pixels:
-    """P poses and R image points. q (P, n) m/rad; w (P, 6); aux (P, len(aux_names)); pose_ids (P,);
-    pose (R,) index into the poses; camera (R,) index into `cameras`; point (R,) index into `points`
-    (robot targets, or board corners in `Board.names` order); uv (R, 2) px; row (R,) file lines
-    (header = 1); mount "world" (cameras fixed, points on the robot) or "tool" (one camera on the
-    tool, points on a board in the world)."""
+class Pixels(Poses):
+    """P poses (`Poses`) and R image points: pose (R,) index into the poses; camera (R,) index into
+    `cameras`; point (R,) index into `points` (robot targets, or board corners in `Board.names`
+    order); uv (R, 2) px; row (R,) file lines (header = 1); mount "world" (cameras fixed, points on
+    the robot) or "tool" (one camera on the tool, points on a board in the world)."""
 
-    q: np.ndarray
-    w: np.ndarray
-    aux: np.ndarray
-    aux_names: tuple[str, ...]
-    pose_ids: np.ndarray
     pose: np.ndarray
     camera: np.ndarray
     point: np.ndarray
@@ -45,14 +40,10 @@ class Pixels:
     mount: str
     source: str = ""
 
-    @property
-    def n_poses(self) -> int:
-        return len(self.q)
-
     def subset(self, poses: np.ndarray) -> "Pixels":
         """The image points of the given pose indices."""
         poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)
-        return Pixels(self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses], pose, self.camera[keep], self.point[keep], self.uv[keep], self.row[keep],
+        return Pixels(*self.poses_at(poses), pose, self.camera[keep], self.point[keep], self.uv[keep], self.row[keep],
                       self.cameras, self.points, self.mount, self.source)
 
 
