@@ -291,6 +291,7 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
         if t.note is not None:
             nominal.append(None)
             reasons.append(t.note)
+            previous = None  # the robot stands wherever that motion took it
             continue
         if t.kind == "joint":
             require(len(t.numbers) == robot.n, f"{t.file}:{t.line}: target {t.name} has {len(t.numbers)} joint "
@@ -328,7 +329,7 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
     for k, (t, tool, base) in enumerate(placed):
         if reasons[k] is not None:
             changes.append(Change(t, None, reasons[k]))
-            previous = nominal[k] if nominal[k] is not None else previous  # run as written
+            previous = nominal[k] if nominal[k] is not None or t.note is not None else previous  # run as written
             continue
         q0 = nominal[k]
         q, status, residual = corrected[k]
