@@ -629,3 +629,63 @@ def test_a_tp_plus_program_round_trips_and_lands_nearer(fanuc_cal, tmp_path):
     assert outcome.corrected == 5 and (outcome.changes[0].target.name, outcome.changes[0].reason) == \
         ("P[1]", "outside the joint limits")
     _lands_nearer(fanuc.FORMAT, source, out, read_frames(frames, fanuc.FORMAT), fanuc_cal, outcome)
+
+
+# -- the Python API and the robots the filters speak for ---------------------------------------------
+
+def test_api_filter_program_returns_every_target_typed(kuka_cal, tmp_path):
+    """gecgen.filter_program without an output writes nothing and returns the corrected texts; each
+    target's before and after are the numbers in the input and output texts, and a joint target's
+    correction (mm) is the nominal flange's move between them, computed here from the written numbers."""
+    import gecgen
+
+    source = _copy_krl(tmp_path)
+    before = sorted(tmp_path.iterdir())
+    done = gecgen.filter_program(kuka_cal[0], source, frames=tmp_path / "frames.yaml")
+    assert sorted(tmp_path.iterdir()) == before and done.written == {} and done.log is None
+    assert done.format == "krl" and isinstance(done.targets[0], gecgen.ProgramTarget)
+    original = kuka.parse(source)
+    out = tmp_path / "out"
+    out.mkdir()
+    for path, text in done.texts.items():
+        (out / path.name).write_bytes(text.encode("latin-1"))
+    filtered = kuka.parse(out / "palletize.src")
+    assert [t.before for t in done.targets] == [tuple(n.text for n in t.numbers) for t in original.targets]
+    assert [t.after or t.before for t in done.targets] == [tuple(n.text for n in t.numbers) for t in filtered.targets]
+    assert done.corrected == sum(t.corrected for t in done.targets) >= 10
+    assert {t.name: t.reason.split(":")[0] for t in done.kept} == {
+        "XHOME (line 14)": "declared outside the program", "XHOME (line 39)": "declared outside the program",
+        "LIN_REL line 25": "a relative motion"}
+    assert sum(done.counts.values()) == len(done.targets)
+    arm = arm_of(kuka_cal[1], np.eye(4))
+    joints = [t for t in done.targets if t.kind == "joint" and t.corrected]
+    assert joints
+    for t in joints:
+        q0, q1 = (np.radians([float(v) for v in values]) for values in (t.before, t.after))
+        moved = 1e3 * np.linalg.norm(arm.fk(q1)[0][:3, 3] - arm.fk(q0)[0][:3, 3])
+        assert abs(moved - t.position_mm) < 0.01  # the written joints are rounded to 1e-4 deg
+
+
+def test_api_filter_program_takes_a_calibration_file_and_writes_program_dat_and_log(kuka_cal_file, tmp_path):
+    import gecgen
+
+    source = _copy_krl(tmp_path)
+    done = gecgen.filter_program(kuka_cal_file, source, tmp_path / "out" / "palletize.src",
+                                 frames=tmp_path / "frames.yaml")
+    assert sorted(p.name for p in done.written.values()) == ["palletize.dat", "palletize.src"]
+    assert all(done.texts[src].encode("latin-1") == dst.read_bytes() for src, dst in done.written.items())
+    assert len(done.log.read_text().splitlines()) == 1 + len(done.targets)
+
+
+@pytest.mark.parametrize("robot, why", [
+    ("panda", "it has 7 axes"), ("pps", "joint lateral is prismatic"), ("tiago", "joint torso_lift_joint is prismatic"),
+    ("humanoid", "it branches into 2 tools"),
+])
+def test_a_robot_that_is_not_a_six_axis_revolute_arm_is_refused_naming_why(robot, why):
+    from gecgen.deliver.programs.core import require_six_axis_arm
+
+    with pytest.raises(ModelError) as err:
+        require_six_axis_arm(load_robot(ROOT / "robots" / f"{robot}.yaml"))
+    assert str(err.value).startswith(f"robot {robot}: program filters correct serial arms of six revolute joints")
+    assert f", and {why}; correct this robot's commands with gecgen compensate" in str(err.value)
+    assert "\n" not in str(err.value)

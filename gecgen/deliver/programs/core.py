@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, pose_error, seed_grid
+from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, not_a_six_axis_arm, pose_error, seed_grid
 from gecgen.model.files import write_atomically
 from gecgen.model.validation import ModelError, read_yaml, require
 
@@ -269,14 +269,20 @@ def _joint_scale(fmt: Format) -> float:
     return 180.0 / math.pi if fmt.joint_unit == "deg" else 1.0
 
 
+def require_six_axis_arm(robot) -> None:
+    """A one-line refusal naming why, unless `robot` is a serial arm of six revolute joints."""
+    why = not_a_six_axis_arm(robot)
+    require(why is None, f"robot {robot.name}: program filters correct serial arms of six revolute joints (the "
+                         f"axes of KUKA, ABB, FANUC and UR programs), and {why}; correct this robot's commands "
+                         f"with gecgen compensate")
+
+
 def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 50) -> Outcome:
     """Every target of the program corrected through the calibration `cal` (a fitted
     gecgen.api.Calibrator), or kept as written with the reason; the texts with the numbers of the
     corrected targets rewritten and every other character as it was."""
     robot = cal.robot_
-    require(not robot.branches and robot.n == 6 and robot.n_frames == 6 and all(j.kind == "R" for j in robot.joints),
-            f"robot {robot.name}: program filters speak for six-axis serial arms with revolute joints; "
-            f"correct this robot's commands with gecgen compensate")
+    require_six_axis_arm(robot)
     arm = arm_of(robot, frames.flange)
     config = fmt.config(arm) if fmt.config else None
     seeds = seed_grid(arm, config)
