@@ -154,7 +154,8 @@ def test_kuka_turn_and_status_follow_the_joint_signs_and_the_wrist():
     q = np.radians([[-10, -60, -40, 20, -30, -90], [10, -60, -140, -20, 30, 90]])
     s, t = kuka.config(arm)(q).T
     assert list(t) == [0b110111, 0b001110]  # bit k: axis k+1 negative
-    assert list(s & 4) == [0, 4]  # A5 > 0
+    assert list(s & 4) == [4, 0]  # A5 < 0: the hand flipped, as T's bit 4
+    assert list(s & 4) == list((t & 16) // 4)
     # the stretched arm (contract: q = 0, -90, -90) divides elbow up from down, at the offset of a3
     assert list(s & 2) == [2, 0]
 
@@ -215,8 +216,8 @@ def test_ur_script_zero_and_real_calibration(ur_cal, tmp_path):
 
 @pytest.mark.parametrize("old, new, name, reason", [
     (b"XP1={A1 -142.53669", b"XP1={A1 -192.53669", "XP1", "outside the joint limits"),
-    # XP2 names S 2; given S 3 (the wrist behind axis 1) its pose is out of reach in that configuration
-    (b"C -135.36718,S 2,T 27", b"C -135.36718,S 3,T 27", "XP2",
+    # XP2 names S 6; given S 7 (the wrist behind axis 1) its pose is out of reach in that configuration
+    (b"C -135.36718,S 6,T 27", b"C -135.36718,S 7,T 27", "XP2",
      "unreachable by the nominal model in its configuration"),
 ])
 def test_a_target_that_cannot_be_corrected_is_kept_and_listed(kuka_cal, tmp_path, old, new, name, reason):
