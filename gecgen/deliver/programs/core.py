@@ -285,7 +285,8 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
     require_six_axis_arm(robot)
     arm = arm_of(robot, frames.flange)
     config = fmt.config(arm) if fmt.config else None
-    seeds = seed_grid(arm, config)
+    # the seeds' forward kinematics is most of the work: only for a program with Cartesian targets
+    seeds = seed_grid(arm, config) if any(t.kind == "pose" and t.note is None for t in program.targets) else None
     scale = _joint_scale(fmt)
     lo, hi = arm.limits()
     # frames first: a program whose frames nobody describes is refused before any work
