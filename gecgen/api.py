@@ -770,6 +770,8 @@ def filter_program(calibrator, program: str | Path, output: str | Path | None = 
     from gecgen.deliver.programs import filter_program as run
     from gecgen.deliver.programs import program_format
 
+    require(isinstance(calibrator, (Calibrator, str, Path)), f"calibrator: {excerpt(calibrator)} is neither a "
+                                                             f"Calibrator nor a calibration file's path; give one")
     cal = calibrator if isinstance(calibrator, Calibrator) else load_calibration(calibrator)
     cal._fitted()
     outcome, written, log = run(cal, program, output, frames, format, max_iter)

@@ -679,6 +679,16 @@ def test_api_filter_program_takes_a_calibration_file_and_writes_program_dat_and_
     assert len(done.log.read_text().splitlines()) == 1 + len(done.targets)
 
 
+def test_api_filter_program_refuses_what_is_not_a_calibration_in_one_line():
+    import gecgen
+
+    source = DATA / "ur" / "pick_place.script"
+    with pytest.raises(ModelError, match=r"^calibrator: None is neither a Calibrator nor a calibration file's path"):
+        gecgen.filter_program(None, source)
+    with pytest.raises(ModelError, match=r"not fitted yet"):
+        gecgen.filter_program(gecgen.Calibrator(), source)
+
+
 @pytest.mark.parametrize("robot, why", [
     ("panda", "it has 7 axes"), ("pps", "joint lateral is prismatic"), ("tiago", "joint torso_lift_joint is prismatic"),
     ("humanoid", "it branches into 2 tools"),
