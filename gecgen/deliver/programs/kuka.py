@@ -49,8 +49,8 @@ def numbers(T: np.ndarray, target: Target) -> list[float]:
 def config(arm: Arm):
     """S and T as KUKA defines them: S bit 0 the wrist centre behind axis 1 (the overhead area), bit 1
     axis 3 at or above the stretched arm, bit 2 A5 negative (a flipped hand); T bit k axis k+1
-    negative. Bit 2 is 1 exactly when T's bit 4 is: so every taught point of real .dat files shows it
-    (S 6 with T 50 or 18, S 2 with T 3 or 34; docs/program-filters.md)."""
+    negative. Bit 2 is 1 exactly when T's bit 4 is: so every point KUKA controllers wrote into the
+    public .dat files checked shows it (S 6 with T 50, S 2 with T 3 or 34; docs/program-filters.md)."""
     def of(q: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(q)
         s = (~front(arm, q)).astype(int) + 2 * elbow_up(arm, q) + 4 * (q[:, 4] < 0)
