@@ -2,13 +2,14 @@
 
 The Python API (docs/python-api.md) is importable from here: `gecgen.Calibrator`, `gecgen.Diagnoser`,
 `gecgen.calibrate`, `gecgen.load_robot`, `gecgen.read_measurements`, `gecgen.load_calibration`,
-the results `gecgen.Score`, `gecgen.Errors`, `gecgen.Compensation`, `gecgen.Selection`, and the
-error type `gecgen.ModelError`.
+`gecgen.filter_program`, the results `gecgen.Score`, `gecgen.Errors`, `gecgen.Compensation`,
+`gecgen.Selection`, `gecgen.FilteredProgram` (with `gecgen.ProgramTarget`), and the error type
+`gecgen.ModelError`.
 """
 from gecgen.version import __version__  # noqa: F401  (gecgen.__version__)
 
-_API = ("Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
-        "load_calibration", "load_robot", "read_measurements")
+_API = ("Calibrator", "Compensation", "Diagnoser", "Errors", "FilteredProgram", "ModelError", "ProgramTarget", "Score",
+        "Selection", "calibrate", "filter_program", "load_calibration", "load_robot", "read_measurements")
 __all__ = list(_API)
 
 

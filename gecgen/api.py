@@ -29,8 +29,8 @@ from gecgen.fit import significance
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, STATUS_NAMES, CompiledModel
 from gecgen.fit.inputs import checked, error_model, measured_counts, on_points, placed
 
-__all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "ModelError", "Score", "Selection", "calibrate",
-           "load_calibration", "load_robot", "read_measurements"]
+__all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "FilteredProgram", "ModelError", "ProgramTarget",
+           "Score", "Selection", "calibrate", "filter_program", "load_calibration", "load_robot", "read_measurements"]
 
 LOSSES = ("cauchy", "huber", "l2")
 REGISTER = ("auto", "always", "never")
@@ -705,3 +705,79 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
                      data, scored.data, scored.branches, scored.after_inside, scored.extrapolation)
+
+
+# -- robot programs ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ProgramTarget:
+    """One target of a filtered program, in program order: `name` (as the program names it, or the
+    motion and its line), `file` and `line` where its numbers are, `kind` "joint", "pose" or "motion"
+    (a motion with no target of its own: a relative motion, a target set at run time, a position
+    register); `before` its numbers as written and `after` as rewritten (the controller's text and
+    units: mm and deg, UR m and rad; None when kept as written); `corrected`, and `reason`
+    ("corrected", or why it is kept: "no correction needed", "outside the joint limits", "compensation
+    singular", ...). The correction: `position_mm` and `rotation_deg` the move of its tool point and
+    orientation (joint targets: the flange's) on the nominal robot, `joints_deg` the largest joint
+    change (deg, UR's too), `residual_mm` the tool error the compensation leaves (1 rad as 1 m)."""
+
+    name: str
+    file: Path
+    line: int
+    kind: str
+    before: tuple[str, ...]
+    after: tuple[str, ...] | None
+    corrected: bool
+    reason: str
+    position_mm: float = 0.0
+    rotation_deg: float = 0.0
+    joints_deg: float = 0.0
+    residual_mm: float = 0.0
+
+
+@dataclass(frozen=True)
+class FilteredProgram:
+    """`filter_program`: the program's `format` ("krl", "rapid", "tp" or "ur"), its `targets`
+    (ProgramTarget, every one the filter found, corrected or kept), `corrected` how many were
+    rewritten, `kept` those kept as written that still carry the uncalibrated error (the calibration
+    would have moved them, or they are motions without a target of their own), `counts` the targets
+    per reason ("corrected", "no correction needed", ...), `texts` each file's corrected text ({input
+    path: text}; KRL: the .src and its .dat), `written` where each went and `log` the change log's
+    path ({} and None when no output was given)."""
+
+    format: str
+    targets: list[ProgramTarget]
+    corrected: int
+    kept: list[ProgramTarget]
+    counts: dict[str, int]
+    texts: dict[Path, str]
+    written: dict[Path, Path] = field(default_factory=dict)
+    log: Path | None = None
+
+
+def filter_program(calibrator, program: str | Path, output: str | Path | None = None, *,
+                   frames: str | Path | None = None, format: str | None = None,
+                   max_iter: int = 50) -> FilteredProgram:
+    """What `gecgen filter` does: the robot program `program` (KUKA .src with its .dat beside it, ABB
+    RAPID .mod/.modx/.prg, FANUC TP .ls, UR .script/.urscript; or `format` "krl", "rapid", "tp", "ur")
+    with its targets corrected through `calibrator` (a fitted Calibrator or a calibration file's path)
+    and every other byte as it was. With `output`, the corrected program is written there (KRL: its
+    .dat beside it, under the program's name) with the change log OUTPUT.log.csv beside it; without,
+    nothing is written and `texts` holds the result. `frames`: a YAML file with the tools, bases and
+    flange the program names but does not declare. `max_iter`: Newton steps at most per compensation.
+    Raises ModelError (one line naming the file and line) for a program the filter cannot read, a
+    frame nobody describes, or a robot that is not a serial arm of six revolute joints."""
+    from gecgen.deliver.programs import filter_program as run
+    from gecgen.deliver.programs import program_format
+
+    require(isinstance(calibrator, (Calibrator, str, Path)), f"calibrator: {excerpt(calibrator)} is neither a "
+                                                             f"Calibrator nor a calibration file's path; give one")
+    cal = calibrator if isinstance(calibrator, Calibrator) else load_calibration(calibrator)
+    cal._fitted()
+    outcome, written, log = run(cal, program, output, frames, format, max_iter)
+    targets = {id(c): ProgramTarget(c.target.name, c.target.file, c.target.line, c.target.kind,
+                                    tuple(n.text for n in c.target.numbers), c.after, c.after is not None, c.reason,
+                                    c.position_mm, c.rotation_deg, c.joints_deg, c.residual_mm)
+               for c in outcome.changes}
+    return FilteredProgram(program_format(program, format).name, list(targets.values()), outcome.corrected,
+                           [targets[id(c)] for c in outcome.kept], outcome.counts(), outcome.texts, written, log)

@@ -105,6 +105,43 @@ def one(name, module, robot_file, truth_file, errors, writer, args, seed) -> dic
                 after_all=rms(miss_after[reached]),
                 after_joint=rms(miss_after[done & joint]), after_pose=rms(miss_after[done & ~joint]))
 
+#: what the configuration rules of kuka.py, abb.py and fanuc.py were checked against (not computed here)
+CONFIGURATION_RULES = """
+## Configuration rules, checked against public documentation
+
+What each rule of docs/reference.md ("What filter does") was compared with, and what could not be
+checked here. Where a rule is not confirmed, check it on the pendant with one taught posture of your
+arm before filtering its programs.
+
+- **KUKA S bit 0** (the wrist root point behind axis 1: its x in the A1 coordinate system negative,
+  the overhead area): as KUKA's expert programming manual words it, quoted on robot-forum.com
+  (thread 7173, "X value of wrist root point"); the same definition in Siemens' SINUMERIK
+  programming manual 12/2019 (6FC5398-2EP40-0BA0), p. 710, whose STAT bits follow KUKA's. Agrees.
+- **KUKA S bit 1** (axis 3 at or above the angle where it changes: A3 >= 0 deg for arms whose axes 3
+  and 4 intersect, moved by the A3-A4 offset otherwise): SINUMERIK manual p. 710. gecgen computes
+  that angle from the robot file as the one that stretches the arm (the wrist centre on the line
+  through axes 2 and 3). Agrees.
+- **KUKA S bit 2**: SINUMERIK manual p. 710: 1 when A5 < 0 (a flipped hand), 0 when A5 >= 0. Checked
+  on taught points: in the 24 E6POS declarations (16 distinct points) of two .dat files of a public KRC
+  backup (a nut-welding cell; found by code search, not copied: no licence), and in the two of RoboDK's
+  KUKA post processor and a C# test, S bit 2 equals T bit 4 (A5 negative) in every one: S 6 with T 50,
+  S 2 with T 3, 34 and 35. ISG's CNC kernel documentation of Status & Turn (kinematics type 45) says
+  the opposite (4 added when A5 > 0), as gecgen did until this check; the points the controllers
+  wrote decide it, so gecgen now sets bit 2 when A5 < 0, and the test program's S values were
+  corrected to it. KUKA's own manuals word this bit ambiguously (robot-forum.com thread 45777).
+- **KUKA T** (bit k: axis k+1 negative): ISG's documentation above, and the same taught points.
+  Agrees.
+- **ABB cf1, cf4, cf6** (the quadrant of axes 1, 4 and 6: 0 from 0 to 90 deg, 1 from 90 to 180, -1
+  from 0 to -90): ABB's RAPID Reference Manual, "confdata" (the copy on yumpu.com, "Basic
+  Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees.
+- **ABB cfx** (wrist centre in front of or behind axis 1 and the lower arm, axis 5's sign): no ABB
+  page with the table for six-axis arms could be reached here. Not checked.
+- **FANUC CONFIG** (flip, up, top, and the turns of J1, J4, J6): onerobotics.com, "The Perils of
+  Six-Axis Robots" (2013), explains the string, but no FANUC document could be reached here, and the
+  secondary pages found contradict each other on which sign of J5 is "F". Not checked: gecgen's F
+  when J5 > 0 and its turn numbers (0 in (-180, 180] deg) rest on the robot file's geometry alone.
+"""
+
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -163,8 +200,8 @@ def main():
               "",
               "The held-out RMS is measured at the calibration's reflectors (tracker noise included); the programs' "
               "tool points sit elsewhere on the tool, so their error is not bound to be below it.", ""]
-    (ROOT / "docs" / "program-filters.md").write_text("\n".join(lines))
-    print("\n".join(lines))
+    (ROOT / "docs" / "program-filters.md").write_text("\n".join(lines) + CONFIGURATION_RULES)
+    print("\n".join(lines) + CONFIGURATION_RULES)
 
 
 if __name__ == "__main__":

@@ -154,7 +154,8 @@ def test_kuka_turn_and_status_follow_the_joint_signs_and_the_wrist():
     q = np.radians([[-10, -60, -40, 20, -30, -90], [10, -60, -140, -20, 30, 90]])
     s, t = kuka.config(arm)(q).T
     assert list(t) == [0b110111, 0b001110]  # bit k: axis k+1 negative
-    assert list(s & 4) == [0, 4]  # A5 > 0
+    assert list(s & 4) == [4, 0]  # A5 < 0: the hand flipped, as T's bit 4
+    assert list(s & 4) == list((t & 16) // 4)
     # the stretched arm (contract: q = 0, -90, -90) divides elbow up from down, at the offset of a3
     assert list(s & 2) == [2, 0]
 
@@ -215,8 +216,8 @@ def test_ur_script_zero_and_real_calibration(ur_cal, tmp_path):
 
 @pytest.mark.parametrize("old, new, name, reason", [
     (b"XP1={A1 -142.53669", b"XP1={A1 -192.53669", "XP1", "outside the joint limits"),
-    # XP2 names S 2; given S 3 (the wrist behind axis 1) its pose is out of reach in that configuration
-    (b"C -135.36718,S 2,T 27", b"C -135.36718,S 3,T 27", "XP2",
+    # XP2 names S 6; given S 7 (the wrist behind axis 1) its pose is out of reach in that configuration
+    (b"C -135.36718,S 6,T 27", b"C -135.36718,S 7,T 27", "XP2",
      "unreachable by the nominal model in its configuration"),
 ])
 def test_a_target_that_cannot_be_corrected_is_kept_and_listed(kuka_cal, tmp_path, old, new, name, reason):
@@ -284,11 +285,18 @@ def test_krl_output_must_keep_the_program_name(kuka_cal_file, tmp_path):
     assert code == 2 and "write it as palletize.src in another folder" in err
 
 
-def test_ur_move_to_an_expression_is_refused(tmp_path):
-    bad = tmp_path / "bad.script"
-    bad.write_text("def p():\n  movel(pose_trans(base, p[0, 0, 0.1, 0, 0, 0]), a=1, v=0.1)\nend\n")
-    with pytest.raises(ModelError, match=r"bad.script:2: movel to 'pose_trans\(base, p\[0, 0, 0.1, 0, 0, 0\]\)'"):
-        ur.parse(bad)
+def test_ur_move_to_an_expression_is_listed_and_the_next_pose_has_no_target_before(ur_cal, tmp_path):
+    """A move to an expression is kept and named; the pose after it cannot be solved near the joints before
+    the expression's motion (the robot stands wherever it took it), so it is kept too."""
+    program = tmp_path / "expr.script"
+    program.write_text("def p():\n  set_tcp(p[0, 0, 0.15, 0, 0, 0])\n  movej([0.3, -1.2, 1.6, -1.9, -1.57, 0.4])\n"
+                       "  movel(pose_trans(base, p[0, 0, 0.1, 0, 0, 0]), "
+                       "a=1, v=0.1)\n  movel(p[-0.8, -0.4, 0.1, 2.2, 2.2, 0.0])\nend\n")
+    outcome, _, _ = filter_program(ur_cal[0], program, tmp_path / "out.script")
+    assert [(c.target.name, c.target.line, c.reason.split(" (")[0].split(":")[0]) for c in outcome.changes] == [
+        ("movej line 3", 3, "corrected"), ("movel to pose_trans(base, p[0, 0, 0.1, (line 4)", 4,
+                                           "a target computed at run time"),
+        ("movel line 5", 5, "no earlier target to solve it near")]
 
 
 def test_unknown_suffix_is_refused_naming_the_formats(tmp_path):
@@ -538,8 +546,8 @@ def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
     program.write_text("def c():\n  movej(get_inverse_kin(p[0.5, -0.2, 0.3, 3.1, 0.1, 0.0], qnear=[0, -1.5, 1.5, -1.5, -1.5, 0]),"
                        " a=1.4, v=1.05)\n  movec(p[0.5, -0.1, 0.3, 3.1, 0.1, 0.0], Via_p, a=1.2, v=0.25, r=0.05, mode=1)\n"
                        "  movec(Via_p, p[0.4, 0.0, 0.3, 3.1, 0.1, 0.0], a=1.2, v=0.25)\nend\n")
-    with pytest.raises(ModelError, match=r"c.script:3: movec to 'Via_p': not a joint list"):
-        ur.parse(program)
+    listed = [t for t in ur.parse(program).targets if t.kind == "motion"]
+    assert [(t.name, t.line) for t in listed] == [("movec to Via_p (line 3)", 3), ("movec to Via_p (line 4)", 4)]
     program.write_text(program.read_text().replace("def c():\n", "def c():\n  global Via_p=p[0.45, -0.15, 0.3, 3.1, 0.1, 0.0]\n"))
     targets = ur.parse(program).targets
     assert [(t.name, t.kind, t.values[0]) for t in targets] == [
@@ -558,3 +566,138 @@ def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
     assert found == {"CIRC line 4": ("pose", "1", "2", (2, 10)), "SPTP line 6": ("joint", None, None, None),
                      "XAUX1": ("pose", "1", "2", (2, 10)), "XEND1": ("pose", "1", "2", (6, 2)),
                      "XUNUSED": ("motion", None, None, None)}
+
+
+# -- public programs (tests/data/programs/README.md names their sources and licences) ----------------
+
+#: a motion instruction's line, found independently of the parsers: every one must be a target or name one
+MOTION_LINES = {"krl": r"^[ \t]*(?:S?PTP|S?LIN|S?CIRC)\b", "rapid": r"^[ \t]*(?:Move\w*|Trigg[JLC])\b",
+                "tp": r"^[ \t]*\d*[ \t]*:[ \t]*[JLCA][ \t]+P", "ur": r"\b(?:optimove[jl]|move[jlpc])\("}
+COMMENT = {"krl": r";.*", "rapid": r"!.*", "tp": r"!.*", "ur": r"#.*|\"[^\"]*\""}
+
+
+def _motion_lines(fmt, path: Path) -> list[int]:
+    import re
+
+    return [k for k, line in enumerate(path.read_text().splitlines(), 1)
+            if re.search(MOTION_LINES[fmt.name], re.sub(COMMENT[fmt.name], "", line), re.I)]
+
+
+@pytest.mark.parametrize("fmt, source, cal, n_kept", [
+    (kuka.FORMAT, "krl/kuka_eki/kuka_eki_hw_interface.src", "kuka_cal", 2),
+    (abb.FORMAT, "rapid/abb_driver/ROS_motion.mod", "abb_cal", 1),
+    (abb.FORMAT, "rapid/motion_program_exec/motion_program_exec.mod", "abb_cal", 10),
+    (fanuc.FORMAT, "tp/fanuc_driver/ros_movesm.ls", "fanuc_cal", 1),
+    (ur.FORMAT, "ur/urcl/external_control.urscript", "ur_cal", 20),
+])
+def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, cal, n_kept, request, tmp_path):
+    """Drivers of ros-industrial, Universal Robots and RPI: every motion goes to a target set while the
+    program runs. Zero and real calibrations leave every byte; each motion is listed with its line and
+    why it is not corrected, none is dropped."""
+    source = DATA / source
+    outcome = _round_trips(fmt, request.getfixturevalue(cal)[0], source, tmp_path / source.name)
+    assert all(out.read_bytes() == src.read_bytes() for src, out in
+               [(p, tmp_path / p.name) for p in fmt.parse(source).texts])
+    kept = outcome.kept
+    assert outcome.corrected == 0 and len(kept) == n_kept == len(outcome.changes)
+    assert sorted({c.target.line for c in kept}) == _motion_lines(fmt, source)
+    assert all(c.reason.startswith(("declared without a value", "a target computed at run time",
+                                     "a position register")) for c in kept)
+
+
+def test_cli_names_a_public_programs_first_kept_target_by_file_and_line(ur_cal, tmp_path):
+    cal = tmp_path / "cal.json"
+    ur_cal[0].save(cal)
+    source = DATA / "ur" / "urcl" / "external_control.urscript"
+    code, out, err = _cli("filter", cal, source, "-o", tmp_path / "out.urscript")
+    assert code != 0 and f"{source}:592: movej to q (line 592) kept as written (a target computed at run time" in err
+    assert (tmp_path / "out.urscript").read_bytes() == source.read_bytes()
+    assert json.loads(out)["corrected"] == 0 and len(json.loads(out)["kept"]) == 20
+
+
+def test_a_tp_plus_program_round_trips(fanuc_cal, tmp_path):
+    """TP+'s compiled example (Apache-2.0): joint and Cartesian positions in UF 3 and UT 5 (their poses
+    in tp_plus/frames.yaml), motion lines without numbers (" : J P[1:p1] ..."), values as TP+ writes
+    them. Only target numbers change, every configuration kept (where TP programs land is tested on
+    weld_seam.ls above)."""
+    source, frames = DATA / "tp" / "tp_plus" / "test10.ls", DATA / "tp" / "tp_plus" / "frames.yaml"
+    program = fanuc.parse(source)
+    assert [(t.name, t.kind, t.config, t.tool, t.base) for t in program.targets] == \
+        [("P[1]", "joint", None, None, None)] + [(f"P[{k}]", "pose", (1, 1, 1, 0, 0, 0), "5", "3") for k in range(2, 7)]
+    assert _motion_lines(fanuc.FORMAT, source) == [9, 16, 17, 21, 22, 23]
+    out = tmp_path / "test10.ls"
+    outcome = _round_trips(fanuc.FORMAT, fanuc_cal[0], source, out, frames)
+    # P[1]'s J3 = 90.5 deg is beyond the arm's 90 deg: listed, never moved
+    assert outcome.corrected == 5 and (outcome.changes[0].target.name, outcome.changes[0].reason) == \
+        ("P[1]", "outside the joint limits")
+    assert all(0.05 < c.position_mm < 20 for c in outcome.changes[1:])
+
+
+# -- the Python API and the robots the filters speak for ---------------------------------------------
+
+def test_api_filter_program_returns_every_target_typed(kuka_cal, tmp_path):
+    """gecgen.filter_program without an output writes nothing and returns the corrected texts; each
+    target's before and after are the numbers in the input and output texts, and a joint target's
+    correction (mm) is the nominal flange's move between them, computed here from the written numbers."""
+    import gecgen
+
+    source = _copy_krl(tmp_path)
+    before = sorted(tmp_path.iterdir())
+    done = gecgen.filter_program(kuka_cal[0], source, frames=tmp_path / "frames.yaml")
+    assert sorted(tmp_path.iterdir()) == before and done.written == {} and done.log is None
+    assert done.format == "krl" and isinstance(done.targets[0], gecgen.ProgramTarget)
+    original = kuka.parse(source)
+    out = tmp_path / "out"
+    out.mkdir()
+    for path, text in done.texts.items():
+        (out / path.name).write_bytes(text.encode("latin-1"))
+    filtered = kuka.parse(out / "palletize.src")
+    assert [t.before for t in done.targets] == [tuple(n.text for n in t.numbers) for t in original.targets]
+    assert [t.after or t.before for t in done.targets] == [tuple(n.text for n in t.numbers) for t in filtered.targets]
+    assert done.corrected == sum(t.corrected for t in done.targets) >= 10
+    assert {t.name: t.reason.split(":")[0] for t in done.kept} == {
+        "XHOME (line 14)": "declared outside the program", "XHOME (line 39)": "declared outside the program",
+        "LIN_REL line 25": "a relative motion"}
+    assert sum(done.counts.values()) == len(done.targets)
+    arm = arm_of(kuka_cal[1], np.eye(4))
+    joints = [t for t in done.targets if t.kind == "joint" and t.corrected]
+    assert joints
+    for t in joints:
+        q0, q1 = (np.radians([float(v) for v in values]) for values in (t.before, t.after))
+        moved = 1e3 * np.linalg.norm(arm.fk(q1)[0][:3, 3] - arm.fk(q0)[0][:3, 3])
+        assert abs(moved - t.position_mm) < 0.01  # the written joints are rounded to 1e-4 deg
+
+
+def test_api_filter_program_takes_a_calibration_file_and_writes_program_dat_and_log(kuka_cal_file, tmp_path):
+    import gecgen
+
+    source = _copy_krl(tmp_path)
+    done = gecgen.filter_program(kuka_cal_file, source, tmp_path / "out" / "palletize.src",
+                                 frames=tmp_path / "frames.yaml")
+    assert sorted(p.name for p in done.written.values()) == ["palletize.dat", "palletize.src"]
+    assert all(done.texts[src].encode("latin-1") == dst.read_bytes() for src, dst in done.written.items())
+    assert len(done.log.read_text().splitlines()) == 1 + len(done.targets)
+
+
+def test_api_filter_program_refuses_what_is_not_a_calibration_in_one_line():
+    import gecgen
+
+    source = DATA / "ur" / "pick_place.script"
+    with pytest.raises(ModelError, match=r"^calibrator: None is neither a Calibrator nor a calibration file's path"):
+        gecgen.filter_program(None, source)
+    with pytest.raises(ModelError, match=r"not fitted yet"):
+        gecgen.filter_program(gecgen.Calibrator(), source)
+
+
+@pytest.mark.parametrize("robot, why", [
+    ("panda", "it has 7 axes"), ("pps", "joint lateral is prismatic"), ("tiago", "joint torso_lift_joint is prismatic"),
+    ("humanoid", "it branches into 2 tools"),
+])
+def test_a_robot_that_is_not_a_six_axis_revolute_arm_is_refused_naming_why(robot, why):
+    from gecgen.deliver.programs.core import require_six_axis_arm
+
+    with pytest.raises(ModelError) as err:
+        require_six_axis_arm(load_robot(ROOT / "robots" / f"{robot}.yaml"))
+    assert str(err.value).startswith(f"robot {robot}: program filters correct serial arms of six revolute joints")
+    assert f", and {why}; correct this robot's commands with gecgen compensate" in str(err.value)
+    assert "\n" not in str(err.value)

@@ -21,24 +21,23 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    from gecgen.api import load_calibration
+    from gecgen.api import filter_program, load_calibration
     from gecgen.cli import Incomplete
-    from gecgen.deliver.programs import filter_program
 
     cal = load_calibration(args.calibration)
-    outcome, written, log = filter_program(cal, args.program, args.output, args.frames, args.format, args.max_iter)
-    kept = outcome.kept
+    done = filter_program(cal, args.program, args.output, frames=args.frames, format=args.format,
+                          max_iter=args.max_iter)
+    kept = done.kept
     result = {"robot": cal.robot_.name, "program": str(args.program),
-              "written": [str(p) for p in written.values()], "log": str(log),
-              "n_targets": len(outcome.changes), "corrected": outcome.corrected, "status_counts": outcome.counts(),
-              "kept": [{"target": c.target.name, "file": c.target.file.name, "line": c.target.line,
-                        "reason": c.reason} for c in kept],
-              "max_correction_mm": max((c.position_mm for c in outcome.changes), default=0.0),
-              "max_correction_deg": max((c.rotation_deg for c in outcome.changes), default=0.0)}
+              "written": [str(p) for p in done.written.values()], "log": str(done.log),
+              "n_targets": len(done.targets), "corrected": done.corrected, "status_counts": done.counts,
+              "kept": [{"target": t.name, "file": t.file.name, "line": t.line, "reason": t.reason} for t in kept],
+              "max_correction_mm": max((t.position_mm for t in done.targets), default=0.0),
+              "max_correction_deg": max((t.rotation_deg for t in done.targets), default=0.0)}
     if kept:
         first = kept[0]
-        raise Incomplete(f"{first.target.file}:{first.target.line}: {first.target.name} kept as written "
-                         f"({first.reason}); {outcome.corrected} of {len(outcome.changes)} targets corrected, "
-                         f"{len(kept)} kept as written (each with its reason in {result['log']}): the program is "
-                         f"written, the kept targets carry the uncalibrated error", result)
+        raise Incomplete(f"{first.file}:{first.line}: {first.name} kept as written ({first.reason}); "
+                         f"{done.corrected} of {len(done.targets)} targets corrected, {len(kept)} kept as written "
+                         f"(each with its reason in {result['log']}): the program is written, the kept targets "
+                         f"carry the uncalibrated error", result)
     return result

@@ -5,7 +5,8 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, write_program
+from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, require_six_axis_arm, \
+    write_program
 from gecgen.model.validation import ModelError
 
 #: format name -> (its module, the file suffixes it reads)
@@ -27,12 +28,16 @@ def program_format(path: str | Path, name: str | None = None) -> Format:
     return importlib.import_module(f"gecgen.deliver.programs.{FORMATS[name][0]}").FORMAT
 
 
-def filter_program(cal, program: str | Path, output: str | Path, frames: str | Path | None = None,
-                   format: str | None = None, max_iter: int = 50) -> tuple[Outcome, dict[Path, Path], Path]:
+def filter_program(cal, program: str | Path, output: str | Path | None, frames: str | Path | None = None,
+                   format: str | None = None, max_iter: int = 50) -> tuple[Outcome, dict[Path, Path], Path | None]:
     """Read `program`, correct its targets through the fitted Calibrator `cal`, and write the corrected
     program to `output` (KRL: its .dat beside it) with the change log beside it (OUTPUT.log.csv): the
-    outcome of every target, where each file went, and the log's path."""
+    outcome of every target, where each file went, and the log's path ({} and None when `output` is
+    None: nothing is written)."""
+    require_six_axis_arm(cal.robot_)
     fmt = program_format(program, format)
     parsed = fmt.parse(Path(program))
     outcome = correct(fmt, parsed, cal, read_frames(frames, fmt), max_iter=max_iter)
+    if output is None:
+        return outcome, {}, None
     return (outcome, *write_program(fmt, parsed, outcome, Path(output)))

@@ -21,6 +21,9 @@ DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjd
                   re.I)
 MOVE = re.compile(r"\b(MoveJ|MoveL|MoveC|MoveAbsJ|MoveJDO|MoveLDO|MoveJAO|MoveLAO|MoveJGO|MoveLGO|MoveJSync|"
                   r"MoveLSync|MoveCDO|MoveCSync|TriggJ|TriggL|TriggC)\b([^;]*);", re.I)
+#: a target with no value in the module: declared without one, or a routine's parameter (set while it runs)
+BARE = re.compile(r"\b(?:(?:CONST|PERS|VAR)\s+(?:robtarget|jointtarget)\s+(\w+)\s*;|(?:robtarget|jointtarget)\s+(\w+)"
+                  r"\s*[,)])", re.I)
 #: functions whose first argument is a target they offset (the offset target follows its base's correction)
 OFFSET = {"offs", "reltool"}
 IDENTITY = ("tool0", "wobj0")
@@ -168,6 +171,9 @@ def parse(path: Path) -> Program:
             bases[name] = _frame(text, code, path, m.end(), kind, name)
         else:
             declared[name] = (kind, m.end())
+    bare: dict[str, list[int]] = {}  # name -> the lines declaring it without a value (routines reuse names)
+    for m in BARE.finditer(code):
+        bare.setdefault(m.group(1) or m.group(2), []).append(line_of(text, m.start()))
     uses, inline = {}, {}
     for m in MOVE.finditer(code):
         args = [(a, m.start(2) + o) for a, o in _split(m.group(2)) if not a.strip().startswith("\\")]
@@ -190,6 +196,11 @@ def parse(path: Path) -> Program:
                 uses.setdefault(stripped, (tool, wobj))
             elif call and call.group(1).lower() in OFFSET and call.group(2) in declared:
                 uses.setdefault(call.group(2), (tool, wobj))
+            elif any(k <= line for k in bare.get(stripped, ())):
+                declared_at = max(k for k in bare[stripped] if k <= line)
+                inline[start] = Target(f"{stripped} (line {line})", path, line, "motion", (),
+                                       note=f"declared without a value (line {declared_at}): set while the module "
+                                            f"runs, not corrected")
             elif re.fullmatch(r"\w+\{.*\}", stripped, re.S):
                 continue  # an element of an array: the array is listed where it is declared
             else:

@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, pose_error, seed_grid
+from gecgen.deliver.programs.kinematics import Arm, arm_of, inverse, not_a_six_axis_arm, pose_error, seed_grid
 from gecgen.model.files import write_atomically
 from gecgen.model.validation import ModelError, read_yaml, require
 
@@ -269,17 +269,24 @@ def _joint_scale(fmt: Format) -> float:
     return 180.0 / math.pi if fmt.joint_unit == "deg" else 1.0
 
 
+def require_six_axis_arm(robot) -> None:
+    """A one-line refusal naming why, unless `robot` is a serial arm of six revolute joints."""
+    why = not_a_six_axis_arm(robot)
+    require(why is None, f"robot {robot.name}: program filters correct serial arms of six revolute joints (the "
+                         f"axes of KUKA, ABB, FANUC and UR programs), and {why}; correct this robot's commands "
+                         f"with gecgen compensate")
+
+
 def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 50) -> Outcome:
     """Every target of the program corrected through the calibration `cal` (a fitted
     gecgen.api.Calibrator), or kept as written with the reason; the texts with the numbers of the
     corrected targets rewritten and every other character as it was."""
     robot = cal.robot_
-    require(not robot.branches and robot.n == 6 and robot.n_frames == 6 and all(j.kind == "R" for j in robot.joints),
-            f"robot {robot.name}: program filters speak for six-axis serial arms with revolute joints; "
-            f"correct this robot's commands with gecgen compensate")
+    require_six_axis_arm(robot)
     arm = arm_of(robot, frames.flange)
     config = fmt.config(arm) if fmt.config else None
-    seeds = seed_grid(arm, config)
+    # the seeds' forward kinematics is most of the work: only for a program with Cartesian targets
+    seeds = seed_grid(arm, config) if any(t.kind == "pose" and t.note is None for t in program.targets) else None
     scale = _joint_scale(fmt)
     lo, hi = arm.limits()
     # frames first: a program whose frames nobody describes is refused before any work
@@ -291,6 +298,7 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
         if t.note is not None:
             nominal.append(None)
             reasons.append(t.note)
+            previous = None  # the robot stands wherever that motion took it
             continue
         if t.kind == "joint":
             require(len(t.numbers) == robot.n, f"{t.file}:{t.line}: target {t.name} has {len(t.numbers)} joint "
@@ -328,7 +336,7 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
     for k, (t, tool, base) in enumerate(placed):
         if reasons[k] is not None:
             changes.append(Change(t, None, reasons[k]))
-            previous = nominal[k] if nominal[k] is not None else previous  # run as written
+            previous = nominal[k] if nominal[k] is not None or t.note is not None else previous  # run as written
             continue
         q0 = nominal[k]
         q, status, residual = corrected[k]

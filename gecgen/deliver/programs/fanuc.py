@@ -21,7 +21,8 @@ GROUP = re.compile(r"GP(\d+)\s*:")
 FRAMES = re.compile(r"UF\s*:\s*(\d+)\s*,\s*UT\s*:\s*(\d+)")
 CONFIG = re.compile(r"CONFIG\s*:\s*'\s*([NF])\s*([UD])\s*([TB])\s*,\s*(-?\d+)\s*,\s*(-?\d+)\s*,\s*(-?\d+)\s*'")
 FIELD = re.compile(r"\b(X|Y|Z|W|P|R|J[1-6])\s*=(\s*[-+]?(?:\d+\.?\d*|\.\d+))\s*(mm|deg)")
-MOTION = re.compile(r"^\s*\d+:\s*([JLCA])\s+(P|PR)\[\s*(\w+)", re.M)
+#: a motion line; the line number before the colon is optional (editors and compilers write " : J P[1] ...")
+MOTION = re.compile(r"^[ \t]*\d*[ \t]*:[ \t]*([JLCA])[ \t]+(P|PR)\[[ \t]*(\w+)", re.M)
 IDENTITY = ("0",)
 
 

@@ -58,6 +58,22 @@ class Arm:
                 np.array([j.upper for j in self.robot.joints], float))
 
 
+def not_a_six_axis_arm(robot: Robot) -> str | None:
+    """Why the controllers' programs here cannot be corrected for `robot` (one clause), or None for a
+    serial arm of six revolute joints: their joint targets carry six axes and their configuration
+    flags are defined for that arm."""
+    prismatic = [j.name for j in robot.joints if j.kind != "R"]
+    if robot.branches:
+        return f"it branches into {len(robot.branches)} tools"
+    if prismatic:
+        return f"joint {prismatic[0]} is prismatic"
+    if robot.n != 6:
+        return f"it has {robot.n} axes"
+    if robot.n_frames != 6:
+        return f"it has {robot.n_frames - robot.n} passive joint(s) in its chain"
+    return None
+
+
 def arm_of(robot: Robot, flange: np.ndarray) -> Arm:
     """The controller's arm, with the joint-3 angle at which the wrist centre is farthest from the
     shoulder (frame 1's origin): the line between elbow up and elbow down."""

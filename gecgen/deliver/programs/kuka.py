@@ -24,6 +24,9 @@ MOTION = re.compile(r"^[ \t]*(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL|SPTP_
                     re.M | re.I)
 DECL = re.compile(r"^[ \t]*(?:DECL[ \t]+)?(?:GLOBAL[ \t]+)?(E6POS|POS|E6AXIS|AXIS|FRAME|FDAT)[ \t]+(\w+)[ \t]*=[ \t]*"
                   r"\{([^}\n]*)\}", re.M | re.I)
+#: a point declared without a value (`DECL AXIS a, b`): set while the program runs
+BARE = re.compile(r"^[ \t]*(?:DECL[ \t]+)?(?:GLOBAL[ \t]+)?(?:E6POS|POS|E6AXIS|AXIS)[ \t]+"
+                  r"(\w+(?:[ \t]*,[ \t]*\w+)*)[ \t]*$", re.M | re.I)
 AGGREGATE = re.compile(r"\{([^}\n]*)\}")
 FIELD = re.compile(r"(\w+)[ \t]+('[^']*'|\"[^\"]*\"|#\w+|[-+.\deE]+)")
 TOOL_SET = re.compile(r"^[ \t]*\$(TOOL|BASE)[ \t]*=[ \t]*(?:(?:TOOL|BASE)_DATA\[(\d+)\]|(\$?\w+))", re.M | re.I)
@@ -44,11 +47,13 @@ def numbers(T: np.ndarray, target: Target) -> list[float]:
 
 
 def config(arm: Arm):
-    """S and T as KUKA defines them: S bit 0 the wrist centre behind axis 1, bit 1 axis 3 at or above
-    the stretched arm, bit 2 A5 > 0; T bit k axis k+1 negative."""
+    """S and T as KUKA defines them: S bit 0 the wrist centre behind axis 1 (the overhead area), bit 1
+    axis 3 at or above the stretched arm, bit 2 A5 negative (a flipped hand); T bit k axis k+1
+    negative. Bit 2 is 1 exactly when T's bit 4 is: so every point KUKA controllers wrote into the
+    public .dat files checked shows it (S 6 with T 50, S 2 with T 3 or 34; docs/program-filters.md)."""
     def of(q: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(q)
-        s = (~front(arm, q)).astype(int) + 2 * elbow_up(arm, q) + 4 * (q[:, 4] > 0)
+        s = (~front(arm, q)).astype(int) + 2 * elbow_up(arm, q) + 4 * (q[:, 4] < 0)
         t = np.sum((q < 0) * (2 ** np.arange(6)), axis=1)
         return np.column_stack([s, t])
     return of
@@ -107,7 +112,7 @@ def parse(path: Path) -> Program:
     texts = {path: src} | ({dat_path: dat} if dat_path else {})
     code = {p: re.sub(r";[^\n]*", lambda m: " " * len(m.group()), t) for p, t in texts.items()}
     decls = {}  # NAME -> (file, kind, start, end of the aggregate's inside)
-    tools, bases, fdat = {}, {}, {}
+    tools, bases, fdat, bare = {}, {}, {}, {}  # bare: NAME -> (file, line) of a declaration without a value
     for p, c in code.items():
         for m in DECL.finditer(c):
             kind, name = m.group(1).upper(), m.group(2).upper()
@@ -119,6 +124,9 @@ def parse(path: Path) -> Program:
                 tools[name] = bases[name] = frame
             else:
                 decls[name] = (p, kind, m.start(3), m.end(3))
+        for m in BARE.finditer(c):
+            for name in re.split(r"[ \t]*,[ \t]*", m.group(1).upper()):
+                bare.setdefault(name, (p, line_of(c, m.start())))
     # tool and base in effect at each motion, in the order of the program's text
     events = sorted([(m.start(), m.group(1).upper(), m.group(2) or m.group(3).upper()) for m in TOOL_SET.finditer(
         code[path])] + [(m.start(), m.group(1).upper(), m.group(2)) for m in BAS_SET.finditer(code[path])] +
@@ -161,6 +169,12 @@ def parse(path: Path) -> Program:
             name = token.group().upper()
             if name in decls:
                 first_use.setdefault(name, (state["TOOL"], state["BASE"]))
+            elif name in bare:
+                where, at_line = bare[name]
+                targets[at + token.start()] = Target(
+                    f"{token.group()} (line {line})", path, line, "motion", (),
+                    note=f"declared without a value ({where.name}:{at_line}): set while the program runs, not "
+                         f"corrected")
             elif dat_path is None:
                 refuse(path, line, f"{m.group(1)} to {token.group()}, and no {path.with_suffix('.dat').name} beside "
                                    f"the program declares it", f"copy {path.with_suffix('.dat').name} beside it")

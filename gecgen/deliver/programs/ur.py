@@ -1,9 +1,11 @@
-"""Universal Robots script (.script, .urscript): `movej`, `movel`, `movep` and `movec` (its via pose and
-its target) to a joint list `[q1, ..., q6]` (rad) or a pose `p[x, y, z, rx, ry, rz]` (m, rotation vector
-in rad) in the robot's base frame, written in the call (also through `get_inverse_kin(pose, ...)`) or
-assigned to a variable the call names. The TCP is the last
-`set_tcp(p[...])` before the target, else the installation's (`tools: installation` of a frames file).
+"""Universal Robots script (.script, .urscript): `movej`, `movel`, `movep`, `movec` (its via pose
+and its target), `optimovej` and `optimovel` to a joint list `[q1, ..., q6]` (rad) or a pose
+`p[x, y, z, rx, ry, rz]` (m, rotation vector in rad) in the robot's base frame, written in the call
+(also through `get_inverse_kin(pose, ...)`) or assigned to a variable the call names. The TCP is the
+last `set_tcp(p[...])` before the target, else the installation's (`tools: installation` of a frames file).
 The controller has no configuration flags: a pose is reached nearest the joints of the target before.
+A move to anything else (a variable set at run time, an expression) is listed and kept as written,
+and the pose after it has no target before it to be solved near.
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from gecgen.deliver.programs.core import Format, Program, Target, line_of, numbers_in, read_text, refuse, \
     write_same_names
 
-MOVE = re.compile(r"\b(movej|movel|movep|movec)\s*\(")
+MOVE = re.compile(r"\b(movej|movel|movep|movec|optimovej|optimovel)\s*\(")
 #: a literal joint list or pose: p[ six numbers ] or [ six numbers ]
 LITERAL = re.compile(r"(p?)\[\s*([^\[\]]*)\]")
 ASSIGN = re.compile(r"^[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[ \t]*(p?)\[([^\[\]\n]*)\]", re.M)
@@ -97,9 +99,10 @@ def parse(path: Path) -> Program:
             elif NAME.fullmatch(inner) and inner in assigned:
                 used.setdefault(inner, start)
             else:
-                refuse(path, line_of(text, start), f"{m.group(1)} to {arg.splitlines()[0][:40]!r}: not a joint list, "
-                                                   f"a pose p[...] or a variable assigned one",
-                       "write the target as a literal or assign it to a variable first")
+                line = line_of(text, start)
+                name = f"{m.group(1)} to {arg.splitlines()[0][:30].rstrip()} (line {line})"
+                found[start] = Target(name, path, line, "motion", (), note="a target computed at run time (not a "
+                                      "joint list or pose p[...] written in the program): not corrected")
             start = end + 1
     for a in ASSIGN.finditer(code):
         if a.group(1) in used and SIX.match(a.group(3)):
