@@ -18,16 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
+from gecgen.fit import calibration as _calibration
+from gecgen.fit import significance
+from gecgen.fit.inputs import checked, error_model, measured_counts, on_points, placed
 from gecgen.model import ModelError, Robot
 from gecgen.model import load_robot as _load_robot
 from gecgen.model.checks import check_terms_finite
 from gecgen.model.measurements import Commands, Measurements, read_commands
 from gecgen.model.measurements import read_measurements as _read_measurements
 from gecgen.model.validation import excerpt, nearest, require
-from gecgen.fit import calibration as _calibration
-from gecgen.fit import significance
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, STATUS_NAMES, CompiledModel
-from gecgen.fit.inputs import checked, error_model, measured_counts, on_points, placed
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "FilteredProgram", "ModelError", "ProgramTarget",
            "Score", "Selection", "calibrate", "filter_program", "load_calibration", "load_robot", "read_measurements"]
