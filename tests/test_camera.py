@@ -197,6 +197,7 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
                      rig.cameras, rig.board)
     assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
     assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
+    assert out["held"] == [h.to_dict() for h in fit.held]
     np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
                header="q1,q2,q3,q4,q5,q6", comments="")
     run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")
@@ -257,3 +258,21 @@ def test_a_pixel_calibration_exports(arm, tmp_path):
     save(calibration_of(robot, model, fit), tmp_path / "cal.json")
     out = run_json("export", tmp_path / "cal.json", "--c", tmp_path / "c")
     assert (tmp_path / "c").is_dir() and out
+
+
+def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_path):
+    robot, truth, _ = arm
+    (tmp_path / "linear.errors.yaml").write_text(
+        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
+    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
+    robot, rig, q, data = world_rig(arm, n=20)
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    assert fit.converged and not fit.failures and fit.iterations < 10
+    assert 0.2 < fit.train["rms_px"] < 0.35
+    held = {e.param: e.detail for e in fit.eliminated if e.reason == "held"}
+    assert held and set(held) == {h.param for h in fit.held}
+    assert all(h.beyond > 1 and "held at zero" in h.reason for h in fit.held)
+    assert not set(held) & {model.coefficient_names(robot)[j] for j in fit.kept}
+    # what holding spares: the same images fitted with every direction free do not settle
+    free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
+    assert not free.converged and free.failures

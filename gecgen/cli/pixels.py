@@ -2,6 +2,7 @@
 points (`runtime.camera`), written as identify writes one."""
 from __future__ import annotations
 
+from gecgen.cli.common import number
 from gecgen.model.validation import require
 
 
@@ -10,6 +11,9 @@ def add_options(p):
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
+    g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
+                   help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
+                        "weakly against it are held at zero and named (default: the fit's own residual)")
 
 
 def identified(args) -> dict:
@@ -34,13 +38,14 @@ def identified(args) -> dict:
     require(not model.aux or set(model.aux) <= set(data.aux_names),
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
-    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss)
+    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"
     save(calibration, out)
     return {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
             **{k: calibration.report[k] for k in ("n_params", "n_identifiable", "eliminated", "before", "train",
-                                                  "sigma_px", "outliers", "converged", "iterations", "cameras")},
+                                                  "sigma_px", "outliers", "converged", "iterations", "cameras",
+                                                  "held")},
             **({"board": calibration.report["board"]} if board is not None else {}),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}

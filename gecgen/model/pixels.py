@@ -49,6 +49,13 @@ class Pixels:
     def n_poses(self) -> int:
         return len(self.q)
 
+    #: image points are never relative rows (sockets, planes): what `runtime.weak` asks measurements
+    relative = None
+
+    def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
+        """(P, len(names)) values of the named auxiliary signals (the file has them: `read_pixels`)."""
+        return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
+
     def subset(self, poses: np.ndarray) -> "Pixels":
         """The image points of the given pose indices."""
         poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)

@@ -32,10 +32,11 @@ from gecgen.model.errors import ErrorModel
 from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.runtime import robust
+from gecgen.runtime import robust, weak
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import RSS_TOL, structural_analysis
 from gecgen.runtime.redundancy import Eliminated
+from gecgen.runtime.threads import one_blas_thread
 
 #: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
 FRAME_ARM = 0.1
@@ -49,6 +50,10 @@ MEDIAN_CHI2 = float(np.sqrt(2 * np.log(2)))
 STEP_TOL_PX = 1e-4
 #: step (rad, m) of the central differences in the poses
 STEP = 1e-7
+#: px: an estimated noise per coordinate is taken at most as this: sub-pixel corners are found to a few
+#: tenths of a pixel, and a larger residual is the model or the camera file missing the data, which must
+#: not pass for noise and hold every direction
+NOISE_CAP_PX = 1.0
 #: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
 CAMERA_POSE = "camera pose"
 SCALE = "scale"
@@ -79,7 +84,9 @@ class PixelFit:
     {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
     eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
     and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
-    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`)."""
+    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`);
+    held: the coefficients held at zero because the images determine them too weakly (`runtime.weak`),
+    each with why (also in eliminated, reason "held")."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -98,6 +105,7 @@ class PixelFit:
     cov: np.ndarray | None = None
     sigma_px: float = np.nan
     ranges: dict | None = None
+    held: tuple[weak.Held, ...] = ()
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -119,8 +127,7 @@ class _Problem:
         self.cm, self.robot, self.data, self.board = cm, robot, data, board
         self.cams = [cameras[n] for n in data.cameras]
         self.tool = data.mount == "tool"
-        self.inputs = (data.q, data.w, data.aux[:, [data.aux_names.index(a) for a in cm.model.aux]]
-                       if cm.model.aux else None)
+        self.inputs = (data.q, data.w, data.aux_columns(cm.model.aux) if cm.model.aux else None)
         seen = set(np.array(data.points)[data.point])
         self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
         # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
@@ -335,6 +342,7 @@ def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Ca
     return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
 
 
+@one_blas_thread
 def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
                      board: Board | None = None) -> dict:
     """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
@@ -344,16 +352,22 @@ def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dic
             "eliminated": [e.to_dict() for e in eliminated]}
 
 
+@one_blas_thread  # small dense algebra: more threads than one on a shared machine only contend
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
-               backend: str = "auto") -> PixelFit:
+               backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
-    order of the fit) held at these values instead of fitted (an oracle that knows the cameras)."""
+    order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
+    hold_weak (default): the coefficients whose direction the images determine too weakly against the
+    noise to hold a plausible value (`runtime.weak`, as identify does for a tracker; the cameras' poses
+    projected out first) are held at zero, each listed in `PixelFit.held` with why; noise_px the
+    corner noise per coordinate when known, else the linearised fit's residual (at most
+    NOISE_CAP_PX). The steps are Levenberg-Marquardt steps in the determined coefficients and the poses,
+    so the fit converges on what the images determine."""
     robust.check_loss(loss)
     problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend)
     c = np.zeros(problem.cm.dims.nc)
-    cols = np.array(kept, int)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)
     before = _summary(e)
@@ -362,18 +376,17 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
 
     limit = limit_of(e)
+    held = ()
+    if hold_weak and kept:
+        kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
+        eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
+                                  key=lambda x: x.index))
+    cols = np.array(kept, int)
     lam, converged, it = 0.0, False, 0
     for it in range(1, max_iter + 1):
         wr = robust.weights(e, limit, loss)
         obj = robust.objective(e, limit, loss)
-        r, J = problem.jacobian(g, c, cols)
-        if not free_g:
-            J = J[:, problem.n_geom:]
-        root = np.repeat(np.sqrt(wr), 2)
-        A, b = J * root[:, None], r.ravel() * root
-        scale = np.linalg.norm(A, axis=0)
-        scale[scale == 0] = 1.0
-        A = A / scale
+        A, b, scale = _system(problem, g, c, cols, wr, free_g)
         predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
         if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
             converged = True  # a full step would change nothing a camera resolves
@@ -417,22 +430,45 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges)
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held)
 
 
-def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
-    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
-    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """The weighted least squares at poses g and coefficients c: its Jacobian A (2R, n) in the poses
+    (when free_g) and c[cols], each column scaled to unit norm, the residual b (2R,) px and the
+    scales (n,); wr (R,) the image points' robust weights."""
     r, J = problem.jacobian(g, c, cols)
     if not free_g:
         J = J[:, problem.n_geom:]
     root = np.repeat(np.sqrt(wr), 2)
     A, b = J * root[:, None], r.ravel() * root
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    return A / scale, b, scale
+
+
+def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int], wr: np.ndarray, free_g: bool,
+               noise_px: float | None) -> tuple[list[int], tuple[weak.Held, ...]]:
+    """The coefficients of kept the images determine against the noise and those held (`weak.hold`),
+    with the poses' columns projected out: the R factor's block below them is that of the
+    coefficients' columns after the poses have taken what they can."""
+    A, b, scale = _system(problem, g, c, np.array(kept, int), wr, free_g)
+    k0 = A.shape[1] - len(kept)
+    R = np.linalg.qr(np.column_stack([A, b]), mode="r")[k0:, k0:]
+    stay, held = weak.hold(problem.cm, problem.data, kept, R, scale[k0:], 2 * float(wr.sum()) - k0, noise_px,
+                           NOISE_CAP_PX)
+    return [kept[i] for i in stay], held
+
+
+def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
+    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+    A, b, scale = _system(problem, g, c, cols, wr, free_g)
     dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
     sigma = float(np.sqrt(b @ b / dof))
     with np.errstate(all="ignore"):
         try:
-            full = sigma ** 2 * np.linalg.inv(A.T @ A)
+            full = sigma ** 2 * np.linalg.inv(A.T @ A) / np.outer(scale, scale)
         except np.linalg.LinAlgError:
             full = np.full((A.shape[1],) * 2, np.inf)
     k0 = A.shape[1] - len(cols)
@@ -459,7 +495,7 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
               "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
               "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
-              "training_ranges": fit.ranges,
+              "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held],
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
                  if fit.board is not None else {})}
