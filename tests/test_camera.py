@@ -276,3 +276,24 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     # what holding spares: the same images fitted with every direction free do not settle
     free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
     assert not free.converged and free.failures
+
+
+def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_similarity_fit(arm, rng):
+    robot, truth, model = arm
+    robot, rig, q, data = world_rig(arm, n=20)
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    assert fit.scale["std_ppm"] > 0 and fit.scale["std_mm"] > 0
+    # independently: coefficients drawn from the fit's covariance, each draw's predicted tool origins
+    # fitted onto the fit's by a similarity (Umeyama); the spread of its scale is the stated one
+    cm = CompiledModel(frame_robot(robot), model)
+    kept = np.array(fit.kept)
+    p0 = cm.model_targets(data.q, data.w, None, fit.c)[:, 0]
+    y = p0 - p0.mean(axis=0)
+    scales = []
+    for draw in rng.multivariate_normal(fit.c[kept], fit.cov, 400):
+        c = fit.c.copy()
+        c[kept] = draw
+        p = cm.model_targets(data.q, data.w, None, c)[:, 0]
+        U, S, Vt = np.linalg.svd(y.T @ (p - p.mean(axis=0)))
+        scales.append(S.sum() / np.sum(y ** 2))
+    assert np.std(scales) * 1e6 == pytest.approx(fit.scale["std_ppm"], rel=0.15)

@@ -46,6 +46,6 @@ def identified(args) -> dict:
     return {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
             **{k: calibration.report[k] for k in ("n_params", "n_identifiable", "eliminated", "before", "train",
                                                   "sigma_px", "outliers", "converged", "iterations", "cameras",
-                                                  "held")},
+                                                  "held", "scale")},
             **({"board": calibration.report["board"]} if board is not None else {}),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}

@@ -86,7 +86,8 @@ class PixelFit:
     and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
     ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`);
     held: the coefficients held at zero because the images determine them too weakly (`runtime.weak`),
-    each with why (also in eliminated, reason "held")."""
+    each with why (also in eliminated, reason "held"); scale: how well the images fix the calibrated
+    robot's scale (`_scale`)."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -106,6 +107,7 @@ class PixelFit:
     sigma_px: float = np.nan
     ranges: dict | None = None
     held: tuple[weak.Held, ...] = ()
+    scale: dict | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -413,6 +415,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             break
     wr = robust.weights(e, limit, loss)
     std, cov, sigma = _uncertainty(problem, g, c, cols, wr, free_g)
+    scale = _scale(problem, c, cols, cov)
     flagged = np.nonzero(e > limit)[0]
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
@@ -430,7 +433,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held)
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale)
 
 
 def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -458,6 +461,22 @@ def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
     stay, held = weak.hold(problem.cm, problem.data, kept, R, scale[k0:], 2 * float(wr.sum()) - k0, noise_px,
                            NOISE_CAP_PX)
     return [kept[i] for i in stay], held
+
+
+def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) -> dict:
+    """How well the fit fixes the scale of the robot it calibrates: the 1-sigma of the relative scale of
+    the tool origins it predicts at the training poses (`std_ppm`; the scale of a similarity fit of
+    them onto the truth's, the rest rigid) and what that moves them by, RMS about their centre
+    (`std_mm`). Pixels fix a length only through a known one (the markers' spacing, the board's
+    square), seen from afar only weakly; a similarity fit's scale of small perturbations dp (P, 3) is
+    sum(r . dp) / sum(|r|^2), r the positions about their centre, so its variance is a^T cov a with a
+    that sum's gradient in the coefficients."""
+    o, _, H = problem.frames(c, with_H=True)
+    r = o - o.mean(axis=0)
+    a = np.einsum("pi,pik->k", r, H[:, 0][..., cols]) / float(np.sum(r ** 2))
+    with np.errstate(invalid="ignore"):
+        std = float(np.sqrt(a @ cov @ a)) if len(cols) else 0.0
+    return {"std_ppm": 1e6 * std, "std_mm": 1e3 * std * float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))}
 
 
 def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -495,7 +514,7 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
               "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
               "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
-              "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held],
+              "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held], "scale": fit.scale,
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
                  if fit.board is not None else {})}
