@@ -297,3 +297,44 @@ def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_simila
         U, S, Vt = np.linalg.svd(y.T @ (p - p.mean(axis=0)))
         scales.append(S.sum() / np.sum(y ** 2))
     assert np.std(scales) * 1e6 == pytest.approx(fit.scale["std_ppm"], rel=0.15)
+
+
+def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(arm, tmp_path):
+    import contextlib
+    import io
+
+    from conftest import run_json
+    from gecgen.cli import main
+
+    robot, truth, model = arm
+    cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
+    (tmp_path / "hand.yaml").write_text(
+        f"cameras:\n  cam: {{mount: tool, fx: {cam.fx}, fy: {cam.fy}, cx: {cam.cx}, cy: {cam.cy}, "
+        f"distortion: {list(cam.distortion)}, width: {cam.width}, height: {cam.height}}}\n")
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    out = run_json("simulate", ROBOTS / "industrial6r.yaml", "--cameras", tmp_path / "hand.yaml", "--board",
+                   tmp_path / "board.yaml", "--poses", "15", "--noise-px", "0.2", "--home", "0,-1.57,-1.57,0,1.05,0",
+                   "--span", "0.14,0.1,0.1,0.44,0.35,0.5", "-o", tmp_path / "pixels.csv", "--rig-out",
+                   tmp_path / "rig.yaml", "--seed", "5")
+    assert out["poses"] == 15 and out["rows"] == 15 * 54 and out["mount"] == "tool"
+    # the file is the truth's: fitted with the true camera and board poses it leaves the noise
+    rig = read_yaml(tmp_path / "rig.yaml", "rig")
+    poses = [rig["cameras"]["cam"], rig["board"]]
+    fixed = np.array([v for p in poses for v in (*Rotation.from_matrix(p["rotation"]).as_rotvec(), *p["translation"])])
+    data = read_pixels(tmp_path / "pixels.csv", robot, {"cam": cam}, Board(9, 6, 0.04))
+    oracle = fit_pixels(robot, model, data, {"cam": cam}, Board(9, 6, 0.04), fixed_poses=fixed)
+    assert oracle.converged and 0.2 < oracle.train["rms_px"] < 0.35
+    fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "hand.yaml", "--board",
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+    assert fit["converged"] and 0.2 < fit["train"]["rms_px"] < 0.35
+    (tmp_path / "world.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("mount: tool", "mount: world"))
+    for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
+                           (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),
+                           (["--eye", "cam=1,2,3"], "--eye goes with --cameras"),
+                           (["--cameras", tmp_path / "hand.yaml"], "give the board it sees")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(["simulate", str(ROBOTS / "industrial6r.yaml"), *map(str, extra), "-o",
+                         str(tmp_path / "x.csv")]) != 0
+        assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
