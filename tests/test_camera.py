@@ -326,8 +326,10 @@ def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(a
     assert oracle.converged and 0.2 < oracle.train["rms_px"] < 0.35
     fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
                    ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "hand.yaml", "--board",
-                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json", "--refine-intrinsics")
     assert fit["converged"] and 0.2 < fit["train"]["rms_px"] < 0.35
+    refined = fit["intrinsics"]["cam"]
+    assert abs(refined["fx"] - cam.fx) < 4 * refined["std"]["fx"] and refined["std"]["fx"] < 2.0
     (tmp_path / "world.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("mount: tool", "mount: world"))
     for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
                            (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),
@@ -338,3 +340,22 @@ def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(a
             assert main(["simulate", str(ROBOTS / "industrial6r.yaml"), *map(str, extra), "-o",
                          str(tmp_path / "x.csv")]) != 0
         assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_refined_intrinsics_find_the_true_camera_from_a_perturbed_file(arm):
+    robot, truth, model = arm
+    rig, train, held, data = hand_rig(arm)
+    cam = rig.cameras["cam"]
+    off = {"cam": replace(cam, fx=cam.fx * 1.01, fy=cam.fy * 0.995, cx=cam.cx + 6, cy=cam.cy - 4,
+                          distortion=(cam.distortion[0] + 0.02, *cam.distortion[1:]))}
+    given = fit_pixels(robot, model, data, off, rig.board)
+    fit = fit_pixels(robot, model, data, off, rig.board, intrinsics=True)
+    assert fit.converged and not fit.failures and 0.2 < fit.train["rms_px"] < 0.35
+    assert given.train["rms_px"] > 3 * fit.train["rms_px"]
+    got, std = fit.cameras["cam"], fit.intrinsics_std["cam"]
+    true = dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
+                    (cam.fx, cam.fy, cam.cx, cam.cy, *cam.distortion)))
+    values = dict(zip(true, (got.fx, got.fy, got.cx, got.cy, *got.distortion)))
+    # within 4 of their stated std of the truth, and that std small against what the file was off by
+    assert all(abs(values[k] - true[k]) < 4 * std[k] for k in true), {k: (values[k] - true[k], std[k]) for k in true}
+    assert std["fx"] < 1.0 and std["cx"] < 1.5 and std["k1"] < 0.005

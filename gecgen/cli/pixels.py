@@ -14,6 +14,9 @@ def add_options(p):
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
+    g.add_argument("--refine-intrinsics", action="store_true",
+                   help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera file's "
+                        "values (JSON intrinsics, with their std)")
     g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
                    help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
                         "weakly against it are held at zero and named (default: the fit's own residual)")
@@ -41,7 +44,8 @@ def identified(args) -> dict:
     require(not model.aux or set(model.aux) <= set(data.aux_names),
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
-    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px)
+    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
+                     intrinsics=args.refine_intrinsics)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"
@@ -51,6 +55,7 @@ def identified(args) -> dict:
                                                   "sigma_px", "outliers", "converged", "iterations", "cameras",
                                                   "held", "scale")},
             **({"board": calibration.report["board"]} if board is not None else {}),
+            **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
 
 

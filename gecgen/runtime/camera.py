@@ -54,6 +54,9 @@ STEP = 1e-7
 #: tenths of a pixel, and a larger residual is the model or the camera file missing the data, which must
 #: not pass for noise and hold every direction
 NOISE_CAP_PX = 1.0
+#: a camera's intrinsics the fit refines on request: fx, fy, cx, cy and OpenCV's five distortion coefficients
+N_INTRINSICS = 9
+INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 #: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
 CAMERA_POSE = "camera pose"
 SCALE = "scale"
@@ -87,7 +90,8 @@ class PixelFit:
     ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`);
     held: the coefficients held at zero because the images determine them too weakly (`runtime.weak`),
     each with why (also in eliminated, reason "held"); scale: how well the images fix the calibrated
-    robot's scale (`_scale`)."""
+    robot's scale (`_scale`); cameras: with intrinsics refined, the cameras as fitted, and
+    intrinsics_std their 1-sigma per camera ({"fx": px, ..., "k1": ..}), None otherwise."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -108,6 +112,8 @@ class PixelFit:
     ranges: dict | None = None
     held: tuple[weak.Held, ...] = ()
     scale: dict | None = None
+    cameras: dict[str, Camera] | None = None
+    intrinsics_std: dict[str, dict[str, float]] | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -125,16 +131,37 @@ def frame_robot(robot: Robot) -> Robot:
 class _Problem:
     """The residual of one pixel data set and its Jacobian (see the module docstring)."""
 
-    def __init__(self, cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None):
+    def __init__(self, cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+                 intrinsics: bool = False):
         self.cm, self.robot, self.data, self.board = cm, robot, data, board
         self.cams = [cameras[n] for n in data.cameras]
+        self.intrinsics = intrinsics
         self.tool = data.mount == "tool"
         self.inputs = (data.q, data.w, data.aux_columns(cm.model.aux) if cm.model.aux else None)
         seen = set(np.array(data.points)[data.point])
         self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
         # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
         self.n_geom = 6 * len(self.cams) + (6 if self.tool else 0) + 3 * len(self.estimated)
+        self.n_poses_geom = self.n_geom  # the unknowns before the intrinsics
+        if intrinsics:  # refined: each camera's nine, last (`cameras_of`)
+            self.n_geom += N_INTRINSICS * len(self.cams)
 
+    def intrinsics_of(self) -> np.ndarray:
+        """The given cameras' intrinsics as the fit's unknowns: fx, fy, cx, cy in units of the given fx
+        (so that one finite-difference step suits them all) and the five distortion coefficients."""
+        return np.concatenate([[c.fx / c.fx, c.fy / c.fx, c.cx / c.fx, c.cy / c.fx, *c.distortion] for c in self.cams])
+
+    def cameras_of(self, g: np.ndarray) -> list[Camera]:
+        """The cameras with the intrinsics of g when they are refined, else as given."""
+        if not self.intrinsics:
+            return self.cams
+        k = self.n_poses_geom
+        out = []
+        for i, c in enumerate(self.cams):
+            v = g[k + N_INTRINSICS * i:k + N_INTRINSICS * (i + 1)]
+            out.append(replace(c, fx=c.fx * v[0], fy=c.fx * v[1], cx=c.fx * v[2], cy=c.fx * v[3],
+                               distortion=tuple(map(float, v[4:]))))
+        return out
     def frames(self, c: np.ndarray, with_H: bool = False):
         """Tool origin o (P, 3), rotation R (P, 3, 3) and, with_H, H_e of the four points (P, 4, 3, nc)."""
         q, w, aux = self.inputs
@@ -178,10 +205,10 @@ class _Problem:
             out[rows] = (Xt[rows] if self.tool else Xw[rows]) @ Rc.T + tc
         return out
 
-    def project(self, X: np.ndarray, jacobian: bool = False):
+    def project(self, X: np.ndarray, g: np.ndarray, jacobian: bool = False):
         uv = np.empty((len(X), 2))
         J = np.empty((len(X), 2, 3)) if jacobian else None
-        for k, cam in enumerate(self.cams):
+        for k, cam in enumerate(self.cameras_of(g)):
             rows = self.data.camera == k
             if jacobian:
                 uv[rows], J[rows] = cam.project(X[rows], True)
@@ -192,20 +219,20 @@ class _Problem:
     def residual(self, g: np.ndarray, c: np.ndarray) -> np.ndarray:
         """(R, 2) observed minus projected pixels."""
         o, R, _ = self.frames(c)
-        return self.data.uv - self.project(self.camera_points(g, o, R))
+        return self.data.uv - self.project(self.camera_points(g, o, R), g)
 
     def jacobian(self, g: np.ndarray, c: np.ndarray, columns: np.ndarray):
         """Residual (R, 2) and its Jacobian (2R, n_geom + len(columns)) in (g, c[columns])."""
         o, R, H = self.frames(c, with_H=True)
         X = self.camera_points(g, o, R)
-        uv, P = self.project(X, jacobian=True)
+        uv, P = self.project(X, g, jacobian=True)
         d = self.data
         Jg = np.empty((len(X), 2, self.n_geom))
         for i in range(self.n_geom):
             e = np.zeros(self.n_geom)
             e[i] = STEP
-            Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R)) -
-                           self.project(self.camera_points(g - e, o, R))) / (2 * STEP)
+            Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R), g + e) -
+                           self.project(self.camera_points(g - e, o, R), g - e)) / (2 * STEP)
         Hc = H[d.pose][..., columns]  # (R, 4, 3, k)
         dr = (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM  # d(tool axis k)/dc: (R, 3 axes, 3, k)
         poses, board, targets = self.unpack(g)
@@ -330,14 +357,16 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
 
 
 def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
-            fixed_poses: np.ndarray | None, backend: str):
+            fixed_poses: np.ndarray | None, backend: str, intrinsics: bool = False):
     """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
     eliminated (structurally, and by `_analysis`), at the nominal model."""
     require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
     cm = CompiledModel(frame_robot(robot), model, backend)
-    problem = _Problem(cm, robot, data, cameras, board)
+    problem = _Problem(cm, robot, data, cameras, board, intrinsics)
     c = np.zeros(cm.dims.nc)
     g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
+    if intrinsics:
+        g = np.concatenate([g, problem.intrinsics_of()])
     struct = structural_analysis(cm, np.arange(4))
     kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
                                  fixed_poses is not None)
@@ -357,7 +386,8 @@ def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dic
 @one_blas_thread  # small dense algebra: more threads than one on a shared machine only contend
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
-               backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True) -> PixelFit:
+               backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
+               intrinsics: bool = False) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
@@ -366,9 +396,11 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     projected out first) are held at zero, each listed in `PixelFit.held` with why; noise_px the
     corner noise per coordinate when known, else the linearised fit's residual (at most
     NOISE_CAP_PX). The steps are Levenberg-Marquardt steps in the determined coefficients and the poses,
-    so the fit converges on what the images determine."""
+    so the fit converges on what the images determine. intrinsics: each camera's fx, fy, cx, cy and
+    distortion are refined in the same fit, from the camera file's values (`PixelFit.cameras`, with
+    their std in `PixelFit.intrinsics_std`)."""
     robust.check_loss(loss)
-    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend)
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend, intrinsics)
     c = np.zeros(problem.cm.dims.nc)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)
@@ -414,7 +446,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             converged = True
             break
     wr = robust.weights(e, limit, loss)
-    std, cov, sigma = _uncertainty(problem, g, c, cols, wr, free_g)
+    std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
     scale = _scale(problem, c, cols, cov)
     flagged = np.nonzero(e > limit)[0]
     d = data
@@ -432,8 +464,15 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
+    refined = problem.cameras_of(g)
+    intrinsics_std = {}
+    if intrinsics and free_g:
+        for i, cam in enumerate(cameras[n] for n in d.cameras):
+            v = std_g[problem.n_poses_geom + N_INTRINSICS * i:problem.n_poses_geom + N_INTRINSICS * (i + 1)]
+            intrinsics_std[cam.name] = dict(zip(INTRINSICS, [*(cam.fx * v[:4]), *v[4:]]))
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale)
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
+                    {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None)
 
 
 def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -481,7 +520,8 @@ def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) 
 
 def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
     """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
-    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+    uncertainty carried in, the residual sigma (px per coordinate, points counted by weight) and the
+    std of the geometric unknowns (n_geom,) in their units (empty when they are given)."""
     A, b, scale = _system(problem, g, c, cols, wr, free_g)
     dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
     sigma = float(np.sqrt(b @ b / dof))
@@ -494,7 +534,7 @@ def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarr
     cov = full[k0:, k0:]
     std = np.full(problem.cm.dims.nc, np.nan)
     std[cols] = np.sqrt(np.abs(np.diag(cov)))
-    return std, cov, sigma
+    return std, cov, sigma, np.sqrt(np.abs(np.diag(full)[:k0]))
 
 
 def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
@@ -516,9 +556,17 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
               "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held], "scale": fit.scale,
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
+              **({"intrinsics": intrinsics_report(fit)} if fit.cameras else {}),
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
                  if fit.board is not None else {})}
     return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
+
+
+def intrinsics_report(fit: PixelFit) -> dict:
+    """Per camera its refined intrinsics (fx, fy, cx, cy px; distortion [k1, k2, p1, p2, k3]) and their
+    1-sigma (`std`), as the camera file and OpenCV write them."""
+    return {n: {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "distortion": list(c.distortion),
+                **({"std": fit.intrinsics_std[n]} if fit.intrinsics_std else {})} for n, c in fit.cameras.items()}
 
 
 def refuse_untrustworthy(fit: PixelFit, where: str):
