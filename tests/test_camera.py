@@ -192,12 +192,19 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
     (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
     out = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
                    ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "cams.yaml", "--board",
-                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json", "--report", tmp_path / "report")
     fit = fit_pixels(robot, model, read_pixels(tmp_path / "pixels.csv", robot, rig.cameras, rig.board),
                      rig.cameras, rig.board)
     assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
     assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
     assert out["held"] == [h.to_dict() for h in fit.held]
+    # the residual in mm at the board: px times the depth over the focal length (here nearly one depth)
+    train = out["train"]
+    assert train["rms_mm_at_target"] == pytest.approx(train["rms_px"] * 1e3 * train["distance_m"] / cam.fx, rel=0.1)
+    assert train["cameras"]["cam"]["rms_px"] == pytest.approx(train["rms_px"])
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Residuals in pixels" in text and f"{train['rms_px']:.3g} px rms" in text
+    assert f"{train['rms_mm_at_target']:.3g} mm at target" in text and "## Coverage of the images" in text
     np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
                header="q1,q2,q3,q4,q5,q6", comments="")
     run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")

@@ -31,7 +31,7 @@ def identified(args) -> dict:
     from gecgen.runtime.camera import calibration_of, fit_pixels, refuse_untrustworthy
 
     require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
-    for option in ("ridge", "rank_tol", "noise_mm", "report"):
+    for option in ("ridge", "rank_tol", "noise_mm"):
         value = getattr(args, option, None)
         require(value in (None, "0", False), f"--{option.replace('_', '-')} is not supported with --cameras yet; "
                                              f"leave it out")
@@ -50,13 +50,18 @@ def identified(args) -> dict:
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"
     save(calibration, out)
-    return {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
+    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
             **{k: calibration.report[k] for k in ("n_params", "n_identifiable", "eliminated", "before", "train",
                                                   "sigma_px", "outliers", "converged", "iterations", "cameras",
                                                   "held", "scale")},
             **({"board": calibration.report["board"]} if board is not None else {}),
             **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
+    if args.report:
+        from gecgen import report
+
+        result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras), args.report))
+    return result
 
 
 #: poses of simulated image points when --poses is not given

@@ -84,14 +84,16 @@ class PixelFit:
     (R (3, 3), t (3,)) such that X_cam = R X + t, X in the world (mount world) or in the tool frame
     (mount tool); board: the board's (R, t) in the world (X_w = R x_b + t), None for world cameras;
     targets: the tool-frame position (m) of every target left to estimate; before and train:
-    {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
+    {rms_px, max_px, rms_mm_at_target, max_mm_at_target, distance_m, cameras: {name: the same}} with the
+    cameras' first poses and the nominal model, and after the fit (`_summary`);
     eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
     and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
     ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`);
     held: the coefficients held at zero because the images determine them too weakly (`runtime.weak`),
     each with why (also in eliminated, reason "held"); scale: how well the images fix the calibrated
     robot's scale (`_scale`); cameras: with intrinsics refined, the cameras as fitted, and
-    intrinsics_std their 1-sigma per camera ({"fx": px, ..., "k1": ..}), None otherwise."""
+    intrinsics_std their 1-sigma per camera ({"fx": px, ..., "k1": ..}), None otherwise; residuals (R, 2)
+    every image point's residual length after the fit, px and mm at the point (`at_target_mm`)."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -114,6 +116,7 @@ class PixelFit:
     scale: dict | None = None
     cameras: dict[str, Camera] | None = None
     intrinsics_std: dict[str, dict[str, float]] | None = None
+    residuals: np.ndarray | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -302,8 +305,28 @@ def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
     return np.array(g, float)
 
 
-def _summary(e: np.ndarray) -> dict:
-    return {"rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max())}
+def at_target_mm(problem: _Problem, g: np.ndarray, c: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What residual lengths e (R,) px mean at the points: the length (mm) across the ray at the point's
+    depth (e times depth over the mean focal length) and the depth (R,) m."""
+    o, R, _ = problem.frames(c)
+    depth = problem.camera_points(g, o, R)[:, 2]
+    f = np.array([(cam.fx + cam.fy) / 2 for cam in problem.cameras_of(g)])[problem.data.camera]
+    return 1e3 * e * depth / f, depth
+
+
+def _rms_max(e: np.ndarray, mm: np.ndarray, depth: np.ndarray) -> dict:
+    return {"rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max()),
+            "rms_mm_at_target": float(np.sqrt(np.mean(mm ** 2))), "max_mm_at_target": float(mm.max()),
+            "distance_m": float(np.median(depth))}
+
+
+def _summary(problem: _Problem, g: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
+    """The residual lengths e (R,) px: RMS and largest, in px and in mm at the points (`at_target_mm`),
+    the median working distance (m), over all points and per camera (`cameras`)."""
+    mm, depth = at_target_mm(problem, g, c, e)
+    cam = problem.data.camera
+    return _rms_max(e, mm, depth) | {"cameras": {n: _rms_max(e[cam == k], mm[cam == k], depth[cam == k])
+                                                 for k, n in enumerate(problem.data.cameras) if (cam == k).any()}}
 
 
 def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list[int], names: list[str],
@@ -404,7 +427,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     c = np.zeros(problem.cm.dims.nc)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)
-    before = _summary(e)
+    before = _summary(problem, g, c, e)
 
     def limit_of(e):
         return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
@@ -452,13 +475,14 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
                              float(e[r]), float(wr[r])) for r in flagged[np.argsort(-e[flagged])])
-    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({_summary(e)['rms_px']:.3g} "
+    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({np.sqrt(np.mean(e ** 2)):.3g} "
                                      f"px rms left): the images may not determine this model (fewer terms, e.g. "
                                      f"--errors with constant errors, or more images), or the camera file is not "
                                      f"this camera's"]
     poses, board_pose, targets = problem.unpack(g)
     inliers = e <= limit
-    train = _summary(e) | {"rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
+    train = _summary(problem, g, c, e) | {
+        "rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
     if not np.isfinite(e).all():
         failures.append("a point lies behind its camera after the fit; check the camera file's mount and the data")
     names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
@@ -472,7 +496,8 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             intrinsics_std[cam.name] = dict(zip(INTRINSICS, [*(cam.fx * v[:4]), *v[4:]]))
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
-                    {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None)
+                    {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
+                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]))
 
 
 def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
