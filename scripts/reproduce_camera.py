@@ -7,7 +7,8 @@ For each seed and pixel noise (0.1 and 0.3 px per coordinate):
 * eye-in-hand: a camera carried at a random pose near the tool sees a 9 x 6 chessboard (40 mm
   squares) fixed in the world, from 40 training and 40 held-out poses;
 * eye-to-hand: two cameras fixed in the world see four markers on the tool (a plate 300 mm square,
-  100 mm out along tool z) from 60 training and 60 held-out poses; and the same with a 450 mm plate.
+  100 mm out along tool z) from 60 training and 60 held-out poses; and the same with a 450 mm plate;
+* both again with the richer error model robots/industrial6r.errors.yaml at 0.1 px.
 The truth is robots/industrial6r.truth.yaml (its constant errors, joint offsets and gravity
 compliance); the model is robots/constant.errors.yaml. Two fits on the same pixels: gecgen's, which
 fits the camera (and board) poses with the coefficients, and an oracle that is given the true camera
@@ -36,6 +37,8 @@ from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, tr
 ROOT = Path(__file__).resolve().parents[1]
 NOISES = (0.1, 0.3)
 DIST = (-0.12, 0.08, 0.0008, -0.0005, 0.0)
+#: px: the noise the richer error model (robots/industrial6r.errors.yaml) is measured at
+RICH_NOISE = 0.1
 #: m: the side of the eye-to-hand marker plate, and a wider one (what a larger known length gives the scale)
 PLATE, WIDE_PLATE = 0.3, 0.45
 
@@ -89,6 +92,7 @@ def hand(robot, truth, model, seed: int, noise: float) -> dict:
         out[name + "_registered"] = registered_mm(c_fit, c_true)
         if name == "fit":
             out["train_px"] = fit.train["rms_px"]
+            out["held"], out["converged"] = len(fit.held), fit.converged
             # the camera on the tool against the truth's: directly, and as the fitted model's tool frame
             # carries it (the truth's last-frame errors, which pixels cannot tell from the camera's pose, included)
             out["direct_mm"] = 1e3 * float(np.linalg.norm(tf - (-R.T @ t)))
@@ -136,6 +140,7 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3) -> d
         if name == "fit":
             out["train_px"] = fit.train["rms_px"]
             out["eliminated"] = fit.eliminated
+            out["held"], out["converged"] = len(fit.held), fit.converged
     return out
 
 
@@ -152,12 +157,17 @@ def main():
     if args.write_only:  # the document again from the last run's figures
         write(json.loads(saved.read_text()), args.seeds)
         return
-    rows = {"eye-in-hand": [], "eye-to-hand": [], "eye-to-hand-wide": []}
+    rich = load_error_model(ROOT / "robots" / "industrial6r.errors.yaml", robot)
+    rows = {"eye-in-hand": [], "eye-to-hand": [], "eye-to-hand-wide": [], "eye-in-hand-rich": [],
+            "eye-to-hand-rich": []}
     wide = lambda *a: world(*a, plate=WIDE_PLATE)  # noqa: E731
     for noise in NOISES:
         for seed in range(args.seeds):
-            for kind, run in (("eye-in-hand", hand), ("eye-to-hand", world), ("eye-to-hand-wide", wide)):
-                r = run(robot, truth, model, seed, noise)
+            runs = [("eye-in-hand", hand, model), ("eye-to-hand", world, model), ("eye-to-hand-wide", wide, model)]
+            if noise == RICH_NOISE:
+                runs += [("eye-in-hand-rich", hand, rich), ("eye-to-hand-rich", world, rich)]
+            for kind, run, errors in runs:
+                r = run(robot, truth, errors, seed, noise)
                 r["eliminated"] = [[e.param, e.reason, e.detail] for e in r["eliminated"]]
                 rows[kind].append((noise, seed, r))
                 print(kind, noise, seed, {k: v for k, v in r.items() if k != "eliminated"}, flush=True)
@@ -208,7 +218,24 @@ def write(rows: dict, seeds: int):
                          f"{r['fit_scaled'] / r['oracle_scaled']:.2f} | "
                          f"{r['fit_scale_ppm']:.0f} / {r['oracle_scale_ppm']:.0f} | "
                          f"{r['fit_scale_std_ppm']:.0f} / {r['oracle_scale_std_ppm']:.0f} |")
-    lines += ["", "## Summary", ""]
+    lines += ["", "## A richer error model", "",
+              f"robots/industrial6r.errors.yaml (every frame's errors quadratic in its joint, and linear in the "
+              f"wrench, which these images do not excite), on the same images at {RICH_NOISE} px: the fit holds "
+              f"what the images determine too weakly (`held`, the coefficients held) and converges. Held-out "
+              f"tool error (mm), and the constant model's on the same images.", "",
+              "| set-up | seed | converged | held | train px | held-out fit mm | oracle mm | ratio | registered fit / "
+              "oracle mm | ratio | constant model, held-out fit mm |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for kind in ("eye-in-hand", "eye-to-hand"):
+        constant = {(n, sd): r for n, sd, r in rows[kind]}
+        for noise, seed, r in rows[kind + "-rich"]:
+            lines.append(f"| {kind} | {seed} | {'yes' if r['converged'] else 'no'} | {r['held']} | {r['train_px']:.3f} | "
+                         f"{r['fit']:.3f} | {r['oracle']:.3f} | {r['fit'] / r['oracle']:.2f} | "
+                         f"{r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
+                         f"{r['fit_registered'] / r['oracle_registered']:.2f} | {constant[(noise, seed)]['fit']:.3f} |")
+    lines += ["", "The richer model's fit is as good as its oracle's, and worse held out than the constant model on "
+              "these 40 or 60 poses: the truth's errors are mostly constant, and the pixel fit has no significance "
+              "gate yet (tracker data's backward elimination) to drop the terms the data do not need.",
+              "", "## Summary", ""]
     for kind in rows:
         keys = (("", "in the fit's world"), ("_registered", "registered on the held-out points"))
         if kind.startswith("eye-to-hand"):

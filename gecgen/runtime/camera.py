@@ -18,7 +18,9 @@ The unknowns are the coefficients the data determine and, per camera, (R, t) (an
 and any target the robot file leaves to `estimate`). The residual is observed minus projected
 pixels (`model.cameras.Camera.project`, OpenCV's model); its Jacobian in the coefficients is the
 projection's d(u, v)/dX times dX/dc from H_e, in the poses by central differences (cheap: no call of
-the generated code).
+the generated code). On request each camera's intrinsics join the poses (`intrinsics`). The
+coefficients the images determine too weakly against the noise are held first (`runtime.weak`, as
+identify holds them for a tracker), with the poses projected out of their columns.
 """
 from __future__ import annotations
 
@@ -165,6 +167,7 @@ class _Problem:
             out.append(replace(c, fx=c.fx * v[0], fy=c.fx * v[1], cx=c.fx * v[2], cy=c.fx * v[3],
                                distortion=tuple(map(float, v[4:]))))
         return out
+
     def frames(self, c: np.ndarray, with_H: bool = False):
         """Tool origin o (P, 3), rotation R (P, 3, 3) and, with_H, H_e of the four points (P, 4, 3, nc)."""
         q, w, aux = self.inputs
