@@ -280,6 +280,11 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     assert held and set(held) == {h.param for h in fit.held}
     assert all(h.beyond > 1 and "held at zero" in h.reason for h in fit.held)
     assert not set(held) & {model.coefficient_names(robot)[j] for j in fit.kept}
+    # the significance gate as for a tracker: what the images do not determine is held too, and named
+    gate = {e.index: e.detail for e in fit.eliminated if e.reason == "insignificant"}
+    assert gate and all(d.startswith("t = ") and fit.c[j] == 0 for j, d in gate.items())
+    carried = fit_pixels(robot, model, data, rig.cameras, significance=False)
+    assert set(gate) <= set(carried.kept) and not any(e.reason == "insignificant" for e in carried.eliminated)
     # what holding spares: the same images fitted with every direction free do not settle
     free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
     assert not free.converged and free.failures

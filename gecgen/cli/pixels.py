@@ -45,7 +45,7 @@ def identified(args) -> dict:
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
     fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
-                     intrinsics=args.refine_intrinsics)
+                     intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"

@@ -38,6 +38,7 @@ from gecgen.runtime import robust, weak
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.identify import RSS_TOL, structural_analysis
 from gecgen.runtime.redundancy import Eliminated
+from gecgen.runtime.significance import judge
 from gecgen.runtime.threads import one_blas_thread
 
 #: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
@@ -413,7 +414,7 @@ def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dic
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
-               intrinsics: bool = False) -> PixelFit:
+               intrinsics: bool = False, significance: bool = True) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
@@ -424,7 +425,9 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     NOISE_CAP_PX). The steps are Levenberg-Marquardt steps in the determined coefficients and the poses,
     so the fit converges on what the images determine. intrinsics: each camera's fx, fy, cx, cy and
     distortion are refined in the same fit, from the camera file's values (`PixelFit.cameras`, with
-    their std in `PixelFit.intrinsics_std`)."""
+    their std in `PixelFit.intrinsics_std`). significance (default): the coefficients the images do not
+    determine (|value| / std below 2 after backward elimination, `significance.judge`) are held at zero
+    and the rest refitted, each in eliminated (reason "insignificant"), as identify does by default."""
     robust.check_loss(loss)
     problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend, intrinsics)
     c = np.zeros(problem.cm.dims.nc)
@@ -441,36 +444,58 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
         eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
                                   key=lambda x: x.index))
-    cols = np.array(kept, int)
-    lam, converged, it = 0.0, False, 0
-    for it in range(1, max_iter + 1):
-        wr = robust.weights(e, limit, loss)
-        obj = robust.objective(e, limit, loss)
-        A, b, scale = _system(problem, g, c, cols, wr, free_g)
-        predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
-        if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
-            converged = True  # a full step would change nothing a camera resolves
-            break
-        for _ in range(20):
-            M = A.T @ A + lam * np.eye(A.shape[1])
-            step = -np.linalg.solve(M, A.T @ b) / scale
-            g_t = g + step[:problem.n_geom] if free_g else g
-            c_t = c.copy()
-            c_t[cols] += step[problem.n_geom:] if free_g else step
-            e_t = np.linalg.norm(problem.residual(g_t, c_t), axis=1)
-            obj_t = robust.objective(e_t, limit, loss)
-            if np.isfinite(obj_t) and obj_t <= obj:
+    def solve(g, c, cols, e, limit):
+        """Levenberg-Marquardt over the poses (free_g) and c[cols], robustly reweighted."""
+        lam, converged, it = 0.0, False, 0
+        for it in range(1, max_iter + 1):
+            wr = robust.weights(e, limit, loss)
+            obj = robust.objective(e, limit, loss)
+            A, b, scale = _system(problem, g, c, cols, wr, free_g)
+            predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
+            if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
+                converged = True  # a full step would change nothing a camera resolves
                 break
-            lam = 1e-6 if lam == 0 else 10 * lam
-        else:
-            break
-        g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
-        new_limit = limit_of(e)
-        settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
-        limit = new_limit
-        if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
-            converged = True
-            break
+            for _ in range(20):
+                M = A.T @ A + lam * np.eye(A.shape[1])
+                step = -np.linalg.solve(M, A.T @ b) / scale
+                g_t = g + step[:problem.n_geom] if free_g else g
+                c_t = c.copy()
+                c_t[cols] += step[problem.n_geom:] if free_g else step
+                e_t = np.linalg.norm(problem.residual(g_t, c_t), axis=1)
+                obj_t = robust.objective(e_t, limit, loss)
+                if np.isfinite(obj_t) and obj_t <= obj:
+                    break
+                lam = 1e-6 if lam == 0 else 10 * lam
+            else:
+                break
+            g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
+            new_limit = limit_of(e)
+            settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
+            limit = new_limit
+            if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
+                converged = True
+                break
+        return g, c, e, limit, converged, it
+
+    cols = np.array(kept, int)
+    g, c, e, limit, converged, it = solve(g, c, cols, e, limit)
+    insignificant = {}
+    if significance and converged and len(cols):
+        # the significance gate of tracker data (`significance.judge`), the poses' unknowns counted out of
+        # the degrees of freedom and their uncertainty carried in the coefficients' covariance
+        wr = robust.weights(e, limit, loss)
+        std, cov, sigma, _ = _uncertainty(problem, g, c, cols, wr, free_g)
+        names = model.coefficient_names(robot)
+        _, insignificant = judge(names, c, std, cols, cov, sigma, 2 * float(wr.sum()) - (problem.n_geom if free_g else 0))
+        if insignificant:
+            cols = np.array([j for j in cols if j not in insignificant], int)
+            c = c.copy()
+            c[list(insignificant)] = 0.0
+            e = np.linalg.norm(problem.residual(g, c), axis=1)
+            g, c, e, limit, converged, it = solve(g, c, cols, e, limit_of(e))
+            eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "insignificant", why)
+                                                      for j, why in insignificant.items())], key=lambda x: x.index))
+    kept = [int(j) for j in cols]
     wr = robust.weights(e, limit, loss)
     std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
     scale = _scale(problem, c, cols, cov)
