@@ -257,25 +257,26 @@ def write(rows: dict, seeds: int):
                      f"0.5 mrad; worst {max(r[key + '_mm'] for r in hand_rows):.3f} mm, "
                      f"{max(r[key + '_mrad'] for r in hand_rows):.3f} mrad")
     lines += ["", "## Reading the figures", "",
-              "- Eye-in-hand, fit and oracle agree to the digit: what the oracle is told (the camera's pose on the "
-              "tool, the board's in the world) is exactly what the base's and the last frame's constant errors "
-              "express, which the fit holds for that reason (below); the two fits span the same predictions of "
-              "where the camera is relative to the board.",
+              "- Eye-in-hand, what the oracle is told (the camera's pose on the tool, the board's in the world) is "
+              "what the base's and the last frame's constant errors express, which the fit holds for that reason "
+              "(below). Fit and oracle differ where the significance gate holds different coefficients in each "
+              "(without the gate they agreed to the digit).",
               "- Eye-to-hand, the fit must find each camera's pose from the markers; the oracle is told them. In "
               "the robot's world (the first camera's fitted pose against its true one) that costs most, and no "
               "design of these images removes it: the base's errors merge with the cameras' poses (named below), "
               "so where the robot's base sits against a camera is not in the pixels. Registered on the held-out "
               "points (as a tracker would see the compensated robot), fit and oracle are close.",
               "- The scale is determined, not lost: the fit states its 1-sigma (`scale.std_ppm`, `scale.std_mm` "
-              "in the JSON: the relative scale of the tool positions it predicts, from the coefficients' "
-              "covariance with the cameras' poses carried in). Its error over that stated value is in the summary: "
-              "above 1 because the constant model misses the truth's gravity compliance, for the oracle as for the "
-              "fit. The fit's stated scale is close to the oracle's, which knows the cameras: most of the scale's "
-              "uncertainty is the robot's lengths, not the markers' spacing.",
+              "in the JSON: the relative scale of the tool positions it predicts, from the covariance of the "
+              "coefficients it keeps, the cameras' poses carried in). That is the uncertainty given the "
+              "coefficients held at zero, so it understates the error: the error over it is in the summary, for "
+              "the oracle as for the fit (the constant model also misses the truth's gravity compliance). The "
+              "fit's stated scale is near the oracle's, which knows the cameras: most of the scale's uncertainty "
+              "is the robot's lengths, not the markers' spacing.",
               "- What the registered comparison leaves beyond the oracle on the 300 mm plate is mostly scale (the "
-              "column with it taken out). A wider plate, a longer known length seen from the same cameras, is the "
-              "design that removes it: compare the two plates' registered ratios in the summary. Closer cameras "
-              "were not measured: their field of view no longer holds the plate over these poses.",
+              "column with it taken out). A wider plate, a longer known length seen from the same cameras, narrows "
+              "it: compare the two plates' registered ratios in the summary. Closer cameras were not measured: "
+              "their field of view no longer holds the plate over these poses.",
               "- *direct* is far off by design: the truth's last-frame errors (0.5 mm, 0.3 mrad per axis) sit "
               "between the flange and the camera, and pixels cannot tell them from the camera's pose."]
     lines += ["", "## What pixels leave undetermined", "",
