@@ -293,8 +293,10 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
 def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_similarity_fit(arm, rng):
     robot, truth, model = arm
     robot, rig, q, data = world_rig(arm, n=20)
-    fit = fit_pixels(robot, model, data, rig.cameras)
+    # without the significance gate, whose covariance the statement is of either way
+    fit = fit_pixels(robot, model, data, rig.cameras, significance=False)
     assert fit.scale["std_ppm"] > 0 and fit.scale["std_mm"] > 0
+    assert fit_pixels(robot, model, data, rig.cameras).scale["std_ppm"] == pytest.approx(fit.scale["std_ppm"], rel=0.2)
     # independently: coefficients drawn from the fit's covariance, each draw's predicted tool origins
     # fitted onto the fit's by a similarity (Umeyama); the spread of its scale is the stated one
     cm = CompiledModel(frame_robot(robot), model)

@@ -479,7 +479,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
 
     cols = np.array(kept, int)
     g, c, e, limit, converged, it = solve(g, c, cols, e, limit)
-    insignificant = {}
+    insignificant, ungated = {}, None
     if significance and converged and len(cols):
         # the significance gate of tracker data (`significance.judge`), the poses' unknowns counted out of
         # the degrees of freedom and their uncertainty carried in the coefficients' covariance
@@ -488,6 +488,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         names = model.coefficient_names(robot)
         _, insignificant = judge(names, c, std, cols, cov, sigma, 2 * float(wr.sum()) - (problem.n_geom if free_g else 0))
         if insignificant:
+            ungated = (cols, cov)
             cols = np.array([j for j in cols if j not in insignificant], int)
             c = c.copy()
             c[list(insignificant)] = 0.0
@@ -498,7 +499,9 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     kept = [int(j) for j in cols]
     wr = robust.weights(e, limit, loss)
     std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
-    scale = _scale(problem, c, cols, cov)
+    # the scale's uncertainty before the gate: holding coefficients at zero would state it given their
+    # zeros, which understates it (docs/camera.md)
+    scale = _scale(problem, c, *(ungated or (cols, cov)))
     flagged = np.nonzero(e > limit)[0]
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
@@ -557,7 +560,7 @@ def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
 
 def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) -> dict:
     """How well the fit fixes the scale of the robot it calibrates: the 1-sigma of the relative scale of
-    the tool origins it predicts at the training poses (`std_ppm`; the scale of a similarity fit of
+    the tool origins it predicts at the training poses, from the covariance cov of c[cols] (`std_ppm`; the scale of a similarity fit of
     them onto the truth's, the rest rigid) and what that moves them by, RMS about their centre
     (`std_mm`). Pixels fix a length only through a known one (the markers' spacing, the board's
     square), seen from afar only weakly; a similarity fit's scale of small perturbations dp (P, 3) is
