@@ -192,11 +192,19 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
     (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
     out = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
                    ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "cams.yaml", "--board",
-                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json")
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json", "--report", tmp_path / "report")
     fit = fit_pixels(robot, model, read_pixels(tmp_path / "pixels.csv", robot, rig.cameras, rig.board),
                      rig.cameras, rig.board)
     assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
     assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
+    assert out["held"] == [h.to_dict() for h in fit.held]
+    # the residual in mm at the board: px times the depth over the focal length (here nearly one depth)
+    train = out["train"]
+    assert train["rms_mm_at_target"] == pytest.approx(train["rms_px"] * 1e3 * train["distance_m"] / cam.fx, rel=0.1)
+    assert train["cameras"]["cam"]["rms_px"] == pytest.approx(train["rms_px"])
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Residuals in pixels" in text and f"{train['rms_px']:.3g} px rms" in text
+    assert f"{train['rms_mm_at_target']:.3g} mm at target" in text and "## Coverage of the images" in text
     np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
                header="q1,q2,q3,q4,q5,q6", comments="")
     run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")
@@ -257,3 +265,111 @@ def test_a_pixel_calibration_exports(arm, tmp_path):
     save(calibration_of(robot, model, fit), tmp_path / "cal.json")
     out = run_json("export", tmp_path / "cal.json", "--c", tmp_path / "c")
     assert (tmp_path / "c").is_dir() and out
+
+
+def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_path):
+    robot, truth, _ = arm
+    (tmp_path / "linear.errors.yaml").write_text(
+        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
+    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
+    robot, rig, q, data = world_rig(arm, n=20)
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    assert fit.converged and not fit.failures and fit.iterations < 10
+    assert 0.2 < fit.train["rms_px"] < 0.35
+    held = {e.param: e.detail for e in fit.eliminated if e.reason == "held"}
+    assert held and set(held) == {h.param for h in fit.held}
+    assert all(h.beyond > 1 and "held at zero" in h.reason for h in fit.held)
+    assert not set(held) & {model.coefficient_names(robot)[j] for j in fit.kept}
+    # the significance gate as for a tracker: what the images do not determine is held too, and named
+    gate = {e.index: e.detail for e in fit.eliminated if e.reason == "insignificant"}
+    assert gate and all(d.startswith("t = ") and fit.c[j] == 0 for j, d in gate.items())
+    carried = fit_pixels(robot, model, data, rig.cameras, significance=False)
+    assert set(gate) <= set(carried.kept) and not any(e.reason == "insignificant" for e in carried.eliminated)
+    # what holding spares: the same images fitted with every direction free do not settle
+    free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
+    assert not free.converged and free.failures
+
+
+def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_similarity_fit(arm, rng):
+    robot, truth, model = arm
+    robot, rig, q, data = world_rig(arm, n=20)
+    # without the significance gate, whose covariance the statement is of either way
+    fit = fit_pixels(robot, model, data, rig.cameras, significance=False)
+    assert fit.scale["std_ppm"] > 0 and fit.scale["std_mm"] > 0
+    assert fit_pixels(robot, model, data, rig.cameras).scale["std_ppm"] == pytest.approx(fit.scale["std_ppm"], rel=0.2)
+    # independently: coefficients drawn from the fit's covariance, each draw's predicted tool origins
+    # fitted onto the fit's by a similarity (Umeyama); the spread of its scale is the stated one
+    cm = CompiledModel(frame_robot(robot), model)
+    kept = np.array(fit.kept)
+    p0 = cm.model_targets(data.q, data.w, None, fit.c)[:, 0]
+    y = p0 - p0.mean(axis=0)
+    scales = []
+    for draw in rng.multivariate_normal(fit.c[kept], fit.cov, 400):
+        c = fit.c.copy()
+        c[kept] = draw
+        p = cm.model_targets(data.q, data.w, None, c)[:, 0]
+        U, S, Vt = np.linalg.svd(y.T @ (p - p.mean(axis=0)))
+        scales.append(S.sum() / np.sum(y ** 2))
+    assert np.std(scales) * 1e6 == pytest.approx(fit.scale["std_ppm"], rel=0.15)
+
+
+def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(arm, tmp_path):
+    import contextlib
+    import io
+
+    from conftest import run_json
+    from gecgen.cli import main
+
+    robot, truth, model = arm
+    cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
+    (tmp_path / "hand.yaml").write_text(
+        f"cameras:\n  cam: {{mount: tool, fx: {cam.fx}, fy: {cam.fy}, cx: {cam.cx}, cy: {cam.cy}, "
+        f"distortion: {list(cam.distortion)}, width: {cam.width}, height: {cam.height}}}\n")
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    out = run_json("simulate", ROBOTS / "industrial6r.yaml", "--cameras", tmp_path / "hand.yaml", "--board",
+                   tmp_path / "board.yaml", "--poses", "15", "--noise-px", "0.2", "--home", "0,-1.57,-1.57,0,1.05,0",
+                   "--span", "0.14,0.1,0.1,0.44,0.35,0.5", "-o", tmp_path / "pixels.csv", "--rig-out",
+                   tmp_path / "rig.yaml", "--seed", "5")
+    assert out["poses"] == 15 and out["rows"] == 15 * 54 and out["mount"] == "tool"
+    # the file is the truth's: fitted with the true camera and board poses it leaves the noise
+    rig = read_yaml(tmp_path / "rig.yaml", "rig")
+    poses = [rig["cameras"]["cam"], rig["board"]]
+    fixed = np.array([v for p in poses for v in (*Rotation.from_matrix(p["rotation"]).as_rotvec(), *p["translation"])])
+    data = read_pixels(tmp_path / "pixels.csv", robot, {"cam": cam}, Board(9, 6, 0.04))
+    oracle = fit_pixels(robot, model, data, {"cam": cam}, Board(9, 6, 0.04), fixed_poses=fixed)
+    assert oracle.converged and 0.2 < oracle.train["rms_px"] < 0.35
+    fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "--cameras", tmp_path / "hand.yaml", "--board",
+                   tmp_path / "board.yaml", "-o", tmp_path / "cal.json", "--refine-intrinsics")
+    assert fit["converged"] and 0.2 < fit["train"]["rms_px"] < 0.35
+    refined = fit["intrinsics"]["cam"]
+    assert abs(refined["fx"] - cam.fx) < 4 * refined["std"]["fx"] and refined["std"]["fx"] < 2.0
+    (tmp_path / "world.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("mount: tool", "mount: world"))
+    for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
+                           (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),
+                           (["--eye", "cam=1,2,3"], "--eye goes with --cameras"),
+                           (["--cameras", tmp_path / "hand.yaml"], "give the board it sees")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(["simulate", str(ROBOTS / "industrial6r.yaml"), *map(str, extra), "-o",
+                         str(tmp_path / "x.csv")]) != 0
+        assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_refined_intrinsics_find_the_true_camera_from_a_perturbed_file(arm):
+    robot, truth, model = arm
+    rig, train, held, data = hand_rig(arm)
+    cam = rig.cameras["cam"]
+    off = {"cam": replace(cam, fx=cam.fx * 1.01, fy=cam.fy * 0.995, cx=cam.cx + 6, cy=cam.cy - 4,
+                          distortion=(cam.distortion[0] + 0.02, *cam.distortion[1:]))}
+    given = fit_pixels(robot, model, data, off, rig.board)
+    fit = fit_pixels(robot, model, data, off, rig.board, intrinsics=True)
+    assert fit.converged and not fit.failures and 0.2 < fit.train["rms_px"] < 0.35
+    assert given.train["rms_px"] > 3 * fit.train["rms_px"]
+    got, std = fit.cameras["cam"], fit.intrinsics_std["cam"]
+    true = dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
+                    (cam.fx, cam.fy, cam.cx, cam.cy, *cam.distortion)))
+    values = dict(zip(true, (got.fx, got.fy, got.cx, got.cy, *got.distortion)))
+    # within 4 of their stated std of the truth, and that std small against what the file was off by
+    assert all(abs(values[k] - true[k]) < 4 * std[k] for k in true), {k: (values[k] - true[k], std[k]) for k in true}
+    assert std["fx"] < 1.0 and std["cx"] < 1.5 and std["k1"] < 0.005

@@ -1,8 +1,12 @@
 """`gecgen identify ROBOT PIXELS.csv --cameras CAMERAS.yaml [--board BOARD.yaml]`: a calibration from image
-points (`fit.camera`), written as identify writes one."""
+points (`fit.camera`), written as identify writes one; `gecgen simulate ROBOT --cameras CAMERAS.yaml ...`:
+image points of a truth robot (`simulate.camera`)."""
 from __future__ import annotations
 
-from gecgen.model.validation import require
+import numpy as np
+
+from gecgen.cli.common import number, numbers
+from gecgen.model.validation import ModelError, require
 
 
 def add_options(p):
@@ -10,6 +14,12 @@ def add_options(p):
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
+    g.add_argument("--refine-intrinsics", action="store_true",
+                   help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera file's "
+                        "values (JSON intrinsics, with their std)")
+    g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
+                   help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
+                        "weakly against it are held at zero and named (default: the fit's own residual)")
 
 
 def identified(args) -> dict:
@@ -21,7 +31,7 @@ def identified(args) -> dict:
     from gecgen.fit.camera import calibration_of, fit_pixels, refuse_untrustworthy
 
     require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
-    for option in ("ridge", "rank_tol", "noise_mm", "report"):
+    for option in ("ridge", "rank_tol", "noise_mm"):
         value = getattr(args, option, None)
         require(value in (None, "0", False), f"--{option.replace('_', '-')} is not supported with --cameras yet; "
                                              f"leave it out")
@@ -34,13 +44,124 @@ def identified(args) -> dict:
     require(not model.aux or set(model.aux) <= set(data.aux_names),
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
-    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss)
+    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
+                     intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"
     save(calibration, out)
-    return {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
+    result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
             **{k: calibration.report[k] for k in ("n_params", "n_identifiable", "eliminated", "before", "train",
-                                                  "sigma_px", "outliers", "converged", "iterations", "cameras")},
+                                                  "sigma_px", "outliers", "converged", "iterations", "cameras",
+                                                  "held", "scale")},
             **({"board": calibration.report["board"]} if board is not None else {}),
+            **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
+    if args.report:
+        from gecgen import report
+
+        result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras), args.report))
+    return result
+
+
+#: poses of simulated image points when --poses is not given
+PIXEL_POSES = 40
+#: rad (m for a prismatic joint): the default half-span of the simulated poses about --home
+SPAN = 0.2
+
+
+def add_simulate_options(p):
+    """simulate's options for image points."""
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): image points instead of tracker "
+                             "points, into a pixel file")
+    g.add_argument("--cameras", metavar="FILE", help="camera file: the simulated cameras' intrinsics and mount")
+    g.add_argument("--board", metavar="FILE", help="a camera on the tool: the board it sees, fixed in the world")
+    g.add_argument("--noise-px", type=number(0, 100), default=None, metavar="PX",
+                   help="corner noise per coordinate, px (default 0.2)")
+    g.add_argument("--eye", action="append", default=[], metavar="NAME=X,Y,Z",
+                   help="fixed cameras: where camera NAME is in the world (m); one per camera (default none: each "
+                        "must be given)")
+    g.add_argument("--look-at", type=numbers(), metavar="X,Y,Z",
+                   help="fixed cameras: the world point (m) they look at (default: the tool origin at --home)")
+    g.add_argument("--span", type=numbers(0), metavar="S",
+                   help=f"the poses are drawn in --home +- span (rad or m; one value, or one per joint; default "
+                        f"{SPAN:g}), keeping every point in every camera's view")
+    g.add_argument("--distance", type=number(0, 100, above=True), default=None,
+                   help="a camera on the tool: the board's distance in front of it at --home, m (default 0.7)")
+    g.add_argument("--rig-out", metavar="FILE", help="write the true cameras' (and board's) poses, YAML")
+
+
+def simulated(args, robot, truth, rng) -> dict:
+    """The pixel files of `gecgen simulate --cameras` and its JSON result."""
+    import yaml
+
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.files import write_atomically
+    from gecgen.model.pixels import write_pixels
+    from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
+
+    others = [f"--{k.replace('_', '-')}" for k, v in (("design", args.design != "random"), ("commands", args.commands),
+                                                      ("payload_kg", args.payload_kg), ("orientation", args.orientation))
+              if v]
+    require(not others, f"{others[0] if others else ''} goes with tracker points; with --cameras the poses are "
+                        f"drawn about --home (--poses, --span), without a payload")
+    cameras = read_cameras(args.cameras)
+    tool = next(iter(cameras.values())).mount == "tool"
+    require(not tool or args.board, f"{args.cameras}: the camera is on the tool: give the board it sees (--board)")
+    require(tool or not args.board, "--board goes with a camera on the tool (mount: tool); these cameras are fixed")
+    require(tool or args.distance is None, "--distance goes with a camera on the tool; give --eye for fixed cameras")
+    require(not tool or (not args.eye and args.look_at is None),
+            "--eye and --look-at place fixed cameras; a camera on the tool is placed near the tool (--distance)")
+    lo, hi = robot.sampling_box()
+    home = np.array(args.home if args.home is not None else [(a + b) / 2 for a, b in zip(lo, hi)], float)
+    require(len(home) == robot.n, f"--home: {len(home)} values for {robot.n} joints; give one per joint (rad or m)")
+    span = np.array(args.span or [SPAN], float)
+    require(len(span) in (1, robot.n), f"--span: {len(span)} values for {robot.n} joints; give one, or one per joint")
+    n = args.poses or PIXEL_POSES
+    n_val = (args.val_poses or n) if args.val_out else 0
+    require(args.val_poses is None or args.val_out, "--val-poses sets the poses of --val-out; give both, or neither")
+    if tool:
+        board = read_board(args.board)
+    else:
+        eyes = {}
+        for text in args.eye:
+            name, _, xyz = text.partition("=")
+            require(name in cameras, f"--eye {text}: no camera {name!r} in {args.cameras} (cameras: "
+                                     f"{', '.join(cameras)})")
+            eyes[name] = numbers()(xyz) if xyz else []
+            require(len(eyes[name]) == 3, f"--eye {text}: give NAME=X,Y,Z (m)")
+        missing = [c for c in cameras if c not in eyes]
+        require(not missing, f"--eye: camera {missing[0] if missing else ''} has no place; give "
+                             f"--eye {missing[0] if missing else ''}=X,Y,Z (m) for every camera of {args.cameras}")
+        cameras_at = np.array([eyes[c] for c in cameras])
+        at = (np.array(args.look_at, float) if args.look_at is not None
+              else true_tools(robot, truth, home[None])[0, :3, 3])
+        require(len(at) == 3, "--look-at: give X,Y,Z (m)")
+    try:
+        if tool:
+            rig, q = eye_in_hand(robot, truth, next(iter(cameras.values())), board, home, span, n + n_val, rng,
+                                 0.7 if args.distance is None else args.distance)
+        else:
+            rig, q = eye_to_hand(robot, truth, list(cameras.values()), cameras_at, at, home, span, n + n_val, rng)
+    except ModelError:
+        raise
+    except ValueError as exc:  # the simulator's: too few poses keep every point in view
+        raise ModelError(f"{args.cameras}: {exc} (--span, --home, --eye, --look-at or --distance)") from None
+    noise = 0.2 if args.noise_px is None else args.noise_px
+    data = simulate_pixels(robot, truth, rig, q[:n], noise, rng)
+    write_pixels(args.output, robot, data)
+    files = {"data": args.output}
+    if args.val_out:
+        write_pixels(args.val_out, robot, simulate_pixels(robot, truth, rig, q[n:], noise, rng))
+        files["val"] = args.val_out
+    if args.truth_out:
+        write_atomically(args.truth_out, yaml.safe_dump(truth.spec, sort_keys=False))
+        files["truth"] = args.truth_out
+    rig_spec = {"cameras": {c: {"rotation": R.tolist(), "translation": t.tolist()} for c, (R, t) in rig.poses.items()},
+                **({"board": {"rotation": rig.board_pose[0].tolist(), "translation": rig.board_pose[1].tolist()}}
+                   if tool else {})}
+    if args.rig_out:
+        write_atomically(args.rig_out, yaml.safe_dump(rig_spec, sort_keys=False))
+        files["rig"] = args.rig_out
+    return {"robot": robot.name, "design": "cameras", "mount": data.mount, "poses": data.n_poses,
+            "rows": len(data.uv), "noise_px": noise, **rig_spec, "files": files}

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from gecgen.cli import pixels
 from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, progress_status, say, whole
 from gecgen.model.files import write_atomically
 from gecgen.model import load_robot
@@ -42,7 +43,8 @@ def add_parser(command):
                         "(`gecgen iso9283 --plan`) for the run before, its compensated commands for the run after")
     p.add_argument("--home", type=numbers(),
                    help="--design tool-grid: comma-separated joint values (rad or m) whose tool orientation the "
-                        "grid keeps, and whose tool origin is its centre (default: the middle of each joint's range)")
+                        "grid keeps, and whose tool origin is its centre; with --cameras the centre of the poses "
+                        "(default: the middle of each joint's range)")
     p.add_argument("--spacing", type=number(0, 10, above=True), default=0.1,
                    help="--design tool-grid: distance between grid points, m (default %(default)s)")
     p.add_argument("--grid", type=numbers(1), default=[6, 6, 6],
@@ -96,6 +98,7 @@ def add_parser(command):
     g.add_argument("--encoder-noise", type=number(0, 0.01),
                    help=f"rad (m for a prismatic joint) per recorded joint reading (default "
                         f"{FIXTURE_DEFAULTS['encoder_noise']:g})")
+    pixels.add_simulate_options(p)
 
 
 def run(args) -> dict:
@@ -111,6 +114,14 @@ def run(args) -> dict:
         spec = {**spec, "seed": args.truth_seed}
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
+    camera_options = [f"--{k.replace('_', '-')}" for k in ("board", "noise_px", "eye", "look_at", "span", "distance",
+                                                           "rig_out") if getattr(args, k) not in (None, [])]
+    if args.cameras:
+        require(not (args.plates or args.planes), "--cameras simulates image points; --plates and --planes sockets "
+                                                  "and planes: give one of them")
+        return pixels.simulated(args, robot, truth, rng)
+    require(not camera_options, f"{camera_options[0] if camera_options else ''} goes with --cameras (image points); "
+                                f"drop it, or add --cameras FILE")
     if args.plates or args.planes:
         return _fixtures(args, robot, truth, rng)
     given = [f"--{k.replace('_', '-')}" for k in (*FIXTURE_DEFAULTS, "block_width", "target")

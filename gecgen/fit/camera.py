@@ -18,7 +18,9 @@ The unknowns are the coefficients the data determine and, per camera, (R, t) (an
 and any target the robot file leaves to `estimate`). The residual is observed minus projected
 pixels (`model.cameras.Camera.project`, OpenCV's model); its Jacobian in the coefficients is the
 projection's d(u, v)/dX times dX/dc from H_e, in the poses by central differences (cheap: no call of
-the generated code).
+the generated code). On request each camera's intrinsics join the poses (`intrinsics`). The
+coefficients the images determine too weakly against the noise are held first (`fit.weak`, as
+identify holds them for a tracker), with the poses projected out of their columns.
 """
 from __future__ import annotations
 
@@ -32,10 +34,12 @@ from gecgen.model.errors import ErrorModel
 from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit import robust
-from gecgen.runtime.compiled import CompiledModel
+from gecgen.fit import robust, weak
 from gecgen.fit.identify import RSS_TOL, structural_analysis
 from gecgen.fit.redundancy import Eliminated
+from gecgen.fit.significance import judge
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.threads import one_blas_thread
 
 #: m: the arm of the virtual targets that give the tool frame (its orientation from their differences)
 FRAME_ARM = 0.1
@@ -49,6 +53,13 @@ MEDIAN_CHI2 = float(np.sqrt(2 * np.log(2)))
 STEP_TOL_PX = 1e-4
 #: step (rad, m) of the central differences in the poses
 STEP = 1e-7
+#: px: an estimated noise per coordinate is taken at most as this: sub-pixel corners are found to a few
+#: tenths of a pixel, and a larger residual is the model or the camera file missing the data, which must
+#: not pass for noise and hold every direction
+NOISE_CAP_PX = 1.0
+#: a camera's intrinsics the fit refines on request: fx, fy, cx, cy and OpenCV's five distortion coefficients
+N_INTRINSICS = 9
+INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 #: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
 CAMERA_POSE = "camera pose"
 SCALE = "scale"
@@ -76,10 +87,16 @@ class PixelFit:
     (R (3, 3), t (3,)) such that X_cam = R X + t, X in the world (mount world) or in the tool frame
     (mount tool); board: the board's (R, t) in the world (X_w = R x_b + t), None for world cameras;
     targets: the tool-frame position (m) of every target left to estimate; before and train:
-    {rms_px, max_px} with the cameras' first poses and the nominal model, and after the fit;
+    {rms_px, max_px, rms_mm_at_target, max_mm_at_target, distance_m, cameras: {name: the same}} with the
+    cameras' first poses and the nominal model, and after the fit (`_summary`);
     eliminated: the coefficients held at zero and why; failures: why the fit must not be used; std (nc,)
     and cov (k, k) over `kept`, the poses' uncertainty carried in; sigma_px the residual per coordinate;
-    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`)."""
+    ranges the span of every input over the data ({"q1": [lo, hi], ...}, as `identify.Fit.ranges`);
+    held: the coefficients held at zero because the images determine them too weakly (`fit.weak`),
+    each with why (also in eliminated, reason "held"); scale: how well the images fix the calibrated
+    robot's scale (`_scale`); cameras: with intrinsics refined, the cameras as fitted, and
+    intrinsics_std their 1-sigma per camera ({"fx": px, ..., "k1": ..}), None otherwise; residuals (R, 2)
+    every image point's residual length after the fit, px and mm at the point (`at_target_mm`)."""
 
     c: np.ndarray
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
@@ -98,6 +115,11 @@ class PixelFit:
     cov: np.ndarray | None = None
     sigma_px: float = np.nan
     ranges: dict | None = None
+    held: tuple[weak.Held, ...] = ()
+    scale: dict | None = None
+    cameras: dict[str, Camera] | None = None
+    intrinsics_std: dict[str, dict[str, float]] | None = None
+    residuals: np.ndarray | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -115,16 +137,37 @@ def frame_robot(robot: Robot) -> Robot:
 class _Problem:
     """The residual of one pixel data set and its Jacobian (see the module docstring)."""
 
-    def __init__(self, cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None):
+    def __init__(self, cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+                 intrinsics: bool = False):
         self.cm, self.robot, self.data, self.board = cm, robot, data, board
         self.cams = [cameras[n] for n in data.cameras]
+        self.intrinsics = intrinsics
         self.tool = data.mount == "tool"
-        self.inputs = (data.q, data.w, data.aux[:, [data.aux_names.index(a) for a in cm.model.aux]]
-                       if cm.model.aux else None)
+        self.inputs = (data.q, data.w, data.aux_columns(cm.model.aux) if cm.model.aux else None)
         seen = set(np.array(data.points)[data.point])
         self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
         # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
         self.n_geom = 6 * len(self.cams) + (6 if self.tool else 0) + 3 * len(self.estimated)
+        self.n_poses_geom = self.n_geom  # the unknowns before the intrinsics
+        if intrinsics:  # refined: each camera's nine, last (`cameras_of`)
+            self.n_geom += N_INTRINSICS * len(self.cams)
+
+    def intrinsics_of(self) -> np.ndarray:
+        """The given cameras' intrinsics as the fit's unknowns: fx, fy, cx, cy in units of the given fx
+        (so that one finite-difference step suits them all) and the five distortion coefficients."""
+        return np.concatenate([[c.fx / c.fx, c.fy / c.fx, c.cx / c.fx, c.cy / c.fx, *c.distortion] for c in self.cams])
+
+    def cameras_of(self, g: np.ndarray) -> list[Camera]:
+        """The cameras with the intrinsics of g when they are refined, else as given."""
+        if not self.intrinsics:
+            return self.cams
+        k = self.n_poses_geom
+        out = []
+        for i, c in enumerate(self.cams):
+            v = g[k + N_INTRINSICS * i:k + N_INTRINSICS * (i + 1)]
+            out.append(replace(c, fx=c.fx * v[0], fy=c.fx * v[1], cx=c.fx * v[2], cy=c.fx * v[3],
+                               distortion=tuple(map(float, v[4:]))))
+        return out
 
     def frames(self, c: np.ndarray, with_H: bool = False):
         """Tool origin o (P, 3), rotation R (P, 3, 3) and, with_H, H_e of the four points (P, 4, 3, nc)."""
@@ -169,10 +212,10 @@ class _Problem:
             out[rows] = (Xt[rows] if self.tool else Xw[rows]) @ Rc.T + tc
         return out
 
-    def project(self, X: np.ndarray, jacobian: bool = False):
+    def project(self, X: np.ndarray, g: np.ndarray, jacobian: bool = False):
         uv = np.empty((len(X), 2))
         J = np.empty((len(X), 2, 3)) if jacobian else None
-        for k, cam in enumerate(self.cams):
+        for k, cam in enumerate(self.cameras_of(g)):
             rows = self.data.camera == k
             if jacobian:
                 uv[rows], J[rows] = cam.project(X[rows], True)
@@ -183,20 +226,20 @@ class _Problem:
     def residual(self, g: np.ndarray, c: np.ndarray) -> np.ndarray:
         """(R, 2) observed minus projected pixels."""
         o, R, _ = self.frames(c)
-        return self.data.uv - self.project(self.camera_points(g, o, R))
+        return self.data.uv - self.project(self.camera_points(g, o, R), g)
 
     def jacobian(self, g: np.ndarray, c: np.ndarray, columns: np.ndarray):
         """Residual (R, 2) and its Jacobian (2R, n_geom + len(columns)) in (g, c[columns])."""
         o, R, H = self.frames(c, with_H=True)
         X = self.camera_points(g, o, R)
-        uv, P = self.project(X, jacobian=True)
+        uv, P = self.project(X, g, jacobian=True)
         d = self.data
         Jg = np.empty((len(X), 2, self.n_geom))
         for i in range(self.n_geom):
             e = np.zeros(self.n_geom)
             e[i] = STEP
-            Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R)) -
-                           self.project(self.camera_points(g - e, o, R))) / (2 * STEP)
+            Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R), g + e) -
+                           self.project(self.camera_points(g - e, o, R), g - e)) / (2 * STEP)
         Hc = H[d.pose][..., columns]  # (R, 4, 3, k)
         dr = (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM  # d(tool axis k)/dc: (R, 3 axes, 3, k)
         poses, board, targets = self.unpack(g)
@@ -266,8 +309,28 @@ def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
     return np.array(g, float)
 
 
-def _summary(e: np.ndarray) -> dict:
-    return {"rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max())}
+def at_target_mm(problem: _Problem, g: np.ndarray, c: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What residual lengths e (R,) px mean at the points: the length (mm) across the ray at the point's
+    depth (e times depth over the mean focal length) and the depth (R,) m."""
+    o, R, _ = problem.frames(c)
+    depth = problem.camera_points(g, o, R)[:, 2]
+    f = np.array([(cam.fx + cam.fy) / 2 for cam in problem.cameras_of(g)])[problem.data.camera]
+    return 1e3 * e * depth / f, depth
+
+
+def _rms_max(e: np.ndarray, mm: np.ndarray, depth: np.ndarray) -> dict:
+    return {"rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max()),
+            "rms_mm_at_target": float(np.sqrt(np.mean(mm ** 2))), "max_mm_at_target": float(mm.max()),
+            "distance_m": float(np.median(depth))}
+
+
+def _summary(problem: _Problem, g: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
+    """The residual lengths e (R,) px: RMS and largest, in px and in mm at the points (`at_target_mm`),
+    the median working distance (m), over all points and per camera (`cameras`)."""
+    mm, depth = at_target_mm(problem, g, c, e)
+    cam = problem.data.camera
+    return _rms_max(e, mm, depth) | {"cameras": {n: _rms_max(e[cam == k], mm[cam == k], depth[cam == k])
+                                                 for k, n in enumerate(problem.data.cameras) if (cam == k).any()}}
 
 
 def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list[int], names: list[str],
@@ -321,20 +384,23 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
 
 
 def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
-            fixed_poses: np.ndarray | None, backend: str):
+            fixed_poses: np.ndarray | None, backend: str, intrinsics: bool = False):
     """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
     eliminated (structurally, and by `_analysis`), at the nominal model."""
     require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
     cm = CompiledModel(frame_robot(robot), model, backend)
-    problem = _Problem(cm, robot, data, cameras, board)
+    problem = _Problem(cm, robot, data, cameras, board, intrinsics)
     c = np.zeros(cm.dims.nc)
     g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
+    if intrinsics:
+        g = np.concatenate([g, problem.intrinsics_of()])
     struct = structural_analysis(cm, np.arange(4))
     kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
                                  fixed_poses is not None)
     return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
 
 
+@one_blas_thread
 def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
                      board: Board | None = None) -> dict:
     """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
@@ -344,102 +410,187 @@ def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dic
             "eliminated": [e.to_dict() for e in eliminated]}
 
 
+@one_blas_thread  # small dense algebra: more threads than one on a shared machine only contend
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
-               backend: str = "auto") -> PixelFit:
+               backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
+               intrinsics: bool = False, significance: bool = True) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
-    order of the fit) held at these values instead of fitted (an oracle that knows the cameras)."""
+    order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
+    hold_weak (default): the coefficients whose direction the images determine too weakly against the
+    noise to hold a plausible value (`fit.weak`, as identify does for a tracker; the cameras' poses
+    projected out first) are held at zero, each listed in `PixelFit.held` with why; noise_px the
+    corner noise per coordinate when known, else the linearised fit's residual (at most
+    NOISE_CAP_PX). The steps are Levenberg-Marquardt steps in the determined coefficients and the poses,
+    so the fit converges on what the images determine. intrinsics: each camera's fx, fy, cx, cy and
+    distortion are refined in the same fit, from the camera file's values (`PixelFit.cameras`, with
+    their std in `PixelFit.intrinsics_std`). significance (default): the coefficients the images do not
+    determine (|value| / std below 2 after backward elimination, `significance.judge`) are held at zero
+    and the rest refitted, each in eliminated (reason "insignificant"), as identify does by default."""
     robust.check_loss(loss)
-    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend)
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend, intrinsics)
     c = np.zeros(problem.cm.dims.nc)
-    cols = np.array(kept, int)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)
-    before = _summary(e)
+    before = _summary(problem, g, c, e)
 
     def limit_of(e):
         return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
 
     limit = limit_of(e)
-    lam, converged, it = 0.0, False, 0
-    for it in range(1, max_iter + 1):
-        wr = robust.weights(e, limit, loss)
-        obj = robust.objective(e, limit, loss)
-        r, J = problem.jacobian(g, c, cols)
-        if not free_g:
-            J = J[:, problem.n_geom:]
-        root = np.repeat(np.sqrt(wr), 2)
-        A, b = J * root[:, None], r.ravel() * root
-        scale = np.linalg.norm(A, axis=0)
-        scale[scale == 0] = 1.0
-        A = A / scale
-        predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
-        if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
-            converged = True  # a full step would change nothing a camera resolves
-            break
-        for _ in range(20):
-            M = A.T @ A + lam * np.eye(A.shape[1])
-            step = -np.linalg.solve(M, A.T @ b) / scale
-            g_t = g + step[:problem.n_geom] if free_g else g
-            c_t = c.copy()
-            c_t[cols] += step[problem.n_geom:] if free_g else step
-            e_t = np.linalg.norm(problem.residual(g_t, c_t), axis=1)
-            obj_t = robust.objective(e_t, limit, loss)
-            if np.isfinite(obj_t) and obj_t <= obj:
+    held = ()
+    if hold_weak and kept:
+        kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
+        eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
+                                  key=lambda x: x.index))
+    def solve(g, c, cols, e, limit):
+        """Levenberg-Marquardt over the poses (free_g) and c[cols], robustly reweighted."""
+        lam, converged, it = 0.0, False, 0
+        for it in range(1, max_iter + 1):
+            wr = robust.weights(e, limit, loss)
+            obj = robust.objective(e, limit, loss)
+            A, b, scale = _system(problem, g, c, cols, wr, free_g)
+            predicted = np.linalg.norm(A @ np.linalg.lstsq(A, -b, rcond=None)[0])
+            if predicted / np.sqrt(len(b)) < STEP_TOL_PX and it > 1:
+                converged = True  # a full step would change nothing a camera resolves
                 break
-            lam = 1e-6 if lam == 0 else 10 * lam
-        else:
-            break
-        g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
-        new_limit = limit_of(e)
-        settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
-        limit = new_limit
-        if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
-            converged = True
-            break
+            for _ in range(20):
+                M = A.T @ A + lam * np.eye(A.shape[1])
+                step = -np.linalg.solve(M, A.T @ b) / scale
+                g_t = g + step[:problem.n_geom] if free_g else g
+                c_t = c.copy()
+                c_t[cols] += step[problem.n_geom:] if free_g else step
+                e_t = np.linalg.norm(problem.residual(g_t, c_t), axis=1)
+                obj_t = robust.objective(e_t, limit, loss)
+                if np.isfinite(obj_t) and obj_t <= obj:
+                    break
+                lam = 1e-6 if lam == 0 else 10 * lam
+            else:
+                break
+            g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
+            new_limit = limit_of(e)
+            settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
+            limit = new_limit
+            if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
+                converged = True
+                break
+        return g, c, e, limit, converged, it
+
+    cols = np.array(kept, int)
+    g, c, e, limit, converged, it = solve(g, c, cols, e, limit)
+    insignificant, ungated = {}, None
+    if significance and converged and len(cols):
+        # the significance gate of tracker data (`significance.judge`), the poses' unknowns counted out of
+        # the degrees of freedom and their uncertainty carried in the coefficients' covariance
+        wr = robust.weights(e, limit, loss)
+        std, cov, sigma, _ = _uncertainty(problem, g, c, cols, wr, free_g)
+        names = model.coefficient_names(robot)
+        _, insignificant = judge(names, c, std, cols, cov, sigma, 2 * float(wr.sum()) - (problem.n_geom if free_g else 0))
+        if insignificant:
+            ungated = (cols, cov)
+            cols = np.array([j for j in cols if j not in insignificant], int)
+            c = c.copy()
+            c[list(insignificant)] = 0.0
+            e = np.linalg.norm(problem.residual(g, c), axis=1)
+            g, c, e, limit, converged, it = solve(g, c, cols, e, limit_of(e))
+            eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "insignificant", why)
+                                                      for j, why in insignificant.items())], key=lambda x: x.index))
+    kept = [int(j) for j in cols]
     wr = robust.weights(e, limit, loss)
-    std, cov, sigma = _uncertainty(problem, g, c, cols, wr, free_g)
+    std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
+    # the scale's uncertainty before the gate: holding coefficients at zero would state it given their
+    # zeros, which understates it (docs/camera.md)
+    scale = _scale(problem, c, *(ungated or (cols, cov)))
     flagged = np.nonzero(e > limit)[0]
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
                              float(e[r]), float(wr[r])) for r in flagged[np.argsort(-e[flagged])])
-    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({_summary(e)['rms_px']:.3g} "
+    failures = [] if converged else [f"Gauss-Newton did not converge in {it} iterations ({np.sqrt(np.mean(e ** 2)):.3g} "
                                      f"px rms left): the images may not determine this model (fewer terms, e.g. "
                                      f"--errors with constant errors, or more images), or the camera file is not "
                                      f"this camera's"]
     poses, board_pose, targets = problem.unpack(g)
     inliers = e <= limit
-    train = _summary(e) | {"rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
+    train = _summary(problem, g, c, e) | {
+        "rms_px_inliers": float(np.sqrt(np.mean(e[inliers] ** 2))) if inliers.any() else np.nan}
     if not np.isfinite(e).all():
         failures.append("a point lies behind its camera after the fit; check the camera file's mount and the data")
     names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
+    refined = problem.cameras_of(g)
+    intrinsics_std = {}
+    if intrinsics and free_g:
+        for i, cam in enumerate(cameras[n] for n in d.cameras):
+            v = std_g[problem.n_poses_geom + N_INTRINSICS * i:problem.n_poses_geom + N_INTRINSICS * (i + 1)]
+            intrinsics_std[cam.name] = dict(zip(INTRINSICS, [*(cam.fx * v[:4]), *v[4:]]))
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
-                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges)
+                    outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
+                    {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
+                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]))
 
 
-def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
-    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
-    uncertainty carried in, and the residual sigma (px per coordinate, points counted by weight)."""
+def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """The weighted least squares at poses g and coefficients c: its Jacobian A (2R, n) in the poses
+    (when free_g) and c[cols], each column scaled to unit norm, the residual b (2R,) px and the
+    scales (n,); wr (R,) the image points' robust weights."""
     r, J = problem.jacobian(g, c, cols)
     if not free_g:
         J = J[:, problem.n_geom:]
     root = np.repeat(np.sqrt(wr), 2)
     A, b = J * root[:, None], r.ravel() * root
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    return A / scale, b, scale
+
+
+def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int], wr: np.ndarray, free_g: bool,
+               noise_px: float | None) -> tuple[list[int], tuple[weak.Held, ...]]:
+    """The coefficients of kept the images determine against the noise and those held (`weak.hold`),
+    with the poses' columns projected out: the R factor's block below them is that of the
+    coefficients' columns after the poses have taken what they can."""
+    A, b, scale = _system(problem, g, c, np.array(kept, int), wr, free_g)
+    k0 = A.shape[1] - len(kept)
+    R = np.linalg.qr(np.column_stack([A, b]), mode="r")[k0:, k0:]
+    stay, held = weak.hold(problem.cm, problem.data, kept, R, scale[k0:], 2 * float(wr.sum()) - k0, noise_px,
+                           NOISE_CAP_PX)
+    return [kept[i] for i in stay], held
+
+
+def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) -> dict:
+    """How well the fit fixes the scale of the robot it calibrates: the 1-sigma of the relative scale of
+    the tool origins it predicts at the training poses, from the covariance cov of c[cols] (`std_ppm`; the scale of a similarity fit of
+    them onto the truth's, the rest rigid) and what that moves them by, RMS about their centre
+    (`std_mm`). Pixels fix a length only through a known one (the markers' spacing, the board's
+    square), seen from afar only weakly; a similarity fit's scale of small perturbations dp (P, 3) is
+    sum(r . dp) / sum(|r|^2), r the positions about their centre, so its variance is a^T cov a with a
+    that sum's gradient in the coefficients."""
+    o, _, H = problem.frames(c, with_H=True)
+    r = o - o.mean(axis=0)
+    a = np.einsum("pi,pik->k", r, H[:, 0][..., cols]) / float(np.sum(r ** 2))
+    with np.errstate(invalid="ignore"):
+        std = float(np.sqrt(a @ cov @ a)) if len(cols) else 0.0
+    return {"std_ppm": 1e6 * std, "std_mm": 1e3 * std * float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))}
+
+
+def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
+    """std (nc,) of the coefficients (NaN where not fitted), their covariance (k, k) with the poses'
+    uncertainty carried in, the residual sigma (px per coordinate, points counted by weight) and the
+    std of the geometric unknowns (n_geom,) in their units (empty when they are given)."""
+    A, b, scale = _system(problem, g, c, cols, wr, free_g)
     dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
     sigma = float(np.sqrt(b @ b / dof))
     with np.errstate(all="ignore"):
         try:
-            full = sigma ** 2 * np.linalg.inv(A.T @ A)
+            full = sigma ** 2 * np.linalg.inv(A.T @ A) / np.outer(scale, scale)
         except np.linalg.LinAlgError:
             full = np.full((A.shape[1],) * 2, np.inf)
     k0 = A.shape[1] - len(cols)
     cov = full[k0:, k0:]
     std = np.full(problem.cm.dims.nc, np.nan)
     std[cols] = np.sqrt(np.abs(np.diag(cov)))
-    return std, cov, sigma
+    return std, cov, sigma, np.sqrt(np.abs(np.diag(full)[:k0]))
 
 
 def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
@@ -459,11 +610,19 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "eliminated": [e.to_dict() for e in fit.eliminated], "before": fit.before, "train": fit.train,
               "sigma_px": fit.sigma_px, "iterations": fit.iterations, "converged": fit.converged,
               "loss": fit.loss, "outliers": [o.to_dict() for o in fit.outliers], "measurement": "pixels",
-              "training_ranges": fit.ranges,
+              "training_ranges": fit.ranges, "held": [h.to_dict() for h in fit.held], "scale": fit.scale,
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
+              **({"intrinsics": intrinsics_report(fit)} if fit.cameras else {}),
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
                  if fit.board is not None else {})}
     return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
+
+
+def intrinsics_report(fit: PixelFit) -> dict:
+    """Per camera its refined intrinsics (fx, fy, cx, cy px; distortion [k1, k2, p1, p2, k3]) and their
+    1-sigma (`std`), as the camera file and OpenCV write them."""
+    return {n: {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "distortion": list(c.distortion),
+                **({"std": fit.intrinsics_std[n]} if fit.intrinsics_std else {})} for n, c in fit.cameras.items()}
 
 
 def refuse_untrustworthy(fit: PixelFit, where: str):

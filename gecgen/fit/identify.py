@@ -764,7 +764,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         stay = [i for i, j in enumerate(red.kept) if j not in hold]
         names = cm.model.coefficient_names(cm.robot)
         kept_held = tuple(hold[j] for j in red.kept if isinstance(hold.get(j), weak.Held))
-        red = replace(red, kept=tuple(red.kept[i] for i in stay),
+        red = replace(red, kept=tuple(int(red.kept[i]) for i in stay),
                       eliminated=(*red.eliminated, *(
                           Eliminated(names[j], j, "held", hold[j].reason) if isinstance(hold[j], weak.Held)
                           else Eliminated(names[j], j, "insignificant", hold[j]) for j in red.kept if j in hold)))
@@ -924,21 +924,11 @@ def _hold_weak(cm: CompiledModel, data: Measurements, red: Redundancy, R: np.nda
     """`red` with the weakly determined coefficients (`fit.weak`) moved from kept to eliminated
     ("held"), the positions in red.kept of those left, and the held coefficients with why. R (k+1,
     k+1): the R factor of [H / scale | r] over red.kept at the fit's start, from m degrees of
-    freedom. The noise is noise_m (m per coordinate) or, unknown, what the linearised fit over
-    every kept column leaves (at most weak.NOISE_CAP_M): if anything smaller than the noise, as it
-    fits some noise too, so that fewer directions are held rather than more."""
-    k = len(red.kept)
-    sigma = noise_m if noise_m is not None else min(float(abs(R[k, k]) / np.sqrt(max(m - k, 1.0))), weak.NOISE_CAP_M)
-    F, error, limit = weak.term_values(cm, data)
-    kept = np.array(red.kept, int)
-    found = weak.weak(R[:k, :k], scale, F[:, kept], error[kept], limit[kept], sigma)
-    if not found:
-        return red, list(range(k)), ()
-    held = tuple(weak.reasons(cm, data, [int(kept[i]) for i, _, _ in found], [s for _, s, _ in found],
-                              [r for _, _, r in found]))
-    out = {i for i, _, _ in found}
-    stay = [i for i in range(k) if i not in out]
-    red = replace(red, kept=tuple(int(kept[i]) for i in stay),
+    freedom; noise_m (m per coordinate) as `weak.hold` takes it, at most weak.NOISE_CAP_M estimated."""
+    stay, held = weak.hold(cm, data, red.kept, R, scale, m, noise_m, weak.NOISE_CAP_M)
+    if not held:
+        return red, stay, ()
+    red = replace(red, kept=tuple(int(red.kept[i]) for i in stay),
                   eliminated=tuple(sorted((*red.eliminated, *(Eliminated(h.param, h.index, "held", h.reason)
                                                                for h in held)), key=lambda e: e.index)))
     return red, stay, held

@@ -138,6 +138,26 @@ def weak(Rk: np.ndarray, scale: np.ndarray, F: np.ndarray, error: np.ndarray, li
     return out
 
 
+def hold(cm, data, kept, R: np.ndarray, scale: np.ndarray, dof: float, noise: float | None,
+         cap: float) -> tuple[list[int], tuple[Held, ...]]:
+    """Which of the coefficients `kept` (indices into the model's) the data hold and which they leave
+    weakly determined: the positions in kept of those to fit and the held ones with why (`weak`,
+    `reasons`). R (k+1, k+1): the R factor of [J / scale | r] over kept, from dof degrees of freedom
+    (the residual's own unit: m for points, px for pixels; J's other unknowns, such as camera poses,
+    already projected out). The noise per coordinate is `noise` when stated, else what the linearised
+    fit over every kept column leaves, at most cap: if anything smaller than the noise, as it fits
+    some noise too, so that fewer directions are held rather than more."""
+    k = len(kept)
+    sigma = noise if noise is not None else min(float(abs(R[k, k]) / np.sqrt(max(dof - k, 1.0))), cap)
+    F, error, limit = term_values(cm, data)
+    kept = np.asarray(kept, int)
+    found = weak(R[:k, :k], scale, F[:, kept], error[kept], limit[kept], sigma)
+    held = tuple(reasons(cm, data, [int(kept[i]) for i, _, _ in found], [s for _, s, _ in found],
+                         [r for _, _, r in found]))
+    out = {i for i, _, _ in found}
+    return [i for i in range(k) if i not in out], held
+
+
 def tool_turn(robot, q: np.ndarray) -> float:
     """The largest angle (rad) between the nominal tool orientation at a pose of q (P, n) and
     its mean over them (on a tree: over every branch's tool, the largest)."""

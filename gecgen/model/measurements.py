@@ -76,6 +76,13 @@ class Poses:
         """The pose fields (q, w, aux, aux_names, pose_ids) of the given pose indices, in field order."""
         return self.q[poses], self.w[poses], self.aux[poses], self.aux_names, self.pose_ids[poses]
 
+    def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
+        """(P, len(names)) values of the named auxiliary signals."""
+        missing = [a for a in names if a not in self.aux_names]
+        require(not missing, f"{self.source}: the error model uses auxiliary signal {excerpt(missing[0]) if missing else ''} "
+                             f"but the data has no such column; add it or remove the term")
+        return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
+
 
 @dataclass(frozen=True)
 class Measurements(Poses):
@@ -136,12 +143,6 @@ class Measurements(Poses):
                             None if self.relative is None else self.relative.take(keep),
                             None if self.vertices is None else self.vertices.take(keep))
 
-    def aux_columns(self, names: tuple[str, ...]) -> np.ndarray:
-        """(P, len(names)) values of the named auxiliary signals."""
-        missing = [a for a in names if a not in self.aux_names]
-        require(not missing, f"{self.source}: the error model uses auxiliary signal {excerpt(missing[0]) if missing else ''} "
-                             f"but the data has no such column; add it or remove the term")
-        return self.aux[:, [self.aux_names.index(a) for a in names]] if names else np.zeros((self.n_poses, 0))
 
 
 def within_limits(q: np.ndarray, robot: Robot, where: str, limit_tolerance: float = LIMIT_TOLERANCE):

@@ -40,6 +40,9 @@ class Pixels(Poses):
     mount: str
     source: str = ""
 
+    #: image points are never relative rows (sockets, planes): what `fit.weak` asks measurements
+    relative = None
+
     def subset(self, poses: np.ndarray) -> "Pixels":
         """The image points of the given pose indices."""
         poses, keep, pose = pose_subset(self.pose, self.n_poses, poses)

@@ -369,6 +369,82 @@ def identify(robot: Robot, cm, data: Measurements, fit, calib, calib_path: str, 
                    glossary(robot), extrapolation_section(robot, calib, None, None)])
 
 
+#: the image is cut into COVERAGE x COVERAGE cells to say how much of it the points cover
+COVERAGE = 4
+#: rows of the pixel report's tables of images and points, the worst first
+WORST = 10
+
+
+def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warnings: list[str] | None = None) -> Report:
+    """The report of a calibration from image points (`fit.camera.PixelFit` on `model.pixels.Pixels`):
+    reprojection residuals in px and in mm at the points, per camera, image and point; how much of each
+    image the points cover; the coefficients with what the images left undetermined."""
+    px, mm = fit.residuals[:, 0], fit.residuals[:, 1]
+    names = data.cameras
+
+    def rms(x):
+        return f"{np.sqrt(np.mean(x ** 2)):.3g}"
+
+    cams = [(n, fit.before["cameras"][n], fit.train["cameras"][n]) for n in names if n in fit.train["cameras"]]
+    per_camera = Table(("camera", "points", "before rms px", "after rms px", "after max px", "after rms mm at target",
+                        "distance m"),
+                       [(f"`{n}`", str(int(np.sum(data.camera == k))), f"{b['rms_px']:.3g}", f"{a['rms_px']:.3g}",
+                         f"{a['max_px']:.3g}", f"{a['rms_mm_at_target']:.3g}", f"{a['distance_m']:.3g}")
+                        for k, (n, b, a) in enumerate(cams)])
+    images = []
+    for p in range(data.n_poses):
+        for k, n in enumerate(names):
+            rows = (data.pose == p) & (data.camera == k)
+            if rows.any():
+                images.append((float(np.sqrt(np.mean(px[rows] ** 2))), int(data.pose_ids[p]), n, int(rows.sum()),
+                               float(px[rows].max()), rms(mm[rows])))
+    images.sort(key=lambda r: -r[0])
+    points = []
+    for j, n in enumerate(data.points):
+        rows = data.point == j
+        if rows.any():
+            points.append((float(np.sqrt(np.mean(px[rows] ** 2))), n, int(rows.sum()), float(px[rows].max()),
+                           rms(mm[rows])))
+    points.sort(key=lambda r: -r[0])
+    coverage = []
+    for k, n in enumerate(names):
+        cam = cameras[n]
+        uv = data.uv[data.camera == k]
+        cells = {(int(COVERAGE * u / cam.width), int(COVERAGE * v / cam.height)) for u, v in uv}
+        coverage.append(f"`{n}`: {len(cells)} of {COVERAGE * COVERAGE} cells of its {cam.width} x {cam.height} image "
+                        f"({COVERAGE} x {COVERAGE}) hold a point")
+    outliers = [f"row {o.row}: image of pose {o.pose}, camera `{o.camera}`, point `{o.point}`: {o.residual_px:.3g} px "
+                f"(weight {o.weight:.2g})" for o in fit.outliers]
+    sections = [
+        *verdict_sections(None, warnings),
+        Section("Residuals in pixels", [
+            f"Reprojection residual of every image point, observed minus projected (a camera measures pixels, not "
+            f"millimetres): before, the nominal model at the cameras' first poses; after, the calibration. *mm at "
+            f"target* is what a residual means across the camera's ray at the point's depth (px times depth over "
+            f"the focal length); the median working distance is {fit.train['distance_m']:.3g} m. Over all "
+            f"{len(px)} points: {fit.before['rms_px']:.3g} -> {fit.train['rms_px']:.3g} px rms "
+            f"({fit.train['rms_mm_at_target']:.3g} mm at target), largest {fit.train['max_px']:.3g} px.",
+            per_camera]),
+        Section("Images with the largest residual", [
+            f"The {min(WORST, len(images))} of {len(images)} images (one pose, one camera) with the largest RMS "
+            f"residual after the calibration.",
+            Table(("pose", "camera", "points", "rms px", "max px", "rms mm at target"),
+                  [(str(p), f"`{n}`", str(c), f"{r:.3g}", f"{m:.3g}", t) for r, p, n, c, m, t in images[:WORST]])]),
+        Section("Points with the largest residual", [
+            f"The {min(WORST, len(points))} of {len(points)} points with the largest RMS residual over the images "
+            f"that see them.",
+            Table(("point", "images", "rms px", "max px", "rms mm at target"),
+                  [(f"`{n}`", str(c), f"{r:.3g}", f"{m:.3g}", t) for r, n, c, m, t in points[:WORST]])]),
+        Section("Coverage of the images", [
+            "Where the points fall in each camera's image: the residuals speak for the lens only where points fall.",
+            Bullets(coverage)]),
+        Section("Outliers", [Bullets(outliers) if outliers else "No image point was flagged as an outlier."]),
+        *coefficient_section(robot, calib), glossary(robot)]
+    return Report(f"gecgen identify: {robot.name} from image points",
+                  [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses, {len(names)} "
+                   f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). Training data only."], sections)
+
+
 def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray, outside: dict[str, int],
              calib_path: str, assessment=None, warnings: list[str] | None = None) -> Report:
     robot = calib.robot
