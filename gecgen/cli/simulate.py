@@ -16,12 +16,14 @@ from gecgen.model.measurements import pose_id_column, read_commands, write_measu
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
-from gecgen.simulate.designs import Design, constant_orientation
+from gecgen.simulate.designs import Design, barely_moving, constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
 #: poses of the random design when --poses is not given
 POSES = 200
+#: how far the joint of --design barely-moving moves when --span is not given (rad, or m)
+SPAN = 1e-3
 #: the socket and plane options' values when not given (each is refused without --plates or --planes)
 FIXTURE_DEFAULTS = {"per_socket": 25, "socket_distance": 0.05, "distance_std": 0.0, "touches": 30,
                     "seating_noise": 1e-5, "encoder_noise": 1e-5}
@@ -32,10 +34,12 @@ def add_parser(command):
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the "
                                    "nominal robot: no errors, no noise)")
-    p.add_argument("--design", choices=["random", "one-at-a-time", "paper", "tool-grid"], default="random",
-                   help="random poses within the limits, one joint at a time, the seed paper's PPS design, or a "
+    p.add_argument("--design", choices=["random", "one-at-a-time", "paper", "tool-grid", "barely-moving"],
+                   default="random",
+                   help="random poses within the limits, one joint at a time, the seed paper's PPS design, a "
                         "grid the tool visits keeping the orientation it has at --home, as a laser tracker's "
-                        "reflector is kept facing the tracker (default %(default)s)")
+                        "reflector is kept facing the tracker, or random poses in which joint --joint barely "
+                        "moves (default %(default)s)")
     p.add_argument("--commands",
                    help="instead of --design: the joints of this CSV (q1..qn a row, the pose ids its pose column's, "
                         "else 0, 1, ...), as a robot commanded to them is measured: an ISO 9283 plan "
@@ -47,8 +51,14 @@ def add_parser(command):
                    help="--design tool-grid: distance between grid points, m (default %(default)s)")
     p.add_argument("--grid", type=numbers(1), default=[6, 6, 6],
                    help="--design tool-grid: points along x, y, z of the world (default 6,6,6; 8,8,1 a plane)")
+    p.add_argument("--joint", type=whole(1, 1000),
+                   help="--design barely-moving: the joint (1-based, as q1..qn) that stays within --span about the "
+                        "middle of its range")
+    p.add_argument("--span", type=number(0, 10),
+                   help=f"--design barely-moving: how far that joint moves, rad (m for a prismatic joint) "
+                        f"(default {SPAN:g})")
     p.add_argument("--poses", type=whole(1, MAX_POSES),
-                   help=f"poses of the random design (default {POSES})")
+                   help=f"poses of the random or barely-moving design (default {POSES})")
     p.add_argument("--step", type=number(0, above=True), default=0.05,
                    help="step (m or rad) of the one-at-a-time design (default %(default)s)")
     p.add_argument("--payload-kg", type=numbers(0),
@@ -118,6 +128,8 @@ def run(args) -> dict:
         (["--no-distance"] if args.no_distance else [])
     if given:
         raise ModelError(f"{given[0]} goes with --plates or --planes (sockets and planes); drop it, or add one of them")
+    require(args.design == "barely-moving" or (args.joint is None and args.span is None),
+            "--joint and --span go with --design barely-moving; drop them, or add it")
     payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
@@ -131,6 +143,11 @@ def run(args) -> dict:
         design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
     elif args.design == "tool-grid":
         design = _tool_grid(args, robot)
+    elif args.design == "barely-moving":
+        require(args.joint is not None and args.joint <= robot.n,
+                f"--design barely-moving: give --joint K, the joint that barely moves (1 to {robot.n})")
+        design = barely_moving(robot, args.poses or POSES, rng, args.joint, SPAN if args.span is None else args.span,
+                               payloads_kg=payloads)
     elif args.design == "one-at-a-time":
         lo, hi = robot.sampling_box()
         count = len(payloads) * sum(int((b - a) / args.step) + 1 for a, b in zip(lo, hi))
