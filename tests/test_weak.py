@@ -13,7 +13,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from conftest import run_json
+from scipy.spatial.transform import Rotation
 
 from gecgen import api
 from gecgen.model import load_error_model, load_robot
@@ -21,9 +24,10 @@ from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit.identify import _fit_failures, absurd_error, identify
 from gecgen.fit.inputs import placed
+from gecgen.fit.registration import register
 from gecgen.fit.weak import PLAUSIBLE_M, PLAUSIBLE_RAD, tool_turn
 from gecgen.simulate import load_truth, simulate
-from gecgen.simulate.designs import barely_moving, constant_orientation
+from gecgen.simulate.designs import constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -96,6 +100,21 @@ def test_without_holding_the_same_fit_does_not_converge(grid):
     assert held.trustworthy and held.held and held.iterations < 10
 
 
+def test_a_refusal_says_that_no_determined_subspace_lets_the_fit_stand(grid):
+    """Data no subspace of the model explains (the world mirrored: no robot and registration give
+    it) are refused, and the refusal says that holding the weakly determined directions was tried,
+    how many, and why that fit fails too."""
+    robot, _, train, _ = grid
+    cm = CompiledModel(robot, load_error_model(ROBOTS / "industrial6r.errors.yaml", robot))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mirrored = identify(cm, replace(train, xyz=train.xyz * [1, -1, 1]))
+    assert not mirrored.trustworthy
+    said = [f for f in mirrored.failures if "no subspace the data determine lets the fit stand" in f]
+    assert len(said) == 1 and "weakly determined coefficients held (" in said[0] and "the fit still fails" in said[0]
+    assert any("robot file" in f for f in mirrored.failures)
+
+
 def test_a_stated_noise_decides_what_is_held(grid):
     """The test is against the noise: a noise a hundred times the tracker's holds more."""
     robot, truth, train, _ = grid
@@ -151,18 +170,22 @@ def test_a_planar_grid_converges_with_what_it_holds_named():
     assert all("the tool never turns" in h["reason"] for h in cal.report_["held"])
 
 
-def test_a_joint_that_barely_moves_is_named():
-    """Joint 4 within 1 mrad: its errors that no other joint's motion tells apart are held, the
-    reason naming the joint; the rest of the arm is fitted."""
-    robot, truth = truth_of("industrial6r")
-    rng = np.random.default_rng(2)
-    data = simulate(robot, truth, barely_moving(robot, 150, rng, joint=4, span=1e-3), rng)
-    cm = CompiledModel(robot, load_error_model(ROBOTS / "industrial6r.errors.yaml", robot))
+def test_a_joint_that_barely_moves_is_named(tmp_path):
+    """`gecgen simulate --design barely-moving`: joint 4 within 1 mrad. identify converges, its
+    errors that no other joint's motion tells apart are held, the reason naming the joint; the rest
+    of the arm is fitted."""
+    robot = ROBOTS / "industrial6r.yaml"
+    data = tmp_path / "barely.csv"
+    made = run_json("simulate", robot, "--design", "barely-moving", "--joint", 4, "--poses", 150, "--seed", 2,
+                    "-o", data)
+    q = pd.read_csv(data)["q4"]
+    assert made["design"] == "barely-moving" and 0 < np.ptp(q) <= 1e-3
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit = identify(cm, data)
-    assert fit.trustworthy, fit.failures
-    assert any("joint 4 (a4) barely moves" in h.reason for h in fit.held)
+        fit = run_json("identify", robot, data, "-o", tmp_path / "calib")
+    assert fit["converged"] and fit["held"]
+    assert all("joint 4 (a4) barely moves" in h["reason"] for h in fit["held"])
+    assert {h["param"] for h in fit["held"]} <= {e["param"] for e in fit["eliminated"] if e["reason"] == "held"}
 
 
 def test_sockets_without_a_distance_hold_the_scale_and_converge():
@@ -171,12 +194,14 @@ def test_sockets_without_a_distance_hold_the_scale_and_converge():
     with the distance given."""
     robot = load_robot(ROBOTS / "panda_ball.yaml")
     truth = load_truth(read_yaml(ROBOTS / "panda.truth.yaml", "truth"), robot, "panda.truth.yaml")
+    rng = np.random.default_rng(0)
+    fixtures = Fixtures("ball", plates=3)
+    measured, _ = simulate_fixtures(robot, truth, fixtures, rng)
+    val, _ = simulate_fixtures(robot, truth, fixtures, rng)
+    # the same seats without the distance declared (solving the configurations is what takes time)
+    unknown = replace(measured, relative=replace(measured.relative, distances=()))
     out = {}
-    for known in (True, False):
-        rng = np.random.default_rng(0)
-        fixtures = Fixtures("ball", plates=3, distance_known=known)
-        train, _ = simulate_fixtures(robot, truth, fixtures, rng)
-        val, _ = simulate_fixtures(robot, truth, fixtures, rng)
+    for known, train in ((True, measured), (False, unknown)):
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
             cal = api.Calibrator().fit(robot, train)
@@ -208,6 +233,37 @@ def test_a_placement_the_data_barely_support_is_held():
     assert any("held where the robot file puts it" in str(w.message) for w in said)
     (fitted, placement), _ = found[2e-3]
     assert not placement.held and fitted.targets["smr"] != robot.targets["smr"]
+
+
+def test_a_registration_the_data_barely_support_is_held():
+    """Points on two lines 22 mm apart, in the robot's world shifted 30 mm along them and turned 0.1
+    rad about them, with 2 mm of the robot's own errors: the turn about the lines is known only to
+    about 60 mm at the workspace, so the fitted frame's turn (over 100 mm there) is held at the world
+    frame, said and reported; the shift, which the points determine, is applied. The same turn of a
+    grid spread in space is fitted."""
+    rng = np.random.default_rng(0)
+    x = np.linspace(0.6, 1.6, 10)
+    lines = np.concatenate([np.c_[x, np.full(10, s), np.ones(10)] for s in (0.011, -0.011)])
+    grid = np.stack(np.meshgrid(np.linspace(0.6, 1.6, 5), np.linspace(-0.5, 0.5, 5), np.linspace(0.5, 1.5, 3)),
+                    -1).reshape(-1, 3)
+    turn = Rotation.from_rotvec([0.1, 0, 0]).as_matrix()
+
+    def measured(p):
+        return (p - p.mean(0)) @ turn.T + p.mean(0) + [0.03, 0, 0] + rng.normal(0, 0.002, p.shape)
+
+    y = measured(lines)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        frame = register(lines, y, "auto")
+    free = register(lines, y, "always")
+    assert np.linalg.norm(Rotation.from_matrix(free.R).as_rotvec()) > 0.03  # what the data alone would do
+    assert frame.applied and len(frame.held) == 1 and "rotation about (1.00" in frame.held[0].replace("-1.00", "1.00")
+    assert "further than the data support" in frame.to_dict()["held"][0]
+    assert any("registration: the rotation about" in str(w.message) for w in said)
+    assert abs(Rotation.from_matrix(frame.R).as_rotvec()[0]) < 1e-3
+    assert np.allclose(frame.R @ lines.mean(0) + frame.t - lines.mean(0), [0.03, 0, 0], atol=2e-3)
+    spread = register(grid, measured(grid), "auto")
+    assert not spread.held and abs(Rotation.from_matrix(spread.R).as_rotvec()[0] - 0.1) < 5e-3
 
 
 def test_an_absurd_value_blames_the_robot_file_only_when_determined():

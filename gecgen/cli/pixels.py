@@ -83,9 +83,6 @@ def add_simulate_options(p):
                         "must be given)")
     g.add_argument("--look-at", type=numbers(), metavar="X,Y,Z",
                    help="fixed cameras: the world point (m) they look at (default: the tool origin at --home)")
-    g.add_argument("--span", type=numbers(0), metavar="S",
-                   help=f"the poses are drawn in --home +- span (rad or m; one value, or one per joint; default "
-                        f"{SPAN:g}), keeping every point in every camera's view")
     g.add_argument("--distance", type=number(0, 100, above=True), default=None,
                    help="a camera on the tool: the board's distance in front of it at --home, m (default 0.7)")
     g.add_argument("--rig-out", metavar="FILE", help="write the true cameras' (and board's) poses, YAML")

@@ -17,12 +17,14 @@ from gecgen.model.measurements import pose_id_column, read_commands, write_measu
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, read_yaml, require
 from gecgen.simulate import load_truth, one_at_a_time, paper_pps, paper_split, random_design, simulate
-from gecgen.simulate.designs import Design, constant_orientation
+from gecgen.simulate.designs import Design, barely_moving, constant_orientation
 from gecgen.simulate.fixtures import Fixtures, simulate_fixtures
 
 
 #: poses of the random design when --poses is not given
 POSES = 200
+#: how far the joint of --design barely-moving moves when --span is not given (rad, or m)
+SPAN = 1e-3
 #: the socket and plane options' values when not given (each is refused without --plates or --planes)
 FIXTURE_DEFAULTS = {"per_socket": 25, "socket_distance": 0.05, "distance_std": 0.0, "touches": 30,
                     "seating_noise": 1e-5, "encoder_noise": 1e-5}
@@ -33,10 +35,12 @@ def add_parser(command):
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--truth", help="truth file (default: NAME.truth.yaml beside the robot file; without one, the "
                                    "nominal robot: no errors, no noise)")
-    p.add_argument("--design", choices=["random", "one-at-a-time", "paper", "tool-grid"], default="random",
-                   help="random poses within the limits, one joint at a time, the seed paper's PPS design, or a "
+    p.add_argument("--design", choices=["random", "one-at-a-time", "paper", "tool-grid", "barely-moving"],
+                   default="random",
+                   help="random poses within the limits, one joint at a time, the seed paper's PPS design, a "
                         "grid the tool visits keeping the orientation it has at --home, as a laser tracker's "
-                        "reflector is kept facing the tracker (default %(default)s)")
+                        "reflector is kept facing the tracker, or random poses in which joint --joint barely "
+                        "moves (default %(default)s)")
     p.add_argument("--commands",
                    help="instead of --design: the joints of this CSV (q1..qn a row, the pose ids its pose column's, "
                         "else 0, 1, ...), as a robot commanded to them is measured: an ISO 9283 plan "
@@ -49,8 +53,16 @@ def add_parser(command):
                    help="--design tool-grid: distance between grid points, m (default %(default)s)")
     p.add_argument("--grid", type=numbers(1), default=[6, 6, 6],
                    help="--design tool-grid: points along x, y, z of the world (default 6,6,6; 8,8,1 a plane)")
+    p.add_argument("--joint", type=whole(1, 1000),
+                   help="--design barely-moving: the joint (1-based, as q1..qn) that stays within --span about the "
+                        "middle of its range")
+    p.add_argument("--span", type=numbers(0), metavar="S",
+                   help=f"how far joints move, rad (m for a prismatic joint): with --design barely-moving, that "
+                        f"joint (one value, default {SPAN:g}); with --cameras, the poses are drawn in --home +- span "
+                        f"(one value, or one per joint; default {pixels.SPAN:g}), keeping every point in every "
+                        f"camera's view")
     p.add_argument("--poses", type=whole(1, MAX_POSES),
-                   help=f"poses of the random design (default {POSES})")
+                   help=f"poses of the random or barely-moving design (default {POSES})")
     p.add_argument("--step", type=number(0, above=True), default=0.05,
                    help="step (m or rad) of the one-at-a-time design (default %(default)s)")
     p.add_argument("--payload-kg", type=numbers(0),
@@ -114,7 +126,7 @@ def run(args) -> dict:
         spec = {**spec, "seed": args.truth_seed}
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
-    camera_options = [f"--{k.replace('_', '-')}" for k in ("board", "noise_px", "eye", "look_at", "span", "distance",
+    camera_options = [f"--{k.replace('_', '-')}" for k in ("board", "noise_px", "eye", "look_at", "distance",
                                                            "rig_out") if getattr(args, k) not in (None, [])]
     if args.cameras:
         require(not (args.plates or args.planes), "--cameras simulates image points; --plates and --planes sockets "
@@ -129,6 +141,8 @@ def run(args) -> dict:
         (["--no-distance"] if args.no_distance else [])
     if given:
         raise ModelError(f"{given[0]} goes with --plates or --planes (sockets and planes); drop it, or add one of them")
+    require(args.design == "barely-moving" or (args.joint is None and args.span is None),
+            "--joint and --span go with --design barely-moving (--span also with --cameras); drop them, or add it")
     payloads = args.payload_kg or [0.0]
     require(args.val_poses is None or (args.design == "random" and args.val_out),
             "--val-poses sets the poses of --val-out with --design random; give both, or neither")
@@ -142,6 +156,13 @@ def run(args) -> dict:
         design = paper_pps(robot, payloads_kg=args.payload_kg or (0.0, 70.0))
     elif args.design == "tool-grid":
         design = _tool_grid(args, robot)
+    elif args.design == "barely-moving":
+        require(args.joint is not None and args.joint <= robot.n,
+                f"--design barely-moving: give --joint K, the joint that barely moves (1 to {robot.n})")
+        require(args.span is None or (len(args.span) == 1 and args.span[0] <= 10),
+                "--span: one value with --design barely-moving, the span of that joint (rad or m, at most 10)")
+        design = barely_moving(robot, args.poses or POSES, rng, args.joint, SPAN if args.span is None else args.span[0],
+                               payloads_kg=payloads)
     elif args.design == "one-at-a-time":
         lo, hi = robot.sampling_box()
         count = len(payloads) * sum(int((b - a) / args.step) + 1 for a, b in zip(lo, hi))

@@ -645,11 +645,26 @@ def identify(cm: CompiledModel, data: Measurements, registration_mode: str = "au
             fit = replace(held, warnings=(f"the fit of every identifiable coefficient cannot be trusted "
                                           f"({'; '.join(fit.failures)}): refitted with the weakly determined "
                                           f"ones held", *held.warnings))
+            if fit.failures:
+                fit = replace(fit, failures=(*fit.failures, _unhelped(held, "as above")))
+        else:
+            fit = replace(fit, failures=(*fit.failures, _unhelped(held, f"({'; '.join(held.failures)})")))
     if hold_weak and not fit.failures and noise_m is not None:
         fit = _plausible(cm, data, options, fit, noise_m)
     for note in [*fit.failures, *fit.warnings]:
         warnings.warn(note, stacklevel=3)  # past one_blas_thread, at the caller
     return fit
+
+
+def _unhelped(held: Fit, how: str) -> str:
+    """Why holding the weakly determined directions does not rescue a fit that cannot be trusted:
+    `held` is the same data's fit with them held, failing `how` (its reasons, in words)."""
+    if not held.held:
+        return ("no direction of the model is weakly determined against the noise, so holding none changes the "
+                "fit: the failure is not what the data leave undetermined")
+    names = ", ".join(h.param for h in held.held[:6]) + (", ..." if len(held.held) > 6 else "")
+    return (f"no subspace the data determine lets the fit stand: with the {len(held.held)} weakly determined "
+            f"coefficients held ({names}) the fit still fails {how}")
 
 
 #: holding weak directions may raise the residual sum of squares by at most this chi-square quantile

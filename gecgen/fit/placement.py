@@ -41,17 +41,16 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust
-from gecgen.fit.registration import kabsch
+from gecgen.fit.registration import FITS_M, HOLD_M, kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
-#: ... unless the data would move it further than this (m) while the given target already fits them within
+#: ... unless the data would move it further than HOLD_M while the given target already fits them within
 #: FITS_M rms (the nominal model's residual with the tracker frames refitted): a robot's own errors leave
 #: millimetres, and a tool that barely turns places its target only weakly, so such a move is what the
 #: robot's errors pushed along the weak direction (a reflector "moved" by 643 mm on a constant-orientation
 #: grid), not what the data determine; the given target is held, and the fit's last-frame errors take up
-#: what is left
-HOLD_M, FITS_M = 0.05, 0.005
+#: what is left (the registration holds its own weak directions by the same limits)
 #: rad: the forward-difference step of a tracker frame's rotation vector (`estimate_placement`)
 ROTATION_STEP = 1e-7
 #: a measured frame (pose data) this far (rad) from the robot's is turned to the estimate before the fit

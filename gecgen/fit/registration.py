@@ -13,6 +13,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from gecgen.model.validation import ModelError
 from gecgen.fit import robust
@@ -24,6 +25,15 @@ FAR_DISTANCE_M = 0.02
 #: a rotation fitted to points closer to a line (or to one point) follows their noise (30 um of noise
 #: on one pose measured 60 times turned the frame 131 degrees)
 MIN_SPREAD_M = 0.01
+#: m: with the data given in the robot's world (`register`'s auto), a direction of the fitted frame whose
+#: 1-sigma moves a point of the workspace by more than HOLD_M, and along which the fit would move the
+#: frame by more, is weakly determined: the robot's own errors pushed it there, not the frame; it is held
+#: at the world frame and reported (a target's placement holds such a move likewise, `fit.placement`).
+#: Only while the fitted frame leaves at most FITS_M rms at the points: a robot's own errors leave
+#: millimetres, and data the nominal model does not describe (a mirrored world) determine nothing to hold
+HOLD_M, FITS_M = 0.05, 0.005
+#: Gauss-Newton steps of the registration with its weak directions held (a rigid fit settles within a few)
+HELD_STEPS = 10
 
 
 @dataclass(frozen=True)
@@ -33,6 +43,8 @@ class Registration:
     R: np.ndarray  # (3, 3)
     t: np.ndarray  # (3,) m
     applied: bool
+    #: the directions of the frame held at the world frame, each with why (`register`)
+    held: tuple[str, ...] = ()
 
     def to_world(self, y: np.ndarray) -> np.ndarray:
         """Measured points (..., 3) in the robot world frame."""
@@ -55,7 +67,8 @@ class Registration:
 
     def to_dict(self) -> dict:
         return {"rotation": self.R.tolist(), "translation": self.t.tolist(), "applied": self.applied,
-                "angle_deg": float(np.degrees(self.angle_rad)), "distance_mm": float(1e3 * np.linalg.norm(self.t))}
+                "angle_deg": float(np.degrees(self.angle_rad)), "distance_mm": float(1e3 * np.linalg.norm(self.t)),
+                **({"held": list(self.held)} if self.held else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Registration":
@@ -133,5 +146,78 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
                           f"the data is taken to be in the robot's world frame", stacklevel=2)
         return IDENTITY
     R, t = robust_kabsch(p_nominal, y, loss, prior)
+    held: tuple[str, ...] = ()
+    if mode == "auto":
+        R, t, held = _hold_weak(p_nominal, y, R, t, prior)
+        for why in held:
+            warnings.warn(f"registration: {why}", stacklevel=2)
     far = _angle(R) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
-    return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)))
+    return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)), held)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) cross-product matrices of vectors v (N, 3)."""
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The fitted frame (R, t) of points p onto y (N, 3; prior weights (N,)) with its weakly
+    determined directions held at the world frame, and why each is held.
+
+    The frame's moves are scaled to the workspace: a rotation by its motion at L, the larger of the
+    measured points' extent and their distance from the world origin (the robot's base: the robot works
+    from there to the data), a translation as it is, both taken about the points' centroid. A direction
+    is weakly determined when its 1-sigma (what the residual left at the points, the robot's own errors
+    among it, makes of it) is beyond HOLD_M; the fitted move along it is held when it is beyond HOLD_M
+    too, and the fitted frame leaves at most FITS_M rms at the points. The frame is then refitted, by
+    Gauss-Newton, in the directions the points determine."""
+    w = np.ones(len(p)) if prior is None else prior
+    pc = w @ p / w.sum()
+    L = max(float(np.max(np.linalg.norm(p - pc, axis=1))), float(np.linalg.norm(pc)), MIN_SPREAD_M)
+    scale = np.r_[np.full(3, L), np.ones(3)]  # per coordinate of the move: m at the workspace per unit
+
+    def jacobian(R):
+        # d(R p + t)/d(rotation vector about the centroid, translation of the centroid), in workspace units
+        q = (p - pc) @ R.T
+        return np.concatenate([-_skew(q), np.broadcast_to(np.eye(3), (len(p), 3, 3))], 2).reshape(-1, 6) / scale
+
+    sw = np.repeat(np.sqrt(w), 3)
+    J = jacobian(R) * sw[:, None]
+    r = (y - p @ R.T - t).reshape(-1) * sw
+    if np.sqrt(r @ r / w.sum()) > FITS_M:
+        return R, t, ()
+    sigma = float(np.sqrt(r @ r / max(3 * len(p) - 6, 1)))
+    lam, U = np.linalg.eigh(J.T @ J)
+    with np.errstate(divide="ignore"):
+        std = np.where(lam > 0, sigma / np.sqrt(np.maximum(lam, 0)), np.inf)
+    rotvec = Rotation.from_matrix(R).as_rotvec()
+    move = np.r_[L * rotvec, R @ pc + t - pc]  # the fitted frame against the world frame, workspace units
+    along = U.T @ move
+    weak = (std > HOLD_M) & (np.abs(along) > HOLD_M)
+    if not weak.any():
+        return R, t, ()
+    held = []
+    for i in np.nonzero(weak)[0]:
+        u = U[:, i]
+        turn = np.linalg.norm(u[:3]) >= np.linalg.norm(u[3:])
+        axis, kind = (u[:3], "rotation about") if turn else (u[3:], "translation along")
+        held.append(f"the {kind} ({', '.join(f'{a / np.linalg.norm(axis):.2f}' for a in axis)}) of the world would "
+                    f"move the workspace by {1e3 * abs(along[i]):.0f} mm, further than the data support (its "
+                    f"1-sigma {1e3 * std[i]:.0f} mm, beyond {1e3 * HOLD_M:g} mm: the measured points do not spread "
+                    f"across it); held at the world frame (measure poses spread across it)")
+    free = U[:, ~weak]
+    m = free @ (free.T @ move)  # the move with the weak directions held
+    for _ in range(HELD_STEPS):
+        Rm = Rotation.from_rotvec(m[:3] / L).as_matrix()
+        tm = pc + m[3:] - Rm @ pc
+        r = (y - p @ Rm.T - tm).reshape(-1) * sw
+        step = free @ np.linalg.lstsq(jacobian(Rm) * sw[:, None] @ free, r, rcond=None)[0]
+        m = m + step
+        if np.abs(step).max() < 1e-12:
+            break
+    Rm = Rotation.from_rotvec(m[:3] / L).as_matrix()
+    return Rm, pc + m[3:] - Rm @ pc, tuple(held)
+

@@ -201,10 +201,10 @@ def constant_orientation(robot: Robot, home, spacing_m: float, counts=(6, 6, 6),
 
 
 def barely_moving(robot: Robot, n_poses: int, rng: np.random.Generator, joint: int, span: float,
-                  targets=None) -> Design:
-    """Random poses within the limits except joint `joint` (1-based), which stays within `span`
-    (m or rad) about the middle of its range: the data then hardly separate its errors."""
-    design = random_design(robot, n_poses, rng, targets=targets)
+                  targets=None, payloads_kg=(0.0,)) -> Design:
+    """Random poses within the limits (`random_design`) except joint `joint` (1-based), which stays
+    within `span` (m or rad) about the middle of its range: the data then hardly separate its errors."""
+    design = random_design(robot, n_poses, rng, payloads_kg, targets=targets)
     lo, hi = _limits(robot)
     middle = (lo[joint - 1] + hi[joint - 1]) / 2
     q = design.q.copy()
