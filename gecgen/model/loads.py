@@ -70,6 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
+from gecgen.model.exact import exact_norm
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.urdf import load_mass_tree
@@ -395,7 +396,7 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
         why_not[f"wrench_torque(q{J})"] = (f"the wrench is measured in frame {sensor}, which joint q{J} does not move"
                                            + (f"; use {use}" if carrying else ""))
     Y = _numeric_columns(robot, generic_poses(robot))
-    g = float(sp.sqrt(sum(v * v for v in robot.gravity)))
+    g = exact_norm(robot.gravity)
     for J, joint in enumerate(robot.joints, start=1):
         keep = _independent(Y[J - 1], g)
         signals += [Signal(f"gravity(q{J},{r})", "gravity", J, k) for r, k in enumerate(keep, start=1)]
