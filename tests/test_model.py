@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from conftest import ROBOTS
 
-from gecgen.model import ModelError, load_error_model, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 from gecgen.model.kinematics import tool_pose
 
 

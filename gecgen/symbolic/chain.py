@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from gecgen.model.errors import joint_symbols
 from gecgen.model.robot import ERROR_NAMES, Elementary, Robot
 from gecgen.symbolic.exact import sympy_robot
+from gecgen.symbolic.parse import joint_symbols
 from gecgen.symbolic.program import Builder, Function
 
 
