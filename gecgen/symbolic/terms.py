@@ -46,10 +46,13 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
         unique = list(dict.fromkeys(t for ts in found[0] for t in ts))
         text = json.dumps({"terms": [[t.text, t.label, list(t.variables)] for t in unique],
                            "errors": [[unique.index(t) for t in ts] for ts in found[0]], "aux": list(found[1])})
-        # the model as a calibration stores it (`to_yaml_dict`, which reads back into the same model)
-        # is read by every command after identify: it is kept too
-        written = _key(ErrorModel(*found).to_yaml_dict(robot), robot, ())
-        for k in dict.fromkeys(filter(None, (key, written))):
+        keys = [key]
+        # the model as a calibration stores it (`to_yaml_dict`) is read by every command after
+        # identify: it is kept too, once it has read back into the same model
+        written = ErrorModel(*found).to_yaml_dict(robot)
+        if written != spec and parse_model(written, robot, where) == found:
+            keys.append(_key(written, robot, ()))
+        for k in dict.fromkeys(filter(None, keys)):
             write_atomically(cache_dir() / f"{robot.name}-{k}.terms.json", text + "\n")
     return ErrorModel(terms=found[0], aux=found[1], source=where, source_hash=digest)
 
