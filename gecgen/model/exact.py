@@ -28,24 +28,18 @@ class PiMultiple:
     def __float__(self) -> float:
         """As sympy's float() of factor * pi**power rounds it (not always the nearest double): joint
         limits and constants in degrees keep the values they have always had, to the last bit."""
-        from mpmath import libmp  # sympy's arithmetic, without sympy; only robots in degrees need it
-
-        def pi_power(prec: int):  # sympy's evalf of pi**power at prec bits (evalf_pow; pi rounds down)
-            if self.power == 1:
-                return libmp.mpf_pi(prec)
-            base = libmp.mpf_pi(prec + int(math.log2(abs(self.power))) + 5)
-            return libmp.mpf_pow_int(base, self.power, prec)
-
-        prec = 53 + 4  # float() is evalf() at 53 bits, evaluated with 4 guard bits and rounded
+        if abs(self.power) != 1:
+            raise ValueError(f"{self}: only factor * pi or factor / pi come from robot files")
+        prec = 53 + 4  # float() is sympy's evalf at 53 bits: evaluated with 4 guard bits, then rounded
         if self.factor == 1:
-            value = pi_power(prec)
-        else:  # evalf_mul: two factors at prec + 2 + 5 bits, their exact product rounded
+            man, exp = _pi_power(self.power, prec)
+        else:  # evalf of a product of two: each factor at prec + 2 + 5 bits, the exact product rounded
             work = prec + 2 + 5
-            factor = libmp.from_rational(self.factor.numerator, self.factor.denominator, work)
-            sign, man, exp, _ = libmp.mpf_mul(factor, pi_power(work))
-            value = libmp.normalize(sign, man, exp, libmp.bitcount(man), prec, libmp.round_nearest)
-        sign, man, exp, bc = value
-        return libmp.to_float(libmp.normalize(sign, man, exp, bc, 53, libmp.round_nearest))
+            fm, fe = _bits(abs(self.factor.numerator), self.factor.denominator, work)
+            pm, pe = _pi_power(self.power, work)
+            man, exp = _round(fm * pm, fe + pe, prec)
+        man, exp = _round(man, exp, 53)
+        return math.copysign(math.ldexp(man, exp), self.factor)
 
     def __mul__(self, other):
         a, b = _parts(self), _parts(other)
@@ -63,6 +57,39 @@ class PiMultiple:
 
     def __neg__(self):
         return PiMultiple(-self.factor, self.power)
+
+
+#: pi to 83 decimals (an integer over 10**83): far more bits than the 69 that `_pi_power` takes
+_PI_DIGITS = 314159265358979323846264338327950288419716939937510582097494459230781640628620899863
+
+
+def _bits(p: int, q: int, prec: int) -> tuple[int, int]:
+    """p / q (p, q > 0) rounded toward zero to prec bits: (mantissa, exponent) (mpmath's round_fast)."""
+    shift = prec - (p.bit_length() - q.bit_length()) + 1
+    man = (p << shift) // q if shift >= 0 else p // (q << -shift)
+    extra = man.bit_length() - prec
+    return man >> extra, extra - shift
+
+
+def _round(man: int, exp: int, prec: int) -> tuple[int, int]:
+    """man * 2**exp rounded to prec bits, to nearest, ties to even (mpmath's round_nearest)."""
+    extra = man.bit_length() - prec
+    if extra <= 0:
+        return man, exp
+    kept, rest = man >> extra, man & ((1 << extra) - 1)
+    half = 1 << (extra - 1)
+    if rest > half or rest == half and kept & 1:
+        kept += 1
+    return kept, exp + extra
+
+
+def _pi_power(power: int, prec: int) -> tuple[int, int]:
+    """sympy's evalf of pi (power 1) or 1/pi (power -1) at prec bits: pi rounded toward zero, and 1/pi
+    the quotient of 1 by pi at prec + 5 bits, rounded toward zero."""
+    if power == 1:
+        return _bits(_PI_DIGITS, 10 ** 83, prec)
+    pm, pe = _bits(_PI_DIGITS, 10 ** 83, prec + 5)  # pi = pm * 2**pe, pe < 0
+    return _bits(1 << -pe, pm, prec)
 
 
 def _parts(value) -> tuple[Fraction, int]:
