@@ -4,7 +4,7 @@ A robot's constants are kept exact so that the symbolic chain prunes exact zeros
 stays pi/2 (`symbolic.exact` turns them into sympy numbers); everything numeric reads them with
 `float()`. A number is one of:
 
-- `int`: an integer of a robot file, or a URDF number that is an integer;
+- `int`: an integer of a robot file, or a URDF axis component or `<mimic>` number that is one;
 - `fractions.Fraction`: a decimal of a robot file, exactly as written (0.1 is 1/10);
 - `float`: any other URDF number (printed with 17 significant digits);
 - `PiMultiple`: a rational multiple of a power of pi (an angle in degrees; a coupling between a
@@ -120,7 +120,8 @@ def degrees(value):
 
 
 def exact_norm(vector) -> float:
-    """The length of a vector of exact rationals (gravity), rounded once."""
+    """The length of a vector of exact rationals (gravity), rounded once (sympy's float of the same
+    square root can differ in the last bit; this length only scales a rank tolerance)."""
     square = sum(Fraction(v) ** 2 for v in vector)
     with decimal.localcontext() as ctx:
         ctx.prec = 60

@@ -12,9 +12,8 @@ import math
 import re
 import warnings
 from dataclasses import replace
-from pathlib import Path
-
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 

@@ -13,7 +13,6 @@ temporary folder for the rest of the run.
 """
 from __future__ import annotations
 
-import atexit
 import contextlib
 import ctypes
 import functools
