@@ -24,8 +24,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_runtime import cpu_model, write_section  # noqa: E402
 
 from gecgen.emit import render  # noqa: E402
-from gecgen.model import load_error_model, load_robot  # noqa: E402
-from gecgen.model.errors import error_model_from_dict  # noqa: E402
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model  # noqa: E402
 from gecgen.model.loads import catalog  # noqa: E402
 from gecgen.model.kinematics import target_positions  # noqa: E402
 from gecgen.runtime.compiled import CFLAGS, COMPILE_FLAGS, CompiledModel, compiler  # noqa: E402

@@ -64,7 +64,8 @@ def panda_csv(path: Path, n_poses: int, seed: int = 0):
 
 CASE = r"""
 import json, resource, sys, time, warnings
-from gecgen.model import load_robot, load_error_model
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.measurements import read_measurements
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit.identify import identify

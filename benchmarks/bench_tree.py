@@ -38,7 +38,8 @@ TRUTH = {"seed": 5, "gravity": [0, 0, -9.81], "masses": "urdf",
 
 CASE = r"""
 import json, resource, sys, time, warnings
-from gecgen.model import load_robot, load_error_model
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.measurements import read_measurements
 from gecgen.loop.diagnose import diagnose
 t0 = time.perf_counter()

@@ -410,7 +410,7 @@ class Calibrator:
         q, w, aux = self._inputs(q, w, aux, "q")
         cm = self._model()
         model = self.calibration_.model
-        check_terms_finite(model, cm.robot, Commands(q, w, aux, model.aux, [], [], "q"), cm.load_signals)
+        check_terms_finite(model, cm.robot, Commands(q, w, aux, model.aux, [], [], "q"), cm)
         self._sound(cm, q, w, aux)
         self._extrapolation(q, w, aux)
         return cm.model_targets(q, w, aux, self.calibration_.c)

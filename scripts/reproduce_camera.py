@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera
 from gecgen.model.validation import read_yaml
 from gecgen.fit.camera import fit_pixels, fitted_tools

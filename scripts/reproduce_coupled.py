@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 import gecgen
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import target_positions
 from gecgen.model.validation import read_yaml
 from gecgen.simulate import load_truth, random_design, simulate

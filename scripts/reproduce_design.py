@@ -28,7 +28,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gecgen.model import load_error_model, load_robot  # noqa: E402
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.symbolic.terms import load_error_model  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402
 from gecgen.runtime.compiled import CompiledModel  # noqa: E402
 from gecgen.plan.design import CRITERIA, NOISE_M, design_poses, uniform_candidates  # noqa: E402

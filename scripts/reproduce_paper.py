@@ -25,7 +25,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gecgen.model import load_error_model, load_robot  # noqa: E402
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.symbolic.terms import load_error_model  # noqa: E402
 from gecgen.model.kinematics import target_positions  # noqa: E402
 from gecgen.model.measurements import Measurements, read_measurements  # noqa: E402
 from gecgen.model.validation import read_yaml  # noqa: E402

@@ -23,7 +23,7 @@ import numpy as np
 
 import gecgen
 from gecgen.model import load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.validation import read_yaml
 from gecgen.simulate import load_truth, random_design, simulate
 

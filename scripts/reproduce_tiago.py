@@ -20,7 +20,8 @@ import warnings
 import numpy as np
 
 from gecgen.loop.diagnose import diagnose
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.measurements import Measurements, read_measurements
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify, position_errors

@@ -115,7 +115,7 @@ def planes(args, robot, truth, errors, tracker_val, lines):
 def designed(args, robot, truth, errors, lines):
     """Configurations chosen by the fixture design from a larger recorded pool, against as many chosen
     at random from the same pool, scored on the same held-out fixtures."""
-    from gecgen.model import load_error_model
+    from gecgen.symbolic.terms import load_error_model
     from gecgen.runtime.compiled import CompiledModel
     from gecgen.plan.fixture_design import design_fixtures, recorded_candidates
 

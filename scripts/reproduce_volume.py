@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.api import Calibrator
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.validation import read_yaml
 from gecgen.model.volume import load_volume
 from gecgen.fit.identify import to_world

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from gecgen.cli import main
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+
+from gecgen.symbolic.terms import load_error_model
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robots"

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from conftest import ROBOTS
 
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.measurements import read_measurements
 from gecgen.fit import calibration
 from gecgen.fit.registration import IDENTITY

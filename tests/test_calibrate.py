@@ -84,7 +84,7 @@ def test_a_tie_goes_to_the_smaller_model_as_delivered(payload_data, monkeypatch)
     from types import SimpleNamespace
 
     import gecgen.loop.calibrate as loop
-    from gecgen.model.errors import error_model_from_dict
+    from gecgen.symbolic.terms import error_model_from_dict
 
     monkeypatch.setenv("GECGEN_WORKERS", "1")
     robot = load_robot(ROBOT)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera, read_board, read_cameras
 from gecgen.model.pixels import read_pixels, write_pixels
 from gecgen.model.validation import ModelError, read_yaml

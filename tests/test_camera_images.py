@@ -5,7 +5,8 @@ import shutil
 import numpy as np
 import pytest
 
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera
 from gecgen.model.pixels import read_pixels
 from gecgen.model.validation import read_yaml

@@ -17,7 +17,8 @@ from scipy.optimize import minimize_scalar
 
 import gecgen
 from gecgen.cli import main
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import BOUNDED, OK, SINGULAR, STATUS_NAMES, compiler

@@ -12,8 +12,8 @@ import pytest
 from conftest import ROBOTS
 
 import gecgen
-from gecgen.model import ModelError, load_error_model, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 from gecgen.model.kinematics import frames, joint_values, target_positions, tool_pose
 from gecgen.model.loads import _numeric_columns
 from gecgen.model.measurements import Measurements

@@ -9,7 +9,8 @@ from conftest import ROBOTS
 from test_cli import gecgen
 
 from gecgen.cli import main
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.plan import design as D
 from gecgen.runtime.compiled import CompiledModel

@@ -8,7 +8,8 @@ from conftest import ROBOTS, random_q
 
 from gecgen.cli import main
 from gecgen.loop.diagnose import diagnose, noise_floor, verdict, what_remains
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, write_measurements
 from gecgen.model.validation import read_yaml
@@ -244,7 +245,7 @@ def test_an_effect_that_ends_insignificant_is_dropped_and_the_model_refitted(rng
     """A term the truth lacks (q2**3 on frame 2's ey, on constant errors and noise) is what backward
     elimination removes: the refit's model no longer has it."""
     from gecgen.loop.diagnose import Effect, _drop_insignificant, _fit
-    from gecgen.model.errors import error_model_from_dict
+    from gecgen.symbolic.terms import error_model_from_dict
 
     robot = load_robot(ROBOTS / "puma560.yaml")
     truth = rng.normal(0, 5e-4, robot.n_errors)

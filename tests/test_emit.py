@@ -8,7 +8,8 @@ from conftest import ROBOTS, ROOT, SHIPPED, random_q
 
 from gecgen.cli import main
 from gecgen.emit import render
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.loads import catalog
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.symbolic.functions import all_functions
@@ -148,7 +149,7 @@ def test_a_new_model_of_a_robot_prints_only_its_own_terms(tmp_path, monkeypatch)
     """The chain's printed code is kept per robot: a second error model of the same robot builds no
     chain function again, and its files are those a fresh `render` writes, byte for byte."""
     import gecgen.emit as emit
-    from gecgen.model.errors import error_model_from_dict
+    from gecgen.symbolic.terms import error_model_from_dict
     from gecgen.runtime.compiled import rendered
 
     monkeypatch.setenv("GECGEN_CACHE", str(tmp_path))
@@ -168,7 +169,7 @@ def test_each_model_links_to_the_robots_chain_compiled_once(tmp_path, monkeypatc
     model's own code to it: three models, one chain object. The linked library computes what the
     one-file build of the same model (`render`, what export writes) computes, bit for bit."""
     import gecgen.runtime.compiled as compiled
-    from gecgen.model.errors import error_model_from_dict
+    from gecgen.symbolic.terms import error_model_from_dict
 
     monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
     robot = load_robot(ROBOTS / "puma560.yaml")

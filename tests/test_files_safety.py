@@ -13,7 +13,8 @@ from test_cli import gecgen
 
 from gecgen.cli import main
 from gecgen.emit import render
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import target_positions
 from gecgen.fit import calibration
 from gecgen.runtime.compiled import CompiledModel, load_casadi_module, model_key, shared_library

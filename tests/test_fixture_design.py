@@ -17,7 +17,8 @@ import pytest
 import yaml
 
 from gecgen import api
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.fixture_file import Fixture
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import read_measurements

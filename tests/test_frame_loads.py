@@ -12,7 +12,7 @@ from conftest import ROBOTS, random_q
 
 from gecgen.cli import main
 from gecgen.model import ModelError, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.gravity import robot_frame_wrenches
 from gecgen.model.kinematics import error_transform, frames, joint_values
 from gecgen.model.loads import catalog, signal_values

@@ -10,7 +10,8 @@ from conftest import ROBOTS, random_q
 from scipy import stats
 
 from gecgen.cli import main
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import target_positions
 from gecgen.model.measurements import Measurements, read_measurements, write_measurements
 from gecgen.fit import calibration

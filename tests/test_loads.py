@@ -13,7 +13,7 @@ from conftest import ROBOTS, random_q
 from gecgen.cli import main
 from gecgen.emit import render
 from gecgen.model import ModelError, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.loads import catalog
 from gecgen.runtime.compiled import OK, CompiledModel

@@ -15,8 +15,8 @@ from conftest import ROBOTS, ROOT, random_q
 from test_symbolic import fd_jacobian
 
 from gecgen.emit import frame_names
-from gecgen.model import ModelError, load_error_model, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 from gecgen.model.gravity import robot_gravity_torques
 from gecgen.model.kinematics import frames, tool_pose
 from gecgen.model.loads import catalog

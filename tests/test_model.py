@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from conftest import ROBOTS
 
-from gecgen.model import ModelError, load_error_model, load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 from gecgen.model.kinematics import tool_pose
 
 
@@ -115,3 +115,24 @@ def test_shipped_default_models(shipped):
     else:
         assert first == ["1", "q1", "q1**2", "fx", "fy", "fz", "mx", "my", "mz"]
         assert all([t.text for t in ts] == ["1"] for ts in model.terms[:6])
+
+
+def test_exact_numbers_are_sympys_to_the_last_bit():
+    """A robot's numbers are read without sympy (model.exact) and become sympy's in the symbolic
+    layer: every float the numeric chain, the limits and the generated C use is the one sympy gives,
+    last bit included (sympy does not always round pi/180 multiples to the nearest double)."""
+    from fractions import Fraction
+
+    import sympy as sp
+
+    from gecgen.model.exact import PiMultiple, exact_norm
+    from gecgen.symbolic.exact import sympy_number
+
+    rng = np.random.default_rng(7)
+    factors = [Fraction(k, 180) for k in range(-720, 721) if k] + \
+              [Fraction(int(n), int(d)) for n, d in zip(rng.integers(-10**9, 10**9, 500), rng.integers(1, 10**9, 500))]
+    for power in (1, -1):
+        for f in factors:
+            x = PiMultiple(f, power)
+            assert float(x) == float(sympy_number(x)) == float(sp.Rational(f.numerator, f.denominator) * sp.pi**power), x
+    assert exact_norm((0, 0, Fraction("-9.80665"))) == float(sp.sqrt(sp.Rational("9.80665") ** 2))

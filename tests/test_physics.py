@@ -11,7 +11,8 @@ import pytest
 from conftest import ROBOTS
 
 from gecgen.loop.diagnose import diagnose
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.validation import read_yaml
 from gecgen.simulate import load_truth, random_design, simulate
 

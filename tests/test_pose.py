@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from gecgen.cli import main
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.model.pose_targets import as_points, with_pose_targets

@@ -12,7 +12,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gecgen.model import ModelError, load_robot
-from gecgen.model.errors import MAX_EXPONENT, error_model_from_dict
+from gecgen.model.errors import MAX_EXPONENT
+from gecgen.symbolic.parse import term_expressions
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.measurements import read_measurements
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -61,8 +63,9 @@ def accepted_or_refused(spec):
 @given(st.lists(TERMS, min_size=1, max_size=3))
 def test_terms_are_finite_with_bounded_powers_or_refused(texts):
     model = accepted_or_refused({"aux": ["temp_c"], "frames": {1: texts}})
+    exprs = term_expressions(PPS, model) if model else {}
     for term in model.terms[6] if model else ():
-        expr = term.expr
+        expr = exprs[term.text]
         assert not expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan), term.text
         assert all(math.isfinite(float(n)) for n in expr.atoms(sp.Number)), term.text
         assert all(abs(p.exp) <= MAX_EXPONENT for p in expr.atoms(sp.Pow)), term.text

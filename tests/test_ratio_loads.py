@@ -10,7 +10,7 @@ import pytest
 
 import gecgen
 from gecgen.model import load_robot
-from gecgen.model.errors import error_model_from_dict
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.validation import read_yaml
 from gecgen.report.content import coefficient_section
 from gecgen.simulate import load_truth, random_design, simulate

@@ -103,7 +103,8 @@ def test_the_refit_begins_from_the_fits_own_analysis_and_finds_the_same():
     from scratch; an analysis at another rank tolerance, or of other data, is not taken."""
     import warnings
 
-    from gecgen.model import load_error_model, load_robot
+    from gecgen.model import load_robot
+    from gecgen.symbolic.terms import load_error_model
     from gecgen.runtime.compiled import CompiledModel
     from gecgen.fit.identify import identify
     from gecgen.model.validation import read_yaml

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from conftest import ROOT, random_q
 
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import frames, target_positions
 from gecgen.runtime.compiled import CompiledModel
 

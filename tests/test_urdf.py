@@ -8,7 +8,8 @@ from conftest import ROBOTS, random_q
 from scipy.spatial.transform import Rotation
 from test_symbolic import fd_jacobian
 
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import frames, target_positions
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.symbolic.chain import jacobian_function

@@ -13,7 +13,8 @@ from conftest import ROBOTS, run_json
 from scipy import stats
 
 from gecgen.api import Calibrator
-from gecgen.model import ModelError, load_error_model, load_robot
+from gecgen.model import ModelError, load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import tool_pose
 from gecgen.model.measurements import write_measurements
 from gecgen.model.validation import read_yaml

@@ -19,7 +19,8 @@ from conftest import run_json
 from scipy.spatial.transform import Rotation
 
 from gecgen import api
-from gecgen.model import load_error_model, load_robot
+from gecgen.model import load_robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit.identify import _fit_failures, absurd_error, identify

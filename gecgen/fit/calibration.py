@@ -20,7 +20,8 @@ import numpy as np
 
 from gecgen.version import __version__
 from gecgen.model.files import write_atomically
-from gecgen.model.errors import ErrorModel, error_model_from_dict
+from gecgen.model.errors import ErrorModel
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.robot_file import load_robot
 from gecgen.model.validation import ModelError, require

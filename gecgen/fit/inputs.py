@@ -5,7 +5,8 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-from gecgen.model import ErrorModel, Robot, load_error_model
+from gecgen.model import ErrorModel, Robot
+from gecgen.symbolic.terms import load_error_model
 from gecgen.model.checks import check_terms_finite
 from gecgen.model.measurements import Measurements
 from gecgen.runtime.compiled import CompiledModel
@@ -71,5 +72,5 @@ def checked(model: ErrorModel, robot: Robot, *datas) -> CompiledModel:
     (measurements or commands; None entries skipped)."""
     cm = CompiledModel(robot, model)
     for data in filter(None, datas):
-        check_terms_finite(model, robot, data, cm.load_signals)
+        check_terms_finite(model, robot, data, cm)
     return cm

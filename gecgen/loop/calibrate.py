@@ -27,7 +27,8 @@ import numpy as np
 
 from gecgen.loop.diagnose import Diagnosis, diagnose
 from gecgen.loop.dictionary import frame_own_errors, loads_by_joint
-from gecgen.model.errors import ErrorModel, error_model_from_dict
+from gecgen.model.errors import ErrorModel
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, MATCHING, Robot
 from gecgen.model.validation import ModelError

@@ -75,7 +75,7 @@ def ratio_load_confounding(cm: CompiledModel, fit: Fit, data: Measurements) -> l
     out, signals = [], None
     for error in sorted({coefs[j].error for j in wanted}):
         own = [i for i, j in enumerate(kept) if coefs[j].error == error
-               and {s.name for s in coefs[j].term.expr.free_symbols} & loads]
+               and set(coefs[j].term.variables) & loads]
         if own:  # the model carries loads on this error: compare with the fit that drops them
             X, L, names = H, own, [coefs[kept[i]].term.label for i in own]
         else:

@@ -36,7 +36,8 @@ from gecgen.loop.confounding import ratio_load_confounding
 from gecgen.loop.dictionary import candidates, refine_period, shown_family
 from gecgen.loop.linear import Round, linear_system, pose_rows, weighted_J
 from gecgen.loop.screening import MIN_CV_GAIN, Folded, Hit, folds, passing, screen, selection_cv_rms, significance_order
-from gecgen.model.errors import ErrorModel, error_model_from_dict
+from gecgen.model.errors import ErrorModel
+from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel

@@ -2,15 +2,20 @@
 output a command names is checked by `check_output_file` or `check_output_dir` before any work.
 
 Below every pipeline layer (model, emit, runtime and loop all write files), so it imports
-nothing of gecgen but the error type.
+nothing of gecgen but the error type. `cache_dir` is where compiled code and read models are kept.
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import contextvars
+import functools
 import glob
 import os
 import secrets
+import shutil
+import tempfile
+import warnings
 from pathlib import Path
 
 from gecgen.model.validation import ModelError
@@ -226,3 +231,25 @@ def _exchange(a: Path, b: Path):
     os.rename(b, aside)
     os.rename(a, b)
     os.rename(aside, a)
+
+
+def cache_dir() -> Path:
+    """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written."""
+    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen"))
+
+
+@functools.cache
+def _usable_cache(wanted: Path) -> Path:
+    """wanted, created if needed, when a file can be created in it; else a fresh temporary folder,
+    removed at exit (one warning per run and folder: the cache only saves time)."""
+    try:
+        wanted.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=wanted).close()
+        return wanted
+    except OSError as exc:
+        fallback = Path(tempfile.mkdtemp(prefix="gecgen-cache-"))
+        atexit.register(shutil.rmtree, fallback, ignore_errors=True)
+        warnings.warn(f"the cache folder {wanted} cannot be written ({exc.strerror}); compiling into {fallback} "
+                      f"for this run instead (set GECGEN_CACHE to a writable folder to keep the compiled code)",
+                      stacklevel=3)
+        return fallback

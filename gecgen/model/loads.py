@@ -68,8 +68,8 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-import sympy as sp
 
+from gecgen.model.exact import exact_norm
 from gecgen.model.kinematics import constant, frames
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.urdf import load_mass_tree
@@ -81,11 +81,6 @@ LOAD_FUNCTIONS = ("wrench_torque", "gravity", "gravity_torque", "gravity_load", 
 RANK_TOL = 1e-7
 #: the rank test's generic poses: uniform within the joint limits (clipped to +-pi), fixed seed
 SEED, MIN_POSES = 20240611, 64
-
-
-def load_symbol(name: str) -> sp.Symbol:
-    """The sympy symbol of a load signal, by canonical spelling (e.g. 'gravity(q2,1)')."""
-    return sp.Symbol(name, real=True)
 
 
 def dot(u, v):
@@ -395,7 +390,7 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
         why_not[f"wrench_torque(q{J})"] = (f"the wrench is measured in frame {sensor}, which joint q{J} does not move"
                                            + (f"; use {use}" if carrying else ""))
     Y = _numeric_columns(robot, generic_poses(robot))
-    g = float(sp.sqrt(sum(v * v for v in robot.gravity)))
+    g = exact_norm(robot.gravity)
     for J, joint in enumerate(robot.joints, start=1):
         keep = _independent(Y[J - 1], g)
         signals += [Signal(f"gravity(q{J},{r})", "gravity", J, k) for r, k in enumerate(keep, start=1)]
@@ -462,12 +457,13 @@ def _build_catalog(robot: Robot) -> LoadCatalog:
 
 
 class LoadTerms:
-    """The load functions of the term parser for one robot: `symbol` for a call inside a term,
-    `expand` for the shorthands gravity(J) and gravity(F, c). `symbols` maps the names a term may use
-    to sympy symbols (joints are q<k>). Errors go through the parser's `fail(text, why)`."""
+    """The load functions of the term parser for one robot: `name` for a call inside a term (the
+    signal's canonical spelling), `expand` for the shorthands gravity(J) and gravity(F, c).
+    `variables` maps the names a term may use to the variables they stand for (joints are q<k>).
+    Errors go through the parser's `fail(text, why)`."""
 
-    def __init__(self, robot: Robot, symbols: dict):
-        self.robot, self.symbols = robot, symbols
+    def __init__(self, robot: Robot, variables: dict[str, str]):
+        self.robot, self.variables = robot, variables
 
     @staticmethod
     def is_shorthand(node) -> bool:
@@ -475,11 +471,11 @@ class LoadTerms:
                 and (len(node.args) == 1 or len(node.args) == 2 and isinstance(node.args[1], ast.Name)))
 
     def _joint(self, text: str, node, fail) -> int:
-        s = self.symbols.get(node.id) if isinstance(node, ast.Name) else None
-        if s is None or not re.fullmatch(r"q\d+", s.name):
+        s = self.variables.get(node.id) if isinstance(node, ast.Name) else None
+        if s is None or not re.fullmatch(r"q\d+", s):
             fail(text, f"'{ast.unparse(node)}' is not a joint of {self.robot.name}; use a joint name or "
                        f"q1..q{self.robot.n}")
-        return int(s.name[1:])
+        return int(s[1:])
 
     def _frame(self, text: str, node, fail) -> int:
         """A frame written as its joint's name (passive joints too), a reading q<k> or its number."""
@@ -489,11 +485,11 @@ class LoadTerms:
             return node.value
         if isinstance(node, ast.Name) and node.id in names:
             return names.index(node.id) + 1
-        s = self.symbols.get(node.id) if isinstance(node, ast.Name) else None
-        if s is None or not re.fullmatch(r"q\d+", s.name):
+        s = self.variables.get(node.id) if isinstance(node, ast.Name) else None
+        if s is None or not re.fullmatch(r"q\d+", s):
             fail(text, f"'{ast.unparse(node)}' is not a frame of {self.robot.name}; use a joint's name (a passive "
                        f"joint's too), q1..q{self.robot.n} or a frame number 0..{self.robot.n_frames}")
-        return self.robot.frame_of(int(s.name[1:]) - 1)
+        return self.robot.frame_of(int(s[1:]) - 1)
 
     def _component(self, text: str, node, fail) -> str:
         if not (isinstance(node, ast.Name) and node.id in WRENCH):
@@ -531,7 +527,7 @@ class LoadTerms:
                        f"{f' .. gravity({base}, {rank})' if rank > 1 else ''}, or gravity({base}) for all")
         return r
 
-    def symbol(self, text: str, node, fail) -> sp.Symbol:
+    def name(self, text: str, node, fail) -> str:
         f, at, rest = self._call(text, node, fail)
         cat = catalog(self.robot)
         if f in ("gravity_load", "wrench_load"):
@@ -551,14 +547,14 @@ class LoadTerms:
         else:
             name = f"{f}(q{at})"
         self._refuse_if_unsupported(text, name, fail)
-        return load_symbol(name)
+        return name
 
-    def expand(self, text: str, node, fail) -> list[tuple[sp.Expr, str]]:
-        """gravity(J) or gravity(F, c) -> (symbol, label) of each of its columns, labelled as written."""
+    def expand(self, text: str, node, fail) -> list[tuple[str, str]]:
+        """gravity(J) or gravity(F, c) -> (signal name, label) of each of its columns, labelled as written."""
         _, at, rest = self._call(text, node, fail)
         written = ", ".join(ast.unparse(a) for a in node.args)
         cat = catalog(self.robot)
         base, rank = (f"q{at}", cat.gravity_rank(at)) if not rest else \
             (f"{at},{rest[0]}", cat.frame_rank(at, WRENCH.index(rest[0])))
         self._refuse_if_unsupported(text, f"gravity({base})", fail)
-        return [(load_symbol(f"gravity({base},{r})"), f"gravity({written}, {r})") for r in range(1, rank + 1)]
+        return [(f"gravity({base},{r})", f"gravity({written}, {r})") for r in range(1, rank + 1)]

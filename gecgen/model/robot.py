@@ -21,7 +21,7 @@ couplings they are the same. A DH row
 `Rz(theta+q) Tz(d+q) Tx(a) Rx(alpha)` becomes `pre = I`, `axis = z`,
 `post = Rz(theta) Tz(d) Tx(a) Rx(alpha)`; a URDF joint becomes `pre = origin`, `post = I`.
 
-Constant transforms are kept as exact sympy numbers (90 degrees stays pi/2) so the symbolic
+Constant transforms are kept as exact numbers (`model.exact`: 90 degrees stays pi/2) so the symbolic
 chain prunes exact zeros; `model.kinematics` evaluates them in floating point. The nouns live
 here; `model.robot_file` reads and validates robot files into them.
 """
@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import sympy as sp
+from fractions import Fraction
 
 from gecgen.model.validation import require
 
@@ -61,8 +61,8 @@ class Coupling:
     file's `couplings` states it, and its multipliers are calibration parameters (`ratio_terms`);
     a URDF `<mimic>` read as it is keeps the model it has always had."""
 
-    terms: tuple[tuple[str, sp.Expr], ...]  # (reading joint's name, exact nonzero multiplier), chain order
-    offset: sp.Expr  # exact number, m or rad
+    terms: tuple[tuple[str, object], ...]  # (reading joint's name, exact nonzero multiplier), chain order
+    offset: object  # exact number (`model.exact`), m or rad
     own: bool = False
     declared: bool = False
 
@@ -82,7 +82,7 @@ class Joint:
 
     name: str
     kind: str  # "R" revolute or "P" prismatic
-    axis: tuple  # unit vector (exact sympy numbers) in the frame after `pre`
+    axis: tuple  # unit vector (exact numbers, `model.exact`) in the frame after `pre`
     pre: tuple[Elementary, ...]
     post: tuple[Elementary, ...]
     lower: float  # joint limits, m or rad (of its reading; a passive joint's are not checked)
@@ -129,7 +129,7 @@ class Robot:
     urdf: str = ""  # the URDF file a robot file names (its masses give gravity torques), else ""
     base_link: str = ""
     tip_link: str = ""  # with urdf: the link the tool hangs from
-    gravity: tuple = tuple(sp.Rational(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
+    gravity: tuple = tuple(Fraction(repr(v)) for v in GRAVITY)  # world, m/s^2, exact numbers
     #: virtual targets standing for measured orientations (`model.pose_targets`): name -> (the
     #: target whose frame they sample, vertex 0..3); none in a robot file
     vertex_of: dict[str, tuple[str, int]] = field(default_factory=dict)
@@ -194,19 +194,19 @@ class Robot:
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
 
-    def drives(self) -> list[tuple[tuple[tuple[int, sp.Expr], ...], sp.Expr]]:
+    def drives(self) -> list[tuple[tuple[tuple[int, object], ...], object]]:
         """Per frame 1..m: ((variable k 0-based, multiplier), ...), offset); its joint's value is the
         sum of multiplier * q[k] plus the offset (((own k, 1),), 0 for a joint that is its reading)."""
         index = {name: k for k, name in enumerate(self.joint_names)}
         out = []
         for j in self.chain:
             if j.coupling is None:
-                out.append((((index[j.name], sp.Integer(1)),), sp.Integer(0)))
+                out.append((((index[j.name], 1),), 0))
             else:
                 out.append((tuple((index[name], m) for name, m in j.coupling.terms), j.coupling.offset))
         return out
 
-    def driven(self, k: int) -> list[tuple[int, sp.Expr]]:
+    def driven(self, k: int) -> list[tuple[int, object]]:
         """The frames (1-based, ascending) whose joint variable k (0-based) moves, with multipliers
         (dv_i/dq_k): its own frame and those of the joints coupled to it."""
         return [(i, m) for i, (terms, _) in enumerate(self.drives(), start=1) for v, m in terms if v == k]

@@ -12,23 +12,24 @@ import math
 import re
 import warnings
 from dataclasses import replace
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-import sympy as sp
 
+from gecgen.model.exact import decimal_number, degrees, pi_factor, pi_multiple
 from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
 from gecgen.model.urdf import urdf_chain
 from gecgen.model.validation import ModelError, excerpt, is_name, read_yaml, require, require_keys
 
 
-def exact(value, where: str, unit_deg: bool = False) -> sp.Expr:
-    """A YAML number as an exact sympy number; degrees become exact multiples of pi."""
+def exact(value, where: str, unit_deg: bool = False):
+    """A YAML number as an exact number (`model.exact`); degrees become exact multiples of pi."""
     require(isinstance(value, (int, float)) and not isinstance(value, bool),
             f"{where}: expected a number, got {excerpt(value)}")
     require(_finite(value), f"{where}: {excerpt(value)} is not a finite number; write the value")
-    v = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
-    return v * sp.pi / 180 if unit_deg else v
+    v = decimal_number(value)
+    return degrees(v) if unit_deg else v
 
 
 def _finite(value) -> bool:
@@ -57,14 +58,11 @@ def _transform(spec, where: str, deg: bool) -> tuple[Elementary, ...]:
         rows = spec["rotation"]
         require(isinstance(rows, list) and len(rows) == 3,
                 f"{where}.rotation: expected 3 rows of 3 numbers (columns are the child axes)")
-        R = sp.Matrix([_vector(r, f"{where}.rotation[{k}]") for k, r in enumerate(rows)])
-        err = (R.T * R - sp.eye(3)).applyfunc(lambda x: abs(float(x)))
-        require(max(err) < 1e-9 and float(R.det()) > 0,
+        R = [_vector(r, f"{where}.rotation[{k}]") for k, r in enumerate(rows)]
+        Rf = np.array(R, dtype=float)
+        require(np.abs(Rf.T @ Rf - np.eye(3)).max() < 1e-9 and np.linalg.det(Rf) > 0,
                 f"{where}.rotation: not a proper rotation matrix (R^T R != I or det != 1); fix the rows")
-        H = sp.eye(4)
-        H[:3, :3] = R
-        H[:3, 3] = sp.Matrix(origin)
-        return (("H", tuple(tuple(H.row(k)) for k in range(4))),)
+        return (("H", tuple(tuple(row) + (o,) for row, o in zip(R, origin)) + ((0, 0, 0, 1),)),)
     ops += [("Tx", origin[0]), ("Ty", origin[1]), ("Tz", origin[2])]
     if "rpy" in spec:
         rpy = spec["rpy"]
@@ -94,7 +92,7 @@ def _dh_joint(row, k: int, where: str, deg: bool) -> Joint:
     post = (("Rz", theta), ("Tz", exact(row.get("d", 0), f"{where}.d")),
             ("Tx", exact(row["a"], f"{where}.a")), ("Rx", exact(row["alpha"], f"{where}.alpha", deg)))
     lo, hi = _limits(row["limits"], f"{where}.limits", kind, deg)
-    return Joint(name, kind, (sp.Integer(0), sp.Integer(0), sp.Integer(1)), (),
+    return Joint(name, kind, (0, 0, 1), (),
                  tuple(op for op in post if op[1] != 0), lo, hi)
 
 
@@ -121,7 +119,7 @@ def _targets(spec, where: str) -> tuple[dict[str, tuple[float, float, float]], t
     return out, tuple(n for n, xyz in spec.items() if xyz == ESTIMATE)
 
 
-def _affine(text, own: str, names: list[str], where: str) -> tuple[dict[str, sp.Expr], sp.Expr]:
+def _affine(text, own: str, names: list[str], where: str) -> tuple[dict[str, Fraction], Fraction]:
     """Joint `own`'s coupling value `text` ("J2 + J3", "-(t2 + t3)", "0.5*j4 + j5 - 10") as
     multipliers by joint name and an offset, exact; only numbers, joint names, + - * / and parentheses."""
     require(isinstance(text, str) and text.strip(), f"{where}: expected the joint's value in the readings as a "
@@ -130,39 +128,47 @@ def _affine(text, own: str, names: list[str], where: str) -> tuple[dict[str, sp.
     # in a MemoryError or RecursionError, and no coupling of a robot's joints needs this many
     require(len(text) <= MAX_COUPLING_LENGTH, f"{where}: {excerpt(text)} is longer than {MAX_COUPLING_LENGTH} "
                                               f"characters; a coupling is a short sum such as \"J2 + J3\"")
-    symbols = {n: sp.Symbol(f"_{n}") for n in names}
+    nonlinear = (f"{where}: {excerpt(text)} is not affine in the readings (a product or power of joints); a "
+                 f"coupling is a sum of number * joint plus a number")
 
-    def walk(node):
+    # a value is (multipliers by joint name, offset): an affine map, exact
+    def walk(node) -> tuple[dict[str, Fraction], Fraction]:
         if isinstance(node, ast.Constant) and type(node.value) in (int, float):
             require(_finite(node.value), f"{where}: {excerpt(text)} holds a number beyond floating point")
-            return sp.Rational(repr(node.value)) if isinstance(node.value, float) else sp.Integer(node.value)
+            return {}, Fraction(decimal_number(node.value))
         if isinstance(node, ast.Name):
-            require(node.id in symbols, f"{where}: {excerpt(text)}: '{node.id}' is not a joint of this robot; "
-                                        f"use the joint names ({', '.join(names)})")
-            return symbols[node.id]
+            require(node.id in names, f"{where}: {excerpt(text)}: '{node.id}' is not a joint of this robot; "
+                                      f"use the joint names ({', '.join(names)})")
+            return {node.id: Fraction(1)}, Fraction(0)
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-            return -walk(node.operand) if isinstance(node.op, ast.USub) else walk(node.operand)
+            value = walk(node.operand)
+            return scaled(value, -1) if isinstance(node.op, ast.USub) else value
         if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
             a, b = walk(node.left), walk(node.right)
             if isinstance(node.op, ast.Div):
-                require(b.is_number and b != 0, f"{where}: {excerpt(text)}: divide only by a nonzero number")
-                return a / b
-            return a + b if isinstance(node.op, ast.Add) else a - b if isinstance(node.op, ast.Sub) else a * b
+                require(not any(b[0].values()) and b[1] != 0, f"{where}: {excerpt(text)}: divide only by a nonzero "
+                                                              f"number")
+                return scaled(a, 1 / b[1])
+            if isinstance(node.op, ast.Mult):
+                require(not any(a[0].values()) or not any(b[0].values()), nonlinear)
+                return scaled(b, a[1]) if not any(a[0].values()) else scaled(a, b[1])
+            sign = 1 if isinstance(node.op, ast.Add) else -1
+            return ({n: a[0].get(n, 0) + sign * b[0].get(n, 0) for n in {**a[0], **b[0]}}, a[1] + sign * b[1])
         raise ModelError(f"{where}: {excerpt(text)} is not an affine map of the readings; write a sum of "
                          f"number * joint name plus a number, such as \"J2 + J3\" or \"-0.5*j4 + 0.1\"")
 
+    def scaled(value, k):
+        return {n: m * k for n, m in value[0].items()}, value[1] * k
+
     try:
         tree = ast.parse(text.strip(), mode="eval")
-        value = sp.expand(walk(tree.body))
+        value = walk(tree.body)
     except SyntaxError:
         raise ModelError(f"{where}: {excerpt(text)} is not an expression; write e.g. \"J2 + J3\"") from None
     except (RecursionError, MemoryError):
         raise ModelError(f"{where}: {excerpt(text)} nests its signs or brackets too deeply; write the sum "
                          f"plainly, such as \"-J2 + J3\"") from None
-    poly = sp.Poly(value, *symbols.values())
-    require(poly.total_degree() <= 1, f"{where}: {excerpt(text)} is not affine in the readings (a product or power "
-                                      f"of joints); a coupling is a sum of number * joint plus a number")
-    multipliers = {n: value.coeff(x) for n, x in symbols.items() if value.coeff(x) != 0}
+    multipliers = {n: value[0][n] for n in names if value[0].get(n, 0) != 0}
     require(multipliers, f"{where}: {excerpt(text)} depends on no joint; a joint that never moves is a fixed transform")
     # a joint's own name whose multiplier cancels (0*J3, J3 - J3) would make the joint passive and
     # drop its reading, which shifts every later column of the data: the text says otherwise
@@ -170,7 +176,7 @@ def _affine(text, own: str, names: list[str], where: str) -> tuple[dict[str, sp.
     require(own in multipliers or own not in named, f"{where}: {excerpt(text)}: the multiplier of "
             f"{own}'s own reading cancels to 0; write {own}'s value without {own} to make it passive (no reading), "
             f"or give its reading a nonzero multiplier")
-    return multipliers, value.subs({x: 0 for x in symbols.values()})
+    return multipliers, value[1]
 
 
 def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tuple[Joint, ...]:
@@ -195,8 +201,8 @@ def with_couplings(chain: tuple[Joint, ...], spec, where: str, deg: bool) -> tup
         values[name] = _affine(text, name, names, f"{where}.{name}")
     kinds = {j.name: j.kind for j in chain}
 
-    def scale(kind: str) -> sp.Expr:  # rad (or m) per unit of the file
-        return sp.pi / 180 if deg and kind == "R" else sp.Integer(1)
+    def scale(kind: str):  # rad (or m) per unit of the file
+        return pi_multiple(Fraction(1, 180), 1) if deg and kind == "R" else 1
 
     out = []
     for j in chain:
@@ -233,22 +239,40 @@ def _check_invertible(chain, where: str) -> None:
     if not coupled:
         return
     index = {j.name: k for k, j in enumerate(readers)}
-    A = sp.eye(len(readers))
+    A = np.eye(len(readers)).tolist()
     for j in coupled:
-        A[index[j.name], index[j.name]] = 0
+        A[index[j.name]][index[j.name]] = 0
         for n, m in j.coupling.terms:
-            A[index[j.name], index[n]] = m
+            A[index[j.name]][index[n]] = m
     # rows of uncoupled readers are unit rows, so the determinant is that of the coupled joints' block
     rows = [index[j.name] for j in coupled]
     named = ", ".join(j.name for j in coupled)
-    require(A.extract(rows, rows).det() != 0,
+    require(_nonsingular([[A[r][c] for c in rows] for r in rows]),
             f"{where}: {named}: the joints' values do not determine their readings (the map from the readings to "
             f"these joints cannot be inverted), so no correction of the readings exists; give each joint that keeps "
             f"its reading a map of its own, such as J3: J2 + J3 with J2 left uncoupled")
-    cond = np.linalg.cond(np.array(A.evalf(), dtype=float))
+    cond = np.linalg.cond(np.array([[float(v) for v in row] for row in A]))
     require(cond <= MAX_CONDITION, f"{where}: {named}: these couplings can hardly be inverted (condition number "
                                    f"{cond:.3g}, beyond {MAX_CONDITION:g}): a reading's error would be magnified as "
                                    f"much; check the multipliers")
+
+
+def _nonsingular(block) -> bool:
+    """Whether the exact square matrix `block` of coupling multipliers has a nonzero determinant.
+
+    Entry (i, j) is a rational times pi**(s_i - s_j), s_k = 1 for a revolute joint of a file in
+    degrees and 0 otherwise (`with_couplings`' units), so the determinant is that of the rational
+    factors times pi**0: Gaussian elimination over the rationals decides it exactly."""
+    M = [[pi_factor(v) for v in row] for row in block]
+    for k in range(len(M)):
+        pivot = next((r for r in range(k, len(M)) if M[r][k] != 0), None)
+        if pivot is None:
+            return False
+        M[k], M[pivot] = M[pivot], M[k]
+        for r in range(k + 1, len(M)):
+            f = M[r][k] / M[k][k]
+            M[r] = [a - f * b for a, b in zip(M[r], M[k])]
+    return True
 
 
 def _check_joint_names(joints, place):

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-import sympy as sp
 
 from gecgen.model.kinematics import constant, joint_motion
 from gecgen.model.robot import Coupling, Elementary, Joint
@@ -72,7 +71,7 @@ def _origin(joint: ET.Element, where: str) -> tuple[Elementary, ...]:
     xyz = _triple(None if el is None else el.get("xyz"), "0 0 0", f"{where} origin xyz")
     rpy = _triple(None if el is None else el.get("rpy"), "0 0 0", f"{where} origin rpy")
     ops = [("Tx", xyz[0]), ("Ty", xyz[1]), ("Tz", xyz[2]), ("Rz", rpy[2]), ("Ry", rpy[1]), ("Rx", rpy[0])]
-    return tuple((op, sp.Float(v, 17)) for op, v in ops if v != 0.0)
+    return tuple((op, v) for op, v in ops if v != 0.0)
 
 
 #: a joint axis may be this far from unit length (either way) and still be read as a direction
@@ -90,7 +89,7 @@ def _axis(joint: ET.Element, where: str) -> tuple:
     require(1 / MAX_AXIS_SCALE <= norm <= MAX_AXIS_SCALE,
             f"{where} axis xyz: length {norm:.3g}; a joint axis is a unit vector (length 1); fix the URDF")
     unit = [a / norm for a in axis]
-    return tuple(sp.Integer(int(u)) if u in (-1.0, 0.0, 1.0) else sp.Float(u, 17) for u in unit)
+    return tuple(int(u) if u in (-1.0, 0.0, 1.0) else u for u in unit)
 
 
 def _limits(joint: ET.Element, jtype: str, where: str) -> tuple[float, float]:
@@ -138,9 +137,9 @@ def follow(joints: dict[str, UrdfJoint], name: str, where: str) -> Follow:
     return Follow(uj.name, multiplier, offset)
 
 
-def _exact(value: float) -> sp.Expr:
-    """A URDF number as sympy: integers stay exact so `1 * q + 0` prunes to q."""
-    return sp.Integer(int(value)) if value == int(value) and abs(value) < 2 ** 53 else sp.Float(value, 17)
+def _exact(value: float) -> int | float:
+    """A URDF number as an exact number (`model.exact`): integers stay exact so `1 * q + 0` prunes to q."""
+    return int(value) if value == int(value) and abs(value) < 2 ** 53 else value
 
 
 def _parse(path: str | Path) -> ET.Element:

@@ -13,7 +13,6 @@ temporary folder for the rest of the run.
 """
 from __future__ import annotations
 
-import atexit
 import contextlib
 import ctypes
 import functools
@@ -33,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model.files import write_atomically
+from gecgen.model.files import cache_dir, write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
@@ -50,28 +49,6 @@ STATUS_NAMES = ("ok", "not_converged", "singular", "outside_limits", "nonfinite"
 #: the codes whose tool is not placed within the tolerance (OUTSIDE_LIMITS is placed, but leaves the
 #: joint limits; SINGULAR and BOUNDED hold a correction that may be sent, the tool off by the residual)
 FAILED = (NOT_CONVERGED, SINGULAR, NONFINITE, BOUNDED)
-
-
-def cache_dir() -> Path:
-    """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written."""
-    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen"))
-
-
-@functools.cache
-def _usable_cache(wanted: Path) -> Path:
-    """wanted, created if needed, when a file can be created in it; else a fresh temporary folder,
-    removed at exit (one warning per run and folder: the cache only saves time)."""
-    try:
-        wanted.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=wanted).close()
-        return wanted
-    except OSError as exc:
-        fallback = Path(tempfile.mkdtemp(prefix="gecgen-cache-"))
-        atexit.register(shutil.rmtree, fallback, ignore_errors=True)
-        warnings.warn(f"the cache folder {wanted} cannot be written ({exc.strerror}); compiling into {fallback} "
-                      f"for this run instead (set GECGEN_CACHE to a writable folder to keep the compiled code)",
-                      stacklevel=3)
-        return fallback
 
 
 def _sha256_file(path: Path) -> str:

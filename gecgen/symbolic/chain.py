@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from gecgen.model.errors import joint_symbols
 from gecgen.model.robot import ERROR_NAMES, Elementary, Robot
+from gecgen.symbolic.exact import sympy_robot
+from gecgen.symbolic.parse import joint_symbols
 from gecgen.symbolic.program import Builder, Function
 
 
@@ -131,6 +132,7 @@ def joint_values(b: Builder, robot: Robot, q) -> list:
 
 def build_chain(b: Builder, robot: Robot, q, eps) -> Chain:
     """Forward pass; `eps` is a flat sequence of 6(m+1) symbols, or None for the nominal chain."""
+    robot = sympy_robot(robot)
     W = constant_pose(robot.base)
     pre, post, er_axis, joint_frames = [], [], [], []
     v = joint_values(b, robot, q)
@@ -212,6 +214,7 @@ def tool_jacobian_function(robot: Robot, branch: int = 0) -> Function:
     The q-dependence of eps through the basis terms is left out: it changes the step, not
     the fixed point, and the errors are small, so Newton still converges.
     """
+    robot = sympy_robot(robot)
     b, q, eps = Builder(), joint_symbols(robot), error_symbols(robot)
     chain = build_chain(b, robot, q, eps)
     T = chain.tools[branch]

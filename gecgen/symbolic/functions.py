@@ -3,11 +3,11 @@ from __future__ import annotations
 
 import sympy as sp
 
-from gecgen.model.errors import ErrorModel, joint_symbols
-from gecgen.model.loads import load_symbol
+from gecgen.model.errors import ErrorModel
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.symbolic.chain import fk_function, jacobian_function, targets_function, tool_jacobian_function
 from gecgen.symbolic.loads import load_values, loads_function
+from gecgen.symbolic.parse import joint_symbols, load_symbol, term_expressions
 from gecgen.symbolic.program import Builder, Function
 
 
@@ -21,16 +21,17 @@ def basis_function(robot: Robot, model: ErrorModel, loads_given: bool = False) -
     q = joint_symbols(robot)
     w = tuple(sp.Symbol(n, real=True) for n in WRENCH)
     aux = tuple(sp.Symbol(n, real=True) for n in model.aux)
+    expr = term_expressions(robot, model)
     terms = model.unique_terms()
     names = model.load_signals(robot)
     if loads_given:
         L = tuple(load_symbol(n) for n in names)
-        f = [b.let(t.expr) for t in terms]
+        f = [b.let(expr[t.text]) for t in terms]
         return b.function("basis_at_loads", f"Basis terms f as {robot.name}_basis computes them, with the load "
                           f"signals L ({robot.name.upper()}_NL, as {robot.name}_loads returns them) given instead of "
                           f"computed from q and w.", {"q": q, "w": w, "aux": aux, "L": L}, {"f": f})
     values = load_values(b, robot, q, w, names)
-    f = [b.let(t.expr.xreplace(values)) for t in terms]
+    f = [b.let(expr[t.text].xreplace(values)) for t in terms]
     return b.function("basis", "Distinct basis terms f of the error model at joints q, wrench w "
                       "(fx fy fz mx my mz) and auxiliary signals aux.", {"q": q, "w": w, "aux": aux}, {"f": f})
 

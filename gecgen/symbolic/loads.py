@@ -16,17 +16,18 @@ from __future__ import annotations
 
 import sympy as sp
 
-from gecgen.model.errors import joint_symbols
-from gecgen.model.loads import (catalog, frame_wrench_columns, frame_wrench_load, frame_wrench_torque, joint_columns,
-                                load_symbol)
+from gecgen.model.loads import (catalog, frame_wrench_columns, frame_wrench_load, frame_wrench_torque, joint_columns)
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.symbolic.chain import apply, build_chain
+from gecgen.symbolic.exact import sympy_robot
+from gecgen.symbolic.parse import joint_symbols, load_symbol
 from gecgen.symbolic.program import Builder, Function
 
 
 def load_values(b: Builder, robot: Robot, q, w, names) -> dict[sp.Symbol, sp.Expr]:
     """load symbol -> its value (an expression in q and w built with b) for the signals `names`
     (canonical spellings the robot supports). Builds nothing when names is empty."""
+    robot = sympy_robot(robot)
     if not names:
         return {}
     cat = catalog(robot)

@@ -1,0 +1,64 @@
+"""What a command loads: one whose compiled code is in the cache reads its robot, error model and
+data, and fits, evaluates or compensates, without sympy, jinja2 or the emitter (they took about a
+second of every run; speed itself is measured in benchmarks/bench_startup.py)."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+#: runs each command line given (a JSON list of argument lists) in one process, exit code 0 or 1
+#: each, then prints the heavy modules the runs loaded
+WRAPPER = ("import json, sys\nfrom gecgen.cli import main\nfor args in json.loads(sys.argv[1]):\n"
+           "    assert main(args) in (0, 1), args\n"
+           "print(sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules))")
+
+ROBOT = """name: arm3
+angle_unit: deg
+joints:
+  - {type: R, theta: 0, d: 0.4, a: 0.1, alpha: 90, limits: [-170, 170]}
+  - {type: R, theta: 0, d: 0, a: 0.5, alpha: 0, limits: [-100, 100]}
+  - {type: R, theta: 0, d: 0, a: 0.4, alpha: 0, limits: [-150, 150]}
+targets:
+  a: [0.05, 0, 0]
+  b: [0, 0.05, 0]
+"""
+
+
+def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(tmp_path, monkeypatch):
+    from gecgen.model import load_robot
+    from gecgen.model.kinematics import target_positions
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.symbolic.terms import load_error_model
+
+    (tmp_path / "arm3.yaml").write_text(ROBOT)
+    robot = load_robot(tmp_path / "arm3.yaml")
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1.2, 1.2, (40, 3))
+    P = target_positions(robot, q) + rng.normal(0, 1e-5, (40, 2, 3))  # (poses, targets, xyz)
+    rows = [f"{i},{','.join(map(str, q[i].tolist()))},{t},{','.join(map(str, P[i, k].tolist()))}"
+            for i in range(40) for k, t in enumerate("ab")]
+    (tmp_path / "data.csv").write_text("\n".join(["pose,q1,q2,q3,target,x,y,z", *rows]) + "\n")
+    (tmp_path / "cmd.csv").write_text("q1,q2,q3\n0.1,0.2,0.3\n-0.4,0.5,0.6\n")
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
+    CompiledModel(robot, load_error_model(None, robot))  # the first run's work: the code of the default model
+    # identify, and then on its calibration evaluate and compensate (which a three-joint arm cannot
+    # do whole: it corrects what it can and exits 1)
+    runs = [["identify", "arm3.yaml", "data.csv", "-o", "c.json", "--json"], ["evaluate", "c.json", "data.csv"],
+            ["compensate", "c.json", "cmd.csv", "-o", "q.csv"]]
+    done = subprocess.run([sys.executable, "-c", WRAPPER, json.dumps(runs)], capture_output=True, text=True,
+                          cwd=tmp_path, env=os.environ, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr
+    assert json.loads(done.stdout.splitlines()[0])["n_params"] > 0 and (tmp_path / "q.csv").is_file()
+
+
+def test_building_any_commands_parser_loads_no_sympy():
+    """The parser is built for the command run only (`build_parser(argv)`), and building it, for any
+    command, loads no computer algebra and no emitter: `gecgen X --help` answers at once."""
+    code = ("import sys\nfrom gecgen.cli import COMMANDS, build_parser\nfor name in COMMANDS:\n"
+            "    assert len(build_parser([name])._subparsers._group_actions[0].choices[name]._actions) > 2\n"
+            "print(sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
