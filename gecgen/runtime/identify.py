@@ -364,9 +364,13 @@ def summary(errors_m: np.ndarray, rotation_rad: np.ndarray | None = None) -> dic
 def fixture_measures(cm: CompiledModel, data: Measurements, c: np.ndarray | None) -> dict:
     """What the relative rows of `data` say of the model at coefficients c (None: nominal):
     `runtime.relative.measures` (consistency, flatness, distance errors, mm)."""
+    return relative.measures(data.relative, _relative_targets(cm, data, c))
+
+
+def _relative_targets(cm: CompiledModel, data: Measurements, c: np.ndarray | None) -> np.ndarray:
+    """The modelled target of every row of `data` (R, 3) m at coefficients c (None: nominal)."""
     q, w, aux = _poses_inputs(cm, data)
-    p = cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
-    return relative.measures(data.relative, p)
+    return cm.model_targets(q, w, aux, np.zeros(cm.dims.nc) if c is None else c)[data.pose, data.target]
 
 
 def structural_matrix(cm: CompiledModel, targets: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -931,6 +935,8 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     inliers = e <= limit
     train_inliers = summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot)
     train = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, c))
+    if data.relative is not None:
+        notes.extend(relative.stray_placements(data.relative, _relative_targets(cm, data, c)))
     if train["rms_mm"] > before["rms_mm"]:
         failures.append(f"the fit leaves more position error than the nominal model ({train['rms_mm']:.4g} mm rms "
                         f"against {before['rms_mm']:.4g} mm): the data is not what the model describes (an "

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import eigh, qr
+from scipy.stats import f as f_distribution
 
 from gecgen.model.relative import RELATIONS, Relative
 
@@ -213,6 +214,46 @@ def measures(relative: Relative, p: np.ndarray) -> dict:
                  if counts[x.a] > 3 and counts[x.b] > 3]
     if relations:
         out["relations"] = relations
+    return out
+
+
+#: a placement's rows stand out when their mean square about their points and planes is beyond this
+#: many times the other placements' (twice their RMS), and beyond what noise gives such a ratio with
+#: probability STRAY_P (F test, over all placements)
+STRAY_RATIO = 4.0
+STRAY_P = 1e-3
+
+
+def stray_placements(relative: Relative, p: np.ndarray) -> list[str]:
+    """A warning for each fixture placement (`Relative.placements`) whose rows scatter about their
+    fitted points and planes far beyond the other placements' rows, at modelled targets p (R, 3) m:
+    a plate that moved, or balls that did not seat, while it was recorded. Each row's scatter counts
+    with the degrees of freedom its group leaves (`Relative.row_dof`)."""
+    placements = relative.placements()
+    if len(placements) < 2:
+        return []
+    gap = np.sum((fill(relative, np.zeros_like(p), p) - p) ** 2, axis=1)
+    dof = np.nan_to_num(relative.row_dof())
+    of = np.full(len(relative.names), -1)
+    for k, (_, members) in enumerate(placements):
+        of[list(members)] = k
+    on = np.where(relative.rows, of[np.maximum(relative.group, 0)], -1)
+    squares = np.bincount(on[on >= 0], gap[on >= 0], len(placements))
+    dofs = np.bincount(on[on >= 0], dof[on >= 0], len(placements))
+    out = []
+    for k, (name, members) in enumerate(placements):
+        rest, rest_dof = squares.sum() - squares[k], dofs.sum() - dofs[k]
+        if dofs[k] <= 0 or rest_dof <= 0 or rest <= 0:
+            continue
+        ratio = (squares[k] / dofs[k]) / (rest / rest_dof)
+        if ratio > STRAY_RATIO and f_distribution.sf(ratio, dofs[k], rest_dof) < STRAY_P / len(placements):
+            ids = ", ".join(relative.names[g] for g in members)
+            mine = 1e3 * np.sqrt(np.mean(gap[on == k]))
+            theirs = 1e3 * np.sqrt(np.mean(gap[(on >= 0) & (on != k)]))
+            out.append(f"placement {name} ({ids}) stands out: its rows lie {mine:.3g} mm rms from their fitted "
+                       f"sockets or planes against {theirs:.3g} mm for the other placements' rows, beyond what "
+                       f"noise gives; it was recorded badly (the fixture moved, or the ball or probe did not seat) "
+                       f"and pulls the whole fit: re-record placement {name} or drop its rows")
     return out
 
 
