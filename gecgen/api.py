@@ -465,12 +465,16 @@ class Calibrator:
                             self._extrapolation(cmds.q, cmds.w, cmds.aux), residual,
                             np.nonzero(np.isin(status, FAILED))[0].tolist())
 
-    def score(self, data, register: bool = False) -> Score:
+    def score(self, data, register: bool | str = False) -> Score:
         """Errors of new measurements (CSV path, DataFrame or Measurements) before and after the
         calibration, in the calibration's tracker frames. register=True: the data was measured from
         a new tracker stationing; each side is scored in the frame fitted on the data (the
-        calibration's coefficients held), so before and after differ by the calibration alone."""
+        calibration's coefficients held), so before and after differ by the calibration alone.
+        register="auto": so when that frame is far from the calibration's (over 1 degree or 20 mm, as
+        identify's "auto" decides) or a station is new, else in the calibration's frames; Score's
+        `registrations` is None when it did not register."""
         from gecgen.runtime.identify import fit_frames, to_world
+        from gecgen.runtime.registration import FAR_ANGLE_RAD, FAR_DISTANCE_M
 
         calib = self._fitted()
         data = read_measurements(data, calib.robot)
@@ -482,8 +486,13 @@ class Calibrator:
         self._sound(cm, data.q, data.w, data.aux_columns(calib.model.aux))
         outside = self._extrapolation(data.q, data.w, data.aux_columns(calib.model.aux))
         moved = None
+        _choice(register, "register", (True, False, "auto"))
+        frames = fit_frames(cm, data, calib.c) if register else None
+        if register == "auto":
+            apart = [frames[k].relative_to(calib.frames[k]) if k in calib.frames else None for k in frames]
+            register = any(a is None or np.radians(a["angle_deg"]) > FAR_ANGLE_RAD
+                           or a["distance_mm"] > 1e3 * FAR_DISTANCE_M for a in apart)
         if register:
-            frames = fit_frames(cm, data, calib.c)
             y_before, y = to_world(fit_frames(cm, data, None), data), to_world(frames, data)
             known = calib.frames
             moved = {k: {**r.to_dict(), **r.relative_to(known.get(k, calib.registration))} for k, r in frames.items()}
