@@ -673,14 +673,15 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
               register_val: bool = False, progress=None, keep_insignificant: bool = False,
-              noise_mm: float | None = None, register: str = "auto") -> Selection:
+              noise_mm: float | None = None, register: str = "auto", stage=None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
-    per candidate. keep_insignificant, noise_mm, register (the training data's registration: "auto",
+    per candidate, stage(text) with what it does once they are scored (the final fits, the
+    significance test, the scoring of val). keep_insignificant, noise_mm, register (the training data's registration: "auto",
     "always" or "never"): as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
@@ -695,7 +696,10 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     fitted, data, val = on_points(robot, _length(orientation_length), data, raw_val)
     if default is not None:
         checked(default, fitted, data, val)
-    choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names)
+    stage = stage or (lambda text: None)
+    choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names,
+                    stage=stage)
+    stage(f"testing which of the {choice.chosen.name} model's coefficients the data determine")
     fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
     # the report's diagnosed stage is the delivered fit (insignificant coefficients held), not diagnose's own
     diagnosis = replace(choice.diagnosis, final=replace(choice.diagnosis.final, fit=fit)) if choice.diagnosis else None
@@ -711,6 +715,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     effects = choice.diagnosis.effects if choice.diagnosis else []
     if raw_val is None:
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
+    stage(f"scoring the calibration on the {'validation' if holdout is None else 'held-out'} poses")
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
                      data, scored.data, scored.branches, scored.after_inside, scored.extrapolation)
