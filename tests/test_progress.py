@@ -94,3 +94,12 @@ def test_accuracy_says_what_it_is_doing_on_a_terminal_only(train, tmp_path, term
     assert ("drawing the map of the bound over the volume" in err) == terminal
     if not terminal:
         assert all(line.startswith("gecgen accuracy: warning: ") for line in err.splitlines()), err
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_design_says_what_it_is_doing_on_a_terminal_only(tmp_path, terminal):
+    code, err = _gecgen(["design", PUMA, "--poses", "8", "-o", str(tmp_path / "d.csv")], terminal)
+    assert code == 0
+    assert ("choosing 8 poses of" in err) == terminal
+    if not terminal:
+        assert err == "", err
