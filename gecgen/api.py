@@ -49,7 +49,7 @@ def _robot(robot) -> Robot:
 
 def read_measurements(source, robot) -> Measurements:
     """Measurements of `robot` (a Robot or its file) from a CSV path or a pandas DataFrame with the
-    measurement file's columns (CONTRACTS.md section 3: pose, q1..qn, target, x, y, z in m, and
+    measurement file's columns (docs/reference.md, "Files": pose, q1..qn, target, x, y, z in m, and
     optional fx..mz, station, orientation and aux columns). A DataFrame is checked as the file would
     be; messages name it `DataFrame`, its rows numbered as in `to_csv(index=False)` (iloc[i] is row
     i + 2). Measurements are passed through, after checking that they fit the robot."""
@@ -514,7 +514,7 @@ class Calibrator:
                      cm, data, y_before, y, branches, inside)
 
     def save(self, path: str | Path) -> Path:
-        """Write the calibration JSON (CONTRACTS.md; read back by `load_calibration`, `gecgen
+        """Write the calibration JSON (docs/reference.md, "Files"; read back by `load_calibration`, `gecgen
         evaluate`, `compensate` and `export`). Returns the path."""
         _calibration.save(self._fitted(), path)
         return Path(path)
