@@ -681,8 +681,8 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
     per candidate, stage(text) with what it does once they are scored (the final fits, the
-    significance test, the scoring of val). keep_insignificant, noise_mm, register (the training data's registration: "auto",
-    "always" or "never"): as for Calibrator."""
+    significance test, the scoring of val). keep_insignificant, noise_mm, register (the training
+    data's registration: "auto", "always" or "never"): as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
     names = model_names(NAMES if models is None else models)

@@ -35,9 +35,9 @@ BLOCK_POSES = 2000
 ILL_CONDITIONED = 1e6
 #: ... and above which it is singular in double precision: the coefficients are not determined
 SINGULAR = 1e12
-#: relative decrease of the residual sum of squares per step below which the fit is stationary
 #: an imposed distance is met when its weighted residual is below this (m): rounding, not noise
 IMPOSED_TOL_M = 1e-11
+#: relative decrease of the residual sum of squares per step below which the fit is stationary
 RSS_TOL = 1e-6  # 5e-7 of the RMS: far below anything a tracker resolves
 
 
@@ -899,8 +899,9 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     std = np.full(nc, np.nan)
     with np.errstate(all="ignore"):  # a singular system gives inf/NaN here, which is reported below
         try:
-            Z = null_space(C) if len(d) else np.eye(k)  # imposed distances: no variance across them
-            cov = sigma ** 2 * Z @ np.linalg.inv(Z.T @ (Rk.T @ Rk + ridge * np.eye(k)) @ Z) @ Z.T / np.outer(scale, scale)
+            Z = null_space(C) if len(d) and k else np.eye(k)  # imposed distances: no variance across them
+            cov = (sigma ** 2 * Z @ np.linalg.inv(Z.T @ (Rk.T @ Rk + ridge * np.eye(k)) @ Z) @ Z.T
+                   / np.outer(scale, scale))
         except np.linalg.LinAlgError:
             cov = np.full((k, k), np.inf)
         std[kept] = np.sqrt(np.abs(np.diag(cov)))
