@@ -66,7 +66,7 @@ PROFILE = """Where the time goes (warm unless said; marks in the process, 2026-1
   the report 1.8 s (before the residual grids took one Axes a row).
 - industrial6r with an empty code cache: 22 models compiled (its candidates and every round of diagnose
   in every fold), 0.2 s each.
-What was done (issue 23): the folds and the report's figures run side by side in forked processes and
+What was done: the folds and the report's figures run side by side in forked processes and
 the parent fits the diagnosed candidate on all the data meanwhile (`runtime.processes`; the same
 figures and report byte for byte); the chain's printed code is cached per robot, and its compiled
 object too, so a new model prints and compiles only its own terms (0.55 -> 0.2 s a model); diagnose's
@@ -74,7 +74,7 @@ chi-square tails come from scipy.special (scipy.stats was 0.3-0.45 s of imports)
 fixed margins (tight_layout drew each twice), and a residual grid's row is one Axes holding its
 joints' panels (a grid of 36 Axes took 0.75 s, 0.54 s with ticks on its outer panels only; now
 0.25 s). Before, warm: UR10 7.7 s, industrial6r 9.6 s (cold
-34.8 s), PPS 17.8 s, TALOS 11.8 s (2026-11-25); when the issue was filed, with an empty cache, UR10
+34.8 s), PPS 17.8 s, TALOS 11.8 s (2026-11-25); before that work, with an empty cache, UR10
 41 s and industrial6r about 100 s."""
 
 def met(label: str, warm: float, cold: float | None) -> str:
@@ -169,7 +169,7 @@ def main():
              "|---|---|---|---|---|---|---|---|"]
     lines += [f"| {label} | {warm:.1f} | {'' if cold is None else f'{cold:.1f}'} | {diag:.1f} | {ref:.2f} | "
               f"{met(label, warm, cold)} | {model} | {cands} |" for label, warm, cold, diag, ref, model, cands in rows]
-    lines += ["", "Targets (issue 23), warm: industrial6r 150 poses <= 10 s, PPS paper design <= 10 s, an 11-joint arm "
+    lines += ["", "Targets, warm: industrial6r 150 poses <= 10 s, PPS paper design <= 10 s, an 11-joint arm "
                   "with 400 poses <= 60 s (here TALOS's 16 joints), 18 poses <= 3 s; cold, 6 joints, <= 15 s.",
               "", PROFILE]
     write_section("calibrate", "\n".join(lines))

@@ -95,7 +95,7 @@ def main():
              f"| {args.robots} | {t_seq:.1f} | {t_alone:.1f} | {t_fleet:.1f} | {args.workers} | "
              f"{t_seq / t_fleet:.2f}x | "
              f"{t_alone / t_fleet:.2f}x | {'yes' if same else 'NO'} |", "",
-             f"Target (issue 23): at least 1.7x with 2 workers over one robot after another, identical results: "
+             f"Target: at least 1.7x with 2 workers over one robot after another, identical results: "
              f"{'met' if t_seq / t_fleet >= 1.7 else 'not met'} against the robots one after another in one "
              "process each, the baseline the target was set on (calibrate then ran in one process). calibrate "
              "alone now runs its own folds and figures side by side, so a robot alone already keeps both cores "

@@ -128,7 +128,7 @@ def main():
               "", "Before the streaming and the batched screening (same machine, 2026-11-25): 200,000 rows took "
                   "44 s and 1,852 MB (the data analysis held every block of H, 8 kB a row with this model, and "
                   "the placement a dense Jacobian of every row); the 10,000-column diagnose 121.5 s (one "
-                  "candidate at a time, 5 million small solves). The second audit (issue 20) measured 1,000,000 "
+                  "candidate at a time, 5 million small solves). The second audit measured 1,000,000 "
                   "rows at 5 minutes and 2.55 GB, and 11 minutes for a 100-joint URDF's redundancy."]
     write_section("large", "\n".join(lines))
 

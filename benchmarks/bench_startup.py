@@ -54,7 +54,7 @@ def main():
              "", "| command | wall time (s) |", "|---|---|"]
     lines += [f"| `{command}` | {seconds:.3f} |" for command, seconds in rows]
     version, identify_s = rows[0][1], rows[-1][1]
-    lines += ["", f"Targets (issue 23): `gecgen --version` <= 0.3 s ({'met' if version <= 0.3 else 'not met'}); "
+    lines += ["", f"Targets: `gecgen --version` <= 0.3 s ({'met' if version <= 0.3 else 'not met'}); "
                   f"`gecgen identify` of 450 PPS poses, warm, <= 1 s ({'met' if identify_s <= 1 else 'not met'})."]
     write_section("startup", "\n".join(lines))
 

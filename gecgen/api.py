@@ -49,7 +49,7 @@ def _robot(robot) -> Robot:
 
 def read_measurements(source, robot) -> Measurements:
     """Measurements of `robot` (a Robot or its file) from a CSV path or a pandas DataFrame with the
-    measurement file's columns (CONTRACTS.md section 3: pose, q1..qn, target, x, y, z in m, and
+    measurement file's columns (docs/reference.md, "Files": pose, q1..qn, target, x, y, z in m, and
     optional fx..mz, station, orientation and aux columns). A DataFrame is checked as the file would
     be; messages name it `DataFrame`, its rows numbered as in `to_csv(index=False)` (iloc[i] is row
     i + 2). Measurements are passed through, after checking that they fit the robot."""
@@ -465,12 +465,16 @@ class Calibrator:
                             self._extrapolation(cmds.q, cmds.w, cmds.aux), residual,
                             np.nonzero(np.isin(status, FAILED))[0].tolist())
 
-    def score(self, data, register: bool = False) -> Score:
+    def score(self, data, register: bool | str = False) -> Score:
         """Errors of new measurements (CSV path, DataFrame or Measurements) before and after the
         calibration, in the calibration's tracker frames. register=True: the data was measured from
         a new tracker stationing; each side is scored in the frame fitted on the data (the
-        calibration's coefficients held), so before and after differ by the calibration alone."""
+        calibration's coefficients held), so before and after differ by the calibration alone.
+        register="auto": so when that frame is far from the calibration's (over 1 degree or 20 mm, as
+        identify's "auto" decides) or a station is new, else in the calibration's frames; Score's
+        `registrations` is None when it did not register."""
         from gecgen.fit.identify import fit_frames, to_world
+        from gecgen.fit.registration import FAR_ANGLE_RAD, FAR_DISTANCE_M
 
         calib = self._fitted()
         data = read_measurements(data, calib.robot)
@@ -482,8 +486,13 @@ class Calibrator:
         self._sound(cm, data.q, data.w, data.aux_columns(calib.model.aux))
         outside = self._extrapolation(data.q, data.w, data.aux_columns(calib.model.aux))
         moved = None
+        _choice(register, "register", (True, False, "auto"))
+        frames = fit_frames(cm, data, calib.c) if register else None
+        if register == "auto":
+            apart = [frames[k].relative_to(calib.frames[k]) if k in calib.frames else None for k in frames]
+            register = any(a is None or np.radians(a["angle_deg"]) > FAR_ANGLE_RAD
+                           or a["distance_mm"] > 1e3 * FAR_DISTANCE_M for a in apart)
         if register:
-            frames = fit_frames(cm, data, calib.c)
             y_before, y = to_world(fit_frames(cm, data, None), data), to_world(frames, data)
             known = calib.frames
             moved = {k: {**r.to_dict(), **r.relative_to(known.get(k, calib.registration))} for k, r in frames.items()}
@@ -505,7 +514,7 @@ class Calibrator:
                      cm, data, y_before, y, branches, inside)
 
     def save(self, path: str | Path) -> Path:
-        """Write the calibration JSON (CONTRACTS.md; read back by `load_calibration`, `gecgen
+        """Write the calibration JSON (docs/reference.md, "Files"; read back by `load_calibration`, `gecgen
         evaluate`, `compensate` and `export`). Returns the path."""
         _calibration.save(self._fitted(), path)
         return Path(path)
@@ -664,15 +673,16 @@ def model_names(names, label: str = "models") -> tuple[str, ...]:
 def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=None,
               models: tuple[str, ...] | None = None, seed: int = 0, orientation_length: float | None = None,
               register_val: bool = False, progress=None, keep_insignificant: bool = False,
-              noise_mm: float | None = None, register: str = "auto") -> Selection:
+              noise_mm: float | None = None, register: str = "auto", stage=None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
     all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
     stationing; it is scored as Calibrator.score(val, register=True) does. progress(name) is called
-    per candidate. keep_insignificant, noise_mm, register (the training data's registration: "auto",
-    "always" or "never"): as for Calibrator."""
+    per candidate, stage(text) with what it does once they are scored (the final fits, the
+    significance test, the scoring of val). keep_insignificant, noise_mm, register (the training
+    data's registration: "auto", "always" or "never"): as for Calibrator."""
     from gecgen.loop.calibrate import NAMES, choose
 
     names = model_names(NAMES if models is None else models)
@@ -686,7 +696,10 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     fitted, data, val = on_points(robot, _length(orientation_length), data, raw_val)
     if default is not None:
         checked(default, fitted, data, val)
-    choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names)
+    stage = stage or (lambda text: None)
+    choice = choose(fitted, data, default, seed, registration_mode=register, progress=progress, names=names,
+                    stage=stage)
+    stage(f"testing which of the {choice.chosen.name} model's coefficients the data determine")
     fit, verdict = significance.determined(choice.cm, data, choice.fit, keep_insignificant, _noise(noise_mm))
     # the report's diagnosed stage is the delivered fit (insignificant coefficients held), not diagnose's own
     diagnosis = replace(choice.diagnosis, final=replace(choice.diagnosis.final, fit=fit)) if choice.diagnosis else None
@@ -702,6 +715,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     effects = choice.diagnosis.effects if choice.diagnosis else []
     if raw_val is None:
         return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, None, None, data)
+    stage(f"scoring the calibration on the {'validation' if holdout is None else 'held-out'} poses")
     scored = cal.score(raw_val, register=register_val)
     return Selection(choice.chosen.name, choice.table, cal, choice, effects, cal.counts_, scored.before, scored.after,
                      data, scored.data, scored.branches, scored.after_inside, scored.extrapolation)

@@ -80,7 +80,7 @@ def discussion(rate: dict, sets: list[str]) -> list[str]:
         f"BASE.csv --noise-mm S`), the model's misfit at the check poses cancels: with half the poses at the longest "
         f"extension the unchanged robot is flagged in {rate[based, 'unchanged']:.0%}, the joint zeros in "
         f"{rate[based, 'lateral zero +0.2 mm']:.0%} and {rate[based, 'couch angle zero +0.4 mrad']:.0%}, the sag in "
-        f"{rate[based, 'couch sag +0.3 mm at full extension']:.0%}: the acceptance's figures, met when the check "
+        f"{rate[based, 'couch sag +0.3 mm at full extension']:.0%}: the target's figures, met when the check "
         "is taken this way.",
         "",
     ]

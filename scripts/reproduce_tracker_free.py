@@ -73,7 +73,7 @@ def sockets(args, robot, truth, errors, tracker_val, lines):
         lines.append(f"| {seed} | {after.consistency_mm:.4f} | {floor['consistency_mm']:.4f} | {ratios[-1]:.3f} | "
                      f"{after.distance_error_mm:.4f} | {absolute:.4f} | {by_tracker:.4f} |")
         blunder_data = blunder_data or (train, seed)
-    lines += ["", f"Largest ratio {max(ratios):.3f} (the acceptance: 1.3). What the data cannot see, named by the "
+    lines += ["", f"Largest ratio {max(ratios):.3f} (the target: 1.3). What the data cannot see, named by the "
               f"redundancy analysis with reason `relative` in every seed: {', '.join(unseen)} (the six rigid motions "
               f"of the whole set; the distance fixes the scale).", ""]
     return blunder_data
@@ -152,7 +152,7 @@ def designed(args, robot, truth, errors, lines):
     lines += ["", "Largest ratio, designed against random: " + "; ".join(
         f"{kind} {max(worst[(kind, 'design')]):.3f} against {max(worst[(kind, 'random')]):.3f} (mean "
         f"{np.mean(worst[(kind, 'design')]):.3f} against {np.mean(worst[(kind, 'random')]):.3f})"
-        for kind in ("planes", "sockets")) + " (the acceptance: 1.3).", ""]
+        for kind in ("planes", "sockets")) + " (the target: 1.3).", ""]
 
 
 def blunder(robot, train, seed, errors, lines):

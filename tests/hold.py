@@ -7,7 +7,7 @@ Dask preload in a fleet's worker processes.
 STEP: `start` (calibrate about to read its inputs, its folder held), `folds` (calibrate's
 cross-validation folds, in its worker processes), `report` (calibrate writing its report: the
 calibration and code already written into the new folder), `fleet` (fleet about to start its
-cluster, its folder held).
+cluster, its folder held), `summary` (fleet writing its summary: fleet.json written, fleet.csv not).
 """
 import os
 import signal
@@ -40,6 +40,8 @@ elif STEP == "report":
     gecgen.report.write = _hold
 elif STEP == "fleet":
     gecgen.cli.fleet._run_tasks = _hold
+elif STEP == "summary":
+    gecgen.cli.fleet.write_csv = _hold
 elif STEP:
     raise SystemExit(f"GECGEN_TEST_HOLD: unknown step {STEP!r}")
 

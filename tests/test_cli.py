@@ -89,6 +89,9 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     print_human({"suspect_poses": [], "placement": None, "val": {"rms_mm": 0.2, "cv_rms_mm": None}, "warnings": ["x"]})
     assert capsys.readouterr().out.splitlines() == ["suspect_poses: none", "placement: -",
                                                     "val: rms_mm 0.2, cv_rms_mm -"]
+    print_human({"val_registered": False, "significance": {"t_min": 2, "insignificant_carried": True}})
+    assert capsys.readouterr().out.splitlines() == ["val_registered: no", "significance: t_min 2, "
+                                                    "insignificant_carried yes"]
 
 
 def test_a_librarys_resource_warning_is_not_shown_but_gecgens_own_warnings_are(monkeypatch, capsys):

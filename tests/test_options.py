@@ -26,6 +26,7 @@ def _parsed(*argv: str):
     # and each takes the one form: --register MODE, --register=MODE, --register alone
     (["evaluate", "c.json", "d.csv", "--register", "always"], "always"),
     (["evaluate", "c.json", "d.csv", "--register=never"], "never"),
+    (["evaluate", "c.json", "d.csv", "--register", "auto"], "auto"),
     (["calibrate", "r.yaml", "t.csv", "--register", "always", "-o", "out"], "always"),
     (["calibrate", "r.yaml", "t.csv", "--register=val", "-o", "out"], "val"),
     (["identify", "r.yaml", "d.csv", "--register"], "always"),
@@ -40,7 +41,7 @@ def test_register_takes_one_form_everywhere_and_every_old_spelling(argv, registe
 
 
 @pytest.mark.parametrize("argv, allowed", [
-    (["evaluate", "c.json", "d.csv", "--register=auto"], "always, never"),
+    (["evaluate", "c.json", "d.csv", "--register=val"], "auto, always, never"),
     (["identify", "r.yaml", "d.csv", "--register=val"], "auto, always, never"),
 ])
 def test_a_registration_a_command_does_not_do_is_one_line(capsys, argv, allowed):

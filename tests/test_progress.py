@@ -50,8 +50,13 @@ def test_calibrate_says_how_far_it_is_on_a_terminal_only(train, tmp_path, termin
     code, err = _gecgen(["calibrate", PUMA, str(train), "--holdout", "0.2", "--models", "geometric", "-o", str(out)],
                         terminal)
     assert code == 0
-    if terminal:  # the last step is said too (the status line shows its last text as it closes)
-        assert "writing the calibration, its code and the report into" in err
+    if terminal:  # each step after the candidates' folds is said, up to the last
+        for step in ("cross-validating the geometric model on the training poses",
+                     "fitting the chosen geometric model on all 24 training poses",
+                     "testing which of the geometric model's coefficients the data determine",
+                     "scoring the calibration on the held-out poses",
+                     "writing the calibration, its code and the report into"):
+            assert step in err, step
     else:
         lines = err.splitlines()
         assert lines and all(line.startswith("gecgen calibrate: warning: ") for line in lines), err
@@ -89,3 +94,12 @@ def test_accuracy_says_what_it_is_doing_on_a_terminal_only(train, tmp_path, term
     assert ("drawing the map of the bound over the volume" in err) == terminal
     if not terminal:
         assert all(line.startswith("gecgen accuracy: warning: ") for line in err.splitlines()), err
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_design_says_what_it_is_doing_on_a_terminal_only(tmp_path, terminal):
+    code, err = _gecgen(["design", PUMA, "--poses", "8", "-o", str(tmp_path / "d.csv")], terminal)
+    assert code == 0
+    assert ("choosing 8 poses of" in err) == terminal
+    if not terminal:
+        assert err == "", err

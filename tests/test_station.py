@@ -128,6 +128,19 @@ def test_evaluate_register_fits_a_new_stationing(setup, calibrations, capsys):
     assert stale["after"]["rms_mm"] > 100 * same["after"]["rms_mm"]
 
 
+def test_evaluate_register_auto_registers_only_a_moved_stationing(setup, calibrations, capsys):
+    """`--register auto`, as identify's: day 2 (the tracker moved 35 degrees and 1.7 m) is scored in its
+    fitted frame, as with --register; the same-frame file in the calibration's, as without."""
+    robot, truth, d, files = setup
+    calib = calibrations[0]
+    moved = run(capsys, "evaluate", calib, d / "day2.csv", "--register", "auto")
+    assert moved["registered"] is True
+    assert moved["after"] == run(capsys, "evaluate", calib, d / "day2.csv", "--register")["after"]
+    same = run(capsys, "evaluate", calib, d / "val.csv", "--register", "auto")
+    assert same["registered"] is False and same["before_registration"] == "the calibration's"
+    assert same["after"] == run(capsys, "evaluate", calib, d / "val.csv")["after"]
+
+
 def test_a_glitch_does_not_tilt_the_new_frame(setup, calibrations, capsys):
     robot, truth, d, files = setup
     day2 = files["day2"]

@@ -75,6 +75,7 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
                     seed=args.seed, orientation_length=args.orientation_length, register_val=register_val,
                     register="auto" if register_val else args.register,
                     progress=lambda name: say(status, f"cross-validating the {name} model on the training poses"),
+                    stage=lambda text: say(status, text),
                     keep_insignificant=args.keep_insignificant, noise_mm=args.noise_mm)
     say(status, f"writing the calibration, its code and the report into {out}")
     cal, choice = sel.calibrator, sel.choice

@@ -40,9 +40,11 @@ def progress_status(enabled: bool):
 
 
 def say(status, text: str):
-    """`status.update(text)` when there is a status line (`progress_status`)."""
+    """`status.update(text)` when there is a status line (`progress_status`), shown at once: a new
+    spinner makes rich redraw now, where the text alone waits for its next refresh, which a short
+    step may never see."""
     if status is not None:
-        status.update(text)
+        status.update(text, spinner="dots")
 
 
 #: the most poses a command draws or designs: far beyond any measurement campaign, far below memory

@@ -18,7 +18,8 @@ import warnings
 
 import numpy as np
 
-from gecgen.cli.common import MAX_POSES, MAX_SEED, ROBOT_HELP, number, robot_and_model, whole
+from gecgen.cli.common import (MAX_POSES, MAX_SEED, ROBOT_HELP, number, progress_status, robot_and_model, say,
+                               whole)
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
@@ -109,6 +110,12 @@ def _targets(args, robot, given) -> np.ndarray:
 
 
 def run(args) -> dict:
+    with progress_status(not args.json) as status:
+        return _designed(args, status)
+
+
+def _designed(args, status) -> dict:
+    """The command's work; says how far it is on `status` (`common.progress_status`)."""
     from gecgen.runtime.compiled import CompiledModel
 
     require(1 <= args.poses <= MAX_POSES,
@@ -118,7 +125,7 @@ def run(args) -> dict:
     require(math.isfinite(args.noise_mm) and args.noise_mm > 0,
             f"--noise-mm {args.noise_mm}: give the measurement noise per coordinate, > 0 mm")
     if args.fixtures:
-        return _run_fixtures(args)
+        return _run_fixtures(args, status)
     for option in ("target", "patch_mm"):
         require(getattr(args, option) is None, f"--{option.replace('_', '-')} goes with --fixtures; give the "
                                                f"fixtures file or drop it")
@@ -149,6 +156,7 @@ def run(args) -> dict:
                          f"candidates (--candidates, --from)")
     allowed = np.nonzero(ok)[0]
     cands = cands.subset(allowed)
+    say(status, f"choosing {args.poses} poses of {len(cands)} candidates ({args.criterion}-optimal)")
     result = D.design_poses(CompiledModel(robot, model), cands, args.poses, targets, given, args.seed,
                             args.noise_mm / 1e3, criterion=args.criterion)
     first = int(given.pose_ids.max()) + 1 if given is not None else 0  # appends to the given file's ids
@@ -174,7 +182,7 @@ NOT_WITH_FIXTURES = {"from_csv": "--from", "targets": "--targets", "payload_kg":
                      "tracker": "--tracker", "max_incidence_deg": "--max-incidence-deg", "given": "--given"}
 
 
-def _run_fixtures(args) -> dict:
+def _run_fixtures(args, status) -> dict:
     from gecgen.model.fixture_file import read_fixtures
     from gecgen.runtime.compiled import CompiledModel
 
@@ -196,7 +204,9 @@ def _run_fixtures(args) -> dict:
     fixtures = read_fixtures(args.fixtures)
     n = FD.CANDIDATES if args.candidates is None else args.candidates
     patch = FD.PATCH_M if args.patch_mm is None else args.patch_mm / 1e3
+    say(status, f"solving the robot's configurations at each fixture ({n} candidates)")
     cands = FD.fixture_candidates(robot, fixtures, target, n, np.random.default_rng(args.seed), patch)
+    say(status, f"choosing {args.poses} configurations of the candidates (D-optimal)")
     result = FD.design_fixtures(CompiledModel(robot, model), cands, args.poses, target, args.seed, args.noise_mm / 1e3)
     header = ["pose", *(f"q{i + 1}" for i in range(robot.n)), "target", "x", "y", "z", "point", "plane"]
     rows = []

@@ -1,4 +1,4 @@
-"""`gecgen evaluate CALIB DATA [--register [always|never]]`: position errors of new data before and after the calibration."""
+"""`gecgen evaluate CALIB DATA [--register [auto|always|never]]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
 from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned
@@ -11,10 +11,11 @@ def add_parser(command):
     p = command("evaluate", run)
     p.add_argument("calibration", help=CALIBRATION_HELP)
     p.add_argument("data", help=DATA_HELP)
-    add_register(p, ("always", "never"), bare="always", default="never",
+    add_register(p, ("auto", "always", "never"), bare="always", default="never",
                  lead="always: DATA was measured from a new tracker stationing: fit only its frame (the "
                       "calibration's coefficients held) and score the uncalibrated model in its own fitted frame; "
-                      "never: DATA is in the calibration's tracker frame")
+                      "never: DATA is in the calibration's tracker frame; auto: as always when the frame fitted on "
+                      "DATA is over 1 degree or 20 mm from the calibration's or a station is new, else as never")
     add_orientation_length(p, calibration_first=True)
     add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
@@ -34,8 +35,8 @@ def _evaluated(args, caught: list) -> dict:
     from gecgen.report.verdict import Noise, assess
 
     cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
-    registered = args.register == "always"
-    score = cal.score(args.data, register=registered)
+    score = cal.score(args.data, register={"always": True, "never": False}.get(args.register, args.register))
+    registered = score.registrations is not None
     result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data),
               "n_poses": score.n_poses, "n_points": score.n_points,
               **({"n_orientations": score.n_orientations} if score.n_orientations else {}),

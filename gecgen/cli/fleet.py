@@ -153,13 +153,14 @@ def calibrate_fleet(manifest, out, scheduler: str | None = None, workers: int = 
     with output_lock(out, "fleet folder"):
         try:
             results = _run_tasks(robots, out, scheduler, workers, seed, timeout, progress)
+            # the mark goes last: a run stopped while writing the summary leaves the folder marked
+            write_atomically(out / SUMMARY, json.dumps(results, indent=1))
+            write_csv(out / TABLE, ["name", "status", "model", "train_rms_mm", "val_rms_mm", "seconds", "reason"],
+                      ([r["name"], r["status"], r.get("result", {}).get("model", ""), _figure(r, "train"),
+                        _figure(r, "val"), f"{r['seconds']:.3g}", r.get("reason", "")] for r in results))
         except KeyboardInterrupt as exc:
             state = f"is marked incomplete ({out / MARK})" if (out / MARK).exists() else "is as it was before this run"
             raise type(exc)(f"{out} {state}: run the fleet again") from None
-        write_atomically(out / SUMMARY, json.dumps(results, indent=1))
-        write_csv(out / TABLE, ["name", "status", "model", "train_rms_mm", "val_rms_mm", "seconds", "reason"],
-                  ([r["name"], r["status"], r.get("result", {}).get("model", ""), _figure(r, "train"),
-                    _figure(r, "val"), f"{r['seconds']:.3g}", r.get("reason", "")] for r in results))
         (out / MARK).unlink()
     return results
 

@@ -10,9 +10,11 @@ def warning_lines(caught) -> list[str]:
 def scalar(value) -> str:
     """A value as a person reads it: three significant digits, as the reports print them, and every
     digit before the point of a number of 1000 or more (a time in seconds, a log det); `-` for a value
-    not known (JSON null) and `none` for an empty list, not Python's spellings."""
+    not known (JSON null), `none` for an empty list and `yes` or `no` for a truth, not Python's spellings."""
     if value is None:
         return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
     if isinstance(value, list):  # an interval: [low, high]
         return "[" + ", ".join(map(scalar, value)) + "]" if value else "none"
     if not isinstance(value, float):

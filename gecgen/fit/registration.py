@@ -139,7 +139,7 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
         if mode == "always":
             raise ModelError(f"registration needs measured points spread at least {1e3 * MIN_SPREAD_M:g} mm rms across "
                              f"their main direction per tracker stationing (these: {1e3 * spread:.3g} mm); measure "
-                             f"poses apart, or do not register (identify --register never)")
+                             f"poses apart, or do not register (--register never; register='never' in Python)")
         if mode == "auto" and len(y):
             warnings.warn(f"the measured points spread {1e3 * spread:.3g} mm rms across their main direction: too "
                           f"little to fix a tracker frame (at least {1e3 * MIN_SPREAD_M:g} mm), so none was fitted and "

@@ -13,12 +13,15 @@ without a known distance - projects to nothing and the redundancy analysis sees 
 A known distance between points a and b is one more row: L - |m_a - m_b| for the fitted points m.
 Carrying the points instead would give it the variance std^2 + sigma^2 (1/n_a + 1/n_b) (the
 points' means have sigma^2 / n along the line), so that is its weight against the rows' sigma; the
-eliminated and the carried problem then have the same minimum (to first order).
+eliminated and the carried problem then have the same minimum (to first order). A distance declared
+exact (std 0) is that row too, and the fit also imposes it as an equality (`exact`): weighted
+alone, the rows' noise would leave the fitted distance off by a share of it.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import eigh, qr
+from scipy.stats import f as f_distribution
 
 from gecgen.model.relative import RELATIONS, Relative
 
@@ -94,6 +97,14 @@ def scale_rows(relative: Relative) -> np.ndarray:
     out = [True] * len(relative.distances)
     for x in relative.relations:
         out += [False] * (RELATIONS[x.kind] - (x.kind == "offset")) + [True] * (x.kind == "offset")
+    return np.array(out, bool)
+
+
+def exact(relative: Relative) -> np.ndarray:
+    """(n_known,) True for the rows of `known_rows` that the fit imposes rather than weighs: the
+    distances declared exact (std 0)."""
+    out = [d.std_m == 0 for d in relative.distances]
+    out += [False] * (relative.n_known - len(out))
     return np.array(out, bool)
 
 
@@ -203,6 +214,46 @@ def measures(relative: Relative, p: np.ndarray) -> dict:
                  if counts[x.a] > 3 and counts[x.b] > 3]
     if relations:
         out["relations"] = relations
+    return out
+
+
+#: a placement's rows stand out when their mean square about their points and planes is beyond this
+#: many times the other placements' (twice their RMS), and beyond what noise gives such a ratio with
+#: probability STRAY_P (F test, over all placements)
+STRAY_RATIO = 4.0
+STRAY_P = 1e-3
+
+
+def stray_placements(relative: Relative, p: np.ndarray) -> list[str]:
+    """A warning for each fixture placement (`Relative.placements`) whose rows scatter about their
+    fitted points and planes far beyond the other placements' rows, at modelled targets p (R, 3) m:
+    a plate that moved, or balls that did not seat, while it was recorded. Each row's scatter counts
+    with the degrees of freedom its group leaves (`Relative.row_dof`)."""
+    placements = relative.placements()
+    if len(placements) < 2:
+        return []
+    gap = np.sum((fill(relative, np.zeros_like(p), p) - p) ** 2, axis=1)
+    dof = np.nan_to_num(relative.row_dof())
+    of = np.full(len(relative.names), -1)
+    for k, (_, members) in enumerate(placements):
+        of[list(members)] = k
+    on = np.where(relative.rows, of[np.maximum(relative.group, 0)], -1)
+    squares = np.bincount(on[on >= 0], gap[on >= 0], len(placements))
+    dofs = np.bincount(on[on >= 0], dof[on >= 0], len(placements))
+    out = []
+    for k, (name, members) in enumerate(placements):
+        rest, rest_dof = squares.sum() - squares[k], dofs.sum() - dofs[k]
+        if dofs[k] <= 0 or rest_dof <= 0 or rest <= 0:
+            continue
+        ratio = (squares[k] / dofs[k]) / (rest / rest_dof)
+        if ratio > STRAY_RATIO and f_distribution.sf(ratio, dofs[k], rest_dof) < STRAY_P / len(placements):
+            ids = ", ".join(relative.names[g] for g in members)
+            mine = 1e3 * np.sqrt(np.mean(gap[on == k]))
+            theirs = 1e3 * np.sqrt(np.mean(gap[(on >= 0) & (on != k)]))
+            out.append(f"placement {name} ({ids}) stands out: its rows lie {mine:.3g} mm rms from their fitted "
+                       f"sockets or planes against {theirs:.3g} mm for the other placements' rows, beyond what "
+                       f"noise gives; it was recorded badly (the fixture moved, or the ball or probe did not seat) "
+                       f"and pulls the whole fit: re-record placement {name} or drop its rows")
     return out
 
 

@@ -157,10 +157,12 @@ def _row(table: list[dict], p: Pipeline) -> dict:
 
 
 def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
-           registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES) -> Choice:
+           registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES, stage=None) -> Choice:
     """Score the named pipelines that apply (see the module docstring) on the training data, fit
-    the choice on all of it. Raises RuntimeError when none applies or can be fitted, or when the
-    chosen fit cannot be trusted."""
+    the choice on all of it. progress(name) is called per candidate while its folds run, stage(text)
+    with what it does after them. Raises RuntimeError when none applies or can be fitted, or when
+    the chosen fit cannot be trusted."""
+    stage = stage or (lambda text: None)
     if data.n_poses < 2 * FOLDS:
         raise RuntimeError(f"{data.n_poses} poses: the model is chosen by {FOLDS}-fold cross-validation over poses, "
                            f"which needs at least {2 * FOLDS}; measure more poses")
@@ -206,6 +208,8 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     full = {ahead[0].name: ahead[1:]} if ahead else {}
     for _, p in tied:
         if p.diagnose and len(tied) > 1 and p.name not in full:
+            stage(f"fitting the {p.name} model on all {data.n_poses} training poses: it ties the best, and the "
+                  f"smaller of them is chosen")
             full[p.name] = _fitted_ahead(robot, p, data, registration_mode)
     for _, p in tied:
         fitted = full.get(p.name, (None,))[0]
@@ -226,6 +230,7 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
             raise fitted
         model, cm, fit, diag = fitted
     else:
+        stage(f"fitting the chosen {chosen.name} model on all {data.n_poses} training poses")
         model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
     if chosen.diagnose:
         _row(table, chosen)["n_params_delivered"] = len(model.coefficients)

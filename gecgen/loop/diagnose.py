@@ -313,7 +313,7 @@ def verdict(remaining: dict) -> str:
     if r["covered"] is False:
         return (f"{what}. The residual is {r['sigma_over_noise']:.2f}x the noise floor ({r['noise']['noise_mm']:.4f} mm, "
                 f"{r['noise']['source']}) and nothing in the candidate dictionary explains the rest.")
-    return (f"{what}. The noise floor is unknown (no repeated poses; give --noise-mm), so whether the model covers "
+    return (f"{what}. The noise floor is unknown (no repeated poses; give --noise-mm, noise_mm in Python), so whether the model covers "
             f"the data cannot be decided; nothing in the candidate dictionary explains the rest.")
 
 

@@ -122,6 +122,36 @@ class Relative:
         clash = np.nonzero(self.group[rows] != self.group[rows[first[same]]])[0]
         return (int(rows[first[same[clash[0]]]]), int(rows[clash[0]])) if len(clash) else None
 
+    def placements(self) -> list[tuple[str, tuple[int, ...]]]:
+        """The fixture placements, each its name and its groups: the points and planes a known
+        distance or relation joins (a plate's sockets, a square's faces), together with those whose
+        ids share a prefix before the last '/' or '.' (`front/hole_0`, `plate2.1`), the name being
+        that prefix or, without one, the ids joined."""
+        label = list(range(len(self.names)))
+
+        def root(g: int) -> int:
+            while label[g] != g:
+                g = label[g]
+            return g
+
+        prefixes: dict[str, int] = {}
+        links = [(x.a, x.b) for x in (*self.distances, *self.relations)]
+        for g, name in enumerate(self.names):
+            cut = max(name.rfind("/"), name.rfind("."), 0)
+            if cut:
+                links.append((prefixes.setdefault(name[:cut], g), g))
+        for a, b in links:
+            label[root(b)] = root(a)
+        out: dict[int, list[int]] = {}
+        for g in range(len(self.names)):
+            out.setdefault(root(g), []).append(g)
+        named = []
+        for members in out.values():
+            ids = [self.names[g] for g in members]
+            stems = {n[:max(n.rfind("/"), n.rfind("."), 0)] for n in ids}
+            named.append((stems.pop() if len(stems) == 1 and "" not in stems else " + ".join(ids), tuple(members)))
+        return named
+
     def summary(self) -> dict:
         """What the file holds: {points, planes, distances, rows}, and relations when it has any."""
         plane = self.is_plane()
