@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import null_space, solve_triangular
+from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import WRENCH
@@ -35,8 +35,6 @@ BLOCK_POSES = 2000
 ILL_CONDITIONED = 1e6
 #: ... and above which it is singular in double precision: the coefficients are not determined
 SINGULAR = 1e12
-#: an imposed distance is met when its weighted residual is below this (m): rounding, not noise
-IMPOSED_TOL_M = 1e-11
 #: relative decrease of the residual sum of squares per step below which the fit is stationary
 RSS_TOL = 1e-6  # 5e-7 of the RMS: far below anything a tracker resolves
 
@@ -190,14 +188,13 @@ def _blocks(data: Measurements, block: int):
 
 def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, block: int = BLOCK_POSES,
                         weights: np.ndarray | None = None, known_sigma_m: float | None = None,
-                        projected: bool = True, constraints: list | None = None):
+                        projected: bool = True):
     """Yield (H rows (3r, nc), residual y - p (3r,)) per block of poses, at coefficients c; with
     point weights (R,), each point's three rows are scaled by the square root of its weight.
     Relative rows (`fit.relative`) have y NaN: their y is filled and, when `projected`, their
     columns projected (else their residual is 0: the columns as absolute data would have them);
     with known_sigma_m (m) the rows of the known distances and plane relations follow the last
-    block's, and those the fit imposes (`fit.relative.exact`) are appended to `constraints`
-    (a list) as (rows (e, nc), residuals (e,)) too."""
+    block's."""
     q, w, aux = _poses_inputs(cm, data)
     nt = cm.dims.nt
     for start, stop, rows in _blocks(data, block):
@@ -216,9 +213,6 @@ def rows_H_and_residual(cm: CompiledModel, data: Measurements, y: np.ndarray, c:
                 r = relative.fill(rel, y[rows], pr, wr) - pr
                 if known_sigma_m is not None and rel.n_known:
                     extra = relative.known_rows(rel, Hr, pr, wr, known_sigma_m)
-                    if constraints is not None:
-                        imposed = relative.exact(rel)
-                        constraints.append((extra[0][imposed], extra[1][imposed]))
                 Hr = relative.project(rel, Hr, pr, wr)
         if weights is not None:
             root = np.sqrt(weights[rows])[:, None]
@@ -250,24 +244,6 @@ def qr_accumulate(blocks, columns: np.ndarray | None = None, scale: np.ndarray |
     if R.shape[0] < k1:  # fewer rows than unknowns so far: pad so the shape is always square
         R = np.vstack([R, np.zeros((k1 - R.shape[0], k1))])
     return R, m
-
-
-def constrained_step(Rk: np.ndarray, z: np.ndarray, lam: float, ridge: float, x: np.ndarray, C: np.ndarray,
-                     d: np.ndarray) -> np.ndarray:
-    """`damped_step` subject to C dx = d (C (e, k), d (e,), in the same scaled coordinates), by
-    elimination in C's null space: dx = Y u + Z v with u fixed by the constraints (least squares
-    over any of them that repeat another) and v the damped step of the reduced problem. The
-    damping acts on v only, so every step satisfies the constraints to first order."""
-    if not len(d):
-        return damped_step(Rk, z, lam, ridge, x)
-    U, s, Vt = np.linalg.svd(C)
-    r = int(np.sum(s > s[0] * 1e-10)) if s.size and s[0] > 0 else 0
-    Y, Z = Vt[:r].T, Vt[r:].T
-    base = Y @ ((U[:, :r].T @ d) / s[:r])
-    if not Z.shape[1]:
-        return base
-    Q, Rz = np.linalg.qr(Rk @ Z)  # |Rk Z v - b| = |Rz v - Q^T b| up to what no v changes
-    return base + Z @ damped_step(Rz, Q.T @ (z - Rk @ base), lam, ridge, Z.T @ (x + base))
 
 
 def damped_step(Rk: np.ndarray, z: np.ndarray, lam: float, ridge: float = 0.0, x: np.ndarray | None = None) -> np.ndarray:
@@ -835,7 +811,6 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         stale = False  # True once c (or the weights) moved on from those R was factored at
     else:
         stale = True
-    C, d = np.zeros((0, k)), np.zeros(0)  # what the fit imposes (`_Known.factor`): nothing without relative data
     # the analysis holds what relative data without a known distance leave of the scale
     held = tuple(weak.Held(e.param, e.index, None, None, e.detail)
                  for e in red.eliminated if e.detail == SCALE_HELD) + kept_held
@@ -844,7 +819,8 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             w = rows.weight * wr[rows.group]
             if data.relative is not None:
                 known = known.at(robust.scale(row_errors(cm, data, y, c, w)[2] * norm))
-            R, C, d = known.factor(y, c, w, kept, scale)
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
+                                 kept, scale)
             stale = False  # the first round's R: the same c and weights
         first = float(row_dof @ wr) + known.n
         red, stay, more = _hold_weak(cm, data, red, R, scale, first, noise_m)
@@ -852,40 +828,32 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             held += more
             kept, k, scale = kept[stay], len(stay), scale[stay]
             R = np.linalg.qr(R[:, [*stay, -1]], mode="r")  # the same rows' R factor over the columns left
-            C = C[:, stay]
     notes.extend(f"not determined, held at zero: {h}" for h in held)
     converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
-    penalty = 0.0
     for it in range(1, max_iter + 1):
         w = rows.weight * wr[rows.group]
         if data.relative is not None:  # the points and planes as these weights fit them
             e = row_errors(cm, data, y, c, w)[2] * norm
             known = known.at(robust.scale(e))
         if stale:
-            R, C, d = known.factor(y, c, w, kept, scale)
+            R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
+                                 kept, scale)
             stale = False
         Rk, z, x = R[:k, :k], R[:k, k], c[kept] * scale
-        squares, off = known.squares(c, w)
-        objective = robust.objective(e, limit, loss, count) + ridge * float(x @ x) + squares
-        full_step = constrained_step(Rk, z, 0.0, ridge, x, C, d)
+        objective = robust.objective(e, limit, loss, count) + ridge * float(x @ x) + known.squares(c, w)
+        full_step = damped_step(Rk, z, 0.0, ridge, x)
         predicted = np.linalg.norm(Rk @ full_step)
-        # what the constraints miss and a step can mend (constraints that contradict each other keep a rest)
-        missed = float(np.sum(np.abs(C @ np.linalg.lstsq(C, d, rcond=None)[0]))) if len(d) else 0.0
-        if missed <= IMPOSED_TOL_M and (predicted / np.sqrt(m) < step_tol_m or predicted ** 2 <= RSS_TOL * objective):
+        if predicted / np.sqrt(m) < step_tol_m or predicted ** 2 <= RSS_TOL * objective:
             converged = True  # the step would change nothing a tracker resolves
             break
-        if len(d):  # an exact penalty on what the constraints miss: its weight beyond their multipliers
-            slope = 2 * Rk.T @ (z - Rk @ full_step)
-            penalty = max(penalty, 2 * float(np.max(np.abs(np.linalg.lstsq(C.T, slope, rcond=None)[0]))))
         for _ in range(16):
             trial = c.copy()
-            trial[kept] += (full_step if lam == 0 else constrained_step(Rk, z, lam, ridge, x, C, d)) / scale
+            trial[kept] += (full_step if lam == 0 else damped_step(Rk, z, lam, ridge, x)) / scale
             errors_trial = row_errors(cm, data, y, trial, w)
             e_trial = errors_trial[2] * norm
-            squares_trial, off_trial = known.squares(trial, w)
             trial_objective = (robust.objective(e_trial, limit, loss, count)
-                               + ridge * float(np.sum((trial[kept] * scale) ** 2)) + squares_trial)
-            if trial_objective + penalty * off_trial < objective + penalty * off:
+                               + ridge * float(np.sum((trial[kept] * scale) ** 2)) + known.squares(trial, w))
+            if trial_objective < objective:
                 break
             lam = 1e-6 if lam == 0 else 10 * lam
         else:
@@ -898,13 +866,13 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
         limit, wr = new_limit, robust.weights(e, new_limit, loss)
         if progress:
             progress(it, 1e3 * np.sqrt(np.mean(e ** 2)))
-        if settled and not len(d) and objective - trial_objective <= RSS_TOL * objective:
-            # stationary: further steps change nothing (imposed rows: once met, the check above)
+        if settled and objective - trial_objective <= RSS_TOL * objective:  # stationary: further steps change nothing
             converged = True
             break
     w = rows.weight * wr[rows.group]
     if stale:
-        R, C, d = known.factor(y, c, w, kept, scale)
+        R, _ = qr_accumulate(rows_H_and_residual(cm, data, y, c, weights=w, known_sigma_m=known.sigma_m),
+                             kept, scale)
     Rk, rss = R[:k, :k], R[k, k] ** 2
     m_eff = float(row_dof @ wr) + known.n  # down-weighted rows count for their weight
     sigma = float(np.sqrt(rss / max(m_eff - k, 1)))
@@ -914,9 +882,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     std = np.full(nc, np.nan)
     with np.errstate(all="ignore"):  # a singular system gives inf/NaN here, which is reported below
         try:
-            Z = null_space(C) if len(d) and k else np.eye(k)  # imposed distances: no variance across them
-            cov = (sigma ** 2 * Z @ np.linalg.inv(Z.T @ (Rk.T @ Rk + ridge * np.eye(k)) @ Z) @ Z.T
-                   / np.outer(scale, scale))
+            cov = sigma ** 2 * np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k)) / np.outer(scale, scale)
         except np.linalg.LinAlgError:
             cov = np.full((k, k), np.inf)
         std[kept] = np.sqrt(np.abs(np.diag(cov)))
@@ -1003,25 +969,13 @@ class _Known:
     def at(self, sigma_m: float) -> "_Known":
         return self if not self.n else replace(self, sigma_m=sigma_m)
 
-    def squares(self, c: np.ndarray, w: np.ndarray) -> tuple[float, float]:
-        """Their weighted squared residuals (m^2) at coefficients c, point weights w (R,), and the
-        summed magnitude of the weighted residuals of those the fit imposes (m)."""
+    def squares(self, c: np.ndarray, w: np.ndarray) -> float:
+        """Their weighted squared residuals (m^2) at coefficients c, point weights w (R,)."""
         if not self.n:
-            return 0.0, 0.0
+            return 0.0
         q, wr, aux = _poses_inputs(self.cm, self.data)
         p = self.cm.model_targets(q, wr, aux, c)[self.data.pose, self.data.target]
-        r = relative.known_rows(self.data.relative, None, p, w, self.sigma_m)[1]
-        return float(np.sum(r ** 2)), float(np.sum(np.abs(r[relative.exact(self.data.relative)])))
-
-    def factor(self, y: np.ndarray, c: np.ndarray, w: np.ndarray, kept: np.ndarray, scale: np.ndarray):
-        """The R factor of [H / scale | r] over the columns `kept` (`qr_accumulate`) at coefficients c
-        and point weights w (R,), with what the fit imposes: its rows C (e, k) in those scaled
-        columns and their residuals d (e,), so that a step dx meets them when C dx = d."""
-        imposed = []
-        R, _ = qr_accumulate(rows_H_and_residual(self.cm, self.data, y, c, weights=w, known_sigma_m=self.sigma_m,
-                                                 constraints=imposed), kept, scale)
-        C = np.vstack([np.zeros((0, len(kept))), *(a[:, kept] / scale for a, _ in imposed)])
-        return R, C, np.concatenate([np.zeros(0), *(b for _, b in imposed)])
+        return float(np.sum(relative.known_rows(self.data.relative, None, p, w, self.sigma_m)[1] ** 2))
 
 
 def _known_rows(cm: CompiledModel, data: Measurements) -> _Known:

@@ -13,9 +13,7 @@ without a known distance - projects to nothing and the redundancy analysis sees 
 A known distance between points a and b is one more row: L - |m_a - m_b| for the fitted points m.
 Carrying the points instead would give it the variance std^2 + sigma^2 (1/n_a + 1/n_b) (the
 points' means have sigma^2 / n along the line), so that is its weight against the rows' sigma; the
-eliminated and the carried problem then have the same minimum (to first order). A distance declared
-exact (std 0) is that row too, and the fit also imposes it as an equality (`exact`): weighted
-alone, the rows' noise would leave the fitted distance off by a share of it.
+eliminated and the carried problem then have the same minimum (to first order).
 """
 from __future__ import annotations
 
@@ -97,14 +95,6 @@ def scale_rows(relative: Relative) -> np.ndarray:
     out = [True] * len(relative.distances)
     for x in relative.relations:
         out += [False] * (RELATIONS[x.kind] - (x.kind == "offset")) + [True] * (x.kind == "offset")
-    return np.array(out, bool)
-
-
-def exact(relative: Relative) -> np.ndarray:
-    """(n_known,) True for the rows of `known_rows` that the fit imposes rather than weighs: the
-    distances declared exact (std 0)."""
-    out = [d.std_m == 0 for d in relative.distances]
-    out += [False] * (relative.n_known - len(out))
     return np.array(out, bool)
 
 
