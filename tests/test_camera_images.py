@@ -100,6 +100,17 @@ def test_image_import_refusals(shots, tmp_path, capsys):
     cv2.imwrite(str(mixed / "img03.png"), cv2.resize(cv2.imread(str(mixed / "img03.png")), (320, 240)))
     assert "one camera's images share one size" in _refused([*base[:4], mixed, *base[5:]], capsys)
     assert "--images, --board and --cameras go together" in _refused(base[:7] + base[-2:], capsys)
+    charuco = "type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\ndictionary: {}\n"
+    (tmp_path / "april.yaml").write_text(charuco.format("DICT_APRILTAG_36h11"))
+    err = _refused([*base[:6], tmp_path / "april.yaml", *base[7:]], capsys)
+    assert "april.yaml, key 'dictionary': 'DICT_APRILTAG_36h11' is not one of the ArUco dictionaries" in err
+    (tmp_path / "aruco.yaml").write_text(charuco.format("DICT_4X4_50"))  # a chessboard has no markers to find
+    assert "check the board file's columns and rows (inner corners, not squares), its marker and dictionary" in \
+        _refused([*base[:6], tmp_path / "aruco.yaml", *base[7:]], capsys)
+    rows = (folder / "readings.csv").read_text().splitlines()
+    (tmp_path / "gone.csv").write_text("\n".join([*rows, "gone.png" + rows[1][rows[1].index(","):]]) + "\n")
+    assert "gone.csv: row 13, column 'image'" in (err := _refused([*base[:2], tmp_path / "gone.csv", *base[3:]], capsys))
+    assert "gone.png does not exist; fix the name or add the image" in err
 
 
 def test_a_charuco_board_names_its_corners(tmp_path):
