@@ -145,6 +145,20 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3) -> d
     return out
 
 
+#: measured by tests/test_camera_images.py (test_real_images_match_the_sources_calibration)
+REAL_IMAGES = (
+    "Detection on real photographs: `gecgen import --images` on OpenCV's 13 sample photographs of a "
+    "printed 9 x 6 chessboard (tests/data/images/opencv, Apache-2.0, with OpenCV's own calibration of "
+    "them) finds the board in all 13. OpenCV does not publish its corners, only its calibration "
+    "(intrinsics, each view's pose) and how far its own corners lie from it (0.16 to 0.38 px RMS per "
+    "view, 1.18 px in left02). gecgen's corners lie 0.18 to 0.33 px RMS per view from where that "
+    "calibration projects the corner of the same name, within 0.06 px of OpenCV's own figure in every "
+    "view (0.82 px in left02), no corner farther than 0.82 px (1.83 px in left02); a corner named wrongly"
+    " would be a square, about 25 px, off. This shows the import keeps OpenCV's sub-pixel quality and "
+    "names every corner consistently on real images; it is not an independent truth for the corners, "
+    "since both come from OpenCV's chessboard detector (tests/test_camera_images.py checks it)."
+)
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
@@ -280,6 +294,7 @@ def write(rows: dict, seeds: int):
               "their field of view no longer holds the plate over these poses.",
               "- *direct* is far off by design: the truth's last-frame errors (0.5 mm, 0.3 mrad per axis) sit "
               "between the flange and the camera, and pixels cannot tell them from the camera's pose."]
+    lines += ["", "## Real images", "", REAL_IMAGES]
     lines += ["", "## What pixels leave undetermined", "",
               "Named in the fit's `eliminated` list, beside the error model's structural merges:", ""]
     for kind in ("eye-in-hand", "eye-to-hand"):

@@ -14,7 +14,7 @@ from gecgen.fit.camera import fit_pixels
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import camera_frame_points, eye_in_hand, render_board, true_tools
 
-from conftest import ROBOTS, run_json
+from conftest import ROBOTS, ROOT, run_json
 from gecgen.cli import main
 
 cv2 = pytest.importorskip("cv2")
@@ -101,6 +101,17 @@ def test_image_import_refusals(shots, tmp_path, capsys):
     cv2.imwrite(str(mixed / "img03.png"), cv2.resize(cv2.imread(str(mixed / "img03.png")), (320, 240)))
     assert "one camera's images share one size" in _refused([*base[:4], mixed, *base[5:]], capsys)
     assert "--images, --board and --cameras go together" in _refused(base[:7] + base[-2:], capsys)
+    charuco = "type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\ndictionary: {}\n"
+    (tmp_path / "april.yaml").write_text(charuco.format("DICT_APRILTAG_36h11"))
+    err = _refused([*base[:6], tmp_path / "april.yaml", *base[7:]], capsys)
+    assert "april.yaml, key 'dictionary': 'DICT_APRILTAG_36h11' is not one of the ArUco dictionaries" in err
+    (tmp_path / "aruco.yaml").write_text(charuco.format("DICT_4X4_50"))  # a chessboard has no markers to find
+    assert "check the board file's columns and rows (inner corners, not squares), its marker and dictionary" in \
+        _refused([*base[:6], tmp_path / "aruco.yaml", *base[7:]], capsys)
+    rows = (folder / "readings.csv").read_text().splitlines()
+    (tmp_path / "gone.csv").write_text("\n".join([*rows, "gone.png" + rows[1][rows[1].index(","):]]) + "\n")
+    err = _refused([*base[:2], tmp_path / "gone.csv", *base[3:]], capsys)
+    assert "gone.csv: row 13, column 'image'" in err and "gone.png does not exist; fix the name or add the image" in err
 
 
 def test_a_charuco_board_names_its_corners(tmp_path):
@@ -125,3 +136,46 @@ def test_a_charuco_board_names_its_corners(tmp_path):
     assert len(error) >= 8 * 40 and np.sqrt(np.mean(error ** 2)) < 0.15
     fit = fit_pixels(robot, load_error_model(ROBOTS / "constant.errors.yaml", robot), data, {"cam": CAMERA}, board)
     assert fit.converged and not fit.failures and fit.train["rms_px"] < 0.3
+
+
+REAL = ROOT / "tests" / "data" / "images" / "opencv"  # OpenCV's samples, Apache-2.0: see its README.md
+
+
+def test_real_images_match_the_sources_calibration(tmp_path):
+    """Thirteen photographs of a printed 9 x 6 chessboard from OpenCV's samples, through `gecgen import
+    --images`: every corner lies where OpenCV's own calibration of these images (its intrinsics and each
+    view's pose) projects the corner of that name, as closely as OpenCV's own corners did (its per-view
+    RMS, stored with the calibration). Same detector family, so this shows gecgen's import keeps OpenCV's
+    sub-pixel quality on real images and names every corner consistently with the board's geometry."""
+    source = cv2.FileStorage(str(REAL / "left_intrinsics.yml"), cv2.FILE_STORAGE_READ)
+    K, dist = source.getNode("camera_matrix").mat(), source.getNode("distortion_coefficients").mat().ravel()
+    poses = source.getNode("extrinsic_parameters").mat()
+    their_rms = source.getNode("per_view_reprojection_errors").mat().ravel()
+    names = [f"left{k:02d}.jpg" for k in (1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14)]
+    assert source.getNode("nframes").real() == len(names) == len(poses)
+    board = Board(int(source.getNode("board_width").real()), int(source.getNode("board_height").real()),
+                  source.getNode("square_size").real())
+    camera = Camera("cam", *K[[0, 1, 0, 1], [0, 1, 2, 2]].tolist(), tuple(dist.tolist()), 640, 480, "tool")
+    home = ",".join(map(repr, np.radians([0, -90, -90, 0, 60, 0]).tolist()))  # no robot took them: any pose
+    (tmp_path / "readings.csv").write_text("image,q1,q2,q3,q4,q5,q6\n" + "".join(f"{n},{home}\n" for n in names))
+    (tmp_path / "cams.yaml").write_text(camera_yaml(camera))
+    (tmp_path / "board.yaml").write_text(f"columns: {board.columns}\nrows: {board.rows}\nsquare: {board.square}\n")
+    out = run_json("import", ROBOTS / "industrial6r.yaml", tmp_path / "readings.csv", "--images", REAL, "--board",
+                   tmp_path / "board.yaml", "--cameras", tmp_path / "cams.yaml", "-o", tmp_path / "px.csv")
+    assert out["not_found"] == [] and out["poses"] == len(names) and out["rows"] == len(names) * 54
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    data = read_pixels(tmp_path / "px.csv", robot, {"cam": camera}, board)
+    ours = np.full((len(names), len(board.names), 2), np.nan)
+    ours[data.pose, data.point] = data.uv
+    rms, worst = [], []
+    for k, pose in enumerate(poses):
+        theirs = cv2.projectPoints(board.corners, pose[:3], pose[3:], K, dist)[0].reshape(-1, 2)
+        if theirs[-1].sum() < theirs[0].sum():  # the board's end gecgen calls r0c0 (see gecgen.model.images)
+            theirs = theirs[::-1]
+        error = np.linalg.norm(ours[k] - theirs, axis=1)
+        rms.append(np.sqrt(np.mean(error ** 2))), worst.append(error.max())
+    rms, worst = np.array(rms), np.array(worst)
+    # px: per view no farther from the source's calibration than the source's own corners (+0.07 px for
+    # the JPEG decoder and OpenCV version); a corner named wrongly would be a square (~25 px) off
+    assert (rms <= their_rms + 0.07).all(), np.column_stack([rms, their_rms])
+    assert (worst < np.where(their_rms < 0.5, 1.0, 2.0)).all(), worst

@@ -172,6 +172,8 @@ def read_board(path: str | Path) -> Board:
     marker, dictionary = spec.get("marker"), spec.get("dictionary")
     require(isinstance(marker, (int, float)) and not isinstance(marker, bool) and 0 < marker < square,
             f"{path}, key 'marker': {marker!r}; give the ArUco marker's side in m, smaller than the square")
-    require(dictionary in ARUCO_DICTIONARIES, f"{path}, key 'dictionary': {dictionary!r}; give OpenCV's name of "
-                                              f"the ArUco dictionary, e.g. DICT_5X5_100")
+    require(dictionary in ARUCO_DICTIONARIES, f"{path}, key 'dictionary': {dictionary!r} is not one of the ArUco "
+                                              f"dictionaries a board may use ({ARUCO_DICTIONARIES[0]} .. "
+                                              f"{ARUCO_DICTIONARIES[-1]}, OpenCV's names); give the one the board "
+                                              f"was printed with, e.g. DICT_5X5_100")
     return Board(spec["columns"], spec["rows"], float(square), str(path), kind, float(marker), dictionary)

@@ -142,7 +142,8 @@ def detect(readings, folder: str | Path, robot: Robot, cameras: dict[str, Camera
         pose.append(np.full(len(corners), r)), cam.append(np.full(len(corners), cam_names.index(c)))
         point.append(index), uv.append(corners)
     require(pose, f"{folder}: the {board.columns} x {board.rows} inner corners of the board were found in none "
-                  f"of the {len(names)} images; check the board file's columns and rows (inner corners, not squares)")
+                  f"of the {len(names)} images; check the board file's columns and rows (inner corners, not squares)"
+                  + (", its marker and dictionary" if board.kind == "charuco" else ""))
     pose, cam, point, uv = (np.concatenate(a) for a in (pose, cam, point, uv))
     used = np.unique(pose)
     remap = -np.ones(len(names), int)
