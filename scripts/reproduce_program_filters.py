@@ -126,9 +126,8 @@ arm before filtering its programs.
   backup (a nut-welding cell; found by code search, not copied: no licence), and in the two of RoboDK's
   KUKA post processor and a C# test, S bit 2 equals T bit 4 (A5 negative) in every one: S 6 with T 50,
   S 2 with T 3, 34 and 35. ISG's CNC kernel documentation of Status & Turn (kinematics type 45) says
-  the opposite (4 added when A5 > 0), as gecgen did until this check; the points the controllers
-  wrote decide it, so gecgen now sets bit 2 when A5 < 0, and the test program's S values were
-  corrected to it. KUKA's own manuals word this bit ambiguously (robot-forum.com thread 45777).
+  the opposite (4 added when A5 > 0); the points the controllers wrote decide it, so gecgen sets
+  bit 2 when A5 < 0. KUKA's own manuals word this bit ambiguously (robot-forum.com thread 45777).
 - **KUKA T** (bit k: axis k+1 negative): ISG's documentation above, and the same taught points.
   Agrees.
 - **ABB cf1, cf4, cf6** (the quadrant of axes 1, 4 and 6: 0 from 0 to 90 deg, 1 from 90 to 180, -1

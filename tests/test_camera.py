@@ -374,3 +374,19 @@ def test_refined_intrinsics_find_the_true_camera_from_a_perturbed_file(arm):
     # within 4 of their stated std of the truth, and that std small against what the file was off by
     assert all(abs(values[k] - true[k]) < 4 * std[k] for k in true), {k: (values[k] - true[k], std[k]) for k in true}
     assert std["fx"] < 1.0 and std["cx"] < 1.5 and std["k1"] < 0.005
+
+
+def test_one_camera_seeing_one_marker_holds_what_it_cannot_determine_and_says_so(tmp_path):
+    """One fixed camera, one marker (the robot's only target), the default error model: more unknowns
+    than the image points give. identify holds what they leave undetermined, names it, and warns that
+    the calibration corrects only the few coefficients the images determine; never a traceback."""
+    from conftest import run_json
+
+    (tmp_path / "cam.yaml").write_text("cameras:\n  cam1: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, "
+                                       "distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0], width: 1280, height: 960}\n")
+    run_json("simulate", ROBOTS / "industrial6r.yaml", "--cameras", tmp_path / "cam.yaml", "--eye", "cam1=2.5,0,1.5",
+             "--seed", "1", "-o", tmp_path / "pixels.csv")
+    fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "pixels.csv", "--cameras",
+                   tmp_path / "cam.yaml", "-o", tmp_path / "cal.json")
+    assert fit["converged"] and 0 < fit["n_identifiable"] < 20 and fit["held"]
+    assert any(w.startswith(f"the images determine {fit['n_identifiable']} of the ") for w in fit["warnings"])

@@ -530,17 +530,6 @@ def test_a_turned_flange_with_its_tool_turned_back_changes_nothing(kuka_cal, tmp
             assert np.allclose([float(v) for v in x.after], [float(v) for v in y.after], atol=2e-3)
 
 
-def test_a_public_krl_program_round_trips(kuka_cal, tmp_path):
-    """ros-industrial's RSI program (BSD, tests/data/programs/krl/ros_rsi): no .dat, two inline joint
-    targets among RSI calls, LF line ends."""
-    source = DATA / "krl" / "ros_rsi" / "ros_rsi.src"
-    program = kuka.parse(source)
-    assert [(t.kind, t.values) for t in program.targets] == [("joint", (0, -90, 90, 0, 90, 0))] * 2
-    outcome = _round_trips(kuka.FORMAT, kuka_cal[0], source, tmp_path / "ros_rsi.src")
-    assert outcome.corrected == 2
-    assert (tmp_path / "ros_rsi.src").read_text().count("PTP {A1 ") == 2
-
-
 def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
     program = tmp_path / "c.script"
     program.write_text("def c():\n  movej(get_inverse_kin(p[0.5, -0.2, 0.3, 3.1, 0.1, 0.0], qnear=[0, -1.5, 1.5, -1.5, -1.5, 0]),"
@@ -553,6 +542,22 @@ def test_ur_movec_and_get_inverse_kin_targets_are_read(tmp_path):
     assert [(t.name, t.kind, t.values[0]) for t in targets] == [
         ("Via_p", "pose", 0.45), ("movej line 3", "pose", 0.5), ("movec line 4", "pose", 0.5),
         ("movec line 5", "pose", 0.4)]
+
+
+def test_ur_variables_set_again_or_named_like_a_parameter_are_not_targets(tmp_path):
+    """A variable the program gives a literal and then sets again (element by element, or from a
+    call), or a function's parameter of a literal's name, moves the robot to a value known only at run
+    time: listed and kept, its initial literal never rewritten. A variable assigned once is a target."""
+    program = tmp_path / "v.script"
+    program.write_text("def v():\n  global home = [0.1, -1.5, 1.5, -1.5, -1.5, 0.2]\n  global q = [0, 0, 0, 0, 0, 0]\n"
+                       "  q[0] = read_input_float_reg(0)\n  global p1 = p[0.5, -0.2, 0.3, 3.1, 0.1, 0.0]\n"
+                       "  p1 = get_actual_tcp_pose()\n  def go(home):\n    movej(home)\n  end\n"
+                       "  movej(home)\n  movej(q)\n  movel(p1)\nend\n")
+    found = [(t.name, t.kind) for t in ur.parse(program).targets]
+    assert found == [("movej to home (line 8)", "motion"), ("movej to home (line 10)", "motion"),
+                     ("movej to q (line 11)", "motion"), ("movel to p1 (line 12)", "motion")]
+    program.write_text(program.read_text().replace("  def go(home):\n    movej(home)\n  end\n", ""))
+    assert [(t.name, t.kind) for t in ur.parse(program).targets][0] == ("home", "joint")
 
 
 def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
@@ -584,15 +589,12 @@ def _motion_lines(fmt, path: Path) -> list[int]:
 
 
 @pytest.mark.parametrize("fmt, source, cal, n_kept", [
-    (kuka.FORMAT, "krl/kuka_eki/kuka_eki_hw_interface.src", "kuka_cal", 2),
-    (abb.FORMAT, "rapid/abb_driver/ROS_motion.mod", "abb_cal", 1),
-    (abb.FORMAT, "rapid/motion_program_exec/motion_program_exec.mod", "abb_cal", 10),
-    (fanuc.FORMAT, "tp/fanuc_driver/ros_movesm.ls", "fanuc_cal", 1),
-    (ur.FORMAT, "ur/urcl/external_control.urscript", "ur_cal", 20),
+    (ur.FORMAT, "ur/ur_rtde/rtde_control.script", "ur_cal", 9),
 ])
 def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, cal, n_kept, request, tmp_path):
-    """Drivers of ros-industrial, Universal Robots and RPI: every motion goes to a target set while the
-    program runs. Zero and real calibrations leave every byte; each motion is listed with its line and
+    """A driver (ur_rtde's control script): every motion goes to a target set while the program runs,
+    some to variables the program first gives a literal value and then sets again from registers, or
+    to a function's parameter named like one. Zero and real calibrations leave every byte; each motion is listed with its line and
     why it is not corrected, none is dropped."""
     source = DATA / source
     outcome = _round_trips(fmt, request.getfixturevalue(cal)[0], source, tmp_path / source.name)
@@ -608,29 +610,12 @@ def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, ca
 def test_cli_names_a_public_programs_first_kept_target_by_file_and_line(ur_cal, tmp_path):
     cal = tmp_path / "cal.json"
     ur_cal[0].save(cal)
-    source = DATA / "ur" / "urcl" / "external_control.urscript"
-    code, out, err = _cli("filter", cal, source, "-o", tmp_path / "out.urscript")
-    assert code != 0 and f"{source}:592: movej to q (line 592) kept as written (a target computed at run time" in err
-    assert (tmp_path / "out.urscript").read_bytes() == source.read_bytes()
-    assert json.loads(out)["corrected"] == 0 and len(json.loads(out)["kept"]) == 20
-
-
-def test_a_tp_plus_program_round_trips(fanuc_cal, tmp_path):
-    """TP+'s compiled example (Apache-2.0): joint and Cartesian positions in UF 3 and UT 5 (their poses
-    in tp_plus/frames.yaml), motion lines without numbers (" : J P[1:p1] ..."), values as TP+ writes
-    them. Only target numbers change, every configuration kept (where TP programs land is tested on
-    weld_seam.ls above)."""
-    source, frames = DATA / "tp" / "tp_plus" / "test10.ls", DATA / "tp" / "tp_plus" / "frames.yaml"
-    program = fanuc.parse(source)
-    assert [(t.name, t.kind, t.config, t.tool, t.base) for t in program.targets] == \
-        [("P[1]", "joint", None, None, None)] + [(f"P[{k}]", "pose", (1, 1, 1, 0, 0, 0), "5", "3") for k in range(2, 7)]
-    assert _motion_lines(fanuc.FORMAT, source) == [9, 16, 17, 21, 22, 23]
-    out = tmp_path / "test10.ls"
-    outcome = _round_trips(fanuc.FORMAT, fanuc_cal[0], source, out, frames)
-    # P[1]'s J3 = 90.5 deg is beyond the arm's 90 deg: listed, never moved
-    assert outcome.corrected == 5 and (outcome.changes[0].target.name, outcome.changes[0].reason) == \
-        ("P[1]", "outside the joint limits")
-    assert all(0.05 < c.position_mm < 20 for c in outcome.changes[1:])
+    source = DATA / "ur" / "ur_rtde" / "rtde_control.script"
+    code, out, err = _cli("filter", cal, source, "-o", tmp_path / "out.script")
+    assert code != 0 and f"{source}:167: movej to move_q (line 167) kept as written (a target computed at run time" \
+        in err
+    assert (tmp_path / "out.script").read_bytes() == source.read_bytes()
+    assert json.loads(out)["corrected"] == 0 and len(json.loads(out)["kept"]) == 9
 
 
 # -- the Python API and the robots the filters speak for ---------------------------------------------

@@ -24,7 +24,8 @@ def add_options(p):
 
 def identified(args) -> dict:
     """The calibration from the pixel file args.data and its JSON result."""
-    from gecgen.cli.common import robot_and_model
+    from gecgen.cli.common import robot_and_model, warned
+    from gecgen.cli.human import warning_lines
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
     from gecgen.fit.calibration import save
@@ -44,8 +45,9 @@ def identified(args) -> dict:
     require(not model.aux or set(model.aux) <= set(data.aux_names),
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
-    fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
-                     intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
+    with warned() as caught:
+        fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
+                         intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit)
     out = args.output or f"{robot.name}.calib.json"
@@ -56,6 +58,7 @@ def identified(args) -> dict:
                                                   "held", "scale")},
             **({"board": calibration.report["board"]} if board is not None else {}),
             **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
+            "warnings": warning_lines(caught),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
     if args.report:
         from gecgen import report

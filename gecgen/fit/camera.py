@@ -24,6 +24,7 @@ identify holds them for a tracker), with the poses projected out of their column
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -440,6 +441,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
 
     limit = limit_of(e)
     held = ()
+    determinable = len(kept)
     if hold_weak and kept:
         kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
         eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
@@ -497,6 +499,13 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "insignificant", why)
                                                       for j, why in insignificant.items())], key=lambda x: x.index))
     kept = [int(j) for j in cols]
+    if len(kept) < determinable:
+        left = [h.param for h in held] + [model.coefficient_names(robot)[j] for j in insignificant]
+        warnings.warn(f"the images determine {len(kept)} of the {determinable} coefficients the model can have "
+                      f"({', '.join(left[:6])}{', ...' if len(left) > 6 else ''} held at zero: `held` and "
+                      f"`eliminated` say why): the calibration corrects only what "
+                      f"{'that one carries' if len(kept) == 1 else f'those {len(kept)} carry'}; more "
+                      f"poses, targets or cameras determine more", stacklevel=2)
     wr = robust.weights(e, limit, loss)
     std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
     # the scale's uncertainty before the gate: holding coefficients at zero would state it given their

@@ -133,7 +133,8 @@ def weak(Rk: np.ndarray, scale: np.ndarray, F: np.ndarray, error: np.ndarray, li
         # the coefficient held is the one the direction moves most in the scaled coordinates (QR
         # pivoting's choice): the column the others come nearest to, whose loss conditions the rest best
         j = int(np.argmax(np.abs(Vt[i])))
-        out.append((active[j], float(sigma / S[i] * size[i, j] * limit[active[j]]), float(ratio[i])))
+        with np.errstate(divide="ignore"):
+            out.append((active[j], float(sigma / S[i] * size[i, j] * limit[active[j]]), float(ratio[i])))
         active.pop(j)
     return out
 
@@ -148,7 +149,11 @@ def hold(cm, data, kept, R: np.ndarray, scale: np.ndarray, dof: float, noise: fl
     fit over every kept column leaves, at most cap: if anything smaller than the noise, as it fits
     some noise too, so that fewer directions are held rather than more."""
     k = len(kept)
-    sigma = noise if noise is not None else min(float(abs(R[k, k]) / np.sqrt(max(dof - k, 1.0))), cap)
+    if R.shape[0] < k + 1:  # fewer rows than unknowns: what the rows do not reach is not determined at all
+        R = np.vstack([R, np.zeros((k + 1 - R.shape[0], R.shape[1]))])
+    # without rows to spare, the residual says nothing of the noise: the cap stands for it
+    sigma = noise if noise is not None else cap if dof <= k else \
+        min(float(abs(R[k, k]) / np.sqrt(dof - k)), cap)
     F, error, limit = term_values(cm, data)
     kept = np.asarray(kept, int)
     found = weak(R[:k, :k], scale, F[:, kept], error[kept], limit[kept], sigma)
@@ -200,6 +205,9 @@ def reasons(cm, data, indices, stds, beyond) -> list[Held]:
             what = f"{span[i - 1]:.3g} {'rad' if joint.kind == 'R' else 'm'}"
             why = (f"joint {i} ({joint.name}) barely moves (its readings span {what}): the errors its motion "
                    f"would tell apart are not determined; held at zero (measure poses that move it)")
+        elif not np.isfinite(ratio):
+            why = ("the data do not determine it at all (fewer independent measurements than unknowns); held at zero "
+                   "(measure more poses, or more targets or cameras)")
         else:
             why = (f"the data determine its direction only to {ratio:.3g} times a plausible size (1-sigma against "
                    f"{1e3 * PLAUSIBLE_M:g} mm, {1e3 * PLAUSIBLE_RAD:g} mrad); held at zero (measure poses that "

@@ -4,8 +4,9 @@ and its target), `optimovej` and `optimovel` to a joint list `[q1, ..., q6]` (ra
 (also through `get_inverse_kin(pose, ...)`) or assigned to a variable the call names. The TCP is the
 last `set_tcp(p[...])` before the target, else the installation's (`tools: installation` of a frames file).
 The controller has no configuration flags: a pose is reached nearest the joints of the target before.
-A move to anything else (a variable set at run time, an expression) is listed and kept as written,
-and the pose after it has no target before it to be solved near.
+A move to anything else (a variable set again, element by element or at run time; a function's
+parameter; an expression) is listed and kept as written, and the pose after it has no target before
+it to be solved near.
 """
 from __future__ import annotations
 
@@ -25,6 +26,11 @@ ASSIGN = re.compile(r"^[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[
 SET_TCP = re.compile(r"\bset_tcp\s*\(\s*p\[([^\[\]]*)\]\s*\)")
 SIX = re.compile(r"^\s*[-+.\d][-+.\deE]*(\s*,\s*[-+.\d][-+.\deE]*){5}\s*$")
 NAME = re.compile(r"[A-Za-z_]\w*")
+#: any assignment to a name or to one of its elements (`q = ...`, `q[0] = ...`), not a comparison
+ANY_ASSIGN = re.compile(r"^[ \t]*(?:\$[\d.]+[ \t]+)?(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*(?:\[[^\]\n]*\])?"
+                        r"[ \t]*=(?!=)", re.M)
+#: a function's or thread's parameters: names bound at each call, never a fixed target
+PARAMETERS = re.compile(r"\b(?:def|thread)[ \t]+\w+[ \t]*\(([^)]*)\)")
 #: the calls a target expression may pass through on its way to a move (UR's own inverse kinematics)
 PASS = {"get_inverse_kin"}
 
@@ -78,7 +84,15 @@ def parse(path: Path) -> Program:
         before = [name for start, name, _ in tcps if start < at]
         return before[-1] if before else "installation"
 
-    assigned = {m.group(1): m for m in ASSIGN.finditer(code) if SIX.match(m.group(3))}
+    # a variable is a target only when the program gives it one literal value and never sets it again
+    # (a driver's `q = [0, 0, 0, 0, 0, 0]` later filled from registers is not one), and no function
+    # takes a parameter of that name
+    times = {}
+    for m in ANY_ASSIGN.finditer(code):
+        times[m.group(1)] = times.get(m.group(1), 0) + 1
+    parameters = {n for m in PARAMETERS.finditer(code) for n in NAME.findall(m.group(1))}
+    assigned = {m.group(1): m for m in ASSIGN.finditer(code)
+                if SIX.match(m.group(3)) and times.get(m.group(1)) == 1 and m.group(1) not in parameters}
     found: dict[int, Target] = {}
     used: dict[str, int] = {}
     for m in MOVE.finditer(code):
