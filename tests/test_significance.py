@@ -1,6 +1,8 @@
 """Significance: backward elimination on the fitted covariance equals refitting without each
 dropped coefficient (plain least squares, checked by brute force), and a calibration carries only
 what the data determine."""
+import json
+
 import numpy as np
 import pytest
 
@@ -129,3 +131,28 @@ def test_the_refit_begins_from_the_fits_own_analysis_and_finds_the_same():
     assert a.serves(cm, a.y, a.rank_tol) and not a.serves(cm, a.y, 1e-3) and not a.serves(cm, a.y[:-1], a.rank_tol)
     other = CompiledModel(robot, load_error_model("robots/constant.errors.yaml", robot))
     assert not a.serves(other, a.y, a.rank_tol)  # another model's analysis of the same data
+
+
+def test_a_variance_that_is_not_positive_determines_nothing():
+    """A singular or numerically broken covariance (a negative or NaN variance) never stops the gate:
+    those coefficients are dropped first, the others judged as before."""
+    x = np.array([1.0, 1e-3, 5.0])
+    cov = np.diag([0.01, -1e-6, 0.01])
+    assert list(significance.backward_elimination(x, cov, 1.0, 10.0)) == [1]
+    cov[1, 1] = np.nan
+    assert list(significance.backward_elimination(x, cov, 1.0, 10.0)) == [1]
+
+
+def test_a_barely_moving_joint_leaves_no_coefficient_the_data_do_not_determine(tmp_path):
+    """Joint 4 barely moves (1 mrad) and the default model has terms in it: its covariance from the
+    squared normal equations lost every digit (condition 1e9) and stopped the gate silently; from R
+    every kept coefficient is determined (|value| / std >= 2)."""
+    from conftest import ROBOTS, run_json
+
+    run_json("simulate", ROBOTS / "industrial6r.yaml", "--design", "barely-moving", "--joint", "4", "--poses", "120",
+             "--seed", "1", "-o", tmp_path / "train.csv")
+    fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "train.csv", "-o", tmp_path / "cal.json")
+    calib = json.loads((tmp_path / "cal.json").read_text())
+    kept = [c for c in calib["coefficients"] if c["identified"]]
+    assert fit["significance"]["n_determined"] == len(kept) < fit["n_identifiable"]
+    assert all(abs(c["value"]) >= 2 * c["std"] for c in kept), [c for c in kept if abs(c["value"]) < 2 * c["std"]]

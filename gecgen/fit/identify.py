@@ -882,7 +882,12 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     std = np.full(nc, np.nan)
     with np.errstate(all="ignore"):  # a singular system gives inf/NaN here, which is reported below
         try:
-            cov = sigma ** 2 * np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k)) / np.outer(scale, scale)
+            if ridge > 0:
+                inverse = np.linalg.inv(Rk.T @ Rk + ridge * np.eye(k))
+            else:  # from R itself: (R^T R)^-1 would square its condition number, and at 1e9 lose every digit
+                Rinv = solve_triangular(Rk, np.eye(k))
+                inverse = Rinv @ Rinv.T
+            cov = sigma ** 2 * inverse / np.outer(scale, scale)
         except np.linalg.LinAlgError:
             cov = np.full((k, k), np.inf)
         std[kept] = np.sqrt(np.abs(np.diag(cov)))

@@ -40,7 +40,7 @@ def backward_elimination(x: np.ndarray, cov: np.ndarray, sigma: float, dof: floa
     significant first, for fitted values x (k,) with covariance cov (k, k), residual standard
     deviation sigma and dof = measured degrees of freedom - k. Empty when all are determined."""
     x = np.array(x, float)
-    if sigma <= 0 or not np.isfinite(sigma) or not np.all(np.isfinite(cov)):
+    if sigma <= 0 or not np.isfinite(sigma):
         return {}
     M = np.array(cov, float) / sigma ** 2
     rss, dof = sigma ** 2 * dof, float(dof)
@@ -50,14 +50,17 @@ def backward_elimination(x: np.ndarray, cov: np.ndarray, sigma: float, dof: floa
         diag = np.diag(M)[active]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.abs(x[active]) / np.sqrt(s2 * diag)
+        # a variance that is not a positive number (a singular system) determines nothing
+        t = np.where(np.isfinite(diag) & (diag > 0), t, 0.0)
         j = int(np.argmin(t))
         if not t[j] < T_MIN:
             break
         a = active.pop(j)
         dropped[a] = float(t[j])
-        rss += x[a] ** 2 / M[a, a]
-        x -= M[:, a] * x[a] / M[a, a]
-        M -= np.outer(M[:, a], M[a, :]) / M[a, a]
+        if np.isfinite(M[a]).all() and M[a, a] > 0:  # the others, given it is zero
+            rss += x[a] ** 2 / M[a, a]
+            x -= M[:, a] * x[a] / M[a, a]
+            M -= np.outer(M[:, a], M[a, :]) / M[a, a]
         dof += 1.0
     return dropped
 
