@@ -42,3 +42,7 @@ def test_the_readme_walkthrough_runs_as_written(tmp_path):
     *corrected, code, residual_mm = (tmp_path / "out.csv").read_text().splitlines()[1].split(",")
     assert middle.returncode == 1 and "row 2: near a singular posture" in middle.stderr and code == "2"
     assert np.abs(np.array(corrected, float) - q_cmd).max() < 0.05 and float(residual_mm) > 1
+    # the next step calibrate advises runs as printed (its probe is left to estimate: --given places it)
+    advised = re.search(r"gecgen design \S+ --given \S+ --poses \d+ -o [^\s`,]+", run.stdout).group(0)
+    design = subprocess.run(["bash", "-e", "-c", advised], cwd=tmp_path, capture_output=True, text=True, env=env)
+    assert design.returncode == 0, (advised, design.stderr)

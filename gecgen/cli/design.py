@@ -143,6 +143,10 @@ def _designed(args, status) -> dict:
         header = read_table(args.from_csv, "file of candidate poses", "q1..qn").header
         columns = tuple(h for h in header if h not in WRENCH and not (h[:1] == "q" and h[1:].isdigit()))
     robot, model = robot_and_model(args.robot, args.errors, columns)
+    if given is not None and robot.estimated:  # the measured poses place what the robot file leaves open
+        from gecgen.fit.placement import place_targets
+
+        robot = place_targets(robot, given)[0]
     cands = _candidates(args, robot, model)
     targets = _targets(args, robot, given)
     tracker = _numbers(args.tracker, "tracker", 3, "m") if args.tracker else None
