@@ -1,5 +1,7 @@
 """Calibration from pixels: the projection against OpenCV, the fit's Jacobian against finite differences,
 the fit against simulated truths (eye-in-hand and eye-to-hand), the files and their refusals."""
+import contextlib
+import io
 from dataclasses import replace
 
 import numpy as np
@@ -219,9 +221,14 @@ def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
     rig, *_, data = hand_rig(arm, n=3)
     write_pixels(tmp_path / "pixels.csv", robot, data)
     assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
-    with pytest.raises(ModelError, match="a pixel file .*give the camera file with --cameras"):
+    with pytest.raises(ModelError, match=r"a pixel file .*identify and redundancy read with the camera file \(--cameras\)"):
         from gecgen.model.measurements import read_measurements
         read_measurements(tmp_path / "pixels.csv", robot)
+    # evaluate has no --cameras: the refusal of the option points to its own help
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), pytest.raises(SystemExit):
+        main(["evaluate", str(tmp_path / "cal.json"), str(tmp_path / "pixels.csv"), "--cameras", "c.yaml"])
+    assert err.getvalue().strip().endswith("see gecgen evaluate --help")
 
 
 def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
@@ -315,9 +322,6 @@ def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_simila
 
 
 def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(arm, tmp_path):
-    import contextlib
-    import io
-
     from conftest import run_json
     from gecgen.cli import main
 

@@ -78,7 +78,9 @@ class _Parser(argparse.ArgumentParser):
         if wrong:  # argparse lists the choices; a near miss gets named
             choices = re.findall(r"'([^']*)'", wrong.group(2))
             line = line[:wrong.start()] + f"invalid choice {wrong.group(1)!r}; {nearest(wrong.group(1), choices)}"
-        self.exit(2, f"{self.prog}: {line}; see {self.prog} --help\n")
+        # an unknown option of a command is found by the top parser: its help is the command's
+        command = getattr(self, "command", None)
+        self.exit(2, f"{self.prog}: {line}; see {self.prog}{f' {command}' if command else ''} --help\n")
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -106,6 +108,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         return p
 
     wanted = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    parser.command = wanted if wanted in COMMANDS else None
     for name, (module, _) in COMMANDS.items():
         if argv is None or name == wanted:
             importlib.import_module(f"gecgen.cli.{module}").add_parser(command)
