@@ -13,6 +13,8 @@ def scalar(value) -> str:
     not known (JSON null), `none` for an empty list and `yes` or `no` for a truth, not Python's spellings."""
     if value is None:
         return "-"
+    if hasattr(value, "item") and getattr(value, "ndim", None) == 0:  # numpy's scalars read as Python's
+        value = value.item()
     if isinstance(value, bool):
         return "yes" if value else "no"
     if isinstance(value, list):  # an interval: [low, high]

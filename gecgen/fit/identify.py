@@ -828,7 +828,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
             held += more
             kept, k, scale = kept[stay], len(stay), scale[stay]
             R = np.linalg.qr(R[:, [*stay, -1]], mode="r")  # the same rows' R factor over the columns left
-    notes.extend(f"not determined, held at zero: {h}" for h in held)
+    notes.extend(weak.said(held))
     converged, it, lam, why_not = False, 0, 0.0, f"Gauss-Newton did not converge in {max_iter} iterations"
     for it in range(1, max_iter + 1):
         w = rows.weight * wr[rows.group]

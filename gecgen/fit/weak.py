@@ -71,6 +71,16 @@ class Held:
         return f"{self.param}{known}: {self.reason}"
 
 
+def said(held) -> list[str]:
+    """The held coefficients as a person reads them: one line per reason (the tool that never turns
+    holds a score of coefficients for one cause), the coefficients it holds named in it."""
+    by_reason: dict[str, list[Held]] = {}
+    for h in held:
+        by_reason.setdefault(h.reason, []).append(h)
+    return [f"not determined, held at zero: {str(hs[0]) if len(hs) == 1 else ', '.join(h.param for h in hs)}"
+            f"{'' if len(hs) == 1 else f' ({len(hs)} coefficients): {reason}'}" for reason, hs in by_reason.items()]
+
+
 #: poses the generalized errors of a direction are evaluated at, at most (spread through the data)
 SAMPLE_POSES = 2000
 
