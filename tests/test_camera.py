@@ -349,6 +349,22 @@ def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(a
     assert fit["converged"] and 0.2 < fit["train"]["rms_px"] < 0.35
     refined = fit["intrinsics"]["cam"]
     assert abs(refined["fx"] - cam.fx) < 4 * refined["std"]["fx"] and refined["std"]["fx"] < 2.0
+    # an intrinsic is named as not determined exactly when its 1 sigma moves a point seen at the image's
+    # corner by more than 1 px: measured here on the camera's own projection
+    corner = np.array([[cam.width / 2 / cam.fx, cam.height / 2 / cam.fy, 1.0]])
+    fields = {"fx": "fx", "fy": "fy", "cx": "cx", "cy": "cy"}
+    moved = {}
+    for k, v in refined["std"].items():
+        if k in fields:
+            shifted = replace(cam, **{k: getattr(cam, k) + v})
+        else:
+            d = list(cam.distortion)
+            d[("k1", "k2", "p1", "p2", "k3").index(k)] += v
+            shifted = replace(cam, distortion=tuple(d))
+        moved[k] = float(np.linalg.norm(shifted.project(corner) - cam.project(corner)))
+    said = [w for w in fit["warnings"] if w.startswith("camera cam: the images determine ")]
+    named = said[0].split("determine ")[1].split(" only")[0].split(", ") if said else []
+    assert sorted(named) == sorted(k for k, m in moved.items() if m > 1.0), (named, moved)
     (tmp_path / "world.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("mount: tool", "mount: world"))
     for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
                            (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),

@@ -60,6 +60,9 @@ STEP = 1e-7
 NOISE_CAP_PX = 1.0
 #: a camera's intrinsics the fit refines on request: fx, fy, cx, cy and OpenCV's five distortion coefficients
 N_INTRINSICS = 9
+#: a refined intrinsic whose 1 sigma moves a point at the image's corner by more than this (px) is
+#: not determined by the images
+INTRINSICS_PX = 1.0
 INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 #: the two reasons pixels leave a coefficient undetermined, named in `eliminated`
 CAMERA_POSE = "camera pose"
@@ -534,6 +537,14 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
         for i, cam in enumerate(cameras[n] for n in d.cameras):
             v = std_g[problem.n_poses_geom + N_INTRINSICS * i:problem.n_poses_geom + N_INTRINSICS * (i + 1)]
             intrinsics_std[cam.name] = dict(zip(INTRINSICS, [*(cam.fx * v[:4]), *v[4:]]))
+        for name, spread in intrinsics_std.items():
+            loose = [k for k, v in spread.items() if not v * _px_per_unit(cameras[name], k) <= INTRINSICS_PX]
+            if loose:
+                warnings.warn(f"camera {name}: the images determine {', '.join(loose)} only to more than "
+                              f"{INTRINSICS_PX:g} px at the image's corner (1 sigma; JSON intrinsics std): their "
+                              f"refined values are not the camera's; keep the camera file's (leave out "
+                              f"--refine-intrinsics, or refine them from board images that fill the frame)",
+                              stacklevel=2)
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
                     {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
@@ -552,6 +563,17 @@ def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, w
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     return A / scale, b, scale
+
+
+def _px_per_unit(cam: Camera, name: str) -> float:
+    """How far (px) a unit change of intrinsic `name` moves a point at the image's corner, to first
+    order: the corner's normalised x or y for a focal length, 1 for the principal point, f r^(2i+1)
+    for the radial coefficients, about 3 f r^2 for the tangential ones (r the corner's normalised
+    radius)."""
+    r = float(np.hypot(cam.width / 2, cam.height / 2)) / cam.fx
+    return {"fx": cam.width / 2 / cam.fx, "fy": cam.height / 2 / cam.fy, "cx": 1.0, "cy": 1.0,
+            "k1": cam.fx * r ** 3, "k2": cam.fx * r ** 5,
+            "k3": cam.fx * r ** 7, "p1": 3 * cam.fx * r ** 2, "p2": 3 * cam.fx * r ** 2}[name]
 
 
 def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int], wr: np.ndarray, free_g: bool,

@@ -250,9 +250,11 @@ def coefficient_section(robot: Robot, calib) -> list[Section]:
                     f"{1e3 * r['std']:.2g}", f"{r['shift_std']:.1f}", ", ".join(f"`{n}`" for n in r["loads"]),
                     "yes" if r["in_model"] else "no") for r in ratio_loads])]))
     if eliminated:
-        rows = [(f"`{p}`", e["reason"], e["detail"] if e["reason"] == "insignificant" else
+        # what a coefficient merges into, else why it is held (a camera's pose it merges with, a weak
+        # direction, an insignificant value), as the JSON's detail says
+        rows = [(f"`{p}`", e["reason"], e["detail"] if e["reason"] in ("insignificant", "held") else
                  ", ".join(f"`{m['param']}` x {m['factor']:.3g}" for m in e["merged_into"])
-                 or "nothing (not seen by the data)") for p, e in eliminated.items()]
+                 or e.get("detail") or "nothing (not seen by the data)") for p, e in eliminated.items()]
         out.append(Section("Eliminated parameters", [
             "Held at zero. Structural, unexcited and weak ones: the data cannot tell them from others, and their "
             "effect is carried by the kept coefficients they merge into (the coefficient gains the factor times the "
