@@ -111,7 +111,7 @@ def test_every_candidate_scored_and_the_rule_followed(payload_data, capsys):
     assert set(cv) == {"geometric", "default", "elastic", "diagnosed"}
     best = min(v for v in cv.values() if v is not None)
     assert cv[out["model"]] <= 1.01 * best
-    assert out["validation"] == "--holdout 0.25 of TRAIN (seed 1)"
+    assert out["validation"] == f"--holdout 0.25 of {d / 'val.csv'} (seed 1)"
     assert {"rms_mm", "max_mm"} <= set(out["train"]) and {"rms_mm", "max_mm"} <= set(out["val"])
 
 

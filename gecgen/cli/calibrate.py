@@ -97,7 +97,7 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
               "train": choice.fit.train, "outliers": [o.to_dict() for o in choice.fit.outliers],
               "effects": [e.to_dict() for e in sel.effects], "placement": cal.report_["placement"]}
     if sel.val is not None:
-        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of TRAIN (seed {args.seed})"
+        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed {args.seed})"
         result["val_extrapolation"] = sel.val_extrapolation
         result["val_before"], result["val"] = sel.val_before.to_dict(), sel.val.to_dict()
         if sel.val_inside:  # the held-out poses inside every training range: where the model is validated

@@ -39,6 +39,8 @@ def print_human(result: dict):
         # the warnings are on stderr already, one line each
         if key in ("identifiable", "training_ranges", "warnings") or (key.endswith("_units") and key[:-6] in result):
             continue
+        if key == "next" and "assessment" in result:  # the verdict's next step says what to do, once
+            continue
         units = result.get(f"{key}_units", {})
         if key == "outliers":
             print(f"outliers: {len(value)}" + (" (file row, pose, target, residual)" if value else ""))

@@ -385,9 +385,11 @@ def log_text(outcome: Outcome) -> str:
                 "joints_deg", "residual_mm"])
     for c in outcome.changes:
         t = c.target
+        # a motion without numbers of its own (its target is set at run time) has no correction to state
+        moved = ["", "", "", ""] if t.kind == "motion" else \
+            [f"{c.position_mm:.4f}", f"{c.rotation_deg:.5f}", f"{c.joints_deg:.5f}", f"{c.residual_mm:.4g}"]
         w.writerow([t.name, t.file.name, t.line, t.kind, c.reason, " ".join(n.text for n in t.numbers),
-                    "" if c.after is None else " ".join(c.after), f"{c.position_mm:.4f}", f"{c.rotation_deg:.5f}",
-                    f"{c.joints_deg:.5f}", f"{c.residual_mm:.4g}"])
+                    "" if c.after is None else " ".join(c.after), *moved])
     return out.getvalue()
 
 
