@@ -103,3 +103,16 @@ def test_design_says_what_it_is_doing_on_a_terminal_only(tmp_path, terminal):
     assert ("choosing 8 poses of" in err) == terminal
     if not terminal:
         assert err == "", err
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_evaluate_and_the_iso9283_plan_say_what_they_are_doing_on_a_terminal_only(train, tmp_path, terminal):
+    assert main(["identify", PUMA, str(train), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+    code, err = _gecgen(["evaluate", str(tmp_path / "c.json"), str(train)], terminal)
+    assert code == 0 and ("before and after the calibration" in " ".join(err.split())) == terminal
+    if not terminal:
+        assert err == "", err
+    code, err = _gecgen(["iso9283", PUMA, "-o", str(tmp_path / "plan.csv"), "--cycles", "2"], terminal)
+    assert code == 0 and ("searching for the largest cube" in " ".join(err.split())) == terminal
+    if not terminal:
+        assert err == "", err

@@ -1,7 +1,8 @@
 """`gecgen evaluate CALIB DATA [--register [auto|always|never]]`: position errors of new data before and after the calibration."""
 from __future__ import annotations
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands, warned
+from gecgen.cli.common import (CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands,
+                               progress_status, say, warned)
 from gecgen.cli.human import warning_lines
 from gecgen.cli.register import add_register
 
@@ -34,8 +35,11 @@ def _evaluated(args, caught: list) -> dict:
     from gecgen.api import load_calibration
     from gecgen.report.verdict import Noise, assess
 
-    cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
-    score = cal.score(args.data, register={"always": True, "never": False}.get(args.register, args.register))
+    with progress_status(not args.json) as status:
+        say(status, f"loading the calibration {args.calibration} and its code")
+        cal = load_calibration(args.calibration, orientation_length=args.orientation_length)
+        say(status, f"scoring {args.data} before and after the calibration")
+        score = cal.score(args.data, register={"always": True, "never": False}.get(args.register, args.register))
     registered = score.registrations is not None
     result = {"robot": cal.robot_.name, "error_model": cal.calibration_.model.source, "data": str(args.data),
               "n_poses": score.n_poses, "n_points": score.n_points,

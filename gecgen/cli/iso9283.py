@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gecgen.cli.common import MAX_SEED, add_tolerance, warned, whole
+from gecgen.cli.common import MAX_SEED, add_tolerance, progress_status, say, warned, whole
 from gecgen.cli.human import warning_lines
 
 #: rad or m: a measured run's readings may differ from the plan's by this much (the compensated
@@ -60,7 +60,8 @@ def run(args) -> dict:
                                                         "a measured test")
     if args.measured:
         require(not args.output, "-o writes a plan; with --measured the characteristics are the result (--json)")
-        with warned() as caught:
+        with warned() as caught, progress_status(not args.json) as status:
+            say(status, f"scoring the test measured in {args.measured} against the plan's commanded poses")
             result = _characteristics(robot, args)
             assessment = iso9283_next_step(result, args.tolerance_mm, args.robot)
             result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)
@@ -88,7 +89,9 @@ def _plan(robot, args) -> dict:
     if len(rpy) != 3 or not np.all(np.isfinite(rpy)):
         raise ModelError(f"--tool-rpy {args.tool_rpy}: give three angles roll,pitch,yaw")
     tool = Rotation.from_euler("xyz", rpy, degrees=True).as_matrix()
-    plan = plan_cube(robot, tool, cycles=args.cycles, rng=np.random.default_rng(args.seed))
+    with progress_status(not args.json) as status:
+        say(status, "searching for the largest cube the tool origin reaches at its corners in one orientation")
+        plan = plan_cube(robot, tool, cycles=args.cycles, rng=np.random.default_rng(args.seed))
     header, rows = command_table(plan)
     write_csv(args.output, ["pose", *header],
               ([k, int(r[0]), int(r[1]), *map(repr, r[2:].tolist())] for k, r in enumerate(rows)))
