@@ -508,6 +508,10 @@ class Calibrator:
                                   .values()), axis=0)
             if within.any():
                 inside = Errors.of(_summary(cm, data.subset(np.nonzero(within)[0]), y[within[data.pose]], calib.c, True))
+        from gecgen.fit.identify import stray_placements
+
+        for note in stray_placements(cm, data, calib.c):  # held-out sockets recorded badly score wrongly too
+            warnings.warn(note, stacklevel=2)
         return Score(Errors.of(_summary(cm, data, y_before, None, True)),
                      Errors.of(_summary(cm, data, y, calib.c, True)),
                      counts["n_poses"], counts["n_points"], counts.get("n_orientations", 0), outside, moved,

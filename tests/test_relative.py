@@ -135,7 +135,7 @@ def test_a_badly_recorded_placement_is_named(panda, tmp_path):
     data, _ = simulate_fixtures(robot, truth, Fixtures("ball", plates=3, per_socket=12), np.random.default_rng(1))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        api.Calibrator().fit(ROBOT, data)
+        clean = api.Calibrator().fit(ROBOT, data)
     assert not [str(w.message) for w in caught if "placement" in str(w.message)]
     moved = np.isin(data.relative.group, [2, 3]) & (np.arange(data.n_poses) % 2 == 0)
     p = target_positions(robot, data.q[moved])[:, 0]
@@ -146,6 +146,11 @@ def test_a_badly_recorded_placement_is_named(panda, tmp_path):
     named = [w for w in fit["warnings"] if "placement" in w]
     assert len(named) == 1 and named[0].startswith("placement plate2 (plate2.0, plate2.1) stands out"), named
     assert "re-record placement plate2 or drop its rows" in named[0]
+    # scored as held-out data by a calibration of the clean set, the same placement is named
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        clean.score(tmp_path / "moved.csv")
+    assert [str(w.message) for w in caught if "placement" in str(w.message)][0].startswith("placement plate2 ")
 
 
 def test_planes_reach_the_noise_floor(panda, elastic):

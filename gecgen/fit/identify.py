@@ -343,6 +343,12 @@ def fixture_measures(cm: CompiledModel, data: Measurements, c: np.ndarray | None
     return relative.measures(data.relative, _relative_targets(cm, data, c))
 
 
+def stray_placements(cm: CompiledModel, data: Measurements, c: np.ndarray) -> list[str]:
+    """`fit.relative.stray_placements` of the relative rows of `data` at coefficients c: a warning
+    for each placement recorded badly, on training or held-out data alike."""
+    return relative.stray_placements(data.relative, _relative_targets(cm, data, c)) if data.relative else []
+
+
 def _relative_targets(cm: CompiledModel, data: Measurements, c: np.ndarray | None) -> np.ndarray:
     """The modelled target of every row of `data` (R, 3) m at coefficients c (None: nominal)."""
     q, w, aux = _poses_inputs(cm, data)
@@ -923,7 +929,7 @@ def _fit(cm: CompiledModel, data: Measurements, frames: dict[int, Registration],
     train_inliers = summary(pos[inliers], rot[inliers]) if inliers.any() else summary(pos, rot)
     train = summary(pos, rot) | ({} if data.relative is None else fixture_measures(cm, data, c))
     if data.relative is not None:
-        notes.extend(relative.stray_placements(data.relative, _relative_targets(cm, data, c)))
+        notes.extend(stray_placements(cm, data, c))
     if train["rms_mm"] > before["rms_mm"]:
         failures.append(f"the fit leaves more position error than the nominal model ({train['rms_mm']:.4g} mm rms "
                         f"against {before['rms_mm']:.4g} mm): the data is not what the model describes (an "
