@@ -221,14 +221,14 @@ def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
     rig, *_, data = hand_rig(arm, n=3)
     write_pixels(tmp_path / "pixels.csv", robot, data)
     assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
-    with pytest.raises(ModelError, match=r"a pixel file .*identify and redundancy read with the camera file \(--cameras\)"):
+    with pytest.raises(ModelError, match=r"a pixel file .*identify, redundancy and evaluate read with the camera file \(--cameras\)"):
         from gecgen.model.measurements import read_measurements
         read_measurements(tmp_path / "pixels.csv", robot)
-    # evaluate has no --cameras: the refusal of the option points to its own help
+    # an option a command lacks: the refusal points to the command's own help
     err = io.StringIO()
     with contextlib.redirect_stderr(err), pytest.raises(SystemExit):
-        main(["evaluate", str(tmp_path / "cal.json"), str(tmp_path / "pixels.csv"), "--cameras", "c.yaml"])
-    assert err.getvalue().strip().endswith("see gecgen evaluate --help")
+        main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "pixels.csv"), "--cameras", "c.yaml"])
+    assert err.getvalue().strip().endswith("see gecgen compensate --help")
 
 
 def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
@@ -410,3 +410,25 @@ def test_one_camera_seeing_one_marker_holds_what_it_cannot_determine_and_says_so
                    tmp_path / "cam.yaml", "-o", tmp_path / "cal.json")
     assert fit["converged"] and 0 < fit["n_identifiable"] < 20 and fit["held"]
     assert any(w.startswith(f"the images determine {fit['n_identifiable']} of the ") for w in fit["warnings"])
+
+
+def test_evaluate_scores_held_out_images_with_the_cameras_the_calibration_fitted(tmp_path):
+    """Held-out image points of the same set-up (simulate --val-out) are scored with the camera and board
+    poses the calibration fitted: after the calibration they are at the corners' noise, as the training
+    images are, and well below the nominal model's; a tracker calibration or a tool set-up of another
+    kind is refused in one line."""
+    from conftest import run_json
+
+    (tmp_path / "hand.yaml").write_text("cameras:\n  cam: {mount: tool, fx: 1400, fy: 1400, cx: 640, cy: 480, "
+                                        "distortion: [-0.1, 0.05, 0.0, 0.0, 0.0], width: 1280, height: 960}\n")
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    rig = ["--cameras", tmp_path / "hand.yaml", "--board", tmp_path / "board.yaml"]
+    run_json("simulate", ROBOTS / "industrial6r.yaml", *rig, "--poses", "20", "--noise-px", "0.2", "--home",
+             "0,-1.57,-1.57,0,1.05,0", "--span", "0.14,0.1,0.1,0.44,0.35,0.5", "--seed", "3", "-o",
+             tmp_path / "train.csv", "--val-out", tmp_path / "val.csv")
+    fit = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "train.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", *rig, "-o", tmp_path / "cal.json")
+    out = run_json("evaluate", tmp_path / "cal.json", tmp_path / "val.csv", *rig)
+    assert out["measurement"] == "pixels" and out["n_points"] == out["n_poses"] * 54
+    assert out["after"]["rms_px"] < 1.5 * fit["train"]["rms_px"] and out["after"]["rms_px"] < 0.5 * out["before"]["rms_px"]
+    assert out["after"]["rms_mm_at_target"] > 0 and set(out["after"]["cameras"]) == {"cam"}

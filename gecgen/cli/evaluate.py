@@ -1,4 +1,5 @@
-"""`gecgen evaluate CALIB DATA [--register [auto|always|never]]`: position errors of new data before and after the calibration."""
+"""`gecgen evaluate CALIB DATA [--register [auto|always|never]]`: position errors of new data before and after the
+calibration; `--cameras CAMERAS.yaml [--board BOARD.yaml]`: image points' residuals, px."""
 from __future__ import annotations
 
 from gecgen.cli.common import (CALIBRATION_HELP, DATA_HELP, add_orientation_length, add_tolerance, next_commands,
@@ -21,11 +22,40 @@ def add_parser(command):
     add_tolerance(p)
     p.add_argument("--report", metavar="DIR",
                    help="folder for report.md (PNG plots beside it) and report.html (self-contained)")
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
+    g.add_argument("--cameras", metavar="FILE", help="camera file of the calibration's cameras: DATA's image points "
+                                                     "are scored with the poses and intrinsics it fitted")
+    g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
 
 
 def run(args) -> dict:
+    if args.cameras or args.board:
+        return _pixels(args)
     with warned() as caught:
         return _evaluated(args, caught)
+
+
+def _pixels(args) -> dict:
+    """Held-out image points before and after a pixel calibration (`fit.camera.score_pixels`)."""
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import score_pixels
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.model.validation import require
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    for option, default in (("register", "never"), ("tolerance_mm", None), ("report", None),
+                            ("orientation_length", None)):
+        require(getattr(args, option) == default, f"--{option.replace('_', '-')} is not supported with --cameras "
+                                                  f"yet; leave it out")
+    with warned() as caught:
+        calibration = load(args.calibration)
+        cameras = read_cameras(args.cameras)
+        board = read_board(args.board) if args.board else None
+        data = read_pixels(args.data, calibration.robot, cameras, board)
+        scores = score_pixels(calibration, args.calibration, data, cameras, board)
+    return {"robot": calibration.robot.name, "data": str(args.data), "measurement": "pixels",
+            "n_poses": data.n_poses, "n_points": len(data.uv), **scores, "warnings": warning_lines(caught)}
 
 
 def _evaluated(args, caught: list) -> dict:

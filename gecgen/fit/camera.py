@@ -649,6 +649,37 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
     return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
 
 
+def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camera],
+                 board: Board | None = None) -> dict:
+    """Held-out image points scored by a pixel calibration (`calibration_of`, read from `where`), with
+    the cameras' (and board's) poses and refined intrinsics it fitted, none fitted again (the cameras
+    must not have moved): `before` (the nominal model) and `after` (the calibrated one), each as identify's
+    `_summary` states a residual (px, and mm at the target)."""
+    report = calibration.report
+    require(report.get("measurement") == "pixels", f"{where}: a calibration from tracker points; "
+                                                   f"score tracker measurements with it (leave out --cameras)")
+    fitted = report["cameras"]
+    unknown = [n for n in data.cameras if n not in fitted]
+    require(not unknown, f"{data.source}: camera {unknown[0] if unknown else ''} is not one the calibration fitted "
+                         f"({', '.join(fitted)}); score the images of its cameras only")
+    require((data.mount == "tool") == ("board" in report),
+            f"{data.source}: the calibration's camera was {'on the tool' if 'board' in report else 'fixed'}, these "
+            f"images' are not; score images of the same set-up")
+    refined = report.get("intrinsics") or {}
+    cams = {n: replace(cam, fx=refined[n]["fx"], fy=refined[n]["fy"], cx=refined[n]["cx"], cy=refined[n]["cy"],
+                       distortion=tuple(refined[n]["distortion"])) if n in refined else cam
+            for n, cam in cameras.items()}
+    robot = calibration.robot
+    problem = _Problem(CompiledModel(frame_robot(robot), calibration.model), robot, data, cams, board)
+    poses = [fitted[n] for n in data.cameras] + ([report["board"]] if data.mount == "tool" else [])
+    g = np.concatenate([[*Rotation.from_matrix(np.array(p["rotation"])).as_rotvec(), *p["translation"]]
+                        for p in poses])
+    out = {}
+    for stage, c in (("before", np.zeros(problem.cm.dims.nc)), ("after", calibration.c)):
+        out[stage] = _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
+    return out
+
+
 def intrinsics_report(fit: PixelFit) -> dict:
     """Per camera its refined intrinsics (fx, fy, cx, cy px; distortion [k1, k2, p1, p2, k3]) and their
     1-sigma (`std`), as the camera file and OpenCV write them."""
