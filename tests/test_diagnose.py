@@ -261,3 +261,23 @@ def test_an_effect_that_ends_insignificant_is_dropped_and_the_model_refitted(rng
     final, kept, dropped = _drop_insignificant(robot, rnd, [effect], data, "auto")
     assert kept == [] and [d["error"] for d in dropped] == ["2.ey"] and dropped[0]["t"] < 2
     assert "2.ey:q2**3" not in final.model.coefficient_names(robot)
+
+
+def test_identify_judges_its_fit_against_the_noise_of_repeated_poses(rng, tmp_path):
+    """Without --noise-mm, identify's verdict uses the noise pooled over repeated poses, as diagnose
+    does (it said "noise not known" on the data diagnose judged): constant errors fitted by the constant
+    model are at the noise."""
+    from conftest import run_json
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    q = np.repeat(random_q(robot, rng, 60), 2, axis=0)
+    eps = np.zeros(robot.n_errors)
+    eps[[6, 14, 21]] = [2e-3, 1e-3, 1.5e-3]  # a few constant errors the default model carries
+    xyz = target_positions(robot, q, eps)[:, 0] + rng.normal(0, NOISE, (len(q), 3))
+    n = len(q)
+    data = Measurements(q, np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n), np.arange(n), np.zeros(n, int), xyz, "s")
+    write_measurements(tmp_path / "d.csv", robot, data, wrench=False)
+    out = run_json("identify", ROBOTS / "puma560.yaml", tmp_path / "d.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", "-o", tmp_path / "c.json")
+    assert out["assessment"]["verdict"] == "at the noise", out["assessment"]
+    assert "repeated poses" in " ".join(out["assessment"]["limits"])

@@ -67,7 +67,8 @@ def _identified(args, caught: list) -> dict:
     sig, relative = cal.report_["significance"], cal.data_.relative is not None
     assessment = assess(after=cal.report_["train"], before=cal.report_["before"], held_out=False,
                         n_poses=cal.counts_["n_poses"], tolerance_mm=args.tolerance_mm,
-                        noise=Noise.of_significance(sig), n_train_poses=cal.counts_["n_poses"],
+                        noise=Noise.of_significance(sig) or _repeated_noise(cal, Noise),
+                        n_train_poses=cal.counts_["n_poses"],
                         held=None if sig.get("insignificant_carried") else
                         (len(sig["held"]), cal.report_["n_identifiable"]),
                         extrapolation={}, inside=None, relative=relative,
@@ -83,3 +84,16 @@ def _identified(args, caught: list) -> dict:
     result["next"] = (f"gecgen evaluate {out} VAL.csv (new poses), gecgen diagnose {args.robot} {args.data} "
                       f"(what the model lacks), gecgen export {out} --c DIR (the controller's code)")
     return result
+
+
+def _repeated_noise(cal, Noise):
+    """Without a stated noise, the fit's residual against the noise pooled over the data's repeated
+    poses (`fit.significance.noise_floor`, as diagnose judges it), or None when nothing repeats."""
+    from gecgen.fit.significance import noise_floor, noise_test
+
+    floor = noise_floor(cal.data_, robot=cal.robot_)
+    if floor is None:
+        return None
+    fit = cal.fit_
+    covered, _, _ = noise_test(fit.sigma_m, max(fit.measured_dof - len(fit.redundancy.kept), 1), floor)
+    return Noise(1e3 * fit.sigma_m, floor["noise_mm"], not covered, floor["source"])

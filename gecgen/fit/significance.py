@@ -15,6 +15,10 @@ and the residual sum of squares grows by x_a^2 / M_aa (so sigma is re-estimated 
 Correlated coefficients that are insignificant one by one but determined together keep the
 survivor of the group, which absorbs the rest. The nonlinear refit with the dropped coefficients
 held at zero follows (`identify`'s hold).
+
+The fit's residual against the instrument's noise: the noise stated, or pooled over the data's
+repeated poses (`noise_floor`), and the test that says whether the residual is only that noise
+(`noise_test`, `overall`); identify and diagnose judge a model with them alike.
 """
 from __future__ import annotations
 
@@ -24,6 +28,8 @@ import numpy as np
 from scipy import special
 
 from gecgen.fit.identify import identify
+from gecgen.model.measurements import Measurements
+from gecgen.model.robot import Robot
 
 #: a coefficient is determined by the data when |value| / std is at least this (about 95 % two-sided)
 T_MIN = 2.0
@@ -146,3 +152,56 @@ def rms_interval(errors: np.ndarray, pose: np.ndarray, level: float = 0.95) -> t
     rms = np.sqrt(sq[draw].sum(1) / n[draw].sum(1))
     lo, hi = np.quantile(rms, [(1 - level) / 2, (1 + level) / 2])
     return float(lo), float(hi)
+
+
+#: joint angles taken 2 pi apart are compared to this many decimals (rad) once wrapped: the wrap's
+#: rounding (1e-15) must not split a repeat, and nothing a robot repeats differs by 1e-9 rad
+ANGLE_DECIMALS = 9
+
+
+def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot | None = None) -> dict | None:
+    """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
+    given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
+    wrench and aux, measuring the same target; with the robot, revolute joints 2 pi apart count as
+    identical), else None (unknown). A measured frame's vertices count with their weight and degrees
+    of freedom (`Measurements.rows`), so the noise is per degree of freedom as the fit's sigma is."""
+    if noise_mm is not None:
+        return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
+    if data.relative is not None:  # a socket's or plane's rows have no position to repeat
+        data = data.rows_of(~data.relative.rows)
+        if not len(data.target):
+            return None
+    q = data.q
+    if robot is not None:  # a revolute joint read 2 pi apart is in the same place (a wrist at -360 and +360 deg)
+        turns = np.array([j.kind == "R" for j in robot.joints])
+        q = np.where(turns, np.round(np.mod(q + np.pi, 2 * np.pi) - np.pi, ANGLE_DECIMALS), q)
+    state = np.column_stack([q, data.w, data.aux])
+    _, group = np.unique(state, axis=0, return_inverse=True)
+    key = group.ravel()[data.pose] * len(data.target) + data.target
+    _, point_group, size = np.unique(key, return_inverse=True, return_counts=True)
+    repeated = size[point_group] > 1
+    if not repeated.any():
+        return None
+    weight, point_dof = data.rows.weight, data.rows.dof
+    mean = np.zeros((len(size), 3))
+    np.add.at(mean, point_group, data.xyz)
+    mean /= size[:, None]
+    dev = data.xyz[repeated] - mean[point_group[repeated]]
+    # each repeated point leaves its degrees of freedom times (size - 1) / size of them
+    dof = float(np.sum(point_dof[repeated] * (1 - 1 / size[point_group[repeated]])))
+    sq = float(np.sum(weight[repeated] * np.einsum("ni,ni->n", dev, dev)))
+    return {"noise_mm": 1e3 * float(np.sqrt(sq / dof)), "source": "repeated poses", "dof": dof}
+
+
+#: the residual is consistent with the noise when an F test of their variances passes at this level
+NOISE_TEST_ALPHA = 0.01
+
+
+def noise_test(sigma_m: float, dof_fit: float, noise: dict) -> tuple[bool, float, float]:
+    """Whether a fit's residual sigma (m per coordinate, over dof_fit degrees of freedom) is only the
+    noise (`noise_floor`): a chi-square test against a noise taken as exact (dof None), an F test
+    against one pooled over repeated poses; (passes at NOISE_TEST_ALPHA, p-value, sigma / noise)."""
+    ratio = (1e3 * sigma_m / noise["noise_mm"]) ** 2
+    p = float(special.chdtrc(dof_fit, ratio * dof_fit) if noise["dof"] is None
+              else special.fdtrc(dof_fit, noise["dof"], ratio))  # scipy.stats's sf, without its import
+    return p > NOISE_TEST_ALPHA, p, float(np.sqrt(ratio))

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from scipy import special
 
 from gecgen.model.files import write_atomically
 from gecgen.loop.confounding import ratio_load_confounding
@@ -42,7 +41,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit.identify import fit_frames, identify, row_errors, summary, to_world
-from gecgen.fit.significance import T_MIN
+from gecgen.fit.significance import T_MIN, noise_floor, noise_test
 from gecgen.runtime.threads import one_blas_thread
 
 #: rounds at most: a safety net, not the stopping rule (that is the statistics)
@@ -225,47 +224,6 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
                      ratio_load_confounding(rnd.cm, rnd.fit, data))
 
 
-#: joint angles taken 2 pi apart are compared to this many decimals (rad) once wrapped: the wrap's
-#: rounding (1e-15) must not split a repeat, and nothing a robot repeats differs by 1e-9 rad
-ANGLE_DECIMALS = 9
-
-
-def noise_floor(data: Measurements, noise_mm: float | None = None, robot: Robot | None = None) -> dict | None:
-    """The measurement noise per coordinate: {"noise_mm", "source", "dof"} from `noise_mm` when
-    given (dof None: taken as exact), else pooled over repeated poses (poses with identical joints,
-    wrench and aux, measuring the same target; with the robot, revolute joints 2 pi apart count as
-    identical), else None (unknown). A measured frame's vertices count with their weight and degrees
-    of freedom (`Measurements.rows`), so the noise is per degree of freedom as the fit's sigma is."""
-    if noise_mm is not None:
-        return {"noise_mm": float(noise_mm), "source": "given (--noise-mm)", "dof": None}
-    if data.relative is not None:  # a socket's or plane's rows have no position to repeat
-        data = data.rows_of(~data.relative.rows)
-        if not len(data.target):
-            return None
-    q = data.q
-    if robot is not None:  # a revolute joint read 2 pi apart is in the same place (a wrist at -360 and +360 deg)
-        turns = np.array([j.kind == "R" for j in robot.joints])
-        q = np.where(turns, np.round(np.mod(q + np.pi, 2 * np.pi) - np.pi, ANGLE_DECIMALS), q)
-    state = np.column_stack([q, data.w, data.aux])
-    _, group = np.unique(state, axis=0, return_inverse=True)
-    key = group.ravel()[data.pose] * len(data.target) + data.target
-    _, point_group, size = np.unique(key, return_inverse=True, return_counts=True)
-    repeated = size[point_group] > 1
-    if not repeated.any():
-        return None
-    weight, point_dof = data.rows.weight, data.rows.dof
-    mean = np.zeros((len(size), 3))
-    np.add.at(mean, point_group, data.xyz)
-    mean /= size[:, None]
-    dev = data.xyz[repeated] - mean[point_group[repeated]]
-    # each repeated point leaves its degrees of freedom times (size - 1) / size of them
-    dof = float(np.sum(point_dof[repeated] * (1 - 1 / size[point_group[repeated]])))
-    sq = float(np.sum(weight[repeated] * np.einsum("ni,ni->n", dev, dev)))
-    return {"noise_mm": 1e3 * float(np.sqrt(sq / dof)), "source": "repeated poses", "dof": dof}
-
-
-#: the residual is consistent with the noise when an F test of their variances passes at this level
-NOISE_TEST_ALPHA = 0.01
 #: largest residual points listed when structure remains
 LARGEST = 5
 
@@ -292,11 +250,8 @@ def what_remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise:
                         **({} if np.isnan(rot[g]) else {"rotation_mrad": 1e3 * float(rot[g])})}
                        for g, r in zip(top, rows.first[top])]}
     if noise is not None and noise["noise_mm"] > 0:
-        ratio = (1e3 * fit.sigma_m / noise["noise_mm"]) ** 2
-        dof_fit = max(fit.measured_dof - len(fit.redundancy.kept), 1)
-        p = float(special.chdtrc(dof_fit, ratio * dof_fit) if noise["dof"] is None
-                  else special.fdtrc(dof_fit, noise["dof"], ratio))  # scipy.stats's sf, without its import
-        out.update(covered=p > NOISE_TEST_ALPHA, noise_p_value=p, sigma_over_noise=float(np.sqrt(ratio)))
+        covered, p, ratio = noise_test(fit.sigma_m, max(fit.measured_dof - len(fit.redundancy.kept), 1), noise)
+        out.update(covered=covered, noise_p_value=p, sigma_over_noise=ratio)
     return out
 
 

@@ -88,7 +88,7 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
     load cases, the instrument noise when repeated poses give it, and how much of each joint's
     range the poses cover; then the point errors per target and per load case of every stage.
     robot: the robot the data is on (a measured frame as its vertex targets, `cm.robot`)."""
-    from gecgen.loop.diagnose import noise_floor
+    from gecgen.fit.significance import noise_floor
     from gecgen.report import plots
 
     noise = noise_floor(sets[0].data, robot=robot)
