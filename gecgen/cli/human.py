@@ -117,5 +117,6 @@ def print_error_table(table: dict):
     print("  frame" + "".join(f" {k:>19}" for k in keys))
     for f in table["frames"]:
         print(f"  {f['frame']:<5}" + "".join(f" {_cell(f[k], f['std'][k]):>19}" for k in keys))
-    print(f"re-expressed with the zero offsets kept: the targets move by {table['reexpressed_change_mm']:.2g} mm "
-          f"at most")
+    change = table["reexpressed_change_mm"]
+    print("re-expressed with the zero offsets kept: the targets move by "
+          + (f"{change:.2g} mm at most" if change >= 5e-7 else "less than 0.000001 mm"))

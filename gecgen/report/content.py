@@ -109,7 +109,7 @@ def measured_section(robot: Robot, sets: list[DataSet]) -> Section:
                  "positions only (no orientation measured)",
                  *([f"{len(stations)} tracker stationing{'s' if len(stations) > 1 else ''}"] if absolute.any() else []),
                  *([_fixtures_fact(relative)] if relative is not None else []),
-                 *([f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (measured force to {LOAD_STEP_N:g} N)"]
+                 *([f"{len(loads)} load case{'s' if len(loads) > 1 else ''} (the measured force's size, rounded to the nearest {LOAD_STEP_N:g} N)"]
                    if np.any(data.w[:, :3]) else ["no force measured"])]
         if noise is not None and ds is sets[0]:
             facts.append(f"instrument noise from repeated poses: {noise['noise_mm']:.3g} mm per coordinate")
