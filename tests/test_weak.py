@@ -287,3 +287,17 @@ def test_an_absurd_value_blames_the_robot_file_only_when_determined():
     determined = _fit_failures(cm, data, c, np.full(cm.dims.nc, 0.01), kept, True, "")
     assert "robot file" not in undetermined[0] and "the data do not determine" in undetermined[0]
     assert "robot file" in determined[0]
+
+
+def test_the_verdict_names_why_the_data_leave_coefficients_weak(grid, tmp_path):
+    """identify's verdict says what limits it in the data's own terms: the tool that never turns,
+    once for every coefficient it holds, and the next steps include its fix."""
+    from gecgen.model.measurements import write_measurements
+
+    robot, _, train, _ = grid
+    write_measurements(tmp_path / "grid.csv", robot, train, wrench=False)
+    out = run_json("identify", ROBOTS / "industrial6r.yaml", tmp_path / "grid.csv", "--noise-mm", "0.05", "-o",
+                   tmp_path / "c.json")
+    turned = [line for line in out["assessment"]["limits"] if "the tool never turns" in line]
+    assert len(turned) == 1 and turned[0].startswith(f"{len(out['held'])} coefficients are held at zero"), turned
+    assert "measure poses that turn the tool, or a second target" in out["assessment"]["next_step"]

@@ -71,7 +71,7 @@ def _identified(args, caught: list) -> dict:
                         n_train_poses=cal.counts_["n_poses"],
                         held=None if sig.get("insignificant_carried") else
                         (len(sig["held"]), cal.report_["n_identifiable"]),
-                        extrapolation={}, inside=None, relative=relative,
+                        extrapolation={}, inside=None, relative=relative, weak=cal.report_.get("held"),
                         commands=next_commands(args.robot, args.data, "", str(out), cal.counts_["n_poses"], relative,
                                                f"--noise-mm {args.noise_mm:g}" if args.noise_mm else ""))
     result["assessment"], result["warnings"] = assessment.to_dict(), warning_lines(caught)

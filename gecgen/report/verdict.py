@@ -7,6 +7,8 @@ Built from figures the command already computed (its JSON), never by a new fit. 
 """
 from __future__ import annotations
 
+from collections import Counter
+
 from dataclasses import asdict, dataclass
 
 #: verdict words against a tolerance
@@ -96,14 +98,16 @@ def _figure(score: dict, relative: bool) -> str:
 
 def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | None, tolerance_mm: float | None,
            noise: Noise | None, held: tuple[int, int] | None, n_train_poses: int | None, extrapolation: dict,
-           inside: dict | None, relative: bool, commands: Commands, before_name: str = "uncalibrated") -> Assessment:
+           inside: dict | None, relative: bool, commands: Commands, before_name: str = "uncalibrated",
+           weak: list[dict] | None = None) -> Assessment:
     """The verdict on a score `after` ({rms_mm, max_mm[, rms_mm_ci95, consistency_mm, distance_error_mm]},
     `identify.summary` as the JSON has it) of n_poses poses (None: not known), `held_out` (data the
     fit never saw) or the training data; `before` that of the model named before_name on the same
     data. noise: the fit's residual against the instrument's; held: (coefficients held at zero as not determined, identifiable ones)
     of a fit on n_train_poses poses; extrapolation: poses outside the training range per input
     ({name: poses}); inside: the score of the poses inside every range; relative: socket or plane
-    data (no absolute position measured)."""
+    data (no absolute position measured); weak: the coefficients held as weakly determined (the
+    fit's `held`, each with its reason: why the data leave it, and the fix in parentheses)."""
     what = "held-out" if held_out else "training"
     statement = f"On {'the' if n_poses is None else n_poses} {what} poses: {_figure(after, relative)}"
     if before is not None:
@@ -126,6 +130,12 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
                       "zero: the poses do not excite them.")
         steps.append(f"measure more poses where they are excited (designed to add to the training data): "
                      f"`{commands.more_poses}`, then calibrate again on both")
+    for reason, count in Counter(h["reason"] for h in weak or ()).items():
+        cause, _, fix = reason.partition("; held at zero")
+        limits.append(f"{count} coefficient{'s are' if count > 1 else ' is'} held at zero as the data determine "
+                      f"{'them' if count > 1 else 'it'} too weakly: {cause}.")
+        if fix.strip(" ()"):  # the data's own cause comes before the general advice to measure more
+            steps.insert(min(len(steps), 0 if held_out else 1), fix.strip(" ()"))
     if extrapolation:
         worst = max(extrapolation.values())
         if len(extrapolation) == 1:  # one input: the count is exact
