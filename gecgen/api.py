@@ -663,9 +663,9 @@ class Selection:
 
 
 def model_names(names, label: str = "models") -> tuple[str, ...]:
-    """The candidate names of `calibrate`, each one of loop.calibrate.NAMES; `label` names them in
+    """The candidate names of `calibrate`, each one of loop.NAMES; `label` names them in
     messages."""
-    from gecgen.loop.calibrate import NAMES
+    from gecgen.loop import NAMES
 
     names = (names,) if isinstance(names, str) else tuple(names)
     unknown = [n for n in names if n not in NAMES]
@@ -679,7 +679,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
               register_val: bool = False, progress=None, keep_insignificant: bool = False,
               noise_mm: float | None = None, register: str = "auto", stage=None) -> Selection:
     """The whole pipeline (gecgen/loop/calibrate.py says the rule): choose among `models` (default
-    all of loop.calibrate.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
+    all of loop.NAMES) by 5-fold cross-validation on `data` alone, fit the choice on it,
     and score it on `val` (or on a `holdout` share of data's poses, split by `seed`) afterwards.
     errors: the robot's default model among the candidates (as for Calibrator; skipped when None
     and the robot has no error-model file). register_val: `val` was measured from another tracker
@@ -687,7 +687,8 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     per candidate, stage(text) with what it does once they are scored (the final fits, the
     significance test, the scoring of val). keep_insignificant, noise_mm, register (the training
     data's registration: "auto", "always" or "never"): as for Calibrator."""
-    from gecgen.loop.calibrate import NAMES, choose
+    from gecgen.loop import NAMES
+    from gecgen.loop.calibrate import choose
 
     names = model_names(NAMES if models is None else models)
     register = _choice(register, "register", REGISTER)

@@ -11,7 +11,7 @@ from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_
                                next_commands, progress_status, say, warned, whole)
 from gecgen.cli.human import warning_lines
 from gecgen.cli.register import REGISTER, add_register
-from gecgen.loop.calibrate import NAMES
+from gecgen.loop import NAMES
 
 
 def add_parser(command):

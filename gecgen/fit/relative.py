@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import eigh, qr
-from scipy.stats import f as f_distribution
+from scipy.special import fdtrc
 
 from gecgen.model.relative import RELATIONS, Relative
 
@@ -236,7 +236,7 @@ def stray_placements(relative: Relative, p: np.ndarray) -> list[str]:
         if dofs[k] <= 0 or rest_dof <= 0 or rest <= 0:
             continue
         ratio = (squares[k] / dofs[k]) / (rest / rest_dof)
-        if ratio > STRAY_RATIO and f_distribution.sf(ratio, dofs[k], rest_dof) < STRAY_P / len(placements):
+        if ratio > STRAY_RATIO and fdtrc(dofs[k], rest_dof, ratio) < STRAY_P / len(placements):
             ids = ", ".join(relative.names[g] for g in members)
             mine = 1e3 * np.sqrt(np.mean(gap[on == k]))
             theirs = 1e3 * np.sqrt(np.mean(gap[(on >= 0) & (on != k)]))

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gecgen.loop import NAMES
 from gecgen.loop.diagnose import Diagnosis, diagnose
 from gecgen.loop.dictionary import frame_own_errors, loads_by_joint
 from gecgen.model.errors import ErrorModel
@@ -86,10 +87,6 @@ def elastic_spec(robot: Robot, data: Measurements, seed: int = 0) -> dict | None
         if terms:
             frames.setdefault(f, {})[ERROR_NAMES[e]] = ["1", *terms]
     return {"default": ["1"], "frames": frames} if frames else None
-
-
-#: the candidates' names, in the order they are tried
-NAMES = ("geometric", "default", "elastic", "diagnosed")
 
 
 def pipelines(robot: Robot, data: Measurements, default: ErrorModel | None,

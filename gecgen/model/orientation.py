@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.validation import ModelError, excerpt, require
 
@@ -75,6 +74,8 @@ def parse_convention(name, unit, where: str) -> Convention:
 
 
 def _valid_seq(seq: str) -> bool:
+    from scipy.spatial.transform import Rotation  # in the functions: a command's help needs this module, not scipy
+
     try:
         Rotation.from_euler(seq, [0.0, 0.0, 0.0])
     except ValueError:
@@ -115,6 +116,8 @@ def rotations(values: np.ndarray, conv: Convention, row_name: Callable[[int], st
     quaternion whose norm, or a matrix whose R^T R, is off by more than UNIT_TOL (or with
     det < 0) is refused, `row_name(i)` naming where row i came from; within it they are
     normalised (the nearest rotation)."""
+    from scipy.spatial.transform import Rotation
+
     values = np.asarray(values, float).reshape(-1, conv.width)
     if not len(values):
         return np.zeros((0, 3, 3))
@@ -141,4 +144,6 @@ def rotations(values: np.ndarray, conv: Convention, row_name: Callable[[int], st
 
 def quaternions(R: np.ndarray) -> np.ndarray:
     """(N, 4) unit quaternions, scalar first, of rotation matrices R (N, 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]] if len(R) else np.zeros((0, 4))

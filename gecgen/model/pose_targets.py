@@ -26,7 +26,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
@@ -44,6 +43,8 @@ def with_pose_targets(robot: Robot, length_m: float = LENGTH_M) -> Robot:
     `Robot.target_frames`, else the identity), after the robot's own targets (whose indices stay)."""
     require(np.isfinite(length_m) and length_m > 0, f"--orientation-length {length_m!r}: give a positive length in "
                                                     f"m (1 rad of orientation error counts as this much position)")
+    from scipy.spatial.transform import Rotation  # here: the option's help needs this module, not scipy
+
     r = vertex_radius(length_m)
     extra, vertex_of = {}, {}
     for name, t in robot.targets.items():

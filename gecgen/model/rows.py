@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 #: unit vertices of a regular tetrahedron: they sum to zero, and sum(v v^T) = 4/3 I
 VERTICES = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]]) / np.sqrt(3.0)
@@ -77,6 +76,8 @@ class Rows:
         mean = _sums(self.group, self.weight[:, None] * d, G)
         at = self.vertex >= 0
         if at.any():
+            from scipy.spatial.transform import Rotation  # here: reading a file of points needs no scipy
+
             v = VERTICES[self.vertex[at]]
             My, Mp = (_sums(self.group[at], np.einsum("ni,nj->nij", x[at], v).reshape(-1, 9), G).reshape(G, 3, 3)
                       for x in (y, p))
