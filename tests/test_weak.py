@@ -301,3 +301,20 @@ def test_the_verdict_names_why_the_data_leave_coefficients_weak(grid, tmp_path):
     turned = [line for line in out["assessment"]["limits"] if "the tool never turns" in line]
     assert len(turned) == 1 and turned[0].startswith(f"{len(out['held'])} coefficients are held at zero"), turned
     assert "measure poses that turn the tool, or a second target" in out["assessment"]["next_step"]
+
+
+def test_coefficients_held_for_their_plausible_size_are_said_together():
+    """Each such coefficient's reason states its own times a plausible size: the verdict says them in
+    one line with their range, and their fix once."""
+    from gecgen.report.verdict import Commands, assess
+
+    why = ("the data determine its direction only to {} times a plausible size (1-sigma against 5 mm, 5 mrad); "
+           "held at zero (measure poses that move it)")
+    weak = [{"param": p, "beyond_plausible": b, "reason": why.format(b)} for p, b in (("1.ex:1", 1.5), ("2.ey:1", 3.25))]
+    said = assess(after={"rms_mm": 0.1, "max_mm": 0.2}, before=None, held_out=False, n_poses=50, tolerance_mm=None,
+                  noise=None, held=None, n_train_poses=50, extrapolation={}, inside=None, relative=False,
+                  commands=Commands("d", "m", "s", "e"), weak=weak)
+    lines = [line for line in said.limits if "plausible size" in line]
+    assert lines == ["2 coefficients are held at zero as the data determine them too weakly: their directions are "
+                     "known only to 1.5 to 3.25 times a plausible size."]
+    assert said.next_step.count("measure poses that move it") == 1

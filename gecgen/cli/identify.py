@@ -67,7 +67,7 @@ def _identified(args, caught: list) -> dict:
     sig, relative = cal.report_["significance"], cal.data_.relative is not None
     assessment = assess(after=cal.report_["train"], before=cal.report_["before"], held_out=False,
                         n_poses=cal.counts_["n_poses"], tolerance_mm=args.tolerance_mm,
-                        noise=Noise.of_significance(sig) or _repeated_noise(cal, Noise),
+                        noise=Noise.of_significance(sig) or _repeated_noise(cal),
                         n_train_poses=cal.counts_["n_poses"],
                         held=None if sig.get("insignificant_carried") else
                         (len(sig["held"]), cal.report_["n_identifiable"]),
@@ -86,10 +86,11 @@ def _identified(args, caught: list) -> dict:
     return result
 
 
-def _repeated_noise(cal, Noise):
+def _repeated_noise(cal):
     """Without a stated noise, the fit's residual against the noise pooled over the data's repeated
     poses (`fit.significance.noise_floor`, as diagnose judges it), or None when nothing repeats."""
     from gecgen.fit.significance import noise_floor, noise_test
+    from gecgen.report.verdict import Noise
 
     floor = noise_floor(cal.data_, robot=cal.robot_)
     if floor is None:

@@ -7,8 +7,6 @@ Built from figures the command already computed (its JSON), never by a new fit. 
 """
 from __future__ import annotations
 
-from collections import Counter
-
 from dataclasses import asdict, dataclass
 
 #: verdict words against a tolerance
@@ -130,12 +128,22 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
                       "zero: the poses do not excite them.")
         steps.append(f"measure more poses where they are excited (designed to add to the training data): "
                      f"`{commands.more_poses}`, then calibrate again on both")
-    for reason, count in Counter(h["reason"] for h in weak or ()).items():
-        cause, _, fix = reason.partition("; held at zero")
-        limits.append(f"{count} coefficient{'s are' if count > 1 else ' is'} held at zero as the data determine "
-                      f"{'them' if count > 1 else 'it'} too weakly: {cause}.")
-        if fix.strip(" ()"):  # the data's own cause comes before the general advice to measure more
-            steps.insert(min(len(steps), 0 if held_out else 1), fix.strip(" ()"))
+    # one line per fix: a direction known only to some times a plausible size says its own times, so
+    # those coefficients are said together, with the range of them
+    by_fix: dict[str, list[dict]] = {}
+    for h in weak or ():
+        by_fix.setdefault(h["reason"].partition("; held at zero")[2].strip(" ()"), []).append(h)
+    for fix, hs in by_fix.items():
+        causes = {h["reason"].partition("; held at zero")[0] for h in hs}
+        beyond = [h["beyond_plausible"] for h in hs if h.get("beyond_plausible") is not None]
+        cause = causes.pop() if len(causes) == 1 else (
+            f"their directions are known only to {min(beyond):.3g} to {max(beyond):.3g} times a plausible size"
+            if beyond else "; ".join(sorted(causes)))
+        n = len(hs)
+        limits.append(f"{n} coefficient{'s are' if n > 1 else ' is'} held at zero as the data determine "
+                      f"{'them' if n > 1 else 'it'} too weakly: {cause}.")
+        if fix:  # the data's own cause comes before the general advice to measure more
+            steps.insert(min(len(steps), 0 if held_out else 1), fix)
     if extrapolation:
         worst = max(extrapolation.values())
         if len(extrapolation) == 1:  # one input: the count is exact
