@@ -9,14 +9,15 @@ from gecgen.cli.common import number, numbers
 from gecgen.model.validation import ModelError, require
 
 
-def add_options(p):
-    """identify's options for image points."""
+def add_options(p, intrinsics: bool = True):
+    """identify's options for image points (diagnose's: without --refine-intrinsics)."""
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
-    g.add_argument("--refine-intrinsics", action="store_true",
-                   help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera file's "
-                        "values (JSON intrinsics, with their std)")
+    if intrinsics:
+        g.add_argument("--refine-intrinsics", action="store_true",
+                       help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera "
+                            "file's values (JSON intrinsics, with their std)")
     g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
                    help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
                         "weakly against it are held at zero and named (default: the fit's own residual)")
@@ -65,6 +66,55 @@ def identified(args) -> dict:
 
         result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras), args.report))
     return result
+
+
+def diagnosed(args) -> dict:
+    """`gecgen diagnose ROBOT PIXELS.csv --cameras FILE`: the closed loop on image points
+    (`loop.pixels.ImagePoints`), its new error model and code, and its JSON result (mm at the target and
+    px)."""
+    from gecgen.cli.common import robot_and_model
+    from gecgen.emit import generate
+    from gecgen.loop.diagnose import diagnose, verdict, write_error_model
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.measurements import hold_out
+    from gecgen.model.pixels import read_pixels
+    from gecgen.runtime.compiled import printed_code
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--report", args.report),
+                            ("--noise-mm", args.noise_mm), ("--orientation-length", args.orientation_length))
+             if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
+                       f"with the robot; the corners' noise is --noise-px); leave it out")
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    robot, model = robot_and_model(args.robot, args.errors)
+    data = read_pixels(args.data, robot, cameras, board)
+    val = read_pixels(args.val, robot, cameras, board) if args.val else None
+    if args.holdout is not None:
+        data, val = hold_out(data, args.holdout, args.seed)
+    require(not model.aux or set(model.aux) <= set(data.aux_names),
+            f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
+            f"add the columns or use another error model")
+    measure = ImagePoints(robot, cameras, board, args.noise_px)
+    try:
+        diag = diagnose(robot, model, data, val, seed=args.seed, noise_mm=args.noise_px, max_rounds=args.max_rounds,
+                        measure=measure)
+    except RuntimeError as exc:  # the declared model's own fit cannot be trusted
+        raise ModelError(f"{args.data}: {exc}") from None
+    out = args.output or f"{robot.name}.diagnosed.errors.yaml"
+    write_error_model(robot, diag.final.model, diag.effects, out)
+    generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
+    generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
+    rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+    return {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
+            "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
+            "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
+            "candidates_tested": diag.candidates_tested, "remaining": diag.remaining, "verdict": verdict(diag.remaining),
+            "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
+            if args.holdout is not None else "internal hold-out of 1/5 of the poses",
+            "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
 
 
 #: poses of simulated image points when --poses is not given

@@ -124,6 +124,10 @@ class PixelFit:
     cameras: dict[str, Camera] | None = None
     intrinsics_std: dict[str, dict[str, float]] | None = None
     residuals: np.ndarray | None = None
+    #: the geometric unknowns as fitted (rotation vectors and translations, in the fit's order) and
+    #: every image point's robust weight (R,): where `linearised` takes the fit's least squares
+    g: np.ndarray | None = None
+    weights: np.ndarray | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -244,27 +248,29 @@ class _Problem:
             e[i] = STEP
             Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R), g + e) -
                            self.project(self.camera_points(g - e, o, R), g - e)) / (2 * STEP)
-        Hc = H[d.pose][..., columns]  # (R, 4, 3, k)
-        dr = (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM  # d(tool axis k)/dc: (R, 3 axes, 3, k)
+        Jc = np.einsum("rij,rjc->ric", P, self.point_derivative(g, o, R, H[d.pose][..., columns]))
+        # the Jacobian of the residual: minus that of the projection
+        return d.uv - uv, -np.concatenate([Jg, Jc], axis=2).reshape(2 * len(X), -1)
+
+    def point_derivative(self, g: np.ndarray, o: np.ndarray, R: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """d(X_cam)/dx (R, 3, m) of every row's point in its camera's frame, from D (R, 4, 3, m): the
+        derivative of the four frame points (`frame_robot`) at the row's pose in m unknowns (H_e's
+        columns of coefficients, or J_e's of generalized errors)."""
+        d = self.data
+        dr = (D[:, 1:] - D[:, :1]) / FRAME_ARM  # d(tool axis k)/dx: (R, 3 axes, 3, m)
         poses, board, targets = self.unpack(g)
         x = self.local_points(targets)
         if self.tool:
             v = x @ board[0].T + board[1] - o[d.pose]  # X_w - o
             # X_tool[k] = r_k . (X_w - o): d = dr_k . v - r_k . do
-            dXt = np.einsum("rkic,ri->rkc", dr, v) - np.einsum("rik,ric->rkc", R[d.pose], Hc[:, 0])
-            dX = np.empty_like(dXt)
-            for k, (Rc, _) in enumerate(poses):
-                rows = d.camera == k
-                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXt[rows])
+            dX = np.einsum("rkic,ri->rkc", dr, v) - np.einsum("rik,ric->rkc", R[d.pose], D[:, 0])
         else:
-            dXw = Hc[:, 0] + np.einsum("rk,rkic->ric", x, dr)  # d(o + sum_k x_k r_k)
-            dX = np.empty_like(dXw)
-            for k, (Rc, _) in enumerate(poses):
-                rows = d.camera == k
-                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXw[rows])
-        Jc = np.einsum("rij,rjc->ric", P, dX)
-        # the Jacobian of the residual: minus that of the projection
-        return d.uv - uv, -np.concatenate([Jg, Jc], axis=2).reshape(2 * len(X), -1)
+            dX = D[:, 0] + np.einsum("rk,rkic->ric", x, dr)  # d(o + sum_k x_k r_k)
+        out = np.empty_like(dX)
+        for k, (Rc, _) in enumerate(poses):
+            rows = d.camera == k
+            out[rows] = np.einsum("ij,rjc->ric", Rc, dX[rows])
+        return out
 
 
 def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
@@ -548,7 +554,41 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
                     {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
-                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]))
+                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]), g, wr)
+
+
+@dataclass(frozen=True)
+class Linearised:
+    """A pixel fit's weighted least squares at its solution, what diagnose screens candidate effects
+    in: rows (u, v) of every image point in the data's order, each scaled by the root of its robust
+    weight. A (2R, n) the residual's derivative in the fitted poses and the kept coefficients; r (2R,)
+    the residual (px); J (2R, ne) its derivative in the generalized errors, from which a new term t
+    on error e adds the column J[:, e] t(pose); mm_per_px what a pixel means at the points (the
+    median over them of depth over focal length, `at_target_mm`)."""
+
+    A: np.ndarray
+    r: np.ndarray
+    J: np.ndarray
+    mm_per_px: float
+
+
+def linearised(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+               fit: PixelFit) -> Linearised:
+    """The `Linearised` system of `fit` (fit_pixels of cm's model on data, the cameras' intrinsics as
+    given); cm: the compiled model of `frame_robot(robot)` and that model."""
+    problem = _Problem(cm, robot, data, cameras, board)
+    cols = np.array(fit.kept, int)
+    g, c = fit.g, fit.c
+    r, A = problem.jacobian(g, c, cols)
+    q, w, aux = problem.inputs
+    _, Je = cm.J_e(q, cm.eps(q, w, aux, c))
+    o, R, _ = problem.frames(c)
+    _, P = problem.project(problem.camera_points(g, o, R), g, jacobian=True)
+    D = Je.reshape(len(q), 4, 3, -1)[data.pose]
+    J = -np.einsum("rij,rjc->ric", P, problem.point_derivative(g, o, R, D)).reshape(2 * len(r), -1)
+    root = np.repeat(np.sqrt(fit.weights), 2)
+    return Linearised(A * root[:, None], r.ravel() * root, J * root[:, None],
+                      float(np.median(at_target_mm(problem, g, c, np.ones(len(r)))[0])))
 
 
 def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -670,14 +710,20 @@ def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camer
                        distortion=tuple(refined[n]["distortion"])) if n in refined else cam
             for n, cam in cameras.items()}
     robot = calibration.robot
-    problem = _Problem(CompiledModel(frame_robot(robot), calibration.model), robot, data, cams, board)
+    cm = CompiledModel(frame_robot(robot), calibration.model)
     poses = [fitted[n] for n in data.cameras] + ([report["board"]] if data.mount == "tool" else [])
     g = np.concatenate([[*Rotation.from_matrix(np.array(p["rotation"])).as_rotvec(), *p["translation"]]
                         for p in poses])
-    out = {}
-    for stage, c in (("before", np.zeros(problem.cm.dims.nc)), ("after", calibration.c)):
-        out[stage] = _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
-    return out
+    return {stage: summary_at(cm, robot, data, cams, board, g, c)
+            for stage, c in (("before", np.zeros(cm.dims.nc)), ("after", calibration.c))}
+
+
+def summary_at(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+               g: np.ndarray, c: np.ndarray) -> dict:
+    """The residual of image points at the poses g (`PixelFit.g`, none fitted) and coefficients c (nc,),
+    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`."""
+    problem = _Problem(cm, robot, data, cameras, board)
+    return _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
 
 
 def intrinsics_report(fit: PixelFit) -> dict:
