@@ -51,7 +51,17 @@ def rig(tmp_path_factory):
     return d
 
 
-def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_floor(rig):
+@pytest.fixture(scope="module")
+def floor(rig):
+    """The held-out images' residual (`evaluate`'s after: px and mm at the target) of a fit of the training
+    images with the truth's structure."""
+    d = rig
+    run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", d / "oracle.errors.yaml", "--cameras",
+             d / "cams.yaml", "--noise-px", "0.1", "-o", d / "oracle.json")
+    return run_json("evaluate", d / "oracle.json", d / "val.csv", "--cameras", d / "cams.yaml")["after"]
+
+
+def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_floor(rig, floor):
     d = rig
     pixels = ["--cameras", d / "cams.yaml"]
     out = run_json("diagnose", d / "arm.yaml", d / "train.csv", "--val", d / "val.csv", "--errors",
@@ -61,16 +71,29 @@ def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_fl
     assert any(e["error"] == "2.er" and all(re.fullmatch(r"gravity\((q2|2,mz),\d+\)", t) for t in e["terms"])
                for e in out["effects"]), [(e["error"], e["terms"]) for e in out["effects"]]
     assert out["remaining"]["covered"]
-    # the floor: the same training images fitted with the truth's structure, the held-out images scored
-    run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", d / "oracle.errors.yaml", *pixels,
-             "--noise-px", "0.1", "-o", d / "oracle.json")
-    floor = run_json("evaluate", d / "oracle.json", d / "val.csv", *pixels)["after"]
     before, after = out["before"], out["after"]
     # the declared model is well above the floor, the diagnosed one within 1.2x of it, in mm at the target and px
     assert before["val_rms_mm"] > 1.3 * floor["rms_mm_at_target"] and before["val_rms_px"] > 1.3 * floor["rms_px"]
     assert after["val_rms_mm"] < 1.2 * floor["rms_mm_at_target"] and after["val_rms_px"] < 1.2 * floor["rms_px"]
     # what diagnose says to run next works as it says: the new model fitted on all the images
     assert "--cameras" in out["next"] and Path(out["errors_out"]).exists()
+
+
+def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig, floor):
+    """calibrate on the same images: the diagnosed candidate (joint 2's gravity load added) wins the
+    cross-validation over the constant errors, scores the validation images within 1.2x the floor, and the
+    folder holds what calibrate writes for a tracker (calibration, error model, code, report)."""
+    d = rig
+    out = run_json("calibrate", d / "arm.yaml", d / "train.csv", "--val", d / "val.csv", "--models",
+                   "geometric,diagnosed", "--cameras", d / "cams.yaml", "--noise-px", "0.1", "-o", d / "cal")
+    assert out["model"] == "diagnosed" and out["measurement"] == "pixels", out["candidates"]
+    cv = {r["model"]: r["cv_rms_mm"] for r in out["candidates"]}
+    assert cv["diagnosed"] < 0.9 * cv["geometric"]
+    assert any(e["error"] == "2.er" for e in out["effects"])
+    assert out["val"]["rms_mm_at_target"] < 1.2 * floor["rms_mm_at_target"] < out["val_before"]["rms_mm_at_target"]
+    assert all(Path(f).exists() for f in out["files"].values())
+    scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")
+    assert scored["after"]["rms_px"] == pytest.approx(out["val"]["rms_px"], rel=1e-6)
 
 
 @pytest.mark.parametrize("extra, message", [

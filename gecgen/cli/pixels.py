@@ -3,6 +3,8 @@ points (`fit.camera`), written as identify writes one; `gecgen simulate ROBOT --
 image points of a truth robot (`simulate.camera`)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from gecgen.cli.common import number, numbers
@@ -115,6 +117,93 @@ def diagnosed(args) -> dict:
             "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
             if args.holdout is not None else "internal hold-out of 1/5 of the poses",
             "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
+
+
+def calibrated(args, out, build, status) -> dict:
+    """`gecgen calibrate ROBOT PIXELS.csv --cameras FILE -o DIR`: the model chosen among the candidates by
+    cross-validation over the training images (`loop.calibrate.choose` on `loop.pixels.ImagePoints`),
+    written into `build` (which becomes `out`) as calibrate writes a tracker calibration; its JSON result,
+    the validation images scored with the cameras (and board) as the fit placed them."""
+    import warnings
+
+    import numpy as np
+
+    from gecgen import report
+    from gecgen.api import model_names
+    from gecgen.cli.common import say
+    from gecgen.cli.human import warning_lines
+    from gecgen.deliver import export
+    from gecgen.fit.calibration import save
+    from gecgen.fit.camera import calibration_of, frame_robot, refuse_untrustworthy, summary_at
+    from gecgen.fit.inputs import error_model
+    from gecgen.loop.calibrate import choose
+    from gecgen.loop.diagnose import write_error_model
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model import load_robot
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.files import write_atomically
+    from gecgen.model.measurements import hold_out
+    from gecgen.model.pixels import read_pixels
+    from gecgen.runtime.compiled import CompiledModel
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
+                            ("--orientation-length", args.orientation_length)) if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
+                       f"with the robot; the corners' noise is --noise-px); leave it out")
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    robot = load_robot(args.robot)
+    data = read_pixels(args.train, robot, cameras, board)
+    val = read_pixels(args.val, robot, cameras, board) if args.val else None
+    if args.holdout is not None:
+        data, val = hold_out(data, args.holdout, args.seed)
+    default = error_model(args.errors, robot, data.aux_names, constant=False)
+    names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
+    measure = ImagePoints(robot, cameras, board, args.noise_px, significance=not args.keep_insignificant)
+    say(status, "choosing the model by cross-validation over the training images")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            choice = choose(robot, data, default, args.seed, names=names, measure=measure,
+                            progress=lambda name: say(status, f"cross-validating the {name} model on the training "
+                                                              f"images"), stage=lambda text: say(status, text))
+        except RuntimeError as exc:
+            raise ModelError(f"{args.train}: {str(exc).splitlines()[0]}") from None
+    refuse_untrustworthy(choice.fit, str(args.train))
+    say(status, f"writing the calibration, its code and the report into {out}")
+    calib = calibration_of(robot, choice.model, choice.fit)
+    calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
+    save(calib, build / "calibration.json")
+    effects = choice.diagnosis.effects if choice.diagnosis else []
+    write_error_model(robot, choice.model, effects, build / "errors.yaml")
+    code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
+    for name, text in code.items():
+        write_atomically(build / "generated" / name, text)
+    fit = choice.fit
+    result = {"robot": robot.name, "train_data": str(args.train), "output": str(out), "measurement": "pixels",
+              "model": choice.chosen.name, "error_model": str(out / "errors.yaml"), "candidates": choice.table,
+              "n_params": len(choice.model.coefficients), "n_identifiable": len(fit.kept), "before": fit.before,
+              "train": fit.train, "outliers": [o.to_dict() for o in fit.outliers], "held": calib.report["held"],
+              "effects": [e.to_dict() for e in effects], "cameras": calib.report["cameras"],
+              **({"board": calib.report["board"]} if board is not None else {})}
+    if val is not None:
+        cm = CompiledModel(frame_robot(robot), choice.model)
+        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
+                                                              f"{args.seed})"
+        result["val_before"], result["val"] = (summary_at(cm, robot, val, cameras, board, fit.g, c)
+                                               for c in (np.zeros(len(fit.c)), fit.c))
+    files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
+             "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
+    result["files"] = {k: str(v) for k, v in files.items()}
+    result["warnings"] = warning_lines(caught)
+    written = report.write(report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
+                                                 result["warnings"]), build)
+    result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in written.items()})
+    rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+    result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, gecgen compensate "
+                      f"{out / 'calibration.json'} POSES.csv -o OUT.csv")
+    return result
 
 
 #: poses of simulated image points when --poses is not given

@@ -40,7 +40,7 @@ from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.fit.identify import fit_frames, identify, row_errors, summary, to_world
+from gecgen.fit.identify import fit_frames, identify, row_errors, squared_error, summary, to_world
 from gecgen.fit.significance import T_MIN, noise_floor, noise_test
 from gecgen.runtime.threads import one_blas_thread
 
@@ -83,12 +83,21 @@ class Points:
     registration_mode: str = "auto"
     register_val: bool = False
 
-    def fit(self, robot: Robot, model: ErrorModel, data: Measurements) -> Round:
+    def fit(self, robot: Robot, model: ErrorModel, data: Measurements, quiet: bool = True) -> Round:
+        """The model fitted; quiet: its warnings kept back (diagnose's rounds: conditioning is reported
+        in the final fit, not per round)."""
         cm = CompiledModel(robot, model)
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # conditioning is reported in the final fit, not per round
+            if quiet:
+                warnings.simplefilter("ignore")
             fit = identify(cm, data, registration_mode=self.registration_mode)
         return Round(model, cm, fit)
+
+    @staticmethod
+    def squared_error(rnd: Round, test: Measurements) -> tuple[float, float]:
+        """(sum of squared point errors (m^2), the points they count for) of poses the fit did not see
+        (`identify.squared_error`)."""
+        return squared_error(rnd.cm, test, rnd.fit.to_world(test), rnd.fit.c)
 
     def system(self, rnd: Round, data: Measurements):
         """The fit's weighted linear system (H (3R, k), r (3R,)), each row's pose and degrees of freedom

@@ -34,20 +34,33 @@ class ImagePoints:
     """Image points of `robot` seen by `cameras` (and, for a camera on the tool, the board): what
     `loop.diagnose.diagnose` fits, linearises and scores when given as its `measure`. noise_px: the
     corners' noise per coordinate (px), when known: the fit holds what the images determine too
-    weakly against it, and the loop says whether what remains is only that noise."""
+    weakly against it, and the loop says whether what remains is only that noise. loss and
+    significance: as for `fit_pixels`."""
 
     robot: Robot
     cameras: dict[str, Camera]
     board: Board | None = None
     noise_px: float | None = None
     loss: str = "cauchy"
+    #: the coefficients the images do not determine held at zero (`fit_pixels`'s significance)
+    significance: bool = True
 
-    def fit(self, robot: Robot, model: ErrorModel, data: Pixels) -> Round:
+    def fit(self, robot: Robot, model: ErrorModel, data: Pixels, quiet: bool = True) -> Round:
+        """The model and the cameras' poses fitted; quiet: its warnings kept back (diagnose's rounds: what
+        the images leave weak is said by the final fit)."""
         cm = CompiledModel(frame_robot(robot), model)
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # what the images leave weak is said by the final fit, not per round
-            fit = fit_pixels(robot, model, data, self.cameras, self.board, loss=self.loss, noise_px=self.noise_px)
+            if quiet:
+                warnings.simplefilter("ignore")
+            fit = fit_pixels(robot, model, data, self.cameras, self.board, loss=self.loss, noise_px=self.noise_px,
+                             significance=self.significance)
         return Round(model, cm, fit)
+
+    def squared_error(self, rnd: Round, test: Pixels) -> tuple[float, float]:
+        """(sum of squared image-point errors in m at the target, the points they count for) of poses the
+        fit did not see, seen from the cameras (and board) as it placed them."""
+        s = summary_at(rnd.cm, self.robot, test, self.cameras, self.board, rnd.fit.g, rnd.fit.c)
+        return 1e-6 * s["rms_mm_at_target"] ** 2 * len(test.uv), float(len(test.uv))
 
     def system(self, rnd: Round, data: Pixels):
         """As `loop.diagnose.Points.system`: the fit's weighted linear system (its columns the cameras'
