@@ -113,12 +113,21 @@ def test_diagnose_with_cameras_refuses_what_it_does_not_take_in_one_line(rig, ex
 
 
 def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_one_line(rig):
+    """diagnose with a board and no cameras, and a pixel file without cameras given to diagnose, accuracy and
+    check: one line each, naming what to give or use."""
     from gecgen.cli import main
 
     d = rig
     for args, message in ((["--board", str(d / "b.yaml")], "give --cameras too"),
-                          ([], "diagnose --cameras finds the model")):
+                          ([], "which identify, diagnose, calibrate, redundancy and evaluate read")):
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), *args]) != 0
         assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+    err = io.StringIO()
+    run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", ROBOTS / "constant.errors.yaml", "--cameras",
+             d / "cams.yaml", "-o", d / "plain.json")
+    with contextlib.redirect_stderr(err):
+        assert main(["check", str(d / "plain.json"), str(d / "val.csv")]) != 0
+    assert "evaluate --cameras scores held-out images, in place of accuracy and check" in err.getvalue()
+    assert len(err.getvalue().strip().splitlines()) == 1
