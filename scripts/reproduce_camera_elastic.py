@@ -41,13 +41,12 @@ from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
 from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 
-from reproduce_camera import DIST, registered_mm
+from reproduce_camera import DIST, ELASTIC as HEADING, registered_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = 0.1
 #: rad per N m: joint 2's compliance in the truth
 COMPLIANCE = 2e-6
-HEADING = "## Elastic effects from pixels"
 
 
 def truth_of(robot):
