@@ -75,6 +75,7 @@ def run(seed: int, noise: float, n: int = 60) -> dict:
         p_fit = np.concatenate([fitted_tools(robot, model, fit.c, held, branch=b)[:, :3, 3] for b in (0, 1)])
         out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((p_fit - p_true) ** 2, axis=1))))
         out[name + "_registered"] = registered_mm(p_fit, p_true)
+        out[name + "_scaled"] = registered_mm(p_fit, p_true, scaled=True)
         if name == "fit":
             out.update(train_px=fit.train["rms_px"], converged=fit.converged, held=len(fit.held),
                        n_identifiable=len(fit.kept), n_points=len(data.uv))
@@ -91,18 +92,29 @@ def write(rows: list):
              "position error (mm) of both hands' tool origins on poses no fit saw, in the fit's world (the first "
              "camera's fitted pose against its true one) and registered rigidly on those points.", "",
              "| noise px | seed | train px | coefficients fitted | held-out fit mm | oracle mm | ratio | "
-             "registered fit / oracle mm | ratio |", "|---|---|---|---|---|---|---|---|---|"]
-    ratios, registered = [], []
+             "registered fit / oracle mm | ratio | scale taken out too, fit / oracle mm | ratio |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    ratios = {"in the fit's world": [], "registered on the held-out points": [],
+              "registered and scaled on the held-out points": []}
     for noise, seed, r in rows:
-        ratio, reg = r["fit"] / r["oracle"], r["fit_registered"] / r["oracle_registered"]
-        ratios.append(ratio), registered.append(reg)
+        ratio = [r["fit"] / r["oracle"], r["fit_registered"] / r["oracle_registered"],
+                 r["fit_scaled"] / r["oracle_scaled"]]
+        for v, x in zip(ratios.values(), ratio):
+            v.append(x)
         lines.append(f"| {noise} | {seed} | {r['train_px']:.3f} | {r['n_identifiable']} | {r['fit']:.3f} | "
-                     f"{r['oracle']:.3f} | {ratio:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
-                     f"{reg:.2f} |")
-    for label, v in (("in the fit's world", ratios), ("registered on the held-out points", registered)):
-        lines.append(f"- {label}: fit / oracle median {np.median(v):.2f}, worst {max(v):.2f}; "
-                     f"{sum(x <= 1.2 for x in v)} of {len(v)} within 1.2")
-    lines = lines[:-2] + [""] + lines[-2:] + [""]
+                     f"{r['oracle']:.3f} | {ratio[0]:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
+                     f"{ratio[1]:.2f} | {r['fit_scaled']:.3f} / {r['oracle_scaled']:.3f} | {ratio[2]:.2f} |")
+    lines.append("")
+    for noise in NOISES:
+        at = [i for i, (n, _, _) in enumerate(rows) if n == noise]
+        for label, v in ratios.items():
+            w = [v[i] for i in at]
+            lines.append(f"- {noise} px, {label}: fit / oracle median {np.median(w):.2f}, worst {max(w):.2f}; "
+                         f"{sum(x <= 1.2 for x in w)} of {len(w)} within 1.2")
+    lines += ["", "As on the serial arm above, the fit's own world carries the base's errors in the cameras' poses "
+              "(pixels cannot tell them apart), so the registered figures are the ones to compare. Part of what "
+              "registration leaves beyond the oracle is scale, which four markers 150 mm apart on each hand fix "
+              "only weakly from 2.6 m (compare the last two ratios); at 0.3 px the rest grows too.", ""]
     doc = ROOT / "docs" / "camera.md"
     text = doc.read_text()
     section = "\n".join(lines)

@@ -70,12 +70,12 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
     mounts = {c.mount for c in cameras.values()}
     mount = "tool" if "tool" in mounts else "world"
     if mount == "tool":
+        require(not robot.branches, f"{robot.source}: a tree of branches; a camera on the tool is supported on "
+                                    f"serial chains only: see the tree's targets with fixed cameras (mount: world)")
         require(board is not None, f"{where}: the camera is on the tool and sees a board: give the board file "
                                    f"(--board BOARD.yaml)")
         points = tuple(board.names)
     else:
-        require(not robot.branches, f"{robot.source}: a tree of branches; image points are supported on serial "
-                                    f"chains only")
         points = tuple(robot.targets)
     names = tuple(cameras)
     cam = _index(table, "camera", names, f"the camera file has {', '.join(names)}")
