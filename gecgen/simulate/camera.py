@@ -55,10 +55,12 @@ def true_tools(robot: Robot, truth: Truth, q: np.ndarray, branch: int | None = 0
     return tools if branch is None else tools[branch]
 
 
-def camera_frame_points(robot: Robot, rig: CameraRig, tools: list[np.ndarray],
+def camera_frame_points(robot: Robot, rig: CameraRig, tools: np.ndarray | list[np.ndarray],
                         camera: str) -> tuple[list[str], np.ndarray]:
-    """The point names and their positions (N, K, 3) in `camera`'s frame for every branch's tool poses
-    (`true_tools` with branch None; a carried camera rides on the first)."""
+    """The point names and their positions (N, K, 3) in `camera`'s frame for the tool poses (N, 4, 4) of
+    a chain, or every branch's of a tree (a list, `true_tools` with branch None; a carried camera rides
+    on the first)."""
+    tools = [tools] if isinstance(tools, np.ndarray) else tools
     R, t = rig.poses[camera]
     if rig.mount == "tool":
         Rb, tb = rig.board_pose
