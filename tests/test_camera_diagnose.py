@@ -113,8 +113,8 @@ def test_diagnose_with_cameras_refuses_what_it_does_not_take_in_one_line(rig, ex
 
 
 def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_one_line(rig):
-    """diagnose with a board and no cameras, and a pixel file without cameras given to diagnose, accuracy and
-    check: one line each, naming what to give or use."""
+    """diagnose with a board and no cameras, a pixel file without cameras, and a pixel calibration given to
+    check and accuracy: one line each, naming what to give or use."""
     from gecgen.cli import main
 
     d = rig
@@ -124,10 +124,15 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
         with contextlib.redirect_stderr(err):
             assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), *args]) != 0
         assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
-    err = io.StringIO()
+    # a pixel calibration given to the commands that compare tracker points with a tracker calibration
     run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", ROBOTS / "constant.errors.yaml", "--cameras",
              d / "cams.yaml", "-o", d / "plain.json")
-    with contextlib.redirect_stderr(err):
-        assert main(["check", str(d / "plain.json"), str(d / "val.csv")]) != 0
-    assert "evaluate --cameras scores held-out images, in place of accuracy and check" in err.getvalue()
-    assert len(err.getvalue().strip().splitlines()) == 1
+    run_json("simulate", d / "arm.yaml", "--truth", d / "truth.yaml", "--poses", "10", "-o", d / "tracker.csv")
+    for command in (["check", d / "plain.json", d / "tracker.csv"],
+                    ["accuracy", d / "plain.json", ROBOTS / "pps.volume.yaml", d / "tracker.csv"]):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(list(map(str, command))) != 0
+        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points: score " \
+               f"held-out images with gecgen evaluate" in err.getvalue()
+        assert len(err.getvalue().strip().splitlines()) == 1
