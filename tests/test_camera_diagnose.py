@@ -44,6 +44,7 @@ def rig(tmp_path_factory):
     (d / "cams.yaml").write_text(CAMERAS)
     (d / "truth.yaml").write_text(TRUTH)
     (d / "oracle.errors.yaml").write_text(ORACLE)
+    (d / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
     run_json("simulate", d / "arm.yaml", "--truth", d / "truth.yaml", "--cameras", d / "cams.yaml", "--eye",
              "cam1=1.9,-2.4,1.7", "--eye", "cam2=1.9,2.4,1.7", "--look-at", "2,0,1", "--home",
              "0,-1.396,-1.745,0,0.524,0", "--span", "0.21,0.44,0.44,1.05,0.7,1.57", "--poses", "40", "--val-poses",
@@ -100,6 +101,8 @@ def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig,
     (["--report", "R"], "--report is not supported with --cameras"),
     (["--noise-mm", "0.1"], "--noise-mm is not supported with --cameras"),
     (["--register", "val", "--val", "V"], "--register is not supported with --cameras"),
+    (["--board", "board.yaml"], "the cameras are fixed (mount: world) and see the robot's targets: a board goes "
+                                "with a camera on the tool; leave out --board"),
 ])
 def test_diagnose_with_cameras_refuses_what_it_does_not_take_in_one_line(rig, extra, message):
     from gecgen.cli import main
@@ -108,7 +111,7 @@ def test_diagnose_with_cameras_refuses_what_it_does_not_take_in_one_line(rig, ex
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
         assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), "--cameras", str(d / "cams.yaml"),
-                     *map(str, extra), "-o", str(d / "x.errors.yaml")]) != 0
+                     *(str(d / a) if a.endswith(".yaml") else a for a in extra), "-o", str(d / "x.errors.yaml")]) != 0
     assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
 
 

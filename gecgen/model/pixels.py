@@ -76,6 +76,8 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
                                    f"(--board BOARD.yaml)")
         points = tuple(board.names)
     else:
+        require(board is None, f"{where}: the cameras are fixed (mount: world) and see the robot's targets: a board "
+                               f"goes with a camera on the tool; leave out --board")
         points = tuple(robot.targets)
     names = tuple(cameras)
     cam = _index(table, "camera", names, f"the camera file has {', '.join(names)}")
