@@ -66,7 +66,8 @@ def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_fl
     d = rig
     pixels = ["--cameras", d / "cams.yaml"]
     out = run_json("diagnose", d / "arm.yaml", d / "train.csv", "--val", d / "val.csv", "--errors",
-                   ROBOTS / "constant.errors.yaml", *pixels, "--noise-px", "0.1", "-o", d / "found.errors.yaml")
+                   ROBOTS / "constant.errors.yaml", *pixels, "--noise-px", "0.1", "-o", d / "found.errors.yaml",
+                   "--report", d / "report")
     assert out["measurement"] == "pixels" and out["effects"], out["rounds"]
     # joint 2's angle error in joint 2's gravity load (its torque's terms, or its frame's moment about the axis)
     assert any(e["error"] == "2.er" and all(re.fullmatch(r"gravity\((q2|2,mz),\d+\)", t) for t in e["terms"])
@@ -76,8 +77,10 @@ def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_fl
     # the declared model is well above the floor, the diagnosed one within 1.2x of it, in mm at the target and px
     assert before["val_rms_mm"] > 1.3 * floor["rms_mm_at_target"] and before["val_rms_px"] > 1.3 * floor["rms_px"]
     assert after["val_rms_mm"] < 1.2 * floor["rms_mm_at_target"] and after["val_rms_px"] < 1.2 * floor["rms_px"]
-    # what diagnose says to run next works as it says: the new model fitted on all the images
     assert "--cameras" in out["next"] and Path(out["errors_out"]).exists()
+    text = Path(out["report"]).read_text()
+    assert "# gecgen diagnose: industrial6r from image points" in text and "## What diagnose added" in text
+    assert "`2.er` <- `gravity(" in text
 
 
 def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig, floor):
@@ -93,12 +96,13 @@ def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig,
     assert any(e["error"] == "2.er" for e in out["effects"])
     assert out["val"]["rms_mm_at_target"] < 1.2 * floor["rms_mm_at_target"] < out["val_before"]["rms_mm_at_target"]
     assert all(Path(f).exists() for f in out["files"].values())
+    text = Path(out["files"]["report"]).read_text()
+    assert "# gecgen calibrate: industrial6r from image points" in text and "Chosen: `diagnosed`." in text
     scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")
     assert scored["after"]["rms_px"] == pytest.approx(out["val"]["rms_px"], rel=1e-6)
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--report", "R"], "--report is not supported with --cameras"),
     (["--noise-mm", "0.1"], "--noise-mm is not supported with --cameras"),
     (["--register", "val", "--val", "V"], "--register is not supported with --cameras"),
     (["--board", "board.yaml"], "the cameras are fixed (mount: world) and see the robot's targets: a board goes "

@@ -84,9 +84,8 @@ def diagnosed(args) -> dict:
     from gecgen.runtime.compiled import printed_code
 
     require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
-    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--report", args.report),
-                            ("--noise-mm", args.noise_mm), ("--orientation-length", args.orientation_length))
-             if v]
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
+                            ("--orientation-length", args.orientation_length)) if v]
     require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
                        f"with the robot; the corners' noise is --noise-px); leave it out")
     cameras = read_cameras(args.cameras)
@@ -110,13 +109,22 @@ def diagnosed(args) -> dict:
     generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
     generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
     rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
-    return {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
+    result = {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
             "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
             "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
             "candidates_tested": diag.candidates_tested, "remaining": diag.remaining, "verdict": verdict(diag.remaining),
             "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
             if args.holdout is not None else "internal hold-out of 1/5 of the poses",
             "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
+    if args.report:  # the diagnosed model's fit on the training images, what it added first
+        from gecgen import report
+        from gecgen.fit.camera import calibration_of
+
+        final = diag.final
+        content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit),
+                                        str(out), cameras, None, "diagnose", report.content.pixel_diagnosis(result))
+        result.update(report.write(content, args.report))
+    return result
 
 
 def calibrated(args, out, build, status) -> dict:
@@ -197,12 +205,12 @@ def calibrated(args, out, build, status) -> dict:
              "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
     result["files"] = {k: str(v) for k, v in files.items()}
     result["warnings"] = warning_lines(caught)
-    written = report.write(report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
-                                                 result["warnings"]), build)
-    result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in written.items()})
     rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
     result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, gecgen compensate "
                       f"{out / 'calibration.json'} POSES.csv -o OUT.csv")
+    content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
+                                    result["warnings"], "calibrate", report.content.pixel_choice(result))
+    result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
     return result
 
 
