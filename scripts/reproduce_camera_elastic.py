@@ -158,8 +158,10 @@ def write(rows: dict):
                          f"{ratio:.2f} | {r['tool_before_mm']:.3f} / {r['tool_after_mm']:.3f} / "
                          f"{r['tool_oracle_mm']:.3f} | {tool:.2f} |")
         n = [r["narrow"] for _, r in runs]
+        added = sorted({f"`{e} <- {t[0]}{', ...' if len(t) > 1 else ''}`" for x in n for e, t in x["effects"]})
         narrow.append(f"- {kind}: joint 2's gravity load traced in {sum(traced(x['effects']) for x in n)} of "
-                      f"{len(n)} seeds, some effect added in {sum(bool(x['effects']) for x in n)}; held-out "
+                      f"{len(n)} seeds, some effect added in {sum(bool(x['effects']) for x in n)}"
+                      f"{' (' + ', '.join(added) + ')' if added else ''}; held-out "
                       f"declared {min(x['before_mm'] for x in n):.3f} to {max(x['before_mm'] for x in n):.3f} mm, "
                       f"diagnosed {min(x['after_mm'] for x in n):.3f} to {max(x['after_mm'] for x in n):.3f} mm")
         summary.append(f"- {kind}: joint 2's gravity load traced in {hits} of {len(runs)} seeds; held-out "
@@ -175,7 +177,7 @@ def write(rows: dict):
     if HEADING in text:
         start = text.index(HEADING)
         end = text.find("\n## ", start + 1)
-        text = text[:start] + section + (text[end + 1:] if end >= 0 else "")
+        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
     else:
         text = text.rstrip("\n") + "\n\n" + section
     doc.write_text(text)
