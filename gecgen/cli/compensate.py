@@ -45,7 +45,7 @@ def parse_bound(text: str | None, n: int) -> list[float] | None:
 def run(args) -> dict:
     import numpy as np
 
-    from gecgen.api import branch_index, load_calibration, moved_joints
+    from gecgen.api import load_calibration
     from gecgen.cli import Incomplete
     from gecgen.model.measurements import read_commands, write_commands
     from gecgen.model.validation import nearest, require
@@ -80,7 +80,7 @@ def run(args) -> dict:
         rows, k = [k + 2 for k in done.failed], done.failed[0]
         kinds = ", ".join(f"{n} {name}" for name, n in done.counts().items()
                           if STATUS_NAMES.index(name) in {int(done.status[i]) for i in done.failed})
-        moved = moved_joints(robot, branch_index(robot, args.branch))
+        moved = robot.moved_joints(robot.branch_index(args.branch))
         raise Incomplete(f"{cmds.source}: row {rows[0]}: {_why(int(done.status[k]), done.residual[k], moved)}; "
                          f"{len(rows)} of "
                          f"{len(done.q)} rows not placed ({kinds}: rows {', '.join(map(str, rows[:10]))}"
