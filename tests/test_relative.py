@@ -145,7 +145,7 @@ def test_a_badly_recorded_placement_is_named(panda, tmp_path):
     fit = run_json("identify", ROBOT, tmp_path / "moved.csv", "-o", tmp_path / "c.json")
     named = [w for w in fit["warnings"] if "placement" in w]
     assert len(named) == 1 and named[0].startswith("placement plate2 (plate2.0, plate2.1) stands out"), named
-    assert "re-record placement plate2 or drop its rows" in named[0]
+    assert "re-record placement plate2 or drop its rows" in named[0] and "gecgen diagnose" in named[0]
     # scored as held-out data by a calibration of the clean set, the same placement is named
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
