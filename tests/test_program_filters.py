@@ -344,6 +344,24 @@ def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
     _lands_nearer(abb.FORMAT, source, out, read_frames(None, abb.FORMAT), abb_cal, outcome)
 
 
+def test_rapid_egm_motion_reads_its_target_after_the_egm_identity(abb_cal, tmp_path):
+    """EGMMoveL egmID, ToPoint, speed, zone, tool: the same target and tool as MoveL ToPoint, speed, zone,
+    tool (before, p3 moved only by EGMMoveL was 'used by no move instruction' and left uncorrected)."""
+    lines = (DATA / "rapid" / "Cell.mod").read_text().splitlines(keepends=True)
+    head = "".join(lines[:9] + [line for line in lines if "robtarget p3:=" in line])
+
+    def corrected_p3(motion):
+        source = tmp_path / "Cell.mod"
+        source.write_text(f"{head}    PROC main()\n        {motion};\n    ENDPROC\nENDMODULE\n")
+        outcome, _, _ = filter_program(abb_cal[0], source, None)
+        return next(c for c in outcome.changes if c.target.name == "p3").after
+
+    through_egm = corrected_p3("EGMMoveL egmID1, p3, v1000, z10, tGripper\\WObj:=wobjTable")
+    assert through_egm is not None and through_egm == corrected_p3("MoveJ p3, v1000, z10, tGripper\\WObj:=wobjTable")
+    with pytest.raises(ModelError, match="target p3 is in tool tWelder"):
+        corrected_p3("EGMMoveL egmID1, p3, v1000, z10, tWelder")
+
+
 @pytest.mark.parametrize("old, new, expected", [
     (b"PERS tooldata tGripper:=[TRUE,", b"PERS tooldata tGripper:=[FALSE,",
      "Cell.mod:8: tooldata tGripper is a stationary tool (robhold FALSE); correct programs of a tool the robot holds"),
@@ -576,7 +594,7 @@ def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
 # -- public programs (tests/data/programs/README.md names their sources and licences) ----------------
 
 #: a motion instruction's line, found independently of the parsers: every one must be a target or name one
-MOTION_LINES = {"krl": r"^[ \t]*(?:S?PTP|S?LIN|S?CIRC)\b", "rapid": r"^[ \t]*(?:Move\w*|Trigg[JLC])\b",
+MOTION_LINES = {"krl": r"^[ \t]*(?:S?PTP|S?LIN|S?CIRC)\b", "rapid": r"^[ \t]*(?:Move\w*|Trigg[JLC]|EGMMove[LC])\b",
                 "tp": r"^[ \t]*\d*[ \t]*:[ \t]*[JLCA][ \t]+P", "ur": r"\b(?:optimove[jl]|move[jlpc])\("}
 COMMENT = {"krl": r";.*", "rapid": r"!.*", "tp": r"!.*", "ur": r"#.*|\"[^\"]*\""}
 
@@ -590,12 +608,20 @@ def _motion_lines(fmt, path: Path) -> list[int]:
 
 @pytest.mark.parametrize("fmt, source, cal, n_kept", [
     (ur.FORMAT, "ur/ur_rtde/rtde_control.script", "ur_cal", 9),
+    (fanuc.FORMAT, "tp/fanex/fanex_mj.ls", "fanuc_cal", 1),
+    (fanuc.FORMAT, "tp/fanex/fanex_ml.ls", "fanuc_cal", 1),
+    (fanuc.FORMAT, "tp/fanex/fanex.ls", "fanuc_cal", 0),
+    (fanuc.FORMAT, "tp/airo_fanuc/GRPRUN.LS", "fanuc_cal", 0),
+    (abb.FORMAT, "rapid/abbrobotegm/MainModule.mod", "abb_cal", 3),
 ])
 def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, cal, n_kept, request, tmp_path):
-    """A driver (ur_rtde's control script): every motion goes to a target set while the program runs,
-    some to variables the program first gives a literal value and then sets again from registers, or
-    to a function's parameter named like one. Zero and real calibrations leave every byte; each motion is listed with its line and
-    why it is not corrected, none is dropped."""
+    """Drivers and examples their packages publish: ur_rtde's control script (every motion to a target
+    set while the program runs, some to variables the program first gives a literal value and then
+    sets again from registers, or to a function's parameter named like one); fanex's TP moves to a
+    position register at a speed from a register, its and airo-fanuc's launchers without a motion;
+    abbrobotegm's RAPID module moving to a robtarget and through EGM to an offset of it, both declared
+    outside the module. Zero and real calibrations leave every byte; each motion is listed with its
+    line and why it is not corrected, none is dropped."""
     source = DATA / source
     outcome = _round_trips(fmt, request.getfixturevalue(cal)[0], source, tmp_path / source.name)
     assert all(out.read_bytes() == src.read_bytes() for src, out in
@@ -604,7 +630,7 @@ def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, ca
     assert outcome.corrected == 0 and len(kept) == n_kept == len(outcome.changes)
     assert sorted({c.target.line for c in kept}) == _motion_lines(fmt, source)
     assert all(c.reason.startswith(("declared without a value", "a target computed at run time",
-                                     "a position register")) for c in kept)
+                                     "a position register", "a target computed or declared elsewhere")) for c in kept)
 
 
 def test_cli_names_a_public_programs_first_kept_target_by_file_and_line(ur_cal, tmp_path):
