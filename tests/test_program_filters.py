@@ -337,6 +337,21 @@ def test_abb_confdata_quadrants_and_cfx_by_hand():
     assert list(cf[:, 3] & 1) == [0, 1]  # axis 5 negative
 
 
+def test_abb_cfx_agrees_with_an_independent_rule_away_from_its_boundaries(rng):
+    """cfx against the rule of robot_motion_program_opt's ABB helper (4 when the flange point is behind
+    axis 1, 2 when axis 3 < -90 deg, 1 when axis 5 < 0), on postures clear of where the two rules'
+    boundaries differ: the flange point within 0.25 m of axis 1's plane (the wrist centre is 0.2 m
+    from it), axis 3 between -90 deg and the stretched arm's -80.1 deg."""
+    arm = arm_of(load_robot(DATA / "robots" / "irb6700.yaml"), np.eye(4))
+    low, high = arm.limits()
+    q = rng.uniform(low, high, (400, 6))
+    ahead = np.einsum("ni,ni->n", arm.fk(q)[:, :3, 3], np.column_stack([np.cos(q[:, 0]), np.sin(q[:, 0]), 0 * q[:, 0]]))
+    clear = (np.abs(ahead) > 0.25) & ((q[:, 2] < np.radians(-91)) | (q[:, 2] > np.radians(-79)))
+    other = 4 * (ahead < 0) + 2 * (q[:, 2] < np.radians(-90)) + (q[:, 4] < 0)
+    assert clear.sum() > 250 and len(set(other[clear])) == 8
+    assert np.array_equal(abb.config(arm)(q[clear])[:, 3], other[clear])
+
+
 def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
     source, out = DATA / "rapid" / "Cell.mod", tmp_path / "Cell.mod"
     outcome = _round_trips(abb.FORMAT, abb_cal[0], source, out)
@@ -430,6 +445,42 @@ def test_tp_refusals_name_the_line_and_the_fix(fanuc_cal, tmp_path, old, new, ex
     with pytest.raises(ModelError) as err:
         filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
     assert str(err.value) == f"{tmp_path / expected}"
+
+
+def _taught_twice(arm, deg, flip_letter_wrong):
+    """A TP program with one posture (deg, the controller's readings) twice: as joints, and as the
+    Cartesian position the nominal arm reaches there with gecgen's CONFIG string (its F/N letter
+    swapped when flip_letter_wrong): the check docs/program-filters.md gives for a configuration rule."""
+    q = np.radians(deg)
+    T = arm.fk(q[None])[0]
+    r, p, w = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
+    x, y, z = 1000 * T[:3, 3]
+    flip, up, front, *turns = fanuc.config(arm)(q[None])[0]
+    letters = f"{'NF'[int(flip) ^ flip_letter_wrong]} {'DU'[int(up)]} {'BT'[int(front)]}"
+    joints = ",".join(f"\tJ{k + 1}= {v:9.3f} deg" + ("\n" if k == 2 else "") for k, v in enumerate(deg))
+    return ("/PROG  TWICE\n/ATTR\n/MN\n   1:J P[1] 100% FINE    ;\n   2:J P[2] 100% FINE    ;\n/POS\n"
+            f"P[1]{{\n   GP1:\n\tUF : 0, UT : 0,\t\n{joints}\n}};\n"
+            f"P[2]{{\n   GP1:\n\tUF : 0, UT : 0,\t\tCONFIG : '{letters}, {turns[0]}, {turns[1]}, {turns[2]}',\n"
+            f"\tX = {x:9.3f}  mm,\tY = {y:9.3f}  mm,\tZ = {z:9.3f}  mm,\n"
+            f"\tW = {w:9.3f} deg,\tP = {p:9.3f} deg,\tR = {r:9.3f} deg\n}};\n/END\n")
+
+
+@pytest.mark.parametrize("flip_letter_wrong", [0, 1])
+def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal, tmp_path, flip_letter_wrong):
+    """The same posture written as joints and as a Cartesian position with its CONFIG: the corrected
+    joints and the corrected Cartesian position place the flange within 0.01 mm of each other. With
+    the F/N letter swapped the Cartesian target is solved on the other wrist branch and its correction
+    differs by more than 0.5 mm: the check tells a wrong configuration rule."""
+    cal, robot, _ = fanuc_cal
+    arm = arm_of(robot, np.eye(4))
+    source = tmp_path / "twice.ls"
+    source.write_text(_taught_twice(arm, np.array([25.0, 15.0, -20.0, 35.0, -55.0, 40.0]), flip_letter_wrong))
+    outcome, _, _ = filter_program(cal, source, None)
+    joint, cartesian = outcome.changes
+    assert joint.after is not None and cartesian.after is not None
+    by_joints = arm.fk(np.radians([float(v) for v in joint.after])[None])[0][:3, 3]
+    apart = 1e3 * np.linalg.norm(by_joints - fanuc.pose([float(v) for v in cartesian.after])[:3, 3])
+    assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
 
 
 # -- details ---------------------------------------------------------------------------------------
