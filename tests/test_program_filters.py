@@ -642,6 +642,30 @@ def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
                      "XUNUSED": ("motion", None, None, None)}
 
 
+
+def test_krl_partial_inline_targets_are_listed_and_kept(kuka_cal, tmp_path):
+    """`SLIN {X 100}` inside a spline block: KRL takes the missing components from the position before
+    it while the program runs, so the motion is listed with what it lacks and kept (it refused the
+    whole program before); a complete inline target beside it is still corrected, every other byte kept."""
+    source = tmp_path / "spl.src"
+    source.write_text("def spl()\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\n"
+                      "sptp {a1 10,a2 -80,a3 95,a4 5,a5 40,a6 -10} c_ptp\nSpline with $acc=100, $vel.cp=3\n"
+                      "slin {x 100}\nscirc {x 110, y 110}, {x 120, y 90}\nslin {y 200} c_dis\nEndSpline\n"
+                      "PTP_Spline with $vel.ptp=100\nsptp {a1 90}\nEndSpline c_spl\nend\n")
+    outcome, _, _ = filter_program(kuka_cal[0], source, tmp_path / "out" / "spl.src", DATA / "krl" / "frames.yaml")
+    kept = {c.target.name: c.reason for c in outcome.kept}
+    assert outcome.corrected == 1 and outcome.changes[0].target.name == "SPTP line 4"
+    assert kept == {"SLIN line 6": "a partial target (Y, Z, A, B, C from the position before it while the program "
+                                   "runs): not corrected",
+                    "SCIRC line 7": "a partial target (Z, A, B, C from the position before it while the program runs): "
+                                    "not corrected",
+                    "SLIN line 8": "a partial target (X, Z, A, B, C from the position before it while the program "
+                                   "runs): not corrected",
+                    "SPTP line 11": "a partial target (A2, A3, A4, A5, A6 from the position before it while the "
+                                    "program runs): not corrected"}
+    before, after = source.read_text().splitlines(), (tmp_path / "out" / "spl.src").read_text().splitlines()
+    assert [k for k, (a, b) in enumerate(zip(before, after), 1) if a != b] == [4] and len(before) == len(after)
+
 # -- public programs (tests/data/programs/README.md names their sources and licences) ----------------
 
 #: a motion instruction's line, found independently of the parsers: every one must be a target or name one

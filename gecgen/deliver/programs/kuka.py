@@ -162,6 +162,13 @@ def parse(path: Path) -> Program:
             if token.group().startswith("{"):
                 fields = _fields(rest, token.start() + 1, token.end() - 1)
                 kind = "AXIS" if "A1" in fields else "POS"
+                missing = [k for k in (JOINT_KEYS if kind == "AXIS" else POSE_KEYS) if k not in fields]
+                if missing:  # KRL takes the missing components from the position before it, when it runs
+                    targets[at + token.start()] = Target(
+                        f"{m.group(1).upper()} line {line}", path, line, "motion", (),
+                        note=f"a partial target ({', '.join(missing)} from the position before it while the "
+                             f"program runs): not corrected")
+                    continue
                 targets[at + token.start()] = _target(src, path, kind, f"{m.group(1).upper()} line {line}",
                                                       at + token.start() + 1, at + token.end() - 1, state["TOOL"],
                                                       state["BASE"])
