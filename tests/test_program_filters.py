@@ -643,6 +643,17 @@ def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
 
 
 
+def test_krl_motion_to_a_frame_of_the_dat_names_the_frame(tmp_path):
+    """`LIN P1` to a FRAME the .dat declares: listed with the declaration's line and why it is kept (no
+    S and T to solve in); before, it read as 'declared outside the program'."""
+    (tmp_path / "fr.src").write_text("DEF fr( )\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\nLIN P1\nPTP XP2 C_PTP\nEND\n")
+    (tmp_path / "fr.dat").write_text("DEFDAT fr\nDECL FRAME P1={X 1500,Y 0,Z 1200,A 0,B 90,C 0}\n"
+                                     "DECL POS XP2={X 1400,Y 100,Z 1100,A 0,B 90,C 0}\nENDDAT\n")
+    found = {t.name: (t.kind, t.note) for t in kuka.parse(tmp_path / "fr.src").targets}
+    assert found == {"P1 (line 4)": ("motion", "a FRAME (fr.dat:2): it names no configuration (S, T) to solve in, "
+                                               "not corrected"),
+                     "XP2": ("pose", None)}
+
 def test_krl_partial_inline_targets_are_listed_and_kept(kuka_cal, tmp_path):
     """`SLIN {X 100}` inside a spline block: KRL takes the missing components from the position before
     it while the program runs, so the motion is listed with what it lacks and kept (it refused the
