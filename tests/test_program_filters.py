@@ -359,9 +359,11 @@ def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
     _lands_nearer(abb.FORMAT, source, out, read_frames(None, abb.FORMAT), abb_cal, outcome)
 
 
-def test_rapid_egm_motion_reads_its_target_after_the_egm_identity(abb_cal, tmp_path):
-    """EGMMoveL egmID, ToPoint, speed, zone, tool: the same target and tool as MoveL ToPoint, speed, zone,
-    tool (before, p3 moved only by EGMMoveL was 'used by no move instruction' and left uncorrected)."""
+def test_rapid_egm_and_arc_welding_motions_read_their_target_and_tool(abb_cal, tmp_path):
+    """EGMMoveL egmID, ToPoint, ...; ArcL \\On, ToPoint, speed, seam, weld, weave, zone, tool; ArcLStart
+    ToPoint, speed, seam, weld, zone, tool\\WObj\\SeamName: the same target and tool as MoveJ ToPoint,
+    speed, zone, tool (before, p3 moved only by one of them was 'used by no move instruction' and left
+    uncorrected). A tool that is not described is refused, named."""
     lines = (DATA / "rapid" / "Cell.mod").read_text().splitlines(keepends=True)
     head = "".join(lines[:9] + [line for line in lines if "robtarget p3:=" in line])
 
@@ -371,10 +373,16 @@ def test_rapid_egm_motion_reads_its_target_after_the_egm_identity(abb_cal, tmp_p
         outcome, _, _ = filter_program(abb_cal[0], source, None)
         return next(c for c in outcome.changes if c.target.name == "p3").after
 
-    through_egm = corrected_p3("EGMMoveL egmID1, p3, v1000, z10, tGripper\\WObj:=wobjTable")
-    assert through_egm is not None and through_egm == corrected_p3("MoveJ p3, v1000, z10, tGripper\\WObj:=wobjTable")
-    with pytest.raises(ModelError, match="target p3 is in tool tWelder"):
-        corrected_p3("EGMMoveL egmID1, p3, v1000, z10, tWelder")
+    plain = corrected_p3("MoveJ p3, v1000, z10, tGripper\\WObj:=wobjTable")
+    assert plain is not None
+    for motion in ("EGMMoveL egmID1, p3, v1000, z10, tGripper\\WObj:=wobjTable",
+                   "ArcL \\On, p3, v100, seam1, weld5, noweave, fine, tGripper\\WObj:=wobjTable",
+                   'ArcLStart p3, v100, seam1, weld5, fine, tGripper\\WObj:=wobjTable\\SeamName:="s1"',
+                   "ArcC \\Off, p3, p3, v100, seam1, weld5, noweave, fine, tGripper\\WObj:=wobjTable"):
+        assert corrected_p3(motion) == plain, motion
+    for motion in ("EGMMoveL egmID1, p3, v1000, z10, tWelder", "ArcL \\On, p3, v100, seam1, weld5, noweave, fine, tWelder"):
+        with pytest.raises(ModelError, match="target p3 is in tool tWelder"):
+            corrected_p3(motion)
 
 
 @pytest.mark.parametrize("old, new, expected", [
