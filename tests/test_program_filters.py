@@ -491,6 +491,22 @@ def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal
     assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
 
 
+def test_tp_indirect_motions_are_listed_not_refused(tmp_path):
+    """`L P[R[1]]` and `J PR[R[2]]` (the register picks the position while the program runs) are valid
+    TP: listed with why, where the whole program was refused as a motion to an undefined P[R]."""
+    source = tmp_path / "ind.ls"
+    source.write_text("/PROG  IND\n/ATTR\n/MN\n   1:  R[1]=1 ;\n   2:L P[R[1]] 500mm/sec FINE    ;\n"
+                      "   3:J PR[ R[2] ] 100% FINE    ;\n   4:J P[1] 100% FINE    ;\n/POS\nP[1]{\n   GP1:\n"
+                      "\tUF : 0, UT : 0,\t\n\tJ1=    25.000 deg,\tJ2=    15.000 deg,\tJ3=   -20.000 deg,\n"
+                      "\tJ4=    35.000 deg,\tJ5=   -55.000 deg,\tJ6=    40.000 deg\n};\n/END\n")
+    found = {t.name: (t.kind, t.line, t.note) for t in fanuc.parse(source).targets}
+    assert found == {
+        "P[1]": ("joint", 9, None),
+        "P[R[1]] (line 5)": ("motion", 5, "the position is chosen by R[1] while the program runs: the /POS positions "
+                                          "it may pick are corrected where they are defined"),
+        "PR[R[2]] (line 6)": ("motion", 6, "the position is chosen by R[2] while the program runs: correct the "
+                                            "position registers on the controller")}
+
 # -- details ---------------------------------------------------------------------------------------
 
 def test_the_controller_arm_is_the_robot_files_chain(rng):
