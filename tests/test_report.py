@@ -273,3 +273,58 @@ def test_log_axis_ticks_are_numbered_within_any_span():
         ticks = log_ticks(lo, hi)
         assert 2 <= len(ticks) <= 12 and ticks.min() >= lo and ticks.max() <= hi, (lo, hi, ticks)
         assert all(len(f"{v:g}") <= 6 for v in ticks), ticks
+
+
+def test_legends_stand_above_the_data_and_pose_labels_clear_of_each_other(monkeypatch):
+    """Each figure's legend is a row of its own above its axes and their titles (inside an axes it
+    covered the largest bars and the histogram's peak), no axes keeps one; the labelled poses'
+    labels do not overlap (five large errors on neighbouring poses of 200); a force is in N."""
+    import gecgen.report.plots as plots
+    from gecgen.model import load_robot
+    from gecgen.model.measurements import Measurements
+    from gecgen.report.blocks import DataSet, Residuals
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    P = 200
+    rng = np.random.default_rng(0)
+    w = np.zeros((P, 6))
+    w[:, 1] = rng.uniform(-700, 0, P)
+    data = Measurements(rng.uniform(-1, 1, (P, robot.n)), w, np.zeros((P, 0)), (), np.arange(P), np.arange(P),
+                        np.zeros(P, int), np.zeros((P, 3)))
+    big = np.where((np.arange(P) >= 100) & (np.arange(P) < 105), 5.0, 1.0)[:, None]
+    stages = [Residuals(name, np.arange(P), scale * big * rng.normal(size=(P, 3)), None)
+              for name, scale in (("uncalibrated", 3.0), ("calibrated", 0.3), ("diagnosed", 0.1))]
+    ds = DataSet("training", data, stages)
+    drawn = []
+    real = plots._figure
+
+    def keep(fig, *args):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        [legend] = fig.legends
+        box = legend.get_window_extent(renderer)
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert all(ax.get_legend() is None for ax in axes)
+        assert not any(box.overlaps(b) for ax in axes
+                       for b in (ax.get_window_extent(renderer), ax.title.get_window_extent(renderer)))
+        labels = [t.get_window_extent(renderer) for ax in axes for t in ax.texts]
+        assert not any(a.overlaps(b) for i, a in enumerate(labels) for b in labels[i + 1:])
+        drawn.append((fig.axes[0].get_xlabel(), len(labels)))
+        return real(fig, *args)
+
+    monkeypatch.setattr(plots, "_figure", keep)
+    plots.per_pose(robot, ds)
+    plots.error_distribution(robot, ds)
+    effect = type("Effect", (), {"error": "2.ep", "terms": ("fy*q3",)})()
+    plots.effect(robot, effect, rng.normal(size=P), "fy", stages[1], stages[2], data)
+    # the five largest poses lie side by side: one label stands for them, and the others go to poses apart
+    assert drawn[0] == ("pose id, in the order of the file", 5)
+    assert drawn[2][0] == "fy (N)"
+
+
+@pytest.mark.parametrize("cell, right", [("0 %", True), ("-0.28 to 0.28 m", True), ("7", True), ("-", True),
+                                         (".5", True), ("q1 lateral (m)", False), ("-x", False), ("", False)])
+def test_a_cell_that_reads_as_a_number_is_right_aligned(cell, right):
+    from gecgen.report.html import numeric
+
+    assert numeric(cell) is right
