@@ -328,3 +328,23 @@ def test_a_cell_that_reads_as_a_number_is_right_aligned(cell, right):
     from gecgen.report.html import numeric
 
     assert numeric(cell) is right
+
+
+def test_a_pixel_calibration_is_judged_against_the_stated_corner_noise():
+    """identify --cameras's verdict: the training residual against --noise-px (chi-square at p = 0.01),
+    the coefficients held as too weakly determined and an image the points cover in part are limits,
+    and the first step scores held-out images."""
+    from gecgen.fit.significance import overall
+    from gecgen.report.verdict import AT_NOISE, BEYOND_NOISE, pixels_next_step
+
+    score = {"rms_px": 0.3, "max_px": 0.9, "rms_mm_at_target": 0.16, "distance_m": 0.75}
+    result = {"train": score, "before": {**score, "rms_px": 1.3}, "n_identifiable": 10,
+              "eliminated": [{"param": "2.ep:1", "reason": "insignificant"}, {"param": "0.ez:1", "reason": "structural"}]}
+    command = "gecgen evaluate cal.json HELD_OUT_PIXELS.csv --cameras cams.yaml"
+    at = pixels_next_step(result, overall(0.2, 4000, 0.2), {"cam": (16, 16)}, command)
+    beyond = pixels_next_step(result, overall(0.25, 4000, 0.2), {"cam": (9, 16)}, command)
+    assert at.verdict == AT_NOISE and beyond.verdict == BEYOND_NOISE
+    assert at.next_step.startswith(f"Score the calibration on images it was not fitted on: `{command}`; then record")
+    assert "The images determine 10 of the 11 coefficients the model can have; 1 is held" in " ".join(at.limits)
+    assert "--refine-intrinsics" in beyond.next_step and any("9 of 16 cells" in line for line in beyond.limits)
+    assert not any("cells" in line for line in at.limits)

@@ -319,7 +319,7 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
     if weak:
         kept = result["n_identifiable"]
         limits.append(f"The images determine {kept} of the {kept + len(weak)} coefficients the model can have; "
-                      f"{len(weak)} are held at zero, too weakly determined (\"Eliminated parameters\" says why).")
+                      f"{len(weak)} {'is' if len(weak) == 1 else 'are'} held at zero, too weakly determined (\"Eliminated parameters\" says why).")
         steps.append("record more images at poses that turn the joints those coefficients name, and identify again")
     for name, (cells, total) in coverage.items():
         if cells < total:
