@@ -176,6 +176,9 @@ def tool_offset_carried(calib: Calibration) -> dict | None:
 #: steps at most, and the singular value (relative to the largest) below which a direction of the
 #: tool points' Jacobian is one the points cannot see at all (finite differences leave ~1e-9)
 REEXPRESS_POSES, REEXPRESS_STEPS, REEXPRESS_NULL = 200, 30, 1e-6
+#: a step below this (m, rad) is done: the finite-difference Jacobian's rounding turns the directions
+#: the points cannot see by about 1e-9, which moves the smallest-norm point by ~1e-11
+REEXPRESS_STEP = 1e-10
 #: how far the re-expressed tool points may sit from the calibration's before it is not used (m)
 REEXPRESS_TOL = 1e-9
 
@@ -228,7 +231,7 @@ def reexpress_tool_offset(calib: Calibration, carried: dict, where: str) -> tupl
         step = -Vt[:seen].T @ ((Vt[:seen] @ J.T @ r) / s[:seen] ** 2)
         step += N @ np.linalg.lstsq(weight[:, None] * N, -weight * (x + step), rcond=None)[0]
         x += step
-        if np.abs(step).max() < 1e-13:
+        if np.abs(step).max() < REEXPRESS_STEP:
             break
     off = float(np.abs(points(x)).max())
     eps = eps0.copy()
