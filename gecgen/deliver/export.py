@@ -189,6 +189,13 @@ def _error_index(name: str) -> int:
     return 6 * int(frame) + ERROR_NAMES.index(rest.split(":")[0])
 
 
+def _origin_moved(E: np.ndarray, O: np.ndarray) -> tuple[float, float]:
+    """How far (mm, mrad) a joint's origin O (4x4) moves when the error transform E before it is folded in."""
+    T = E @ O
+    angle = math.acos(min(1.0, max(-1.0, (np.trace(O[:3, :3].T @ T[:3, :3]) - 1) / 2)))
+    return float(1e3 * np.linalg.norm(T[:3, 3] - O[:3, 3])), float(1e3 * angle)
+
+
 def reexpress_tool_offset(calib: Calibration, carried: dict, where: str) -> tuple[np.ndarray, dict]:
     """The constant errors (ne,) the URDF carries when the fit carries the measured tool's offset
     in frames before the tool (`tool_offset_carried`), and what changed.
@@ -239,18 +246,12 @@ def reexpress_tool_offset(calib: Calibration, carried: dict, where: str) -> tupl
         eps[free] = x
     names = robot.error_names()
     moved = []
-    for i, (tip, _) in enumerate(robot.tips()):
-        joint = robot.chain[tip - 1]
-        O = constant(joint.pre)
+    for tip, _ in robot.tips():
         before = robot.parent(tip)
-
-        def distance(E: np.ndarray) -> tuple[float, float]:
-            T = E @ O
-            angle = math.acos(min(1.0, max(-1.0, (np.trace(O[:3, :3].T @ T[:3, :3]) - 1) / 2)))
-            return float(1e3 * np.linalg.norm(T[:3, 3] - O[:3, 3])), float(1e3 * angle)
-
         if before in frames_moved:
-            fit, out = (distance(error_transform(e[6 * before:6 * before + 6])) for e in (eps0, eps))
+            joint = robot.chain[tip - 1]
+            fit, out = (_origin_moved(error_transform(e[6 * before:6 * before + 6]), constant(joint.pre))
+                        for e in (eps0, eps))
             moved.append({"joint": joint.name, "fit_mm": fit[0], "fit_mrad": fit[1], "exported_mm": out[0],
                           "exported_mrad": out[1]})
     return eps, {"applied": off <= REEXPRESS_TOL, "max_point_change_mm": float(1e3 * off), "poses": REEXPRESS_POSES,
