@@ -348,3 +348,34 @@ def test_a_pixel_calibration_is_judged_against_the_stated_corner_noise():
     assert "The images determine 10 of the 11 coefficients the model can have; 1 is held" in " ".join(at.limits)
     assert "--refine-intrinsics" in beyond.next_step and any("9 of 16 cells" in line for line in beyond.limits)
     assert not any("cells" in line for line in at.limits)
+
+
+def _reads_only_what_exists_or_is_written(step: str, folder) -> None:
+    """Each command in a next step that reads a calibration (export, evaluate, compensate) reads one
+    on disk (relative to folder), or one that a command before it in the same code span writes."""
+    for span in re.findall(r"`([^`]+)`", step):
+        written = set()
+        for part in span.split("&&"):
+            words = part.split()
+            if words[1:2] and words[1] in ("export", "evaluate", "compensate"):
+                assert words[2] in written or (folder / words[2]).exists(), step
+            written |= {b for a, b in zip(words, words[1:]) if a == "-o"}
+
+
+def test_a_next_step_names_only_calibrations_that_exist_or_that_it_writes_first(reports, tmp_path, monkeypatch):
+    """diagnose writes an error model, not a calibration: at the noise its next step fits the new model
+    on all the data before exporting it (the README's report said to export a file nothing had
+    written). The other reports' steps read the calibration their command wrote."""
+    for result in reports.values():
+        _reads_only_what_exists_or_is_written(re.search(r"\*\*Next step:\*\* (.*)", report_md(result)).group(1),
+                                              tmp_path)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "truth.yaml").write_text("seed: 3\nconstant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 3.0e-5}\n")
+    gecgen("simulate", ROBOT, "--truth", "truth.yaml", "--poses", 30, "--val-out", "val.csv", "--val-poses", 10,
+           "--seed", 3, "-o", "train.csv")
+    out = gecgen("diagnose", ROBOT, "train.csv", "--val", "val.csv", "--errors", ERRORS, "--max-rounds", 1,
+                 "--noise-mm", 0.0316, "-o", "new.errors.yaml")
+    step = out["assessment"]["next_step"]
+    assert out["assessment"]["verdict"] == "at the noise" and "gecgen export" in step
+    _reads_only_what_exists_or_is_written(step, tmp_path)
