@@ -339,7 +339,8 @@ def test_a_pixel_calibration_is_judged_against_the_stated_corner_noise():
 
     score = {"rms_px": 0.3, "max_px": 0.9, "rms_mm_at_target": 0.16, "distance_m": 0.75}
     result = {"train": score, "before": {**score, "rms_px": 1.3}, "n_identifiable": 10,
-              "eliminated": [{"param": "2.ep:1", "reason": "insignificant"}, {"param": "0.ez:1", "reason": "structural"}]}
+              "eliminated": [{"param": "2.ep:1", "reason": "insignificant"},
+                             {"param": "0.ez:1", "reason": "structural"}]}
     command = "gecgen evaluate cal.json HELD_OUT_PIXELS.csv --cameras cams.yaml"
     at = pixels_next_step(result, overall(0.2, 4000, 0.2), {"cam": (16, 16)}, command)
     beyond = pixels_next_step(result, overall(0.25, 4000, 0.2), {"cam": (9, 16)}, command)

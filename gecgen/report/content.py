@@ -421,7 +421,8 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
                            rms(mm[rows])))
     points.sort(key=lambda r: -r[0])
     coverage = [f"`{n}`: {cells} of {total} cells of its {cameras[n].width} x {cameras[n].height} image "
-                f"({COVERAGE} x {COVERAGE}) hold a point" for n, (cells, total) in image_coverage(data, cameras).items()]
+                f"({COVERAGE} x {COVERAGE}) hold a point"
+                for n, (cells, total) in image_coverage(data, cameras).items()]
     outliers = [f"row {o.row}: image of pose {o.pose}, camera `{o.camera}`, point `{o.point}`: {o.residual_px:.3g} px "
                 f"(weight {o.weight:.2g})" for o in fit.outliers]
     sections = [

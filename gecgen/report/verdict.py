@@ -290,7 +290,8 @@ def iso9283_next_step(result: dict, tolerance_mm: float | None, robot: str) -> A
     return Assessment(verdict, statement, limits, step[0].upper() + step[1:] + ".", tolerance_mm)
 
 
-def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple[int, int]], evaluate: str) -> Assessment:
+def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple[int, int]],
+                     evaluate: str) -> Assessment:
     """The verdict on a calibration from image points (`gecgen identify --cameras`'s result): its
     training reprojection residual against the corners' noise when it was stated (`noise`:
     `fit.significance.overall` of the residual per coordinate against `--noise-px`, in px), what
@@ -319,7 +320,8 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
     if weak:
         kept = result["n_identifiable"]
         limits.append(f"The images determine {kept} of the {kept + len(weak)} coefficients the model can have; "
-                      f"{len(weak)} {'is' if len(weak) == 1 else 'are'} held at zero, too weakly determined (\"Eliminated parameters\" says why).")
+                      f"{len(weak)} {'is' if len(weak) == 1 else 'are'} held at zero, too weakly determined "
+                      f"(\"Eliminated parameters\" says why).")
         steps.append("record more images at poses that turn the joints those coefficients name, and identify again")
     for name, (cells, total) in coverage.items():
         if cells < total:
