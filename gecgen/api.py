@@ -216,34 +216,6 @@ def correction_bound(robot: Robot, bound) -> np.ndarray | None:
     return np.ascontiguousarray(values)
 
 
-def branch_index(robot: Robot, branch: str | None) -> int:
-    """The index of the named branch: 0 on a serial robot, whose `branch` must be None."""
-    names = [b.name for b in robot.branches]
-    if not names:
-        require(branch is None, f"branch={excerpt(branch)}: robot {robot.name} is a serial chain with one tool; "
-                                f"leave branch out")
-        return 0
-    require(branch in names, f"branch={excerpt(branch)}: robot {robot.name} has branches {', '.join(names)}; name "
-                             f"the one whose tool to place")
-    return names.index(branch)
-
-
-def moved_joints(robot: Robot, branch: int) -> list[str]:
-    """The names of the joints whose readings compensation moves to place branch `branch`'s tool:
-    those that turn a frame on its path alone (symbolic.chain.tool_jacobian_function)."""
-    tips = [tip for tip, _ in robot.tips()]
-    shared = {f for k, tip in enumerate(tips) if k != branch for f in robot.path(tip)}
-    drives = robot.drives()
-    readings = {k for i in set(robot.path(tips[branch])) - shared - {0} for k, _ in drives[i - 1][0]}
-    return [robot.joint_names[k] for k in sorted(readings)]
-
-
-def branch_targets(robot: Robot, branch: str) -> list[str]:
-    """The targets on the named branch's tool."""
-    k = [b.name for b in robot.branches].index(branch)
-    return [t for t in robot.target_names if robot.branch_of(t) == k]
-
-
 # -- the calibrator --------------------------------------------------------------------------
 
 class Calibrator:
@@ -336,7 +308,7 @@ class Calibrator:
                 if b.name not in calib.report["branches"]:
                     warnings.warn(f"branch {b.name!r}: the data measures none of its targets, so its own joints' "
                                   f"errors are not calibrated and compensating it is refused; measure "
-                                  f"{', '.join(branch_targets(robot, b.name))} to calibrate it", stacklevel=2)
+                                  f"{', '.join(robot.branch_targets(b.name))} to calibrate it", stacklevel=2)
         if fitted.vertex_of:
             calib.report["orientation_length_m"] = fitted.pose_length
         if data.relative is not None:  # the errors "relative" in `eliminated` are those it cannot see
@@ -439,13 +411,13 @@ class Calibrator:
         own joints are corrected, every other reading (the trunk's, the other branches') is held at its
         command."""
         calib = self._fitted()
-        index = branch_index(calib.robot, branch)
+        index = calib.robot.branch_index(branch)
         measured = calib.report.get("branches")  # the branches the data measured (older files: unknown)
         if calib.robot.branches and isinstance(measured, dict) and branch not in measured:
             raise ModelError(f"branch={excerpt(branch)}: the calibration's data measured no target of this branch "
                              f"(only of {', '.join(measured)}), so its own joints' errors were not calibrated and the "
                              f"correction would rest on the other branches' fit alone; measure "
-                             f"{', '.join(branch_targets(calib.robot, branch))} and calibrate again")
+                             f"{', '.join(calib.robot.branch_targets(branch))} and calibrate again")
         require(isinstance(max_iter, int) and max_iter >= 0,
                 f"max_iter={excerpt(max_iter)}: give a non-negative number of Newton steps")
         limit = correction_bound(calib.robot, bound)

@@ -133,12 +133,36 @@ arm before filtering its programs.
 - **ABB cf1, cf4, cf6** (the quadrant of axes 1, 4 and 6: 0 from 0 to 90 deg, 1 from 90 to 180, -1
   from 0 to -90): ABB's RAPID Reference Manual, "confdata" (the copy on yumpu.com, "Basic
   Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees.
-- **ABB cfx** (wrist centre in front of or behind axis 1 and the lower arm, axis 5's sign): no ABB
-  page with the table for six-axis arms could be reached here. Not checked.
+- **ABB cfx** (4 when the wrist centre is behind axis 1, + 2 when it is behind the lower arm, + 1
+  when axis 5 is negative): no ABB page with the table for six-axis arms could be reached here; ABB's
+  RobotStudio API reference ("ConfigurationData") and ROS-Industrial's abb_rapid_msgs RobTarget say
+  only that its meaning depends on the robot model. Compared with an independent implementation
+  instead: the ABB helper of robot_motion_program_opt 0.0.1 (PyPI, John Wason), which writes the
+  confdata of the robtargets it sends to IRC5 controllers, computes cfx = 4 rear + 2 lower arm + 1
+  flip with flip when axis 5 < 0. Bits and order agree. Its boundaries are simpler: "rear" from the
+  flange point instead of the wrist centre, and "lower arm" when axis 3 < -90 deg, where gecgen takes
+  the angle that puts the wrist centre on the line through axes 2 and 3 (-80.1 deg on the IRB
+  6700-sized arm here: the A3-A4 offset moves it). Postures within those few degrees are the only
+  ones where the two differ; the test suite checks the two agree elsewhere.
 - **FANUC CONFIG** (flip, up, top, and the turns of J1, J4, J6): onerobotics.com, "The Perils of
-  Six-Axis Robots" (2013), explains the string, but no FANUC document could be reached here, and the
-  secondary pages found contradict each other on which sign of J5 is "F". Not checked: gecgen's F
-  when J5 > 0 and its turn numbers (0 in (-180, 180] deg) rest on the robot file's geometry alone.
+  Six-Axis Robots" (2013), explains the string, but no FANUC document could be reached here. On the
+  flip, the two statements found give the opposite of gecgen's "F when J5 > 0": a reply in
+  robot-forum.com thread 31037 (2019: "if J5 angle is positive then is Non-flip") and a knowledge-base
+  page of industrialmonitordirect.com ("If J5 >= 0, No-Flip"), another page of which calls F
+  "Front/Back". Neither is FANUC's, so gecgen's rule is unchanged and not confirmed; the sign also
+  depends on the robot file's J5 turning the way the controller's does. The turn numbers (0 in
+  (-180, 180] deg) rest on the robot file's geometry alone. Check it on your arm as below before
+  filtering Cartesian FANUC positions.
+
+### Checking a configuration rule on your own arm
+
+Teach one posture and store it twice in a program: once as joints and once as the Cartesian target
+the controller shows for it, with its configuration (FANUC: the same P[] converted with REPRE; KUKA:
+an E6AXIS and an E6POS; ABB: a jointtarget and CalcRobT's robtarget). Filter the program and compare
+the two corrections in the log: where gecgen reads the configuration as the controller does, the
+corrected joints and the corrected Cartesian target put the tool at the same place (within 0.01 mm
+in the test suite's FANUC case); where it reads the flag wrongly, the Cartesian target is solved on
+another branch and its correction differs (by 1.6 mm there).
 """
 
 

@@ -208,6 +208,13 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Residuals in pixels" in text and f"{train['rms_px']:.3g} px rms" in text
     assert f"{train['rms_mm_at_target']:.3g} mm at target" in text and "## Coverage of the images" in text
+    # the report opens with its verdict and next step, then the warnings the terminal printed
+    assert text.index("## Verdict and next step") < text.index("## Warnings") < text.index("## Residuals in pixels")
+    assert "**Verdict: noise not known.**" in text and "No held-out images" in text
+    evaluate = (f"`gecgen evaluate {tmp_path / 'cal.json'} HELD_OUT_PIXELS.csv --cameras {tmp_path / 'cams.yaml'} "
+                f"--board {tmp_path / 'board.yaml'}`")
+    assert evaluate in out["next_step"] and f"**Next step:** {out['next_step']}" in text
+    assert all(f"- {w}" in text for w in out["warnings"]) and "*" not in text[text.index("## Residuals"):][:600]
     np.savetxt(tmp_path / "poses.csv", np.radians([[5, -70, -100, 20, 40, 10]]), delimiter=",",
                header="q1,q2,q3,q4,q5,q6", comments="")
     run_json("compensate", tmp_path / "cal.json", tmp_path / "poses.csv", "-o", tmp_path / "fixed.csv")

@@ -337,11 +337,52 @@ def test_abb_confdata_quadrants_and_cfx_by_hand():
     assert list(cf[:, 3] & 1) == [0, 1]  # axis 5 negative
 
 
+def test_abb_cfx_agrees_with_an_independent_rule_away_from_its_boundaries(rng):
+    """cfx against the rule of robot_motion_program_opt's ABB helper (4 when the flange point is behind
+    axis 1, 2 when axis 3 < -90 deg, 1 when axis 5 < 0), on postures clear of where the two rules'
+    boundaries differ: the flange point within 0.25 m of axis 1's plane (the wrist centre is 0.2 m
+    from it), axis 3 between -90 deg and the stretched arm's -80.1 deg."""
+    arm = arm_of(load_robot(DATA / "robots" / "irb6700.yaml"), np.eye(4))
+    low, high = arm.limits()
+    q = rng.uniform(low, high, (400, 6))
+    ahead = np.einsum("ni,ni->n", arm.fk(q)[:, :3, 3], np.column_stack([np.cos(q[:, 0]), np.sin(q[:, 0]), 0 * q[:, 0]]))
+    clear = (np.abs(ahead) > 0.25) & ((q[:, 2] < np.radians(-91)) | (q[:, 2] > np.radians(-79)))
+    other = 4 * (ahead < 0) + 2 * (q[:, 2] < np.radians(-90)) + (q[:, 4] < 0)
+    assert clear.sum() > 250 and len(set(other[clear])) == 8
+    assert np.array_equal(abb.config(arm)(q[clear])[:, 3], other[clear])
+
+
 def test_rapid_module_zero_real_and_untouched_bytes(abb_cal, tmp_path):
     source, out = DATA / "rapid" / "Cell.mod", tmp_path / "Cell.mod"
     outcome = _round_trips(abb.FORMAT, abb_cal[0], source, out)
     assert outcome.corrected == 10 and outcome.changes[-1].reason.startswith("a target computed")
     _lands_nearer(abb.FORMAT, source, out, read_frames(None, abb.FORMAT), abb_cal, outcome)
+
+
+def test_rapid_egm_and_arc_welding_motions_read_their_target_and_tool(abb_cal, tmp_path):
+    """EGMMoveL egmID, ToPoint, ...; ArcL \\On, ToPoint, speed, seam, weld, weave, zone, tool; ArcLStart
+    ToPoint, speed, seam, weld, zone, tool\\WObj\\SeamName: the same target and tool as MoveJ ToPoint,
+    speed, zone, tool (before, p3 moved only by one of them was 'used by no move instruction' and left
+    uncorrected). A tool that is not described is refused, named."""
+    lines = (DATA / "rapid" / "Cell.mod").read_text().splitlines(keepends=True)
+    head = "".join(lines[:9] + [line for line in lines if "robtarget p3:=" in line])
+
+    def corrected_p3(motion):
+        source = tmp_path / "Cell.mod"
+        source.write_text(f"{head}    PROC main()\n        {motion};\n    ENDPROC\nENDMODULE\n")
+        outcome, _, _ = filter_program(abb_cal[0], source, None)
+        return next(c for c in outcome.changes if c.target.name == "p3").after
+
+    plain = corrected_p3("MoveJ p3, v1000, z10, tGripper\\WObj:=wobjTable")
+    assert plain is not None
+    for motion in ("EGMMoveL egmID1, p3, v1000, z10, tGripper\\WObj:=wobjTable",
+                   "ArcL \\On, p3, v100, seam1, weld5, noweave, fine, tGripper\\WObj:=wobjTable",
+                   'ArcLStart p3, v100, seam1, weld5, fine, tGripper\\WObj:=wobjTable\\SeamName:="s1"',
+                   "ArcC \\Off, p3, p3, v100, seam1, weld5, noweave, fine, tGripper\\WObj:=wobjTable"):
+        assert corrected_p3(motion) == plain, motion
+    for motion in ("EGMMoveL egmID1, p3, v1000, z10, tWelder", "ArcL \\On, p3, v100, seam1, weld5, noweave, fine, tWelder"):
+        with pytest.raises(ModelError, match="target p3 is in tool tWelder"):
+            corrected_p3(motion)
 
 
 @pytest.mark.parametrize("old, new, expected", [
@@ -413,6 +454,58 @@ def test_tp_refusals_name_the_line_and_the_fix(fanuc_cal, tmp_path, old, new, ex
         filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
     assert str(err.value) == f"{tmp_path / expected}"
 
+
+def _taught_twice(arm, deg, flip_letter_wrong):
+    """A TP program with one posture (deg, the controller's readings) twice: as joints, and as the
+    Cartesian position the nominal arm reaches there with gecgen's CONFIG string (its F/N letter
+    swapped when flip_letter_wrong): the check docs/program-filters.md gives for a configuration rule."""
+    q = np.radians(deg)
+    T = arm.fk(q[None])[0]
+    r, p, w = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
+    x, y, z = 1000 * T[:3, 3]
+    flip, up, front, *turns = fanuc.config(arm)(q[None])[0]
+    letters = f"{'NF'[int(flip) ^ flip_letter_wrong]} {'DU'[int(up)]} {'BT'[int(front)]}"
+    joints = ",".join(f"\tJ{k + 1}= {v:9.3f} deg" + ("\n" if k == 2 else "") for k, v in enumerate(deg))
+    return ("/PROG  TWICE\n/ATTR\n/MN\n   1:J P[1] 100% FINE    ;\n   2:J P[2] 100% FINE    ;\n/POS\n"
+            f"P[1]{{\n   GP1:\n\tUF : 0, UT : 0,\t\n{joints}\n}};\n"
+            f"P[2]{{\n   GP1:\n\tUF : 0, UT : 0,\t\tCONFIG : '{letters}, {turns[0]}, {turns[1]}, {turns[2]}',\n"
+            f"\tX = {x:9.3f}  mm,\tY = {y:9.3f}  mm,\tZ = {z:9.3f}  mm,\n"
+            f"\tW = {w:9.3f} deg,\tP = {p:9.3f} deg,\tR = {r:9.3f} deg\n}};\n/END\n")
+
+
+@pytest.mark.parametrize("flip_letter_wrong", [0, 1])
+def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal, tmp_path, flip_letter_wrong):
+    """The same posture written as joints and as a Cartesian position with its CONFIG: the corrected
+    joints and the corrected Cartesian position place the flange within 0.01 mm of each other. With
+    the F/N letter swapped the Cartesian target is solved on the other wrist branch and its correction
+    differs by more than 0.5 mm: the check tells a wrong configuration rule."""
+    cal, robot, _ = fanuc_cal
+    arm = arm_of(robot, np.eye(4))
+    source = tmp_path / "twice.ls"
+    source.write_text(_taught_twice(arm, np.array([25.0, 15.0, -20.0, 35.0, -55.0, 40.0]), flip_letter_wrong))
+    outcome, _, _ = filter_program(cal, source, None)
+    joint, cartesian = outcome.changes
+    assert joint.after is not None and cartesian.after is not None
+    by_joints = arm.fk(np.radians([float(v) for v in joint.after])[None])[0][:3, 3]
+    apart = 1e3 * np.linalg.norm(by_joints - fanuc.pose([float(v) for v in cartesian.after])[:3, 3])
+    assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
+
+
+def test_tp_indirect_motions_are_listed_not_refused(tmp_path):
+    """`L P[R[1]]` and `J PR[R[2]]` (the register picks the position while the program runs) are valid
+    TP: listed with why, where the whole program was refused as a motion to an undefined P[R]."""
+    source = tmp_path / "ind.ls"
+    source.write_text("/PROG  IND\n/ATTR\n/MN\n   1:  R[1]=1 ;\n   2:L P[R[1]] 500mm/sec FINE    ;\n"
+                      "   3:J PR[ R[2] ] 100% FINE    ;\n   4:J P[1] 100% FINE    ;\n/POS\nP[1]{\n   GP1:\n"
+                      "\tUF : 0, UT : 0,\t\n\tJ1=    25.000 deg,\tJ2=    15.000 deg,\tJ3=   -20.000 deg,\n"
+                      "\tJ4=    35.000 deg,\tJ5=   -55.000 deg,\tJ6=    40.000 deg\n};\n/END\n")
+    found = {t.name: (t.kind, t.line, t.note) for t in fanuc.parse(source).targets}
+    assert found == {
+        "P[1]": ("joint", 9, None),
+        "P[R[1]] (line 5)": ("motion", 5, "the position is chosen by R[1] while the program runs: the /POS positions "
+                                          "it may pick are corrected where they are defined"),
+        "PR[R[2]] (line 6)": ("motion", 6, "the position is chosen by R[2] while the program runs: correct the "
+                                            "position registers on the controller")}
 
 # -- details ---------------------------------------------------------------------------------------
 
@@ -573,10 +666,45 @@ def test_krl_circ_and_spline_motions_name_their_targets(tmp_path):
                      "XUNUSED": ("motion", None, None, None)}
 
 
+
+def test_krl_motion_to_a_frame_of_the_dat_names_the_frame(tmp_path):
+    """`LIN P1` to a FRAME the .dat declares: listed with the declaration's line and why it is kept (no
+    S and T to solve in); before, it read as 'declared outside the program'."""
+    (tmp_path / "fr.src").write_text("DEF fr( )\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\nLIN P1\nPTP XP2 C_PTP\nEND\n")
+    (tmp_path / "fr.dat").write_text("DEFDAT fr\nDECL FRAME P1={X 1500,Y 0,Z 1200,A 0,B 90,C 0}\n"
+                                     "DECL POS XP2={X 1400,Y 100,Z 1100,A 0,B 90,C 0}\nENDDAT\n")
+    found = {t.name: (t.kind, t.note) for t in kuka.parse(tmp_path / "fr.src").targets}
+    assert found == {"P1 (line 4)": ("motion", "a FRAME (fr.dat:2): it names no configuration (S, T) to solve in, "
+                                               "not corrected"),
+                     "XP2": ("pose", None)}
+
+def test_krl_partial_inline_targets_are_listed_and_kept(kuka_cal, tmp_path):
+    """`SLIN {X 100}` inside a spline block: KRL takes the missing components from the position before
+    it while the program runs, so the motion is listed with what it lacks and kept (it refused the
+    whole program before); a complete inline target beside it is still corrected, every other byte kept."""
+    source = tmp_path / "spl.src"
+    source.write_text("def spl()\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\n"
+                      "sptp {a1 10,a2 -80,a3 95,a4 5,a5 40,a6 -10} c_ptp\nSpline with $acc=100, $vel.cp=3\n"
+                      "slin {x 100}\nscirc {x 110, y 110}, {x 120, y 90}\nslin {y 200} c_dis\nEndSpline\n"
+                      "PTP_Spline with $vel.ptp=100\nsptp {a1 90}\nEndSpline c_spl\nend\n")
+    outcome, _, _ = filter_program(kuka_cal[0], source, tmp_path / "out" / "spl.src", DATA / "krl" / "frames.yaml")
+    kept = {c.target.name: c.reason for c in outcome.kept}
+    assert outcome.corrected == 1 and outcome.changes[0].target.name == "SPTP line 4"
+    assert kept == {"SLIN line 6": "a partial target (Y, Z, A, B, C from the position before it while the program "
+                                   "runs): not corrected",
+                    "SCIRC line 7": "a partial target (Z, A, B, C from the position before it while the program runs): "
+                                    "not corrected",
+                    "SLIN line 8": "a partial target (X, Z, A, B, C from the position before it while the program "
+                                   "runs): not corrected",
+                    "SPTP line 11": "a partial target (A2, A3, A4, A5, A6 from the position before it while the "
+                                    "program runs): not corrected"}
+    before, after = source.read_text().splitlines(), (tmp_path / "out" / "spl.src").read_text().splitlines()
+    assert [k for k, (a, b) in enumerate(zip(before, after), 1) if a != b] == [4] and len(before) == len(after)
+
 # -- public programs (tests/data/programs/README.md names their sources and licences) ----------------
 
 #: a motion instruction's line, found independently of the parsers: every one must be a target or name one
-MOTION_LINES = {"krl": r"^[ \t]*(?:S?PTP|S?LIN|S?CIRC)\b", "rapid": r"^[ \t]*(?:Move\w*|Trigg[JLC])\b",
+MOTION_LINES = {"krl": r"^[ \t]*(?:S?PTP|S?LIN|S?CIRC)\b", "rapid": r"^[ \t]*(?:Move\w*|Trigg[JLC]|EGMMove[LC])\b",
                 "tp": r"^[ \t]*\d*[ \t]*:[ \t]*[JLCA][ \t]+P", "ur": r"\b(?:optimove[jl]|move[jlpc])\("}
 COMMENT = {"krl": r";.*", "rapid": r"!.*", "tp": r"!.*", "ur": r"#.*|\"[^\"]*\""}
 
@@ -590,12 +718,20 @@ def _motion_lines(fmt, path: Path) -> list[int]:
 
 @pytest.mark.parametrize("fmt, source, cal, n_kept", [
     (ur.FORMAT, "ur/ur_rtde/rtde_control.script", "ur_cal", 9),
+    (fanuc.FORMAT, "tp/fanex/fanex_mj.ls", "fanuc_cal", 1),
+    (fanuc.FORMAT, "tp/fanex/fanex_ml.ls", "fanuc_cal", 1),
+    (fanuc.FORMAT, "tp/fanex/fanex.ls", "fanuc_cal", 0),
+    (fanuc.FORMAT, "tp/airo_fanuc/GRPRUN.LS", "fanuc_cal", 0),
+    (abb.FORMAT, "rapid/abbrobotegm/MainModule.mod", "abb_cal", 3),
 ])
 def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, cal, n_kept, request, tmp_path):
-    """A driver (ur_rtde's control script): every motion goes to a target set while the program runs,
-    some to variables the program first gives a literal value and then sets again from registers, or
-    to a function's parameter named like one. Zero and real calibrations leave every byte; each motion is listed with its line and
-    why it is not corrected, none is dropped."""
+    """Drivers and examples their packages publish: ur_rtde's control script (every motion to a target
+    set while the program runs, some to variables the program first gives a literal value and then
+    sets again from registers, or to a function's parameter named like one); fanex's TP moves to a
+    position register at a speed from a register, its and airo-fanuc's launchers without a motion;
+    abbrobotegm's RAPID module moving to a robtarget and through EGM to an offset of it, both declared
+    outside the module. Zero and real calibrations leave every byte; each motion is listed with its
+    line and why it is not corrected, none is dropped."""
     source = DATA / source
     outcome = _round_trips(fmt, request.getfixturevalue(cal)[0], source, tmp_path / source.name)
     assert all(out.read_bytes() == src.read_bytes() for src, out in
@@ -604,7 +740,7 @@ def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, ca
     assert outcome.corrected == 0 and len(kept) == n_kept == len(outcome.changes)
     assert sorted({c.target.line for c in kept}) == _motion_lines(fmt, source)
     assert all(c.reason.startswith(("declared without a value", "a target computed at run time",
-                                     "a position register")) for c in kept)
+                                     "a position register", "a target computed or declared elsewhere")) for c in kept)
 
 
 def test_cli_names_a_public_programs_first_kept_target_by_file_and_line(ur_cal, tmp_path):

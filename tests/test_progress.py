@@ -106,12 +106,19 @@ def test_design_says_what_it_is_doing_on_a_terminal_only(tmp_path, terminal):
 
 
 @pytest.mark.parametrize("terminal", [True, False])
-def test_evaluate_and_the_iso9283_plan_say_what_they_are_doing_on_a_terminal_only(train, tmp_path, terminal):
+def test_evaluate_compensate_and_the_iso9283_plan_say_what_they_are_doing_on_a_terminal_only(train, tmp_path,
+                                                                                              terminal):
     assert main(["identify", PUMA, str(train), "-o", str(tmp_path / "c.json"), "--json"]) == 0
     code, err = _gecgen(["evaluate", str(tmp_path / "c.json"), str(train)], terminal)
     assert code == 0 and ("before and after the calibration" in " ".join(err.split())) == terminal
     if not terminal:
         assert err == "", err
+    (tmp_path / "cmd.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,-0.4,0.3,0.2,0.5,-0.1\n")
+    code, err = _gecgen(["compensate", str(tmp_path / "c.json"), str(tmp_path / "cmd.csv"), "-o",
+                         str(tmp_path / "out.csv")], terminal)
+    assert code == 0 and ("correcting 1 commands" in " ".join(err.split())) == terminal
+    if not terminal:  # the one warning: q3 outside the training ranges
+        assert [ln.split(":")[1] for ln in err.splitlines()] == [" warning"], err
     code, err = _gecgen(["iso9283", PUMA, "-o", str(tmp_path / "plan.csv"), "--cycles", "2"], terminal)
     assert code == 0 and ("searching for the largest cube" in " ".join(err.split())) == terminal
     if not terminal:

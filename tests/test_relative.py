@@ -20,7 +20,9 @@ import pytest
 
 from gecgen import api
 from gecgen.model import load_robot
-from gecgen.model.kinematics import target_positions
+from gecgen.deliver.export import constant_errors
+from gecgen.fit import calibration
+from gecgen.model.kinematics import constant, error_transform, target_positions
 from gecgen.model.measurements import read_measurements, write_measurements
 from gecgen.model.validation import ModelError, read_yaml
 from gecgen.simulate import load_truth, random_design, simulate
@@ -145,7 +147,7 @@ def test_a_badly_recorded_placement_is_named(panda, tmp_path):
     fit = run_json("identify", ROBOT, tmp_path / "moved.csv", "-o", tmp_path / "c.json")
     named = [w for w in fit["warnings"] if "placement" in w]
     assert len(named) == 1 and named[0].startswith("placement plate2 (plate2.0, plate2.1) stands out"), named
-    assert "re-record placement plate2 or drop its rows" in named[0]
+    assert "re-record placement plate2 or drop its rows" in named[0] and "gecgen diagnose" in named[0]
     # scored as held-out data by a calibration of the clean set, the same placement is named
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -312,7 +314,8 @@ def test_socket_files_of_one_id_and_a_distance_in_millimetres_are_refused(tmp_pa
 def test_mukca_panda6_held_out_placements(tmp_path):
     """The MUKCa project's real Panda (tests/data/mukca_panda6): calibrated on `front` through the command
     line, scored on the held-out `left` and `right` next to that project's own calibrated URDF (trained
-    on `front` too; figures from tests/data/mukca_panda6/reference.py)."""
+    on `front` too; figures from tests/data/mukca_panda6/reference.py); its exported URDF against the
+    calibration with pinocchio."""
     spec = importlib.util.spec_from_file_location("reference", MUKCA / "reference.py")
     reference = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(reference)
@@ -330,3 +333,28 @@ def test_mukca_panda6_held_out_placements(tmp_path):
         ours = run_json("evaluate", tmp_path / "c.json", files[place])["after"]
         assert ours["consistency_mm"] < theirs["rms"]  # theirs: left 0.248 mm, right 0.315 mm
         assert ours["distance_error_mm"] < 0.15  # theirs: left 0.195 mm, right 0.071 mm
+    # its URDF: the ball's link where the calibration puts the ball at the held-out readings; the fit's
+    # frame 6 carries the ball's offset along joint 7's axis, but the ball sits 7 mm off that axis, so
+    # the points see all of it but the slide along the axis: panda_joint7's origin moves only along it
+    pin = pytest.importorskip("pinocchio")
+    out = run_json("export", tmp_path / "c.json", "--urdf", tmp_path / "c.urdf")["urdf"]
+    assert out["tool_offset_carried"]["reexpressed"]["applied"]
+    calib = calibration.load(tmp_path / "c.json")
+    eps = constant_errors(calib)
+    model = pin.buildModelFromUrdf(str(tmp_path / "c.urdf"))
+    data = model.createData()
+    joints = [model.joints[model.getJointId(name)].idx_q for name in calib.robot.joint_names]
+    ball, base = model.getFrameId(out["tool_links"]["ball"]), model.getFrameId("panda_link0")
+    for place in ("left", "right"):
+        for qk in np.vstack([np.loadtxt(MUKCA / place / f"hole_{k}.csv", delimiter=",") for k in (0, 1)]):
+            v = pin.neutral(model)
+            v[joints] = qk
+            pin.framesForwardKinematics(model, data, v)
+            got = (data.oMf[base].inverse() * data.oMf[ball]).translation
+            np.testing.assert_allclose(got, target_positions(calib.robot, qk, eps)[0, 0], atol=1e-9)
+    placed = model.jointPlacements[model.getJointId("panda_joint7")]
+    fit = error_transform(eps[36:42]) @ constant(calib.robot.chain[6].pre)
+    np.testing.assert_allclose(placed.rotation, fit[:3, :3], atol=1e-12)
+    np.testing.assert_allclose(np.cross(placed.translation - fit[:3, 3], fit[:3, 2]), 0.0, atol=1e-12)
+    slide = 1e3 * (placed.translation - fit[:3, 3]) @ fit[:3, 2]  # what the ball's link took over, mm
+    assert slide == pytest.approx(-out["tool_offset_carried"]["reexpressed"]["tool"]["7.ez"], abs=1e-9)

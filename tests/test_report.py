@@ -273,3 +273,110 @@ def test_log_axis_ticks_are_numbered_within_any_span():
         ticks = log_ticks(lo, hi)
         assert 2 <= len(ticks) <= 12 and ticks.min() >= lo and ticks.max() <= hi, (lo, hi, ticks)
         assert all(len(f"{v:g}") <= 6 for v in ticks), ticks
+
+
+def test_legends_stand_above_the_data_and_pose_labels_clear_of_each_other(monkeypatch):
+    """Each figure's legend is a row of its own above its axes and their titles (inside an axes it
+    covered the largest bars and the histogram's peak), no axes keeps one; the labelled poses'
+    labels do not overlap (five large errors on neighbouring poses of 200); a force is in N."""
+    import gecgen.report.plots as plots
+    from gecgen.model import load_robot
+    from gecgen.model.measurements import Measurements
+    from gecgen.report.blocks import DataSet, Residuals
+
+    robot = load_robot(ROBOTS / "puma560.yaml")
+    P = 200
+    rng = np.random.default_rng(0)
+    w = np.zeros((P, 6))
+    w[:, 1] = rng.uniform(-700, 0, P)
+    data = Measurements(rng.uniform(-1, 1, (P, robot.n)), w, np.zeros((P, 0)), (), np.arange(P), np.arange(P),
+                        np.zeros(P, int), np.zeros((P, 3)))
+    big = np.where((np.arange(P) >= 100) & (np.arange(P) < 105), 5.0, 1.0)[:, None]
+    stages = [Residuals(name, np.arange(P), scale * big * rng.normal(size=(P, 3)), None)
+              for name, scale in (("uncalibrated", 3.0), ("calibrated", 0.3), ("diagnosed", 0.1))]
+    ds = DataSet("training", data, stages)
+    drawn = []
+    real = plots._figure
+
+    def keep(fig, *args):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        [legend] = fig.legends
+        box = legend.get_window_extent(renderer)
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert all(ax.get_legend() is None for ax in axes)
+        assert not any(box.overlaps(b) for ax in axes
+                       for b in (ax.get_window_extent(renderer), ax.title.get_window_extent(renderer)))
+        labels = [t.get_window_extent(renderer) for ax in axes for t in ax.texts]
+        assert not any(a.overlaps(b) for i, a in enumerate(labels) for b in labels[i + 1:])
+        drawn.append((fig.axes[0].get_xlabel(), len(labels)))
+        return real(fig, *args)
+
+    monkeypatch.setattr(plots, "_figure", keep)
+    plots.per_pose(robot, ds)
+    plots.error_distribution(robot, ds)
+    effect = type("Effect", (), {"error": "2.ep", "terms": ("fy*q3",)})()
+    plots.effect(robot, effect, rng.normal(size=P), "fy", stages[1], stages[2], data)
+    # the five largest poses lie side by side: one label stands for them, and the others go to poses apart
+    assert drawn[0] == ("pose id, in the order of the file", 5)
+    assert drawn[2][0] == "fy (N)"
+
+
+@pytest.mark.parametrize("cell, right", [("0 %", True), ("-0.28 to 0.28 m", True), ("7", True), ("-", True),
+                                         (".5", True), ("q1 lateral (m)", False), ("-x", False), ("", False)])
+def test_a_cell_that_reads_as_a_number_is_right_aligned(cell, right):
+    from gecgen.report.html import numeric
+
+    assert numeric(cell) is right
+
+
+def test_a_pixel_calibration_is_judged_against_the_stated_corner_noise():
+    """identify --cameras's verdict: the training residual against --noise-px (chi-square at p = 0.01),
+    the coefficients held as too weakly determined and an image the points cover in part are limits,
+    and the first step scores held-out images."""
+    from gecgen.fit.significance import overall
+    from gecgen.report.verdict import AT_NOISE, BEYOND_NOISE, pixels_next_step
+
+    score = {"rms_px": 0.3, "max_px": 0.9, "rms_mm_at_target": 0.16, "distance_m": 0.75}
+    result = {"train": score, "before": {**score, "rms_px": 1.3}, "n_identifiable": 10,
+              "eliminated": [{"param": "2.ep:1", "reason": "insignificant"},
+                             {"param": "0.ez:1", "reason": "structural"}]}
+    command = "gecgen evaluate cal.json HELD_OUT_PIXELS.csv --cameras cams.yaml"
+    at = pixels_next_step(result, overall(0.2, 4000, 0.2), {"cam": (16, 16)}, command)
+    beyond = pixels_next_step(result, overall(0.25, 4000, 0.2), {"cam": (9, 16)}, command)
+    assert at.verdict == AT_NOISE and beyond.verdict == BEYOND_NOISE
+    assert at.next_step.startswith(f"Score the calibration on images it was not fitted on: `{command}`; then record")
+    assert "The images determine 10 of the 11 coefficients the model can have; 1 is held" in " ".join(at.limits)
+    assert "--refine-intrinsics" in beyond.next_step and any("9 of 16 cells" in line for line in beyond.limits)
+    assert not any("cells" in line for line in at.limits)
+
+
+def _reads_only_what_exists_or_is_written(step: str, folder) -> None:
+    """Each command in a next step that reads a calibration (export, evaluate, compensate) reads one
+    on disk (relative to folder), or one that a command before it in the same code span writes."""
+    for span in re.findall(r"`([^`]+)`", step):
+        written = set()
+        for part in span.split("&&"):
+            words = part.split()
+            if words[1:2] and words[1] in ("export", "evaluate", "compensate"):
+                assert words[2] in written or (folder / words[2]).exists(), step
+            written |= {b for a, b in zip(words, words[1:]) if a == "-o"}
+
+
+def test_a_next_step_names_only_calibrations_that_exist_or_that_it_writes_first(reports, tmp_path, monkeypatch):
+    """diagnose writes an error model, not a calibration: at the noise its next step fits the new model
+    on all the data before exporting it (the README's report said to export a file nothing had
+    written). The other reports' steps read the calibration their command wrote."""
+    for result in reports.values():
+        _reads_only_what_exists_or_is_written(re.search(r"\*\*Next step:\*\* (.*)", report_md(result)).group(1),
+                                              tmp_path)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "truth.yaml").write_text("seed: 3\nconstant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}\n"
+                                         "noise: {repeatability: 1.0e-5, tracker: 3.0e-5}\n")
+    gecgen("simulate", ROBOT, "--truth", "truth.yaml", "--poses", 30, "--val-out", "val.csv", "--val-poses", 10,
+           "--seed", 3, "-o", "train.csv")
+    out = gecgen("diagnose", ROBOT, "train.csv", "--val", "val.csv", "--errors", ERRORS, "--max-rounds", 1,
+                 "--noise-mm", 0.0316, "-o", "new.errors.yaml")
+    step = out["assessment"]["next_step"]
+    assert out["assessment"]["verdict"] == "at the noise" and "gecgen export" in step
+    _reads_only_what_exists_or_is_written(step, tmp_path)

@@ -158,7 +158,7 @@ def test_the_bound_holds_the_true_worst_error_of_a_robot_the_model_describes(pps
     assert worst <= held.bound_mm < 0.5 and held.unmodelled_as == "rigid tool motion"
     assert held.verdict == "cannot tell" and (held.measured.poses, held.measured.outside) == (56, 0)
     said = " ".join(held.reasons)
-    assert "per input: q4 2, q5 600, q6 600 (of 600)" in said and "measure with them moving" in said
+    assert "per input: q4 (theta) 2, q5 (roll) 600, q6 (pitch) 600 (of 600)" in said and "measure with them moving" in said
     assert "needs at least 59" in said and "measure 3 more held-out poses inside the volume" in said
 
 
@@ -294,6 +294,10 @@ def test_accuracy_from_the_command_line(pps, geometric, tmp_path):
     assert (m["n"], m["outside"], m["needed"], m["share"]) == (56, 0, 29, 0.9)
     assert m["achieved_confidence"] >= 0.95 > stats.binom.cdf(56 - m["rank"] - 1, 56, 0.9)
     assert m["error_mm"] <= m["largest_error_mm"] and held["verdict"] == "cannot tell"  # roll and pitch: not trained
+    # so the next step is to train over them, and the command it names keeps the options the statement rests on
+    assert held["next_step"].startswith("Measure training poses that move the inputs named under")
+    assert f"`gecgen accuracy NEW_CALIB.json {volume} NEW_DATA.csv --noise-mm 0.04 --repeatability-mm 0.05 --share " \
+           f"0.9 --tolerance-mm 0.5`" in held["next_step"]
     with pytest.raises(ModelError, match="not the data the calibration was fitted to"):
         accuracy(cal.calibration_, load_volume(volume, pps), val, to_world(cal.calibration_.frames, val), None, None,
                  0.0, 0.5, 0.95, 500, np.random.default_rng(0))

@@ -101,7 +101,10 @@ def _stated(args, caught: list, status) -> dict:
     result = {"robot": calib.robot.name, "volume": str(args.volume), "samples": len(samples.q),
               "unreachable": samples.unreachable, **statement.to_dict(),
               "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst}
-    assessment = accuracy_next_step(result, args.calibration, args.volume, args.data)
+    kept = [("--noise-mm", args.noise_mm, None), ("--repeatability-mm", args.repeatability_mm, 0.0),
+            ("--confidence", args.confidence, 0.95), ("--share", args.share, 0.95)]
+    assessment = accuracy_next_step(result, args.calibration, args.volume, args.data,
+                                    "".join(f" {o} {v:g}" for o, v, default in kept if v != default))
     result["next_step"], result["warnings"] = assessment.next_step, warning_lines(caught)
     if args.plot or args.report:
         from gecgen.model.files import write_atomically

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from gecgen.cli.common import CALIBRATION_HELP, whole
+from gecgen.cli.common import CALIBRATION_HELP, progress_status, say, whole
 
 
 def add_parser(command):
@@ -45,27 +45,31 @@ def parse_bound(text: str | None, n: int) -> list[float] | None:
 def run(args) -> dict:
     import numpy as np
 
-    from gecgen.api import branch_index, load_calibration, moved_joints
+    from gecgen.api import load_calibration
     from gecgen.cli import Incomplete
     from gecgen.model.measurements import read_commands, write_commands
     from gecgen.model.validation import nearest, require
     from gecgen.runtime.compiled import NONFINITE, STATUS_NAMES
 
-    cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
-    robot = cal.robot_
-    names = [b.name for b in robot.branches]
-    # said here in the option's words: the API's own refusal speaks of its keyword, branch=
-    require(args.branch is None if not names else args.branch in names,
-            f"--branch: robot {robot.name} is a serial chain with one tool; leave --branch out" if not names else
-            f"--branch{' ' + args.branch if args.branch else ''}: robot {robot.name} has branches; name the one "
-            f"whose tool to place: {nearest(args.branch, names)}")
-    bound = parse_bound(args.bound, robot.n)
-    cmds = read_commands(args.poses, robot, cal.calibration_.model.aux)
-    done = cal.compensate(cmds, max_iter=args.max_iter, branch=args.branch, bound=bound)
-    # every row written, its status beside it: a controller reads which commands it may send
-    residual = ["" if s == NONFINITE else repr(float(1e3 * r)) for s, r in zip(done.status, done.residual)]
-    write_commands(args.output, robot, cmds, done.q,
-                   {"status": [str(int(s)) for s in done.status], "residual_mm": residual})
+    with progress_status(not args.json) as status:
+        say(status, f"loading the calibration {args.calibration} and its compiled code")
+        cal = load_calibration(args.calibration)  # refuses non-finite coefficients, naming the first
+        robot = cal.robot_
+        names = [b.name for b in robot.branches]
+        # said here in the option's words: the API's own refusal speaks of its keyword, branch=
+        require(args.branch is None if not names else args.branch in names,
+                f"--branch: robot {robot.name} is a serial chain with one tool; leave --branch out" if not names else
+                f"--branch{' ' + args.branch if args.branch else ''}: robot {robot.name} has branches; name the one "
+                f"whose tool to place: {nearest(args.branch, names)}")
+        bound = parse_bound(args.bound, robot.n)
+        cmds = read_commands(args.poses, robot, cal.calibration_.model.aux)
+        say(status, f"correcting {len(cmds.q)} commands")
+        done = cal.compensate(cmds, max_iter=args.max_iter, branch=args.branch, bound=bound)
+        say(status, f"writing {args.output}")
+        # every row written, its status beside it: a controller reads which commands it may send
+        residual = ["" if s == NONFINITE else repr(float(1e3 * r)) for s, r in zip(done.status, done.residual)]
+        write_commands(args.output, robot, cmds, done.q,
+                       {"status": [str(int(s)) for s in done.status], "residual_mm": residual})
     outside = [k + 2 for k in done.outside_limits]
     if outside:
         print(f"gecgen compensate: warning: corrected commands leave the joint limits in rows {outside[:10]}"
@@ -80,7 +84,7 @@ def run(args) -> dict:
         rows, k = [k + 2 for k in done.failed], done.failed[0]
         kinds = ", ".join(f"{n} {name}" for name, n in done.counts().items()
                           if STATUS_NAMES.index(name) in {int(done.status[i]) for i in done.failed})
-        moved = moved_joints(robot, branch_index(robot, args.branch))
+        moved = robot.moved_joints(robot.branch_index(args.branch))
         raise Incomplete(f"{cmds.source}: row {rows[0]}: {_why(int(done.status[k]), done.residual[k], moved)}; "
                          f"{len(rows)} of "
                          f"{len(done.q)} rows not placed ({kinds}: rows {', '.join(map(str, rows[:10]))}"

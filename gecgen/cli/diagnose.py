@@ -101,8 +101,11 @@ def _diagnosed(args, caught: list) -> dict:
     held = f"--val {quote(args.val)}" if args.val else f"--holdout {args.holdout:g}" if args.holdout is not None else ""
     commands = next_commands(args.robot, args.data, held, str(calib), diagnoser.data_.n_poses, relative,
                              f"--noise-mm {args.noise_mm:g}" if args.noise_mm else "")
-    # diagnose has looked for what the model misses: the new model's fit on all the data shows the rest
-    commands = replace(commands, diagnose=f"{result['next']} --report REPORT_DIR")
+    # diagnose has looked for what the model misses: the new model's fit on all the data shows the rest;
+    # that fit writes the calibration the other commands read, so they come after it
+    fit = result["next"]
+    commands = replace(commands, diagnose=f"{fit} --report REPORT_DIR", export=f"{fit} && {commands.export}",
+                       score=f"{fit} && {commands.score}")
     assessment = assess(after={"rms_mm": diag.after["val_rms_mm"], "max_mm": diag.after["val_max_mm"]},
                         before={"rms_mm": diag.before["val_rms_mm"]}, before_name="the declared model",
                         held_out=True, n_poses=None if val is None else val.n_poses, tolerance_mm=args.tolerance_mm,

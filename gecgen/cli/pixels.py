@@ -63,10 +63,26 @@ def identified(args) -> dict:
             **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "warnings": warning_lines(caught),
             "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
+    from shlex import quote
+
+    from gecgen.fit.significance import overall
+    from gecgen.report.content import image_coverage
+    from gecgen.report.verdict import pixels_next_step
+
+    noise = None
+    if args.noise_px is not None:
+        fitted = (len(fit.kept) + 6 * (len(fit.poses) + (fit.board is not None))
+                  + sum(len(v) for v in (fit.intrinsics_std or {}).values()))
+        noise = overall(fit.sigma_px, 2 * len(data.uv) - fitted, args.noise_px)
+    evaluate = (f"gecgen evaluate {quote(str(out))} HELD_OUT_PIXELS.csv --cameras {quote(str(args.cameras))}"
+                + (f" --board {quote(str(args.board))}" if args.board else ""))
+    assessment = pixels_next_step(result, noise, image_coverage(data, cameras), evaluate)
+    result["next_step"] = assessment.next_step
     if args.report:
         from gecgen import report
 
-        result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras), args.report))
+        result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras,
+                                                         result["warnings"], assessment), args.report))
     return result
 
 
@@ -122,7 +138,8 @@ def diagnosed(args) -> dict:
 
         final = diag.final
         content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit),
-                                        str(out), cameras, None, "diagnose", report.content.pixel_diagnosis(result))
+                                        str(out), cameras, command="diagnose",
+                                        lead=report.content.pixel_diagnosis(result))
         result.update(report.write(content, args.report))
     return result
 
@@ -209,7 +226,7 @@ def calibrated(args, out, build, status) -> dict:
     result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, gecgen compensate "
                       f"{out / 'calibration.json'} POSES.csv -o OUT.csv")
     content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
-                                    result["warnings"], "calibrate", report.content.pixel_choice(result))
+                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
     return result
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model.kinematics import constant, error_transform
+from gecgen.model.kinematics import constant, error_transform, frames, target_positions
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import require
 from gecgen.fit.calibration import Calibration, model_hash
@@ -172,10 +172,99 @@ def tool_offset_carried(calib: Calibration) -> dict | None:
     return {"errors": [e["param"] for e in eliminated], "carried_by": by} if by else None
 
 
+#: the tool offset's re-expression: poses uniform in the training ranges (seed 0), Gauss-Newton
+#: steps at most, and the singular value (relative to the largest) below which a direction of the
+#: tool points' Jacobian is one the points cannot see at all (finite differences leave ~1e-9)
+REEXPRESS_POSES, REEXPRESS_STEPS, REEXPRESS_NULL = 200, 30, 1e-6
+#: a step below this (m, rad) is done: the finite-difference Jacobian's rounding turns the directions
+#: the points cannot see by about 1e-9, which moves the smallest-norm point by ~1e-11
+REEXPRESS_STEP = 1e-10
+#: how far the re-expressed tool points may sit from the calibration's before it is not used (m)
+REEXPRESS_TOL = 1e-9
+
+
+def _error_index(name: str) -> int:
+    """The generalized error index of a coefficient name "frame.error:term"."""
+    frame, rest = name.split(".", 1)
+    return 6 * int(frame) + ERROR_NAMES.index(rest.split(":")[0])
+
+
+def _origin_moved(E: np.ndarray, O: np.ndarray) -> tuple[float, float]:
+    """How far (mm, mrad) a joint's origin O (4x4) moves when the error transform E before it is folded in."""
+    T = E @ O
+    angle = math.acos(min(1.0, max(-1.0, (np.trace(O[:3, :3].T @ T[:3, :3]) - 1) / 2)))
+    return float(1e3 * np.linalg.norm(T[:3, 3] - O[:3, 3])), float(1e3 * angle)
+
+
+def reexpress_tool_offset(calib: Calibration, carried: dict, where: str) -> tuple[np.ndarray, dict]:
+    """The constant errors (ne,) the URDF carries when the fit carries the measured tool's offset
+    in frames before the tool (`tool_offset_carried`), and what changed.
+
+    The fit's frames and the tool's own translations it eliminated (U) are exchanged where the tool
+    points cannot tell them apart: the six errors of every frame that carries the offset and U are
+    varied so that the tool points stay exactly where the calibration's constant errors put them
+    (REEXPRESS_POSES poses in the training ranges), and among those choices the one whose frames'
+    errors are smallest is taken (translations in m, rotations times the tool points' distance from
+    the frame, so both are what they move the points by). That keeps only the exact symmetries: a
+    translation along the last joint's axis commutes with the joint into the tool, and with one
+    point on that axis any turn about the point does; what the points see even slightly stays with
+    the fit. Solved by Gauss-Newton with the smallest-norm step in the directions the points cannot
+    see, never to first order only; the result is used only when the points stay within
+    REEXPRESS_TOL, else the fit's errors are kept and the returned dict says so."""
+    robot = calib.robot
+    eps0 = constant_errors(calib)
+    frames_moved = sorted({int(k.split(".")[0]) for k in carried["carried_by"]})
+    U = [_error_index(u) for u in carried["errors"]]
+    free = [6 * f + e for f in frames_moved for e in range(6)] + U
+    span = _spans(calib, where)[:robot.n]
+    q = np.random.default_rng(0).uniform(span[:, 0], span[:, 1], (REEXPRESS_POSES, robot.n))
+    goal = target_positions(robot, q, eps0)
+    W0 = frames(robot, q[:1])
+    reach = {f: float(np.sqrt(np.mean(np.sum((goal[0] - W0[f][0, :3, 3]) ** 2, axis=-1)))) for f in frames_moved}
+    weight = np.array([1.0 if e < 3 else reach[f] for f in frames_moved for e in range(6)] + [0.0] * len(U))
+
+    def points(x: np.ndarray) -> np.ndarray:
+        eps = eps0.copy()
+        eps[free] = x
+        return (target_positions(robot, q, eps) - goal).ravel()
+
+    x = eps0[free].copy()
+    for _ in range(REEXPRESS_STEPS):
+        r = points(x)
+        J = np.column_stack([(points(x + 1e-7 * d) - points(x - 1e-7 * d)) / 2e-7 for d in np.eye(len(x))])
+        _, s, Vt = np.linalg.svd(J, full_matrices=True)
+        seen = int(np.sum(s > REEXPRESS_NULL * s[0]))
+        N = Vt[seen:].T  # the directions the points cannot see
+        step = -Vt[:seen].T @ ((Vt[:seen] @ J.T @ r) / s[:seen] ** 2)
+        step += N @ np.linalg.lstsq(weight[:, None] * N, -weight * (x + step), rcond=None)[0]
+        x += step
+        if np.abs(step).max() < REEXPRESS_STEP:
+            break
+    off = float(np.abs(points(x)).max())
+    eps = eps0.copy()
+    if off <= REEXPRESS_TOL:
+        eps[free] = x
+    names = robot.error_names()
+    moved = []
+    for tip, _ in robot.tips():
+        before = robot.parent(tip)
+        if before in frames_moved:
+            joint = robot.chain[tip - 1]
+            fit, out = (_origin_moved(error_transform(e[6 * before:6 * before + 6]), constant(joint.pre))
+                        for e in (eps0, eps))
+            moved.append({"joint": joint.name, "fit_mm": fit[0], "fit_mrad": fit[1], "exported_mm": out[0],
+                          "exported_mrad": out[1]})
+    return eps, {"applied": off <= REEXPRESS_TOL, "max_point_change_mm": float(1e3 * off), "poses": REEXPRESS_POSES,
+                 "tool": {names[u]: float(1e3 * (eps[u] - eps0[u])) for u in U},
+                 "frames": {names[k]: float(1e3 * eps[k]) for k in free[:-len(U)] if eps[k] != 0.0},
+                 "last_joint_origin": moved}
+
+
 def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, dict]:
     """The robot's URDF with the calibration's constant errors folded into its joint origins
     (`model.urdf.folded_copy`), and what the command reports about it. The tracker registration
-    is the measurement frame, not the robot: it is not applied."""
+    is the measurement frame, not the robot: it is not applied. Where the fit carries the measured
+    tool's offset in the frames before it, the URDF gives it to the tool (`reexpress_tool_offset`)."""
     from gecgen.model.urdf import folded_copy
 
     robot = calib.robot
@@ -187,6 +276,10 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
         warnings.warn(f"the URDF keeps its own joints: the robot file's couplings of {', '.join(declared)} are not in "
                       f"it (a URDF cannot state a joint from several others); the controller applies them")
     eps = constant_errors(calib)
+    carried = tool_offset_carried(calib)
+    if carried:
+        eps, carried["reexpressed"] = reexpress_tool_offset(calib, carried, where)
+        warnings.warn(_carried_warning(carried))
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
             f"into the joint origins, the last frame's into the measured tool points' links; the tracker "
@@ -194,19 +287,31 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
     tip_links = [b.tip_link for b in robot.branches] or [robot.tip_link]
     text, tips, tool_links, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note, tool_points(robot))
     left = not_carried(calib, cm, where)
-    carried = tool_offset_carried(calib)
-    if carried:
-        warnings.warn(f"the data cannot tell the measured tool's offset along {', '.join(carried['errors'])} from "
-                      f"errors of the robot, and the calibration carries it in "
-                      + ", ".join(f"{k} ({v:.3g} {'mm' if k.split('.')[1][:2] in ERRORS_MM else 'mrad'})"
-                                  for k, v in carried["carried_by"].items())
-                      + ": the links before the tool move with it (the tool point is right); measure a second point "
-                        "on the tool to keep them apart (urdf.tool_offset_carried)")
     reg = calib.registration.to_dict()
     branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
     return text, {"tip_link": tips[0], **branch_tips, "tool_links": tool_links, "changed_joints": changed,
                   "not_carried": left, "tool_offset_carried": carried,
                   "registration_applied": False, "registration": {k: reg[k] for k in ("angle_deg", "distance_mm")}}
+
+
+def _carried_warning(carried: dict) -> str:
+    """The one line that says how the fit carries the tool's offset and what the URDF does with it."""
+    fit = ", ".join(f"{k} ({v:.3g} {_unit(_error_index(k))})" for k, v in carried["carried_by"].items())
+    head = (f"the data cannot tell the measured tool's offset along {', '.join(carried['errors'])} from errors of the "
+            f"robot, and the calibration carries it in {fit}")
+    r = carried["reexpressed"]
+    if not r["applied"]:
+        return (f"{head}: the links before the tool move with it (the tool point is right; re-expressing it in the "
+                f"tool left the points {r['max_point_change_mm']:.3g} mm off); measure a second point on the tool to "
+                f"keep them apart (urdf.tool_offset_carried)")
+    tool = ", ".join(f"{k} {v:.3g} mm" for k, v in r["tool"].items())
+    joints = "; ".join(f"{m['joint']}'s origin is {m['exported_mm']:.3g} mm, {m['exported_mrad']:.3g} mrad from "
+                       f"nominal (the fit's frames: {m['fit_mm']:.3g} mm, {m['fit_mrad']:.3g} mrad)"
+                       for m in r["last_joint_origin"])
+    return (f"{head}; the URDF gives the tool's link what the points cannot tell apart ({tool}): {joints}, the tool "
+            f"points within {r['max_point_change_mm']:.2g} mm of the calibration's at {r['poses']} poses in the "
+            f"training ranges; which part is the tool's is a choice the data cannot check: measure a second point on "
+            f"the tool to tell them apart (urdf.tool_offset_carried)")
 
 
 # -- the table ---------------------------------------------------------------------------------------

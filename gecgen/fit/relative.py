@@ -217,7 +217,9 @@ STRAY_P = 1e-3
 def stray_placements(relative: Relative, p: np.ndarray) -> list[str]:
     """A warning for each fixture placement (`Relative.placements`) whose rows scatter about their
     fitted points and planes far beyond the other placements' rows, at modelled targets p (R, 3) m:
-    a plate that moved, or balls that did not seat, while it was recorded. Each row's scatter counts
+    a plate that moved, or balls that did not seat, while it was recorded; or, with the same signature,
+    an effect the error model misses that is largest where that placement sits (a constant model of a
+    Panda whose joints twist under gravity names a clean plate), so the warning names both. Each row's scatter counts
     with the degrees of freedom its group leaves (`Relative.row_dof`)."""
     placements = relative.placements()
     if len(placements) < 2:
@@ -242,8 +244,10 @@ def stray_placements(relative: Relative, p: np.ndarray) -> list[str]:
             theirs = 1e3 * np.sqrt(np.mean(gap[(on >= 0) & (on != k)]))
             out.append(f"placement {name} ({ids}) stands out: its rows lie {mine:.3g} mm rms from their fitted "
                        f"sockets or planes against {theirs:.3g} mm for the other placements' rows, beyond what "
-                       f"noise gives; it was recorded badly (the fixture moved, or the ball or probe did not seat) "
-                       f"and pulls the whole fit: re-record placement {name} or drop its rows")
+                       f"noise gives, and pulls the whole fit: it was recorded badly (the fixture moved, or the ball "
+                       f"or probe did not seat), or the error model misses an effect that is largest where it sits; "
+                       f"re-record placement {name} or drop its rows, and if a clean recording stands out again, "
+                       f"run gecgen diagnose on the data to find the effect")
     return out
 
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 from fractions import Fraction
 
-from gecgen.model.validation import require
+from gecgen.model.validation import excerpt, require
 
 #: An elementary transform: ("Tx"|"Ty"|"Tz"|"Rx"|"Ry"|"Rz", value) or ("H", 4x4 rows).
 Elementary = tuple
@@ -159,6 +159,31 @@ class Robot:
         if target in self.vertex_of:
             target = self.vertex_of[target][0]
         return self.target_branch.get(target, 0)
+
+    def branch_index(self, branch: str | None) -> int:
+        """The index of the named branch: 0 on a serial robot, whose `branch` must be None."""
+        names = [b.name for b in self.branches]
+        if not names:
+            require(branch is None, f"branch={excerpt(branch)}: robot {self.name} is a serial chain with one tool; "
+                                    f"leave branch out")
+            return 0
+        require(branch in names, f"branch={excerpt(branch)}: robot {self.name} has branches {', '.join(names)}; "
+                                 f"name the one whose tool to place")
+        return names.index(branch)
+
+    def branch_targets(self, branch: str) -> list[str]:
+        """The targets on the named branch's tool."""
+        k = [b.name for b in self.branches].index(branch)
+        return [t for t in self.target_names if self.branch_of(t) == k]
+
+    def moved_joints(self, branch: int) -> list[str]:
+        """The names of the joints whose readings compensation moves to place branch `branch`'s (index)
+        tool: those that turn a frame on its path alone (symbolic.chain.tool_jacobian_function)."""
+        tips = [tip for tip, _ in self.tips()]
+        shared = {f for k, tip in enumerate(tips) if k != branch for f in self.path(tip)}
+        drives = self.drives()
+        readings = {k for i in set(self.path(tips[branch])) - shared - {0} for k, _ in drives[i - 1][0]}
+        return [self.joint_names[k] for k in sorted(readings)]
 
     def sensor_frame(self) -> int:
         """The frame the wrench sensor rides on: `wrench_frame`, or the tool's (the first branch's tip)."""

@@ -93,6 +93,15 @@ def variable(data: Measurements, name: str) -> np.ndarray:
     return data.aux[:, data.aux_names.index(name)]
 
 
+def variable_label(name: str) -> str:
+    """A term variable other than a joint as an axis names it: a wrench component or the payload's
+    force with its unit ('fx (N)', 'mz (N m)'); an auxiliary signal as its column is named (its unit
+    is the user's)."""
+    if name in WRENCH:
+        return f"{name} ({'N' if name in WRENCH[:3] else 'N m'})"
+    return "payload force (N)" if name == "payload" else name
+
+
 def joint_unit(robot: Robot, k: int) -> str:
     """The unit reports show joint variable k (0-based) in: the robot file's angle unit for a
     revolute joint, m for a prismatic one (as the robot file states lengths)."""

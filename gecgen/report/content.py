@@ -377,12 +377,24 @@ COVERAGE = 4
 WORST = 10
 
 
+def image_coverage(data, cameras: dict) -> dict[str, tuple[int, int]]:
+    """Per camera of the pixel data: (cells of its image cut COVERAGE x COVERAGE that hold a point, cells)."""
+    out = {}
+    for k, n in enumerate(data.cameras):
+        cam = cameras[n]
+        cells = {(int(COVERAGE * u / cam.width), int(COVERAGE * v / cam.height)) for u, v in data.uv[data.camera == k]}
+        out[n] = (len(cells), COVERAGE * COVERAGE)
+    return out
+
+
 def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warnings: list[str] | None = None,
-           command: str = "identify", lead: tuple[Section, ...] = ()) -> Report:
+           assessment=None, command: str = "identify", lead: tuple[Section, ...] = ()) -> Report:
     """The report of a calibration from image points (`fit.camera.PixelFit` on `model.pixels.Pixels`):
     reprojection residuals in px and in mm at the points, per camera, image and point; how much of each
-    image the points cover; the coefficients with what the images left undetermined. command: the
-    command whose report it is; lead: its own sections, first (`pixel_choice`, `pixel_diagnosis`)."""
+    image the points cover; the coefficients with what the images left undetermined; first the verdict
+    and next step (`verdict.pixels_next_step`) and the warnings the command printed. command: the
+    command whose report it is; lead: its own sections, after the verdict (`pixel_choice`,
+    `pixel_diagnosis`)."""
     px, mm = fit.residuals[:, 0], fit.residuals[:, 1]
     names = data.cameras
 
@@ -410,21 +422,17 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
             points.append((float(np.sqrt(np.mean(px[rows] ** 2))), n, int(rows.sum()), float(px[rows].max()),
                            rms(mm[rows])))
     points.sort(key=lambda r: -r[0])
-    coverage = []
-    for k, n in enumerate(names):
-        cam = cameras[n]
-        uv = data.uv[data.camera == k]
-        cells = {(int(COVERAGE * u / cam.width), int(COVERAGE * v / cam.height)) for u, v in uv}
-        coverage.append(f"`{n}`: {len(cells)} of {COVERAGE * COVERAGE} cells of its {cam.width} x {cam.height} image "
-                        f"({COVERAGE} x {COVERAGE}) hold a point")
+    coverage = [f"`{n}`: {cells} of {total} cells of its {cameras[n].width} x {cameras[n].height} image "
+                f"({COVERAGE} x {COVERAGE}) hold a point"
+                for n, (cells, total) in image_coverage(data, cameras).items()]
     outliers = [f"row {o.row}: image of pose {o.pose}, camera `{o.camera}`, point `{o.point}`: {o.residual_px:.3g} px "
                 f"(weight {o.weight:.2g})" for o in fit.outliers]
     sections = [
-        *verdict_sections(None, warnings), *lead,
+        *verdict_sections(assessment, warnings), *lead,
         Section("Residuals in pixels", [
             f"Reprojection residual of every image point, observed minus projected (a camera measures pixels, not "
-            f"millimetres): before, the nominal model at the cameras' first poses; after, the calibration. *mm at "
-            f"target* is what a residual means across the camera's ray at the point's depth (px times depth over "
+            f"millimetres): before, the nominal model at the cameras' first poses; after, the calibration. The mm "
+            f"at target are what a residual means across the camera's ray at the point's depth (px times depth over "
             f"the focal length); the median working distance is {fit.train['distance_m']:.3g} m. Over all "
             f"{len(px)} points: {fit.before['rms_px']:.3g} -> {fit.train['rms_px']:.3g} px rms "
             f"({fit.train['rms_mm_at_target']:.3g} mm at target), largest {fit.train['max_px']:.3g} px.",

@@ -22,6 +22,12 @@ def inline(text: str) -> Markup:
     return Markup(re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", out))
 
 
+def numeric(cell: str) -> bool:
+    """A table cell that reads as a number (right-aligned, in tabular figures): it starts with a
+    figure, a minus sign before one, or is "-" (a figure not known); "0 %", "-0.28 to 0.28 m" too."""
+    return re.match(r"-?\.?[0-9]|-$", cell) is not None
+
+
 def _kind(block) -> str:
     return {Table: "table", Bullets: "bullets", Figure: "figure"}.get(type(block), "text")
 
@@ -31,6 +37,7 @@ def render(report: Report) -> str:
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["inline"] = inline
     env.filters["kind"] = _kind
+    env.tests["numeric"] = numeric
     env.filters["base64"] = lambda png: base64.b64encode(png).decode("ascii")
     env.filters["anchor"] = lambda title: re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-")
     return env.get_template("report.html.j2").render(report=report)

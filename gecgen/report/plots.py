@@ -16,13 +16,15 @@ from matplotlib.collections import LineCollection  # noqa: E402
 
 from gecgen.model.robot import Robot  # noqa: E402
 from gecgen.report.blocks import (DataSet, Figure, Residuals, joint_label, joint_scale, joint_values,  # noqa: E402
-                                  variable)
+                                  variable, variable_label)
 
 #: one colour per stage, in order: uncalibrated, calibrated, diagnosed
 COLOURS = ("tab:red", "tab:blue", "tab:green")
 DPI = 100
 #: at most this many poses get a bar each per model in the per-pose figure (more: a point each)
 MAX_BARS = 40
+#: the share of the per-pose figure's width a labelled pose keeps clear of another's label (7 pt "pose 1234")
+LABEL_CLEAR = 0.05
 #: panels per row of the accuracy map: legible at a page's width
 MAP_COLUMNS = 4
 #: fixed margins of the one-row figures (a share of the figure): tight_layout would draw each figure twice
@@ -37,6 +39,20 @@ def _figure(fig, name: str, caption: str, named: tuple[str, ...] = ()) -> Figure
     fig.savefig(out, format="png", dpi=DPI)
     plt.close(fig)
     return Figure(name, caption, out.getvalue(), labels)
+
+
+#: the height (inches) of the row above a figure's axes that holds its legend, and of the axes' titles
+LEGEND_ROW, TITLE_ROW = 0.3, 0.3
+
+
+def _legend_above(fig, ax) -> None:
+    """One legend for the figure, in a row of its own above the axes and their titles, so that it
+    hides no data (a legend inside an axes covers the points or bars in its corner); the axes' top
+    is moved down to make the row."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncol=len(labels), fontsize=8,
+               frameon=False, markerscale=2.5)
+    fig.subplots_adjust(top=1 - (LEGEND_ROW + TITLE_ROW) / fig.get_figheight())
 
 
 def _slug(text: str) -> str:
@@ -57,7 +73,7 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
     positive = positive[positive > 0]
     lo, hi = (positive.min(), positive.max()) if len(positive) else (1e-3, 1.0)
     bins = np.geomspace(lo / 1.05, hi * 1.05, 40)
-    fig, (ax, cx) = plt.subplots(1, 2, figsize=(12, 3.6))
+    fig, (ax, cx) = plt.subplots(1, 2, figsize=(12, 3.6 + LEGEND_ROW))
     for s, e, colour in zip(ds.stages, errors, COLOURS):
         e = np.maximum(e, lo)
         ax.hist(e, bins, color=colour, alpha=0.45, label=s.stage)
@@ -72,15 +88,13 @@ def error_distribution(robot: Robot, ds: DataSet, orientation: bool = False) -> 
         a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         a.set_xlabel(f"{what} ({unit})")
         a.grid(alpha=0.3, which="both")
-        # a fixed place: loc="best" searches, and warns when the search is slow, so that a report's
-        # warnings would depend on the machine's load
-        a.legend(fontsize=8, loc="upper right" if a is ax else "lower right")
     ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts
     ax.set_ylabel("measured frames" if orientation else "measured rows")
     cx.set_ylabel("share of them at or below" if orientation else "share of rows at or below")
     ax.set_title(f"{robot.name}, {ds.name} data: histogram of {what}s")
     cx.set_title(f"{robot.name}, {ds.name} data: cumulative distribution")
     fig.subplots_adjust(**MARGINS, wspace=0.18)
+    _legend_above(fig, ax)
     return _figure(fig, name, f"{what.capitalize()}s on the {ds.name} data, each model")
 
 
@@ -105,8 +119,9 @@ def log_ticks(lo: float, hi: float, most: int = 12) -> np.ndarray:
 
 def per_pose(robot: Robot, ds: DataSet) -> Figure:
     """Each pose's RMS point error (mm) of every stage against the pose's order in the file, the
-    five largest of the last stage labelled with their pose ids: a bad pose stands out."""
-    fig, ax = plt.subplots(figsize=(12, 3.0))
+    five largest of the last stage labelled with their pose ids (a pose within LABEL_CLEAR of the
+    width of a larger one is not, its label would cover the other's): a bad pose stands out."""
+    fig, ax = plt.subplots(figsize=(12, 3.0 + LEGEND_ROW))
     P = ds.data.n_poses
     x = np.arange(P)
     width = 0.8 / len(ds.stages)
@@ -118,8 +133,14 @@ def per_pose(robot: Robot, ds: DataSet) -> Figure:
             ax.bar(x + (k - (len(ds.stages) - 1) / 2) * width, rms, width, color=colour, label=s.stage)
         else:
             ax.plot(x, rms, "o", ms=2.5, color=colour, label=s.stage)
-    for p in np.argsort(-rms)[:5]:
-        ax.annotate(f"pose {ds.data.pose_ids[p]}", (p, rms[p]), fontsize=7, xytext=(2, 2), textcoords="offset points")
+    labelled: list[int] = []  # the largest first, each far enough from the others for its label to stand clear
+    for p in np.argsort(-rms):
+        if len(labelled) == 5:
+            break
+        if all(abs(p - o) > LABEL_CLEAR * P for o in labelled):
+            labelled.append(p)
+            ax.annotate(f"pose {ds.data.pose_ids[p]}", (p, rms[p]), fontsize=7, xytext=(2, 2),
+                        textcoords="offset points")
     ids = ds.data.pose_ids
     ax.xaxis.set_major_locator(matplotlib.ticker.FixedLocator(x) if P <= MAX_BARS // 2 else
                                matplotlib.ticker.MaxNLocator(nbins=MAX_BARS // 2, integer=True))
@@ -130,8 +151,8 @@ def per_pose(robot: Robot, ds: DataSet) -> Figure:
     ax.set_ylabel("RMS point error (mm)")
     ax.set_title(f"{robot.name}, {ds.name} data: error per pose")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")  # a fixed place, as in error_distribution
     fig.subplots_adjust(**MARGINS)
+    _legend_above(fig, ax)
     return _figure(fig, f"poses_{ds.name}", f"RMS point error of each pose, {ds.name} data, each model")
 
 
@@ -242,9 +263,9 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
     without the effect (its coefficients zeroed, all else held) and that of the diagnosed model."""
     k = int(name[1:]) - 1 if name.startswith("q") and name[1:].isdigit() else None
     x = joint_values(robot, data, k) if k is not None else variable(data, name)
-    label = joint_label(robot, k) if k is not None else name
+    label = joint_label(robot, k) if k is not None else variable_label(name)
     unit = "mm" if eff.error.split(".")[-1] in ("ex", "ey", "ez") else "mrad"
-    fig, axes = plt.subplots(1, 4, figsize=(12, 3.0))
+    fig, axes = plt.subplots(1, 4, figsize=(12, 3.0 + LEGEND_ROW))
     axes[0].plot(x, size, ".", ms=3, color=COLOURS[2])
     axes[0].set_ylabel(f"{eff.error} added ({unit})", fontsize=8)
     axes[0].set_title(f"fitted {eff.error}", fontsize=9)
@@ -255,12 +276,13 @@ def effect(robot: Robot, eff, size: np.ndarray, name: str, without: Residuals, a
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_ylabel(f"{'xyz'[a]} residual (mm)", fontsize=8)
         ax.set_title(f"{'xyz'[a]} residual", fontsize=9)
-    axes[1].legend(fontsize=7, loc="upper right")  # a fixed place, as in error_distribution
     for ax in axes:
         ax.set_xlabel(label, fontsize=8)
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(nbins=5))  # a quarter page: the default crowds
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     fig.subplots_adjust(**MARGINS, wspace=0.38)
+    _legend_above(fig, axes[1])
     return _figure(fig, f"effect_{_slug(eff.error)}_{_slug(eff.terms[0])}_{_slug(name)}",
                    f"{eff.error} ({', '.join(eff.terms)}) against {label}: the fitted effect, and the residual "
                    "without it and with it")
@@ -287,6 +309,7 @@ def volume_map(robot: Robot, volume, samples, statement) -> Figure:
             ax.axhline(statement.tolerance_mm, color="k", ls="--", lw=1)
         ax.axhline(statement.bound_mm, color="C3", lw=1)
         ax.set_xlabel(label, fontsize=8)
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(nbins=6))  # a quarter page: the default crowds
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     for ax in panels.flat[len(axes):]:

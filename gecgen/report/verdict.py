@@ -207,18 +207,27 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
     return Assessment(verdict, statement, limits, text[0].upper() + text[1:] + ".", tolerance_mm)
 
 
-def accuracy_next_step(result: dict, calibration: str, volume: str, data: str) -> Assessment:
+def accuracy_next_step(result: dict, calibration: str, volume: str, data: str, options: str = "") -> Assessment:
     """The accuracy statement's verdict (`gecgen accuracy`'s result, as it is: meets, does not
     meet, cannot tell or no tolerance given), what limits it (its reasons) and the next step, with
-    this run's files."""
+    this run's files and the options it was given that the statement rests on (`options`, e.g.
+    " --noise-mm 0.04"), which the command it names keeps."""
+    from gecgen.verify.volume import COMPENSATED_OUTSIDE, OUTSIDE_TRAINING  # the other reports load none of it
+
     verdict, tol = result["verdict"], result["tolerance_mm"]
     statement = (f"The worst compensated error over the volume is at most {result['bound_mm']:.3g} mm with "
                  f"{result['confidence']:.0%} confidence, largest at the worst sample "
                  f"({result['worst_at']['bound_mm']:.3g} mm); " + ("no tolerance was given." if tol is None else f"the tolerance is {tol:.3g} mm."))
-    again = f"gecgen accuracy {calibration} {volume} {data}"
+    again = f"gecgen accuracy {calibration} {volume} {data}{options}"
+    outside = any(r.startswith((OUTSIDE_TRAINING, COMPENSATED_OUTSIDE)) for r in result["reasons"])
     if result["noise_mm"] is None:
         step = (f"state the tracker's noise and the robot's repeatability, without which the noise counts as model "
                 f"error: `{again} --noise-mm S --repeatability-mm R`")
+    elif outside and verdict != DOES_NOT_MEET:
+        step = ("measure training poses that move the inputs named under \"Why, and what it assumes\" over the "
+                "spans given there, calibrate again with them, and state it again on the new calibration: "
+                f"`gecgen accuracy NEW_CALIB.json {volume} NEW_DATA.csv{options}"
+                f"{'' if tol is None else f' --tolerance-mm {tol:g}'}`")
     elif verdict == MEETS and not result["held_out"]:
         step = (f"sign it with held-out poses measured inside the volume, at its extremes: `{again} --val VAL.csv "
                 f"--tolerance-mm {tol:g}`")
@@ -279,3 +288,45 @@ def iso9283_next_step(result: dict, tolerance_mm: float | None, robot: str) -> A
     else:
         step = "sign the test's figures; repeat it after any change to the robot (`gecgen check` for a short one)"
     return Assessment(verdict, statement, limits, step[0].upper() + step[1:] + ".", tolerance_mm)
+
+
+def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple[int, int]],
+                     evaluate: str) -> Assessment:
+    """The verdict on a calibration from image points (`gecgen identify --cameras`'s result): its
+    training reprojection residual against the corners' noise when it was stated (`noise`:
+    `fit.significance.overall` of the residual per coordinate against `--noise-px`, in px), what
+    limits it (no held-out images, coefficients the images leave undetermined, the model beyond the
+    noise, images the points cover in part: coverage, per camera (cells holding a point, cells)) and
+    the next step; evaluate: the command that scores held-out images."""
+    train, before = result["train"], result["before"]
+    statement = (f"On the training images: reprojection residual {train['rms_px']:.3g} px RMS, largest "
+                 f"{train['max_px']:.3g} px ({train['rms_mm_at_target']:.3g} mm RMS across the rays at "
+                 f"{train['distance_m']:.3g} m); the nominal model {before['rms_px']:.3g} px.")
+    limits = ["No held-out images: a training residual is not a prediction of the error at new poses."]
+    steps = [f"score the calibration on images it was not fitted on: `{evaluate}`"]
+    if noise is None:
+        verdict = NOISE_UNKNOWN
+        limits.append("The corners' noise was not stated (`--noise-px`), so whether the model explains the images "
+                      "cannot be decided.")
+    elif noise["beyond_noise"]:
+        verdict = BEYOND_NOISE
+        limits.append(f"The model leaves more than the noise: the residual is {noise['sigma_mm']:.3g} px per "
+                      f"coordinate against the stated {noise['noise_mm']:.3g} px.")
+        steps.append("refine the cameras' intrinsics with the robot (`--refine-intrinsics`) or fit a larger error "
+                     "model (`--errors`)")
+    else:
+        verdict = AT_NOISE
+    weak = [e["param"] for e in result["eliminated"] if e["reason"] in ("insignificant", "held")]
+    if weak:
+        kept = result["n_identifiable"]
+        limits.append(f"The images determine {kept} of the {kept + len(weak)} coefficients the model can have; "
+                      f"{len(weak)} {'is' if len(weak) == 1 else 'are'} held at zero, too weakly determined "
+                      f"(\"Eliminated parameters\" says why).")
+        steps.append("record more images at poses that turn the joints those coefficients name, and identify again")
+    for name, (cells, total) in coverage.items():
+        if cells < total:
+            limits.append(f"Camera `{name}`: points fall in {cells} of {total} cells of its image: the lens is "
+                          f"checked only there.")
+            steps.append(f"record images with the points near the corners of camera `{name}`'s image")
+    text = "; then ".join(steps[:2])
+    return Assessment(verdict, statement, limits, text[0].upper() + text[1:] + ".")

@@ -504,18 +504,30 @@ def _outside(calib: Calibration, q: np.ndarray, w: np.ndarray) -> dict[str, int]
     return {k: n for k, n in extrapolation(calib, q, w, np.zeros((len(q), 0))).items() if k in used}
 
 
-def _per_input(counts: dict[str, int], n: int, what: str) -> str:
-    return f"{what}, per input: {', '.join(f'{k} {v}' for k, v in counts.items())} (of {n})"
+#: how a reason begins when samples (or their compensated commands) leave the training ranges:
+#: the next step is then to train over them (`report.verdict.accuracy_next_step`)
+OUTSIDE_TRAINING = "samples outside the ranges the calibration was fitted over"
+COMPENSATED_OUTSIDE = "samples whose compensated command leaves the ranges the calibration was fitted over"
+
+
+def _per_input(robot, counts: dict[str, int], n: int, what: str) -> str:
+    """'what, per input: q4 (theta) 4, fz 10 (of n)': a joint's reading named with its joint, as the
+    extrapolation warnings name it."""
+    def name(k: str) -> str:
+        return f"{k} ({robot.joints[int(k[1:]) - 1].name})" if k[0] == "q" and k[1:].isdigit() else k
+
+    return f"{what}, per input: {', '.join(f'{name(k)} {v}' for k, v in counts.items())} (of {n})"
 
 
 def _commanded_span(calib: Calibration, q_c: np.ndarray, names: dict[str, int]) -> str:
-    """The span (joint units of the robot file's kind: deg or m) the compensated commands q_c (N, n)
-    take on each named input, against the training range."""
+    """The span (in the robot file's angle unit, m for a prismatic joint) the compensated commands
+    q_c (N, n) take on each named input, against the training range."""
     ranges = calib.report.get("training_ranges") or {}
     parts = []
     for name in (n for n in names if n in ranges and n[0] == "q" and n[1:].isdigit()):
         k = int(name[1:]) - 1
-        scale, unit = (np.degrees(1.0), "deg") if calib.robot.joints[k].kind == "R" else (1.0, "m")
+        scale, unit = ((np.degrees(1.0) if calib.robot.angle_unit == "deg" else 1.0, calib.robot.angle_unit)
+                       if calib.robot.joints[k].kind == "R" else (1.0, "m"))
         lo, hi = ranges[name]
         parts.append(f"{calib.robot.joints[k].name} {scale * q_c[:, k].min():.4g} to {scale * q_c[:, k].max():.4g} "
                      f"{unit} (trained over {scale * lo:.4g} to {scale * hi:.4g})")
@@ -530,7 +542,7 @@ def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.
     blocks, doubts, notes, n = [], [], [], len(samples.q)
     outside = _outside(calib, samples.q, samples.w)
     if outside:
-        doubts.append(_per_input(outside, n, "samples outside the ranges the calibration was fitted over") +
+        doubts.append(_per_input(calib.robot, outside, n, OUTSIDE_TRAINING) +
                       ": the model is not validated there")
     force, carried = (np.linalg.norm(x[:, :3], axis=1) for x in (samples.w, data.w))
     heavier = int(((force < carried.min() - 1.0) | (force > carried.max() + 1.0)).sum())  # 1 N: the sensor's tilt
@@ -555,15 +567,14 @@ def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.
                       "where the poses did not reach (docs/volume.md): measure held-out poses inside the volume, at "
                       "random over it, and give them as --val to sign it")
     limits = ((q_c < [j.lower for j in calib.robot.joints]) | (q_c > [j.upper for j in calib.robot.joints]))
-    beyond = {j.name: int(k) for j, k in zip(calib.robot.joints, limits[status == OUTSIDE_LIMITS].sum(axis=0)) if k}
+    beyond = {f"q{i + 1}": int(k) for i, k in enumerate(limits[status == OUTSIDE_LIMITS].sum(axis=0)) if k}
     if beyond:
-        notes.append(_per_input(beyond, n, "samples whose compensated command leaves the joint limits") +
+        notes.append(_per_input(calib.robot, beyond, n, "samples whose compensated command leaves the joint limits") +
                      ": the statement holds there only if the controller may go beyond them; narrow the declared "
                      "ranges otherwise")
     moved = {k: v for k, v in _outside(calib, q_c, samples.w).items() if k not in outside}
     if moved:
-        doubts.append(_per_input(moved, n, "samples whose compensated command leaves the ranges the calibration was "
-                                           "fitted over") +
+        doubts.append(_per_input(calib.robot, moved, n, COMPENSATED_OUTSIDE) +
                       ": compensation moves joints beyond what the data moved, and the error of that motion is not "
                       "in the bound; measure with them moving over what compensation needs: " +
                       _commanded_span(calib, q_c, moved))

@@ -20,7 +20,8 @@ from gecgen.deliver.programs.kinematics import Arm, elbow_up, front
 DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*(\{[^}]*\})?\s*:=\s*",
                   re.I)
 MOVE = re.compile(r"\b(MoveJ|MoveL|MoveC|MoveAbsJ|MoveJDO|MoveLDO|MoveJAO|MoveLAO|MoveJGO|MoveLGO|MoveJSync|"
-                  r"MoveLSync|MoveCDO|MoveCSync|TriggJ|TriggL|TriggC)\b([^;]*);", re.I)
+                  r"MoveLSync|MoveCDO|MoveCSync|TriggJ|TriggL|TriggC|EGMMoveL|EGMMoveC|"
+                  r"Arc[LC][12]?|Arc[LC]Start|Arc[LC]End)\b([^;]*);", re.I)
 #: a target with no value in the module: declared without one, or a routine's parameter (set while it runs)
 BARE = re.compile(r"\b(?:(?:CONST|PERS|VAR)\s+(?:robtarget|jointtarget)\s+(\w+)\s*;|(?:robtarget|jointtarget)\s+(\w+)"
                   r"\s*[,)])", re.I)
@@ -178,8 +179,12 @@ def parse(path: Path) -> Program:
     for m in MOVE.finditer(code):
         args = [(a, m.start(2) + o) for a, o in _split(m.group(2)) if not a.strip().startswith("\\")]
         instruction = m.group(1).lower()
-        circular = instruction.startswith("movec") or instruction == "triggc"
-        tool_arg = args[-1][0] if instruction.startswith("trigg") else args[min(len(args) - 1, 4 if circular else 3)][0]
+        if instruction.startswith("egm"):
+            args = args[1:]  # the EGM identity comes first; the target, speed, zone and tool follow as in MoveL
+        circular = instruction.startswith(("movec", "arcc")) or instruction in ("triggc", "egmmovec")
+        # trigger and arc-welding instructions put their own data (trigger, seam, weld, weave) before the tool
+        tool_arg = args[-1][0] if instruction.startswith(("trigg", "arc")) else \
+            args[min(len(args) - 1, 4 if circular else 3)][0]
         tool = re.sub(r"\\.*", "", tool_arg, flags=re.S).strip()
         wobj = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.I)
         wobj = wobj.group(1) if wobj else "wobj0"

@@ -22,7 +22,7 @@ FRAMES = re.compile(r"UF\s*:\s*(\d+)\s*,\s*UT\s*:\s*(\d+)")
 CONFIG = re.compile(r"CONFIG\s*:\s*'\s*([NF])\s*([UD])\s*([TB])\s*,\s*(-?\d+)\s*,\s*(-?\d+)\s*,\s*(-?\d+)\s*'")
 FIELD = re.compile(r"\b(X|Y|Z|W|P|R|J[1-6])\s*=(\s*[-+]?(?:\d+\.?\d*|\.\d+))\s*(mm|deg)")
 #: a motion line; the line number before the colon is optional (editors and compilers write " : J P[1] ...")
-MOTION = re.compile(r"^[ \t]*\d*[ \t]*:[ \t]*([JLCA])[ \t]+(P|PR)\[[ \t]*(\w+)", re.M)
+MOTION = re.compile(r"^[ \t]*\d*[ \t]*:[ \t]*([JLCA])[ \t]+(P|PR)\[[ \t]*(R\[[ \t]*\w+[ \t]*\]|\w+)", re.M)
 IDENTITY = ("0",)
 
 
@@ -93,7 +93,12 @@ def parse(path: Path) -> Program:
     defined = {t.name for t in targets}
     for m in MOTION.finditer(text, 0, section if section >= 0 else len(text)):
         line = line_of(text, m.start())
-        if m.group(2) == "PR":
+        if m.group(3).upper().startswith("R["):  # indirect: the register picks the position while it runs
+            targets.append(Target(f"{m.group(2)}[{m.group(3)}] (line {line})", path, line, "motion", (),
+                                  note=f"the position is chosen by {m.group(3)} while the program runs: " + (
+                                      "correct the position registers on the controller" if m.group(2) == "PR"
+                                      else "the /POS positions it may pick are corrected where they are defined")))
+        elif m.group(2) == "PR":
             targets.append(Target(f"PR[{m.group(3)}] (line {line})", path, line, "motion", (),
                                   note="a position register: correct it on the controller"))
         elif f"P[{m.group(3)}]" not in defined:

@@ -113,6 +113,7 @@ def parse(path: Path) -> Program:
     code = {p: re.sub(r";[^\n]*", lambda m: " " * len(m.group()), t) for p, t in texts.items()}
     decls = {}  # NAME -> (file, kind, start, end of the aggregate's inside)
     tools, bases, fdat, bare = {}, {}, {}, {}  # bare: NAME -> (file, line) of a declaration without a value
+    frames = {}  # NAME -> (file, line) of a FRAME the program declares
     for p, c in code.items():
         for m in DECL.finditer(c):
             kind, name = m.group(1).upper(), m.group(2).upper()
@@ -122,6 +123,7 @@ def parse(path: Path) -> Program:
             elif kind == "FRAME":
                 frame = _frame(_fields(c, m.start(3), m.end(3)), p, line_of(c, m.start()))
                 tools[name] = bases[name] = frame
+                frames[name] = (p, line_of(c, m.start()))
             else:
                 decls[name] = (p, kind, m.start(3), m.end(3))
         for m in BARE.finditer(c):
@@ -162,6 +164,13 @@ def parse(path: Path) -> Program:
             if token.group().startswith("{"):
                 fields = _fields(rest, token.start() + 1, token.end() - 1)
                 kind = "AXIS" if "A1" in fields else "POS"
+                missing = [k for k in (JOINT_KEYS if kind == "AXIS" else POSE_KEYS) if k not in fields]
+                if missing:  # KRL takes the missing components from the position before it, when it runs
+                    targets[at + token.start()] = Target(
+                        f"{m.group(1).upper()} line {line}", path, line, "motion", (),
+                        note=f"a partial target ({', '.join(missing)} from the position before it while the "
+                             f"program runs): not corrected")
+                    continue
                 targets[at + token.start()] = _target(src, path, kind, f"{m.group(1).upper()} line {line}",
                                                       at + token.start() + 1, at + token.end() - 1, state["TOOL"],
                                                       state["BASE"])
@@ -169,6 +178,12 @@ def parse(path: Path) -> Program:
             name = token.group().upper()
             if name in decls:
                 first_use.setdefault(name, (state["TOOL"], state["BASE"]))
+            elif name in frames:  # a FRAME names no S and T, and may also be a tool or base of the program
+                where, at_line = frames[name]
+                targets[at + token.start()] = Target(
+                    f"{token.group()} (line {line})", path, line, "motion", (),
+                    note=f"a FRAME ({where.name}:{at_line}): it names no configuration (S, T) to solve in, not "
+                         f"corrected")
             elif name in bare:
                 where, at_line = bare[name]
                 targets[at + token.start()] = Target(
