@@ -40,6 +40,8 @@ NOISES = (0.1, 0.3)
 DIST = (-0.12, 0.08, 0.0008, -0.0005, 0.0)
 #: px: the noise the richer error model (robots/industrial6r.errors.yaml) is measured at
 RICH_NOISE = 0.1
+#: the heading of docs/camera.md's section that scripts/reproduce_camera_elastic.py writes
+ELASTIC = "## Elastic effects from pixels"
 #: m: the side of the eye-to-hand marker plate, and a wider one (what a larger known length gives the scale)
 PLATE, WIDE_PLATE = 0.3, 0.45
 
@@ -303,7 +305,10 @@ def write(rows: dict, seeds: int):
             if reason != "structural":
                 why.setdefault(detail, []).append(f"`{param}`")
         lines.append(f"- {kind}: " + "; ".join(f"{', '.join(p)}: {d}" for d, p in why.items()))
-    (ROOT / "docs" / "camera.md").write_text("\n".join(lines) + "\n")
+    doc = ROOT / "docs" / "camera.md"
+    # the section scripts/reproduce_camera_elastic.py writes is kept as it is
+    kept = doc.read_text().partition(ELASTIC)[1:] if doc.exists() else ("", "")
+    doc.write_text("\n".join(lines) + "\n" + ("\n" + "".join(kept) if kept[0] else ""))
 
 
 if __name__ == "__main__":

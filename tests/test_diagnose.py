@@ -244,7 +244,7 @@ def test_a_period_longer_than_the_stroke_is_called_smooth():
 def test_an_effect_that_ends_insignificant_is_dropped_and_the_model_refitted(rng):
     """A term the truth lacks (q2**3 on frame 2's ey, on constant errors and noise) is what backward
     elimination removes: the refit's model no longer has it."""
-    from gecgen.loop.diagnose import Effect, _drop_insignificant, _fit
+    from gecgen.loop.diagnose import Effect, Points, _drop_insignificant
     from gecgen.symbolic.terms import error_model_from_dict
 
     robot = load_robot(ROBOTS / "puma560.yaml")
@@ -254,11 +254,11 @@ def test_an_effect_that_ends_insignificant_is_dropped_and_the_model_refitted(rng
     y = target_positions(robot, q, truth)[:, 0] + rng.normal(0, NOISE, (n, 3))
     data = Measurements(q, np.zeros((n, 6)), np.zeros((n, 0)), (), np.arange(n), np.arange(n), np.zeros(n, int), y, "s")
     spec = {"default": ["1"], "frames": {2: {"ey": ["1", "q2**3"]}}}
-    rnd = _fit(robot, error_model_from_dict(spec, robot, "<test>", ()), data, "auto")
+    rnd = Points().fit(robot, error_model_from_dict(spec, robot, "<test>", ()), data)
     effect = Effect("2.ey", ["q2"], ["q2**3"], "polynomial", 0.0, 1.0, [{"name": "2.ey:q2**3"}])
     j = rnd.model.coefficient_names(robot).index("2.ey:q2**3")
     assert abs(rnd.fit.c[j]) < 2 * rnd.fit.std[j]  # not determined: the truth has no such term
-    final, kept, dropped = _drop_insignificant(robot, rnd, [effect], data, "auto")
+    final, kept, dropped = _drop_insignificant(robot, rnd, [effect], data, Points().fit)
     assert kept == [] and [d["error"] for d in dropped] == ["2.ey"] and dropped[0]["t"] < 2
     assert "2.ey:q2**3" not in final.model.coefficient_names(robot)
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, MAX_SEED, number, progress_status, say, warned, whole
+from gecgen.cli.common import (CALIBRATION_HELP, DATA_HELP, MAX_SEED, not_from_pixels, number, progress_status, say,
+                               warned, whole)
 from gecgen.cli.human import warning_lines
 
 #: Monte Carlo draws of the coefficient and unmodelled errors
@@ -70,6 +71,7 @@ def _stated(args, caught: list, status) -> dict:
 
     cal = load_calibration(args.calibration)
     calib = cal.calibration_
+    not_from_pixels(calib.report, args.calibration, "accuracy")
     require(not calib.model.aux, f"{args.calibration}: its model uses auxiliary signals "
                                  f"({', '.join(calib.model.aux)}), which a volume file cannot range over yet; state "
                                  f"the accuracy of a model without them")

@@ -1,12 +1,14 @@
 """`gecgen calibrate ROBOT TRAIN [--val VAL | --holdout F] -o DIR`: the whole pipeline in one command.
 
 The model is chosen on the training data alone (gecgen/loop/calibrate.py says the rule); DIR gets
-the calibration, the chosen error model, its generated code and a report.
+the calibration, the chosen error model, its generated code and a report. With `--cameras FILE
+[--board FILE]` TRAIN (and VAL) are pixel files (`cli.pixels.calibrated`).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+from gecgen.cli import pixels
 from gecgen.cli.common import (MAX_SEED, add_keep_insignificant, add_noise, add_orientation_length, add_tolerance,
                                next_commands, progress_status, say, warned, whole)
 from gecgen.cli.human import warning_lines
@@ -41,6 +43,7 @@ def add_parser(command):
     add_keep_insignificant(p)
     add_noise(p)
     add_tolerance(p)
+    pixels.add_options(p, intrinsics=False)
 
 
 def run(args) -> dict:
@@ -52,6 +55,8 @@ def run(args) -> dict:
         # aside, replacing the old one whole at the end (files.output_folder)
         with output_folder(out, "calibration folder") as build, progress_status(not args.json) as status, \
                 warned() as caught:
+            if args.cameras or args.board:
+                return pixels.calibrated(args, out, build, status)
             return _calibrate(args, out, build, status, caught)
     except KeyboardInterrupt as exc:
         raise type(exc)(f"{out} is as it was before this run") from None

@@ -15,7 +15,7 @@ import math
 from datetime import datetime, timezone
 from pathlib import Path
 
-from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, number
+from gecgen.cli.common import CALIBRATION_HELP, DATA_HELP, not_from_pixels, number
 
 #: rad or m: a baseline's reading of a pose may differ from the check's by this much (a servo's
 #: standstill error is a few 1e-5); the calibrated model carries the points across the difference
@@ -51,6 +51,7 @@ def run(args) -> dict:
 
     cal = load_calibration(args.calibration)
     calib = cal.calibration_
+    not_from_pixels(calib.report, args.calibration, "check")
     data = read_measurements(args.data, calib.robot)
     require(data.relative is None and data.orientation is None,
             f"{args.data}: a check compares measured positions; give rows with x y z only")

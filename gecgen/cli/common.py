@@ -25,6 +25,16 @@ def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str,
     return robot, error_model(errors, robot, aux_columns)
 
 
+def not_from_pixels(report: dict, where: str, command: str):
+    """Refuse, in one line, a calibration from image points (its report's `measurement`) to a command that
+    compares tracker points with a tracker calibration (its residual, its frames)."""
+    from gecgen.model.validation import require
+
+    require(report.get("measurement") != "pixels",
+            f"{where}: a calibration from image points; {command} takes a calibration from tracker points: score "
+            f"held-out images with gecgen evaluate {where} PIXELS.csv --cameras CAMERAS.yaml")
+
+
 def progress_status(enabled: bool):
     """Where long steps say how far they are (`status.update(text)`): a rich status line on stderr
     when stderr is a terminal, which is cleared when the block ends; None (say nothing) when it is

@@ -1,4 +1,5 @@
-"""`gecgen diagnose ROBOT DATA [--val VAL]`: trace the residual to missing effects, add them, refit, report."""
+"""`gecgen diagnose ROBOT DATA [--val VAL]`: trace the residual to missing effects, add them, refit, report;
+`--cameras FILE [--board FILE]`: DATA is a pixel file (`cli.pixels.diagnosed`)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -6,6 +7,7 @@ from pathlib import Path
 
 from gecgen.cli.common import (MAX_SEED, DATA_HELP, ROBOT_HELP, add_orientation_length, add_tolerance, next_commands,
                                number, progress_status, warned, whole)
+from gecgen.cli import pixels
 from gecgen.cli.human import warning_lines
 from gecgen.cli.register import REGISTER, add_register
 from gecgen.model import ModelError
@@ -38,6 +40,7 @@ def add_parser(command):
                         "from repeated poses, if any)")
     add_orientation_length(p)
     add_tolerance(p)
+    pixels.add_options(p, intrinsics=False)
 
 
 #: the report's stages -> their keys in the JSON's per-branch figures: before and after as diagnose's own
@@ -45,6 +48,8 @@ STAGES = {"uncalibrated": "uncalibrated", "calibrated (declared model)": "before
 
 
 def run(args) -> dict:
+    if args.cameras or args.board:
+        return pixels.diagnosed(args)
     with warned() as caught:
         return _diagnosed(args, caught)
 

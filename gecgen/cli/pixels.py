@@ -3,20 +3,23 @@ points (`fit.camera`), written as identify writes one; `gecgen simulate ROBOT --
 image points of a truth robot (`simulate.camera`)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from gecgen.cli.common import number, numbers
 from gecgen.model.validation import ModelError, require
 
 
-def add_options(p):
-    """identify's options for image points."""
+def add_options(p, intrinsics: bool = True):
+    """identify's options for image points (diagnose's: without --refine-intrinsics)."""
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
-    g.add_argument("--refine-intrinsics", action="store_true",
-                   help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera file's "
-                        "values (JSON intrinsics, with their std)")
+    if intrinsics:
+        g.add_argument("--refine-intrinsics", action="store_true",
+                       help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera "
+                            "file's values (JSON intrinsics, with their std)")
     g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
                    help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
                         "weakly against it are held at zero and named (default: the fit's own residual)")
@@ -80,6 +83,151 @@ def identified(args) -> dict:
 
         result.update(report.write(report.content.pixels(robot, data, fit, calibration, str(out), cameras,
                                                          result["warnings"], assessment), args.report))
+    return result
+
+
+def diagnosed(args) -> dict:
+    """`gecgen diagnose ROBOT PIXELS.csv --cameras FILE`: the closed loop on image points
+    (`loop.pixels.ImagePoints`), its new error model and code, and its JSON result (mm at the target and
+    px)."""
+    from gecgen.cli.common import robot_and_model
+    from gecgen.emit import generate
+    from gecgen.loop.diagnose import diagnose, verdict, write_error_model
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.measurements import hold_out
+    from gecgen.model.pixels import read_pixels
+    from gecgen.runtime.compiled import printed_code
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
+                            ("--orientation-length", args.orientation_length)) if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
+                       f"with the robot; the corners' noise is --noise-px); leave it out")
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    robot, model = robot_and_model(args.robot, args.errors)
+    data = read_pixels(args.data, robot, cameras, board)
+    val = read_pixels(args.val, robot, cameras, board) if args.val else None
+    if args.holdout is not None:
+        data, val = hold_out(data, args.holdout, args.seed)
+    require(not model.aux or set(model.aux) <= set(data.aux_names),
+            f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
+            f"add the columns or use another error model")
+    measure = ImagePoints(robot, cameras, board, args.noise_px)
+    try:
+        diag = diagnose(robot, model, data, val, seed=args.seed, noise_mm=args.noise_px, max_rounds=args.max_rounds,
+                        measure=measure)
+    except RuntimeError as exc:  # the declared model's own fit cannot be trusted
+        raise ModelError(f"{args.data}: {exc}") from None
+    out = args.output or f"{robot.name}.diagnosed.errors.yaml"
+    write_error_model(robot, diag.final.model, diag.effects, out)
+    generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
+    generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
+    rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+    result = {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
+            "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
+            "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
+            "candidates_tested": diag.candidates_tested, "remaining": diag.remaining, "verdict": verdict(diag.remaining),
+            "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
+            if args.holdout is not None else "internal hold-out of 1/5 of the poses",
+            "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
+    if args.report:  # the diagnosed model's fit on the training images, what it added first
+        from gecgen import report
+        from gecgen.fit.camera import calibration_of
+
+        final = diag.final
+        content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit),
+                                        str(out), cameras, command="diagnose",
+                                        lead=report.content.pixel_diagnosis(result))
+        result.update(report.write(content, args.report))
+    return result
+
+
+def calibrated(args, out, build, status) -> dict:
+    """`gecgen calibrate ROBOT PIXELS.csv --cameras FILE -o DIR`: the model chosen among the candidates by
+    cross-validation over the training images (`loop.calibrate.choose` on `loop.pixels.ImagePoints`),
+    written into `build` (which becomes `out`) as calibrate writes a tracker calibration; its JSON result,
+    the validation images scored with the cameras (and board) as the fit placed them."""
+    import warnings
+
+    import numpy as np
+
+    from gecgen import report
+    from gecgen.api import model_names
+    from gecgen.cli.common import say
+    from gecgen.cli.human import warning_lines
+    from gecgen.deliver import export
+    from gecgen.fit.calibration import save
+    from gecgen.fit.camera import calibration_of, frame_robot, refuse_untrustworthy, summary_at
+    from gecgen.fit.inputs import error_model
+    from gecgen.loop.calibrate import choose
+    from gecgen.loop.diagnose import write_error_model
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model import load_robot
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.files import write_atomically
+    from gecgen.model.measurements import hold_out
+    from gecgen.model.pixels import read_pixels
+    from gecgen.runtime.compiled import CompiledModel
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
+                            ("--orientation-length", args.orientation_length)) if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
+                       f"with the robot; the corners' noise is --noise-px); leave it out")
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    robot = load_robot(args.robot)
+    data = read_pixels(args.train, robot, cameras, board)
+    val = read_pixels(args.val, robot, cameras, board) if args.val else None
+    if args.holdout is not None:
+        data, val = hold_out(data, args.holdout, args.seed)
+    default = error_model(args.errors, robot, data.aux_names, constant=False)
+    names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
+    measure = ImagePoints(robot, cameras, board, args.noise_px, significance=not args.keep_insignificant)
+    say(status, "choosing the model by cross-validation over the training images")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            choice = choose(robot, data, default, args.seed, names=names, measure=measure,
+                            progress=lambda name: say(status, f"cross-validating the {name} model on the training "
+                                                              f"images"), stage=lambda text: say(status, text))
+        except RuntimeError as exc:
+            raise ModelError(f"{args.train}: {str(exc).splitlines()[0]}") from None
+    refuse_untrustworthy(choice.fit, str(args.train))
+    say(status, f"writing the calibration, its code and the report into {out}")
+    calib = calibration_of(robot, choice.model, choice.fit)
+    calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
+    save(calib, build / "calibration.json")
+    effects = choice.diagnosis.effects if choice.diagnosis else []
+    write_error_model(robot, choice.model, effects, build / "errors.yaml")
+    code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
+    for name, text in code.items():
+        write_atomically(build / "generated" / name, text)
+    fit = choice.fit
+    result = {"robot": robot.name, "train_data": str(args.train), "output": str(out), "measurement": "pixels",
+              "model": choice.chosen.name, "error_model": str(out / "errors.yaml"), "candidates": choice.table,
+              "n_params": len(choice.model.coefficients), "n_identifiable": len(fit.kept), "before": fit.before,
+              "train": fit.train, "outliers": [o.to_dict() for o in fit.outliers], "held": calib.report["held"],
+              "effects": [e.to_dict() for e in effects], "cameras": calib.report["cameras"],
+              **({"board": calib.report["board"]} if board is not None else {})}
+    if val is not None:
+        cm = CompiledModel(frame_robot(robot), choice.model)
+        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
+                                                              f"{args.seed})"
+        result["val_before"], result["val"] = (summary_at(cm, robot, val, cameras, board, fit.g, c)
+                                               for c in (np.zeros(len(fit.c)), fit.c))
+    files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
+             "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
+    result["files"] = {k: str(v) for k, v in files.items()}
+    result["warnings"] = warning_lines(caught)
+    rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+    result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, gecgen compensate "
+                      f"{out / 'calibration.json'} POSES.csv -o OUT.csv")
+    content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
+                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
+    result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
     return result
 
 

@@ -124,6 +124,10 @@ class PixelFit:
     cameras: dict[str, Camera] | None = None
     intrinsics_std: dict[str, dict[str, float]] | None = None
     residuals: np.ndarray | None = None
+    #: the geometric unknowns as fitted (rotation vectors and translations, in the fit's order) and
+    #: every image point's robust weight (R,): where `linearised` takes the fit's least squares
+    g: np.ndarray | None = None
+    weights: np.ndarray | None = None
 
     def tool_camera(self) -> tuple[np.ndarray, np.ndarray]:
         """The carried camera's pose in the tool frame: (R, t) with X_tool = R X_cam + t."""
@@ -132,10 +136,15 @@ class PixelFit:
 
 
 def frame_robot(robot: Robot) -> Robot:
-    """The robot with four virtual targets: the tool origin and FRAME_ARM along each tool axis."""
+    """The robot with four virtual targets per branch (one on a serial chain): its tool origin and
+    FRAME_ARM along each tool axis, a branch's four together, branch by branch."""
     a = FRAME_ARM
-    return replace(robot, targets={"o": (0.0, 0.0, 0.0), "x": (a, 0.0, 0.0), "y": (0.0, a, 0.0), "z": (0.0, 0.0, a)},
-                   estimated=(), target_frames={}, vertex_of={})
+    axes = {"o": (0.0, 0.0, 0.0), "x": (a, 0.0, 0.0), "y": (0.0, a, 0.0), "z": (0.0, 0.0, a)}
+    if not robot.branches:
+        return replace(robot, targets=axes, estimated=(), target_frames={}, vertex_of={})
+    targets = {f"{k}{b}": v for b in range(len(robot.branches)) for k, v in axes.items()}
+    return replace(robot, targets=targets, target_branch={t: int(t[1:]) for t in targets}, estimated=(),
+                   target_frames={}, vertex_of={})
 
 
 class _Problem:
@@ -150,6 +159,11 @@ class _Problem:
         self.inputs = (data.q, data.w, data.aux_columns(cm.model.aux) if cm.model.aux else None)
         seen = set(np.array(data.points)[data.point])
         self.estimated = [] if self.tool else [t for t in robot.estimated if t in seen]
+        self.n_branches = max(len(robot.branches), 1)
+        # each row's (pose, branch): where its point's tool frame is in `frames`' arrays (a board's corners:
+        # the first branch's, the only one a camera rides on)
+        branch = np.zeros(len(data.points), int) if self.tool else np.array([robot.branch_of(n) for n in data.points])
+        self.at = (data.pose, branch[data.point])
         # geometric unknowns: 6 per camera (rotation vector, translation), 6 for the board, 3 per estimated target
         self.n_geom = 6 * len(self.cams) + (6 if self.tool else 0) + 3 * len(self.estimated)
         self.n_poses_geom = self.n_geom  # the unknowns before the intrinsics
@@ -174,13 +188,15 @@ class _Problem:
         return out
 
     def frames(self, c: np.ndarray, with_H: bool = False):
-        """Tool origin o (P, 3), rotation R (P, 3, 3) and, with_H, H_e of the four points (P, 4, 3, nc)."""
+        """Per pose and branch (B; one on a chain) the tool origin o (P, B, 3), rotation R (P, B, 3, 3)
+        and, with_H, H_e of the four points (P, B, 4, 3, nc); a row's are at `self.at`."""
         q, w, aux = self.inputs
         out = self.cm.model_targets(q, w, aux, c, with_H=with_H)
         p, H = out if with_H else (out, None)
-        o = p[:, 0]
-        R = np.stack([p[:, 1] - o, p[:, 2] - o, p[:, 3] - o], -1) / FRAME_ARM
-        return o, R, (None if H is None else H.reshape(len(q), 4, 3, -1))
+        p = p.reshape(len(q), self.n_branches, 4, 3)
+        o = p[:, :, 0]
+        R = np.stack([p[:, :, 1] - o, p[:, :, 2] - o, p[:, :, 3] - o], -1) / FRAME_ARM
+        return o, R, (None if H is None else H.reshape(len(q), self.n_branches, 4, 3, -1))
 
     def unpack(self, g: np.ndarray):
         k = 6 * len(self.cams)
@@ -204,7 +220,7 @@ class _Problem:
         poses, board, targets = self.unpack(g)
         d = self.data
         x = self.local_points(targets)
-        Rp, op = R[d.pose], o[d.pose]
+        Rp, op = R[self.at], o[self.at]
         if self.tool:
             Xw = x @ board[0].T + board[1]
             Xt = np.einsum("rji,rj->ri", Rp, Xw - op)
@@ -244,27 +260,29 @@ class _Problem:
             e[i] = STEP
             Jg[:, :, i] = (self.project(self.camera_points(g + e, o, R), g + e) -
                            self.project(self.camera_points(g - e, o, R), g - e)) / (2 * STEP)
-        Hc = H[d.pose][..., columns]  # (R, 4, 3, k)
-        dr = (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM  # d(tool axis k)/dc: (R, 3 axes, 3, k)
+        Jc = np.einsum("rij,rjc->ric", P, self.point_derivative(g, o, R, H[self.at][..., columns]))
+        # the Jacobian of the residual: minus that of the projection
+        return d.uv - uv, -np.concatenate([Jg, Jc], axis=2).reshape(2 * len(X), -1)
+
+    def point_derivative(self, g: np.ndarray, o: np.ndarray, R: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """d(X_cam)/dx (R, 3, m) of every row's point in its camera's frame, from D (R, 4, 3, m): the
+        derivative of the four frame points (`frame_robot`) at the row's pose in m unknowns (H_e's
+        columns of coefficients, or J_e's of generalized errors)."""
+        d = self.data
+        dr = (D[:, 1:] - D[:, :1]) / FRAME_ARM  # d(tool axis k)/dx: (R, 3 axes, 3, m)
         poses, board, targets = self.unpack(g)
         x = self.local_points(targets)
         if self.tool:
-            v = x @ board[0].T + board[1] - o[d.pose]  # X_w - o
+            v = x @ board[0].T + board[1] - o[self.at]  # X_w - o
             # X_tool[k] = r_k . (X_w - o): d = dr_k . v - r_k . do
-            dXt = np.einsum("rkic,ri->rkc", dr, v) - np.einsum("rik,ric->rkc", R[d.pose], Hc[:, 0])
-            dX = np.empty_like(dXt)
-            for k, (Rc, _) in enumerate(poses):
-                rows = d.camera == k
-                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXt[rows])
+            dX = np.einsum("rkic,ri->rkc", dr, v) - np.einsum("rik,ric->rkc", R[self.at], D[:, 0])
         else:
-            dXw = Hc[:, 0] + np.einsum("rk,rkic->ric", x, dr)  # d(o + sum_k x_k r_k)
-            dX = np.empty_like(dXw)
-            for k, (Rc, _) in enumerate(poses):
-                rows = d.camera == k
-                dX[rows] = np.einsum("ij,rjc->ric", Rc, dXw[rows])
-        Jc = np.einsum("rij,rjc->ric", P, dX)
-        # the Jacobian of the residual: minus that of the projection
-        return d.uv - uv, -np.concatenate([Jg, Jc], axis=2).reshape(2 * len(X), -1)
+            dX = D[:, 0] + np.einsum("rk,rkic->ric", x, dr)  # d(o + sum_k x_k r_k)
+        out = np.empty_like(dX)
+        for k, (Rc, _) in enumerate(poses):
+            rows = d.camera == k
+            out[rows] = np.einsum("ij,rjc->ric", Rc, dX[rows])
+        return out
 
 
 def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
@@ -284,7 +302,8 @@ def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
             placed = rows[~np.isin(np.array(d.points)[d.point[rows]], problem.estimated)]
             rows = placed if len(placed) >= 6 else rows
             x = problem.local_points({t: np.zeros(3) for t in problem.estimated})[rows]
-            Xw = np.einsum("rij,rj->ri", R[d.pose[rows]], x) + o[d.pose[rows]]
+            at = problem.at[0][rows], problem.at[1][rows]
+            Xw = np.einsum("rij,rj->ri", R[at], x) + o[at]
             ok, rvec, tvec = cv2.solvePnP(Xw, d.uv[rows], cam.K, np.array(cam.distortion), flags=cv2.SOLVEPNP_ITERATIVE)
             require(ok, f"{d.source}: camera {cam.name}: no camera pose explains its points; check the camera file "
                         f"and the point names")
@@ -298,7 +317,7 @@ def _initial(problem: _Problem, c0: np.ndarray) -> np.ndarray:
             ok, rvec, tvec = cv2.solvePnP(problem.board.corners[d.point[at]], d.uv[at], cam.K,
                                           np.array(cam.distortion))
             if ok:
-                Rg.append(R[p]), tg.append(o[p]), Rb.append(cv2.Rodrigues(rvec)[0]), tb.append(tvec.ravel())
+                Rg.append(R[p, 0]), tg.append(o[p, 0]), Rb.append(cv2.Rodrigues(rvec)[0]), tb.append(tvec.ravel())
         require(len(Rg) >= 3, f"{d.source}: camera {cam.name}: fewer than 3 images with 6 board corners or more; "
                               f"take more images of the board")
         Rcg, tcg = cv2.calibrateHandEye(Rg, tg, Rb, tb, method=cv2.CALIB_HAND_EYE_TSAI)
@@ -351,9 +370,9 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
         o, R, H = problem.frames(c, with_H=True)
         d = problem.data
         x = problem.local_points({t: np.zeros(3) for t in problem.estimated})
-        Hc = H[d.pose][..., struct_kept]
+        Hc = H[problem.at][..., struct_kept]
         A = (Hc[:, 0] + np.einsum("rk,rkic->ric", x, (Hc[:, 1:] - Hc[:, :1]) / FRAME_ARM)).reshape(-1, len(struct_kept))
-        p = (np.einsum("rij,rj->ri", R[d.pose], x) + o[d.pose]).ravel()
+        p = (np.einsum("rij,rj->ri", R[problem.at], x) + o[problem.at]).ravel()
         sol, *_ = np.linalg.lstsq(A, p, rcond=None)
         if np.linalg.norm(A @ sol - p) < 1e-6 * np.linalg.norm(p):
             scale_dir = sol
@@ -391,14 +410,16 @@ def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Ca
             fixed_poses: np.ndarray | None, backend: str, intrinsics: bool = False):
     """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
     eliminated (structurally, and by `_analysis`), at the nominal model."""
-    require(not robot.branches, f"{robot.source}: a tree; image points are supported on serial chains only")
+    require(not (robot.branches and data.mount == "tool"), f"{robot.source}: a tree; a camera on the tool is "
+                                                            f"supported on serial chains only: see the tree's "
+                                                            f"markers with fixed cameras (mount: world)")
     cm = CompiledModel(frame_robot(robot), model, backend)
     problem = _Problem(cm, robot, data, cameras, board, intrinsics)
     c = np.zeros(cm.dims.nc)
     g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
     if intrinsics:
         g = np.concatenate([g, problem.intrinsics_of()])
-    struct = structural_analysis(cm, np.arange(4))
+    struct = structural_analysis(cm, np.arange(4 * problem.n_branches))
     kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
                                  fixed_poses is not None)
     return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
@@ -548,7 +569,41 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     return PixelFit(c, dict(zip(d.cameras, poses)), board_pose, targets, tuple(kept), eliminated, before, train,
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
                     {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
-                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]))
+                    np.column_stack([e, at_target_mm(problem, g, c, e)[0]]), g, wr)
+
+
+@dataclass(frozen=True)
+class Linearised:
+    """A pixel fit's weighted least squares at its solution, what diagnose screens candidate effects
+    in: rows (u, v) of every image point in the data's order, each scaled by the root of its robust
+    weight. A (2R, n) the residual's derivative in the fitted poses and the kept coefficients; r (2R,)
+    the residual (px); J (2R, ne) its derivative in the generalized errors, from which a new term t
+    on error e adds the column J[:, e] t(pose); mm_per_px what a pixel means at the points (the
+    median over them of depth over focal length, `at_target_mm`)."""
+
+    A: np.ndarray
+    r: np.ndarray
+    J: np.ndarray
+    mm_per_px: float
+
+
+def linearised(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+               fit: PixelFit) -> Linearised:
+    """The `Linearised` system of `fit` (fit_pixels of cm's model on data, the cameras' intrinsics as
+    given); cm: the compiled model of `frame_robot(robot)` and that model."""
+    problem = _Problem(cm, robot, data, cameras, board)
+    cols = np.array(fit.kept, int)
+    g, c = fit.g, fit.c
+    r, A = problem.jacobian(g, c, cols)
+    q, w, aux = problem.inputs
+    _, Je = cm.J_e(q, cm.eps(q, w, aux, c))
+    o, R, _ = problem.frames(c)
+    _, P = problem.project(problem.camera_points(g, o, R), g, jacobian=True)
+    D = Je.reshape(len(q), problem.n_branches, 4, 3, -1)[problem.at]
+    J = -np.einsum("rij,rjc->ric", P, problem.point_derivative(g, o, R, D)).reshape(2 * len(r), -1)
+    root = np.repeat(np.sqrt(fit.weights), 2)
+    return Linearised(A * root[:, None], r.ravel() * root, J * root[:, None],
+                      float(np.median(at_target_mm(problem, g, c, np.ones(len(r)))[0])))
 
 
 def _system(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
@@ -598,8 +653,9 @@ def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) 
     sum(r . dp) / sum(|r|^2), r the positions about their centre, so its variance is a^T cov a with a
     that sum's gradient in the coefficients."""
     o, _, H = problem.frames(c, with_H=True)
+    o, H = o.reshape(-1, 3), H[:, :, 0].reshape(len(o) * problem.n_branches, 3, -1)  # every branch's tool
     r = o - o.mean(axis=0)
-    a = np.einsum("pi,pik->k", r, H[:, 0][..., cols]) / float(np.sum(r ** 2))
+    a = np.einsum("pi,pik->k", r, H[..., cols]) / float(np.sum(r ** 2))
     with np.errstate(invalid="ignore"):
         std = float(np.sqrt(a @ cov @ a)) if len(cols) else 0.0
     return {"std_ppm": 1e6 * std, "std_mm": 1e3 * std * float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))}
@@ -670,14 +726,20 @@ def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camer
                        distortion=tuple(refined[n]["distortion"])) if n in refined else cam
             for n, cam in cameras.items()}
     robot = calibration.robot
-    problem = _Problem(CompiledModel(frame_robot(robot), calibration.model), robot, data, cams, board)
+    cm = CompiledModel(frame_robot(robot), calibration.model)
     poses = [fitted[n] for n in data.cameras] + ([report["board"]] if data.mount == "tool" else [])
     g = np.concatenate([[*Rotation.from_matrix(np.array(p["rotation"])).as_rotvec(), *p["translation"]]
                         for p in poses])
-    out = {}
-    for stage, c in (("before", np.zeros(problem.cm.dims.nc)), ("after", calibration.c)):
-        out[stage] = _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
-    return out
+    return {stage: summary_at(cm, robot, data, cams, board, g, c)
+            for stage, c in (("before", np.zeros(cm.dims.nc)), ("after", calibration.c))}
+
+
+def summary_at(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+               g: np.ndarray, c: np.ndarray) -> dict:
+    """The residual of image points at the poses g (`PixelFit.g`, none fitted) and coefficients c (nc,),
+    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`."""
+    problem = _Problem(cm, robot, data, cameras, board)
+    return _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
 
 
 def intrinsics_report(fit: PixelFit) -> dict:
@@ -694,10 +756,11 @@ def refuse_untrustworthy(fit: PixelFit, where: str):
 
 
 def fitted_tools(robot: Robot, model: ErrorModel, c: np.ndarray, q: np.ndarray, w: np.ndarray | None = None,
-                 aux: np.ndarray | None = None, backend: str = "auto") -> np.ndarray:
-    """(N, 4, 4) the tool poses the model with coefficients c (nc,) gives at joints q (N, n)."""
+                 aux: np.ndarray | None = None, backend: str = "auto", branch: int = 0) -> np.ndarray:
+    """(N, 4, 4) the tool poses the model with coefficients c (nc,) gives at joints q (N, n); on a tree,
+    the tool's of branch `branch`."""
     cm = CompiledModel(frame_robot(robot), model, backend)
-    p = cm.model_targets(q, w, aux, c)
+    p = cm.model_targets(q, w, aux, c)[:, 4 * branch:4 * branch + 4]
     T = np.zeros((len(p), 4, 4))
     T[:, :3, :3] = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], -1) / FRAME_ARM
     T[:, :3, 3], T[:, 3, 3] = p[:, 0], 1.0

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.loop import NAMES
-from gecgen.loop.diagnose import Diagnosis, diagnose
+from gecgen.loop.diagnose import Diagnosis, Points, diagnose
+from gecgen.loop.linear import Round
 from gecgen.loop.dictionary import frame_own_errors, loads_by_joint
 from gecgen.model.errors import ErrorModel
 from gecgen.symbolic.terms import error_model_from_dict
@@ -34,7 +35,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, MATCHING, Robot
 from gecgen.model.validation import ModelError
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.fit.identify import Fit, identify, squared_error
+from gecgen.fit.identify import Fit
 from gecgen.runtime.processes import mapped, side_by_side
 
 FOLDS = 5
@@ -104,29 +105,32 @@ def pipelines(robot: Robot, data: Measurements, default: ErrorModel | None,
 
 
 def run_pipeline(robot: Robot, pipeline: Pipeline, data: Measurements,
-                 registration_mode: str = "auto") -> tuple[ErrorModel, CompiledModel, Fit, Diagnosis | None]:
-    """Fit one pipeline on `data`: (final model, its compiled code, the fit, diagnose's record)."""
+                 measure=None) -> tuple[ErrorModel, CompiledModel, Fit, Diagnosis | None]:
+    """Fit one pipeline on `data`: (final model, its compiled code, the fit, diagnose's record).
+    measure: what data holds and how it is fitted (`loop.diagnose.Points`, the default, or
+    `loop.pixels.ImagePoints`)."""
+    measure = measure or Points()
     if pipeline.diagnose:
         # the second `data` is only reported on: diagnose then chooses on every pose it is given
-        diag = diagnose(robot, pipeline.model, data, data, registration_mode=registration_mode)
+        diag = diagnose(robot, pipeline.model, data, data, measure=measure)
         return diag.final.model, diag.final.cm, diag.final.fit, diag
-    cm = CompiledModel(robot, pipeline.model)
-    return pipeline.model, cm, identify(cm, data, registration_mode=registration_mode), None
+    rnd = measure.fit(robot, pipeline.model, data, quiet=False)
+    return pipeline.model, rnd.cm, rnd.fit, None
 
 
 def fold_score(robot: Robot, pipeline: Pipeline, data: Measurements, fold: np.ndarray, f: int,
-               registration_mode: str = "auto") -> tuple[float, float]:
+               measure=None) -> tuple[float, float]:
     """(sum of squared errors (m^2), the points they count for) over all measured points of the poses
     of fold f (fold (P,) each pose's fold), a measured frame counting as two
-    (`identify.squared_error`), the pipeline run whole on the other folds. Raises RuntimeError when
-    the fold's fit cannot be trusted."""
+    (`identify.squared_error`; image points in m at the target), the pipeline run whole on the other
+    folds. Raises RuntimeError when the fold's fit cannot be trusted."""
+    measure = measure or Points()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # conditioning warnings of the fold fits; the score says it all
-        _, cm, fit, _ = run_pipeline(robot, pipeline, data.subset(np.nonzero(fold != f)[0]), registration_mode)
+        model, cm, fit, _ = run_pipeline(robot, pipeline, data.subset(np.nonzero(fold != f)[0]), measure)
     if fit.failures:
         raise RuntimeError(f"fold {f + 1}: {fit.failures[0]}")
-    test = data.subset(np.nonzero(fold == f)[0])
-    return squared_error(cm, test, fit.to_world(test), fit.c)
+    return measure.squared_error(Round(model, cm, fit), data.subset(np.nonzero(fold == f)[0]))
 
 
 def _scored(*task) -> tuple[float, float] | str:
@@ -138,13 +142,13 @@ def _scored(*task) -> tuple[float, float] | str:
         return str(exc).splitlines()[0]
 
 
-def _fitted_ahead(robot: Robot, pipeline: Pipeline, data: Measurements, registration_mode: str):
+def _fitted_ahead(robot: Robot, pipeline: Pipeline, data: Measurements, measure):
     """run_pipeline before the choice: (its result, or the RuntimeError or ModelError it raised; the
     warnings it issued), held until it is known to be the choice's."""
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         try:
-            return run_pipeline(robot, pipeline, data, registration_mode), said
+            return run_pipeline(robot, pipeline, data, measure), said
         except (RuntimeError, ModelError) as exc:
             return exc, said
 
@@ -154,12 +158,15 @@ def _row(table: list[dict], p: Pipeline) -> dict:
 
 
 def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: int = 0,
-           registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES, stage=None) -> Choice:
+           registration_mode: str = "auto", progress=None, names: tuple[str, ...] = NAMES, stage=None,
+           measure=None) -> Choice:
     """Score the named pipelines that apply (see the module docstring) on the training data, fit
     the choice on all of it. progress(name) is called per candidate while its folds run, stage(text)
-    with what it does after them. Raises RuntimeError when none applies or can be fitted, or when
-    the chosen fit cannot be trusted."""
+    with what it does after them. measure: as for `run_pipeline` (default: tracker points registered
+    as registration_mode says). Raises RuntimeError when none applies or can be fitted, or when the
+    chosen fit cannot be trusted."""
     stage = stage or (lambda text: None)
+    measure = measure or Points(registration_mode)
     if data.n_poses < 2 * FOLDS:
         raise RuntimeError(f"{data.n_poses} poses: the model is chosen by {FOLDS}-fold cross-validation over poses, "
                            f"which needs at least {2 * FOLDS}; measure more poses")
@@ -175,14 +182,14 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
     order = sorted(range(len(candidates)), key=lambda i: not candidates[i].diagnose)
     tasks = [(i, f) for i in order for f in range(FOLDS)]
     ahead = None
-    with mapped([(_scored, (robot, candidates[i], data, fold, f, registration_mode)) for i, f in tasks]) as results:
+    with mapped([(_scored, (robot, candidates[i], data, fold, f, measure)) for i, f in tasks]) as results:
         if side_by_side(len(tasks)) > 1 and candidates[order[0]].diagnose:
             # while the workers score the folds, this process fits the longest candidate on all the data:
             # it is most often the choice, and otherwise the time would have been spent waiting. Its
             # failure matters only if it is chosen, and is raised then, as it would be after the choice.
             if progress:
                 progress(candidates[order[0]].name)
-            ahead = candidates[order[0]], *_fitted_ahead(robot, candidates[order[0]], data, registration_mode)
+            ahead = candidates[order[0]], *_fitted_ahead(robot, candidates[order[0]], data, measure)
         scores = {}
         for i in order:  # a candidate's name while its folds are awaited
             if progress:
@@ -207,7 +214,7 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
         if p.diagnose and len(tied) > 1 and p.name not in full:
             stage(f"fitting the {p.name} model on all {data.n_poses} training poses: it ties the best, and the "
                   f"smaller of them is chosen")
-            full[p.name] = _fitted_ahead(robot, p, data, registration_mode)
+            full[p.name] = _fitted_ahead(robot, p, data, measure)
     for _, p in tied:
         fitted = full.get(p.name, (None,))[0]
         if p.diagnose and fitted is not None and not isinstance(fitted, Exception):
@@ -228,7 +235,7 @@ def choose(robot: Robot, data: Measurements, default: ErrorModel | None, seed: i
         model, cm, fit, diag = fitted
     else:
         stage(f"fitting the chosen {chosen.name} model on all {data.n_poses} training poses")
-        model, cm, fit, diag = run_pipeline(robot, chosen, data, registration_mode)
+        model, cm, fit, diag = run_pipeline(robot, chosen, data, measure)
     if chosen.diagnose:
         _row(table, chosen)["n_params_delivered"] = len(model.coefficients)
     if fit.failures:

@@ -40,7 +40,7 @@ from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.runtime.compiled import CompiledModel
-from gecgen.fit.identify import fit_frames, identify, row_errors, summary, to_world
+from gecgen.fit.identify import fit_frames, identify, row_errors, squared_error, summary, to_world
 from gecgen.fit.significance import T_MIN, noise_floor, noise_test
 from gecgen.runtime.threads import one_blas_thread
 
@@ -73,12 +73,58 @@ class Effect:
                 "indistinguishable": self.alternatives}
 
 
-def _fit(robot, model, data, registration_mode) -> Round:
-    cm = CompiledModel(robot, model)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # conditioning is reported in the final fit, not per round
-        fit = identify(cm, data, registration_mode=registration_mode)
-    return Round(model, cm, fit)
+@dataclass(frozen=True)
+class Points:
+    """Tracker points: how diagnose fits a model to them, linearises the fit and scores it (the loop
+    itself does not care what was measured; `loop.pixels.ImagePoints` does the same for image points).
+    registration_mode: of the training data; register_val: the validation data's frame is fitted
+    before it is scored."""
+
+    registration_mode: str = "auto"
+    register_val: bool = False
+
+    def fit(self, robot: Robot, model: ErrorModel, data: Measurements, quiet: bool = True) -> Round:
+        """The model fitted; quiet: its warnings kept back (diagnose's rounds: conditioning is reported
+        in the final fit, not per round)."""
+        cm = CompiledModel(robot, model)
+        with warnings.catch_warnings():
+            if quiet:
+                warnings.simplefilter("ignore")
+            fit = identify(cm, data, registration_mode=self.registration_mode)
+        return Round(model, cm, fit)
+
+    @staticmethod
+    def squared_error(rnd: Round, test: Measurements) -> tuple[float, float]:
+        """(sum of squared point errors (m^2), the points they count for) of poses the fit did not see
+        (`identify.squared_error`)."""
+        return squared_error(rnd.cm, test, rnd.fit.to_world(test), rnd.fit.c)
+
+    def system(self, rnd: Round, data: Measurements):
+        """The fit's weighted linear system (H (3R, k), r (3R,)), each row's pose and degrees of freedom
+        (3R,), and J_e (3R, ne), rows in the same order, each pose's adjacent (`loop.screening`)."""
+        H, r = linear_system(rnd, data, rnd.fit.to_world(data))
+        rows_pose, rows_dof, order = pose_rows(data)
+        return H, r, rows_pose, rows_dof, weighted_J(rnd, data, order)
+
+    @staticmethod
+    def train_rms_mm(rnd: Round) -> float:
+        return rnd.fit.train["rms_mm"]
+
+    @staticmethod
+    def noise(data: Measurements, robot: Robot, noise: float | None) -> dict | None:
+        """The noise floor (`significance.noise_floor`); noise: mm per coordinate, when known."""
+        return noise_floor(data, noise, robot)
+
+    def scores(self, rnd: Round, val: Measurements) -> dict:
+        return _scores(rnd, val, self.register_val)
+
+    @staticmethod
+    def remains(rnd: Round, data: Measurements, cv_rms_mm: float | None, noise: dict | None) -> dict:
+        return what_remains(rnd, data, cv_rms_mm, noise)
+
+    @staticmethod
+    def confounding(rnd: Round, data: Measurements) -> list[dict]:
+        return ratio_load_confounding(rnd.cm, rnd.fit, data)
 
 
 def _with_terms(robot: Robot, model: ErrorModel, error: int, terms: tuple[str, ...], aux: tuple[str, ...]) -> ErrorModel:
@@ -125,36 +171,36 @@ def _choose(found: list[Hit], cands, fs: Folded, J, rows_pose, n_tests: int, bas
 @one_blas_thread
 def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measurements | None = None,
              registration_mode: str = "auto", seed: int = 0, progress=None, noise_mm: float | None = None,
-             max_rounds: int = MAX_ROUNDS, register_val: bool = False) -> Diagnosis:
+             max_rounds: int = MAX_ROUNDS, register_val: bool = False, measure=None) -> Diagnosis:
     """Run the loop; without `val`, a seeded fifth of the poses is held out for the report.
     `noise_mm`: the measurement noise per coordinate (mm), when known; otherwise it is estimated
     from repeated poses of `data`, if any. It decides whether what remains is only noise. The loop
     stops when nothing passes the statistics, or after `max_rounds`. `register_val`: `val` was
-    measured from another tracker stationing; each scored model fits its frame on it first."""
+    measured from another tracker stationing; each scored model fits its frame on it first. measure:
+    what data holds and how it is fitted (`Points`, the default, with registration_mode and
+    register_val; `loop.pixels.ImagePoints` for image points, whose noise is given in its own unit)."""
+    measure = measure or Points(registration_mode, register_val)
     rng = np.random.default_rng(seed)
-    noise = noise_floor(data, noise_mm, robot)
+    noise = measure.noise(data, robot, noise_mm)
     if val is None:
         held = rng.permutation(data.n_poses)
         n_val = max(1, data.n_poses // 5)
         val, data = data.subset(np.sort(held[:n_val])), data.subset(np.sort(held[n_val:]))
     fold = folds(data.n_poses, rng)
-    rnd = first = _fit(robot, model, data, registration_mode)
+    rnd = first = measure.fit(robot, model, data)
     if first.fit.failures:
         raise RuntimeError(f"the declared model's fit is not trustworthy: {first.fit.failures[0]}")
     effects: list[Effect] = []
     history, tested, correlates = [], 0, []
     for round_no in range(1, max_rounds + 1):
         if progress:
-            progress(round_no, rnd.fit.train["rms_mm"])
-        y = rnd.fit.to_world(data)
-        H, r = linear_system(rnd, data, y)
-        rows_pose, rows_dof, order = pose_rows(data)
+            progress(round_no, measure.train_rms_mm(rnd))
+        H, r, rows_pose, rows_dof, J = measure.system(rnd, data)
         fs = Folded(H, r, rows_pose, fold, rows_dof)
         base = fs.basis()
         m, k = rows_dof.sum(), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
         cands = candidates(rnd.cm, data, rng)
-        J = weighted_J(rnd, data, order)
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
         base_cv = fs.cv_rms()
         present = [{t.text for t in ts} for ts in rnd.model.terms]
@@ -173,7 +219,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
             if chosen:
                 break
         results.sort(key=significance_order)
-        history.append({"round": round_no, "train_rms_mm": rnd.fit.train["rms_mm"], "cv_rms_mm": 1e3 * base_cv,
+        history.append({"round": round_no, "train_rms_mm": measure.train_rms_mm(rnd), "cv_rms_mm": 1e3 * base_cv,
                         "candidates": n_tests, "accepted": None})
         if chosen is None:
             correlates = [{"error": robot.error_names()[h.error], "terms": list(cands[h.candidate].terms),
@@ -201,7 +247,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
                 alternatives.append({"error": robot.error_names()[h.error], "terms": list(key[1]),
                                      "similarity": float(cos)})
         new_model = _with_terms(robot, rnd.model, e, c.terms, data.aux_names)
-        refit = _fit(robot, new_model, data, registration_mode)
+        refit = measure.fit(robot, new_model, data)
         if refit.fit.failures:
             # an effect whose fit cannot be trusted is not added, however much it promised
             history[-1]["refused"] = f"{history[-1]['accepted']}: {refit.fit.failures[0]}"
@@ -211,17 +257,16 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         coefs = _effect_coefficients(robot, rnd, e, len(c.terms))
         effects.append(Effect(robot.error_names()[e], list(c.variables), list(c.terms), shown_family(c, data),
                               1e3 * (base_cv - cv), p, coefs, alternatives[:5]))
-    rnd, effects, dropped = _drop_insignificant(robot, rnd, effects, data, registration_mode)
-    before = _scores(first, val, register_val)
-    after = _scores(rnd, val, register_val)
+    rnd, effects, dropped = _drop_insignificant(robot, rnd, effects, data, measure.fit)
+    before, after = measure.scores(first, val), measure.scores(rnd, val)
     # the last round's CV is the final model's unless that round added an effect (the round cap) or
     # an effect was dropped since
     final_cv = history[-1]["cv_rms_mm"] if history[-1]["accepted"] is None and not dropped else None
-    remaining = {**what_remains(rnd, data, final_cv, noise), "correlates": correlates,
+    remaining = {**measure.remains(rnd, data, final_cv, noise), "correlates": correlates,
                  "stopped": "round cap" if history[-1]["accepted"] else "nothing passes the statistics",
                  "dropped": dropped}
     return Diagnosis(robot, first, rnd, effects, len(history), tested, before, after, history, remaining,
-                     ratio_load_confounding(rnd.cm, rnd.fit, data))
+                     measure.confounding(rnd, data))
 
 
 #: largest residual points listed when structure remains
@@ -282,11 +327,11 @@ def _strength(robot: Robot, rnd: Round, effect: Effect) -> float:
 
 
 def _drop_insignificant(robot: Robot, rnd: Round, effects: list[Effect], data: Measurements,
-                        registration_mode: str) -> tuple[Round, list[Effect], list[dict]]:
+                        fit) -> tuple[Round, list[Effect], list[dict]]:
     """Backward elimination of effects: while the weakest effect has no coefficient with |value| /
     std of at least T_MIN in the final fit, its terms are removed and the model refitted. An effect
     added early can end insignificant once later ones explain what it did (on the PPS paper design,
-    0.er's fx, added first, ends at 0.0049 +- 0.0063 mrad/N). Returns the final round, the effects
+    0.er's fx, added first, ends at 0.0049 +- 0.0063 mrad/N). fit(robot, model, data): a Round. Returns the final round, the effects
     left (their coefficients as finally fitted) and the dropped ones ({error, terms, t})."""
     dropped = []
     while effects:
@@ -301,7 +346,7 @@ def _drop_insignificant(robot: Robot, rnd: Round, effects: list[Effect], data: M
         if kept_labels == labels:
             break  # its terms are not in the model as written: nothing to remove
         spec["frames"].setdefault(int(frame), {})[name] = kept_labels
-        refit = _fit(robot, error_model_from_dict(spec, robot, "<diagnose>", data.aux_names), data, registration_mode)
+        refit = fit(robot, error_model_from_dict(spec, robot, "<diagnose>", data.aux_names), data)
         if refit.fit.failures:
             break  # the model with the effect is the trustworthy one
         rnd, effects = refit, [e for e in effects if e is not weakest]

@@ -167,8 +167,10 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     where = table.where
     header = table.header
     require(not ("u" in header and "v" in header and "target" not in header),
-            f"{where}: row 1: columns u and v: a pixel file (image points), which identify, redundancy and "
-            f"evaluate read with the camera file (--cameras); this step takes tracker measurements (pose, q1..qn, target, x, y, z)")
+            f"{where}: row 1: columns u and v: a pixel file (image points), which identify, diagnose, calibrate, "
+            f"redundancy and evaluate read with the camera file (--cameras; evaluate --cameras scores held-out "
+            f"images, in place of accuracy and check); this step takes tracker measurements (pose, q1..qn, target, "
+            f"x, y, z)")
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
     extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]

@@ -70,12 +70,14 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
     mounts = {c.mount for c in cameras.values()}
     mount = "tool" if "tool" in mounts else "world"
     if mount == "tool":
+        require(not robot.branches, f"{robot.source}: a tree of branches; a camera on the tool is supported on "
+                                    f"serial chains only: see the tree's targets with fixed cameras (mount: world)")
         require(board is not None, f"{where}: the camera is on the tool and sees a board: give the board file "
                                    f"(--board BOARD.yaml)")
         points = tuple(board.names)
     else:
-        require(not robot.branches, f"{robot.source}: a tree of branches; image points are supported on serial "
-                                    f"chains only")
+        require(board is None, f"{where}: the cameras are fixed (mount: world) and see the robot's targets: a board "
+                               f"goes with a camera on the tool; leave out --board")
         points = tuple(robot.targets)
     names = tuple(cameras)
     cam = _index(table, "camera", names, f"the camera file has {', '.join(names)}")

@@ -388,11 +388,13 @@ def image_coverage(data, cameras: dict) -> dict[str, tuple[int, int]]:
 
 
 def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warnings: list[str] | None = None,
-           assessment=None) -> Report:
+           assessment=None, command: str = "identify", lead: tuple[Section, ...] = ()) -> Report:
     """The report of a calibration from image points (`fit.camera.PixelFit` on `model.pixels.Pixels`):
     reprojection residuals in px and in mm at the points, per camera, image and point; how much of each
     image the points cover; the coefficients with what the images left undetermined; first the verdict
-    and next step (`verdict.pixels_next_step`) and the warnings the command printed."""
+    and next step (`verdict.pixels_next_step`) and the warnings the command printed. command: the
+    command whose report it is; lead: its own sections, after the verdict (`pixel_choice`,
+    `pixel_diagnosis`)."""
     px, mm = fit.residuals[:, 0], fit.residuals[:, 1]
     names = data.cameras
 
@@ -426,7 +428,7 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
     outliers = [f"row {o.row}: image of pose {o.pose}, camera `{o.camera}`, point `{o.point}`: {o.residual_px:.3g} px "
                 f"(weight {o.weight:.2g})" for o in fit.outliers]
     sections = [
-        *verdict_sections(assessment, warnings),
+        *verdict_sections(assessment, warnings), *lead,
         Section("Residuals in pixels", [
             f"Reprojection residual of every image point, observed minus projected (a camera measures pixels, not "
             f"millimetres): before, the nominal model at the cameras' first poses; after, the calibration. The mm "
@@ -450,9 +452,38 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
             Bullets(coverage)]),
         Section("Outliers", [Bullets(outliers) if outliers else "No image point was flagged as an outlier."]),
         *coefficient_section(robot, calib), glossary(robot)]
-    return Report(f"gecgen identify: {robot.name} from image points",
-                  [f"Calibration `{calib_path}` fitted on `{data.source}` ({data.n_poses} poses, {len(names)} "
+    return Report(f"gecgen {command}: {robot.name} from image points",
+                  [f"{'The diagnosed model' if command == 'diagnose' else 'Calibration'} `{calib_path}` fitted on "
+                   f"`{data.source}` ({data.n_poses} poses, {len(names)} "
                    f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). Training data only."], sections)
+
+
+def pixel_choice(result: dict) -> tuple[Section, ...]:
+    """calibrate --cameras's own section: every candidate's cross-validated error over the training images
+    (mm at the target) and the one chosen; the validation images before and after, when given."""
+    rows = [(f"`{r['model']}`", "not fitted" if r["cv_rms_mm"] is None else f"{r['cv_rms_mm']:.4g}",
+             str(r.get("n_params_delivered", r["n_params"]))) for r in result["candidates"]]
+    held = [f"Validation images ({result['validation']}): {result['val_before']['rms_px']:.3g} px rms with the nominal "
+            f"model, {result['val']['rms_px']:.3g} px ({result['val']['rms_mm_at_target']:.3g} mm at target) "
+            f"calibrated, seen from the cameras as the fit placed them."] if "val" in result else []
+    return (Section("The model chosen", [
+        f"Each candidate was fitted on four fifths of the training images and scored on the fifth it did not see "
+        f"(5 folds over poses, RMS image-point error in mm at the target); the lowest wins, a tie within 1 % going "
+        f"to the smaller model. Chosen: `{result['model']}`.",
+        Table(("model", "cross-validated rms mm at target", "coefficients"), rows), *held]),)
+
+
+def pixel_diagnosis(result: dict) -> tuple[Section, ...]:
+    """diagnose --cameras's own section: the effects added, and the held-out images before and after."""
+    before, after = result["before"], result["after"]
+    added = [f"`{e['error']}` <- {', '.join(f'`{t}`' for t in e['terms'])} ({e['family']}; cross-validated gain "
+             f"{e['gain_mm']:.3g} mm at target)" for e in result["effects"]]
+    return (Section("What diagnose added", [
+        f"Held out ({result['validation']}): {before['val_rms_px']:.3g} px rms ({before['val_rms_mm']:.3g} mm at "
+        f"target) with the declared model, {after['val_rms_px']:.3g} px ({after['val_rms_mm']:.3g} mm) with the "
+        f"diagnosed one. {result['verdict']}",
+        Bullets(added) if added else "Nothing in the candidate dictionary passed the statistics: the model is "
+                                     "unchanged."]),)
 
 
 def evaluate(calib, cm, data: Measurements, y_before: np.ndarray, y: np.ndarray, outside: dict[str, int],

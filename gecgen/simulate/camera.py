@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.cameras import Board, Camera
-from gecgen.model.kinematics import tool_pose
+from gecgen.model.kinematics import tool_poses
 from gecgen.model.pixels import Pixels
 from gecgen.model.robot import Robot
 from gecgen.simulate.truth import Truth, true_state
@@ -45,25 +45,32 @@ class CameraRig:
         return "tool" if self.board is not None else "world"
 
 
-def true_tools(robot: Robot, truth: Truth, q: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) the truth robot's tool poses at joint readings q (N, n)."""
+def true_tools(robot: Robot, truth: Truth, q: np.ndarray, branch: int | None = 0):
+    """(N, 4, 4) the truth robot's tool poses at joint readings q (N, n); on a tree the tool's of branch
+    `branch`, or (branch None) the list of every branch's."""
     robot = truth.robot or robot
     N = len(q)
     q_true, eps = true_state(robot, truth, q, np.zeros(N), np.zeros(3), {}, np.ones_like(q))
-    return tool_pose(robot, q_true, eps)
+    tools = tool_poses(robot, q_true, eps)
+    return tools if branch is None else tools[branch]
 
 
-def camera_frame_points(robot: Robot, rig: CameraRig, tools: np.ndarray, camera: str) -> tuple[list[str], np.ndarray]:
-    """The point names and their positions (N, K, 3) in `camera`'s frame for tool poses (N, 4, 4)."""
+def camera_frame_points(robot: Robot, rig: CameraRig, tools: np.ndarray | list[np.ndarray],
+                        camera: str) -> tuple[list[str], np.ndarray]:
+    """The point names and their positions (N, K, 3) in `camera`'s frame for the tool poses (N, 4, 4) of
+    a chain, or every branch's of a tree (a list, `true_tools` with branch None; a carried camera rides
+    on the first)."""
+    tools = [tools] if isinstance(tools, np.ndarray) else tools
     R, t = rig.poses[camera]
     if rig.mount == "tool":
         Rb, tb = rig.board_pose
         Xw = rig.board.corners @ Rb.T + tb
-        Xt = np.einsum("nji,nkj->nki", tools[:, :3, :3], Xw[None] - tools[:, None, :3, 3])
+        Xt = np.einsum("nji,nkj->nki", tools[0][:, :3, :3], Xw[None] - tools[0][:, None, :3, 3])
         return rig.board.names, Xt @ R.T + t
     names = list(robot.targets)
     x = np.array([robot.targets[n] for n in names])
-    Xw = np.einsum("nij,kj->nki", tools[:, :3, :3], x) + tools[:, None, :3, 3]
+    T = np.stack([tools[robot.branch_of(n)] for n in names], axis=1)  # (N, K, 4, 4) each point's tool
+    Xw = np.einsum("nkij,kj->nki", T[..., :3, :3], x) + T[..., :3, 3]
     return names, Xw @ R.T + t
 
 
@@ -71,7 +78,7 @@ def simulate_pixels(robot: Robot, truth: Truth, rig: CameraRig, q: np.ndarray, n
                     rng: np.random.Generator) -> Pixels:
     """Image points of the truth robot at joint readings q (N, n): every point each camera sees inside
     its image, with Gaussian noise of noise_px per coordinate."""
-    tools = true_tools(robot, truth, q)
+    tools = true_tools(robot, truth, q, None)
     pose, cam, point, uv = [], [], [], []
     names = list(rig.cameras)
     for k, name in enumerate(names):
@@ -98,7 +105,7 @@ def simulate_pixels(robot: Robot, truth: Truth, rig: CameraRig, q: np.ndarray, n
 def visible_share(robot: Robot, truth: Truth, rig: CameraRig, q: np.ndarray) -> np.ndarray:
     """(N,) the smallest share, over the cameras, of the points each sees inside its image at q (N, n):
     for choosing poses a camera can see."""
-    tools = true_tools(robot, truth, q)
+    tools = true_tools(robot, truth, q, None)
     share = np.ones(len(q))
     for name, camera in rig.cameras.items():
         _, X = camera_frame_points(robot, rig, tools, name)

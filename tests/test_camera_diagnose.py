@@ -1,0 +1,145 @@
+"""diagnose on image points (`gecgen diagnose --cameras`): a gravity-compliant joint in a simulated truth is
+traced from pixels, and the held-out images are then as well explained as by a fit with the truth's model;
+what the pixel path does not take is refused in one line."""
+import contextlib
+import io
+import re
+from pathlib import Path
+
+import pytest
+
+from conftest import ROBOTS, run_json
+
+pytest.importorskip("cv2")
+
+CAMERAS = """cameras:
+  cam1: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
+         width: 1280, height: 960}
+  cam2: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
+         width: 1280, height: 960}
+"""
+#: robots/industrial6r.truth.yaml with one gravity-compliant joint: the shoulder, 3e-6 rad per N m
+TRUTH = """seed: 7
+gravity: [0, 0, -9.81]
+constant: {translation_std: 5.0e-4, rotation_std: 3.0e-4}
+joint_offsets: {std: 3.0e-4}
+masses:
+  - {frame: 2, mass: 250, at: [-0.575, 0, 0]}
+  - {frame: 4, mass: 180, at: [0, 0, 0]}
+sources:
+  - {type: compliance, joint: 2, compliance: 3.0e-6}
+"""
+#: the truth's structure: constant errors and joint 2's angle error linear in its gravity torque
+ORACLE = "default: ['1']\nframes:\n  2: {er: ['1', " + ", ".join(f"'gravity(q2,{k})'" for k in range(1, 11)) + "]}\n"
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    """Two fixed cameras seeing four markers on the tool of the elastic truth: training and held-out pixel
+    files, the shoulder and elbow swept by +-25 deg (their gravity torque must vary to be seen)."""
+    d = tmp_path_factory.mktemp("elastic")
+    robot = (ROBOTS / "industrial6r.yaml").read_text()
+    markers = "  m1: [0.15, 0.15, 0.1]\n  m2: [-0.15, 0.15, 0.1]\n  m3: [-0.15, -0.15, 0.1]\n  m4: [0.15, -0.15, 0.1]"
+    (d / "arm.yaml").write_text(re.sub(r"(?m)^  smr: .*$", markers, robot))
+    (d / "cams.yaml").write_text(CAMERAS)
+    (d / "truth.yaml").write_text(TRUTH)
+    (d / "oracle.errors.yaml").write_text(ORACLE)
+    (d / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    run_json("simulate", d / "arm.yaml", "--truth", d / "truth.yaml", "--cameras", d / "cams.yaml", "--eye",
+             "cam1=1.9,-2.4,1.7", "--eye", "cam2=1.9,2.4,1.7", "--look-at", "2,0,1", "--home",
+             "0,-1.396,-1.745,0,0.524,0", "--span", "0.21,0.44,0.44,1.05,0.7,1.57", "--poses", "40", "--val-poses",
+             "30", "--noise-px", "0.1", "--seed", "2", "-o", d / "train.csv", "--val-out", d / "val.csv")
+    return d
+
+
+@pytest.fixture(scope="module")
+def floor(rig):
+    """The held-out images' residual (`evaluate`'s after: px and mm at the target) of a fit of the training
+    images with the truth's structure."""
+    d = rig
+    run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", d / "oracle.errors.yaml", "--cameras",
+             d / "cams.yaml", "--noise-px", "0.1", "-o", d / "oracle.json")
+    return run_json("evaluate", d / "oracle.json", d / "val.csv", "--cameras", d / "cams.yaml")["after"]
+
+
+def test_diagnose_traces_a_gravity_compliant_joint_from_pixels_to_the_oracles_floor(rig, floor):
+    d = rig
+    pixels = ["--cameras", d / "cams.yaml"]
+    out = run_json("diagnose", d / "arm.yaml", d / "train.csv", "--val", d / "val.csv", "--errors",
+                   ROBOTS / "constant.errors.yaml", *pixels, "--noise-px", "0.1", "-o", d / "found.errors.yaml",
+                   "--report", d / "report")
+    assert out["measurement"] == "pixels" and out["effects"], out["rounds"]
+    # joint 2's angle error in joint 2's gravity load (its torque's terms, or its frame's moment about the axis)
+    assert any(e["error"] == "2.er" and all(re.fullmatch(r"gravity\((q2|2,mz),\d+\)", t) for t in e["terms"])
+               for e in out["effects"]), [(e["error"], e["terms"]) for e in out["effects"]]
+    assert out["remaining"]["covered"]
+    before, after = out["before"], out["after"]
+    # the declared model is well above the floor, the diagnosed one within 1.2x of it, in mm at the target and px
+    assert before["val_rms_mm"] > 1.3 * floor["rms_mm_at_target"] and before["val_rms_px"] > 1.3 * floor["rms_px"]
+    assert after["val_rms_mm"] < 1.2 * floor["rms_mm_at_target"] and after["val_rms_px"] < 1.2 * floor["rms_px"]
+    assert "--cameras" in out["next"] and Path(out["errors_out"]).exists()
+    text = Path(out["report"]).read_text()
+    assert "# gecgen diagnose: industrial6r from image points" in text and "## What diagnose added" in text
+    assert "`2.er` <- `gravity(" in text
+
+
+def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig, floor):
+    """calibrate on the same images: the diagnosed candidate (joint 2's gravity load added) wins the
+    cross-validation over the constant errors, scores the validation images within 1.2x the floor, and the
+    folder holds what calibrate writes for a tracker (calibration, error model, code, report)."""
+    d = rig
+    out = run_json("calibrate", d / "arm.yaml", d / "train.csv", "--val", d / "val.csv", "--models",
+                   "geometric,diagnosed", "--cameras", d / "cams.yaml", "--noise-px", "0.1", "-o", d / "cal")
+    assert out["model"] == "diagnosed" and out["measurement"] == "pixels", out["candidates"]
+    cv = {r["model"]: r["cv_rms_mm"] for r in out["candidates"]}
+    assert cv["diagnosed"] < 0.9 * cv["geometric"]
+    assert any(e["error"] == "2.er" for e in out["effects"])
+    assert out["val"]["rms_mm_at_target"] < 1.2 * floor["rms_mm_at_target"] < out["val_before"]["rms_mm_at_target"]
+    assert all(Path(f).exists() for f in out["files"].values())
+    text = Path(out["files"]["report"]).read_text()
+    assert "# gecgen calibrate: industrial6r from image points" in text and "Chosen: `diagnosed`." in text
+    scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")
+    assert scored["after"]["rms_px"] == pytest.approx(out["val"]["rms_px"], rel=1e-6)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--noise-mm", "0.1"], "--noise-mm is not supported with --cameras"),
+    (["--register", "val", "--val", "V"], "--register is not supported with --cameras"),
+    (["--board", "board.yaml"], "the cameras are fixed (mount: world) and see the robot's targets: a board goes "
+                                "with a camera on the tool; leave out --board"),
+])
+def test_diagnose_with_cameras_refuses_what_it_does_not_take_in_one_line(rig, extra, message):
+    from gecgen.cli import main
+
+    d = rig
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), "--cameras", str(d / "cams.yaml"),
+                     *(str(d / a) if a.endswith(".yaml") else a for a in extra), "-o", str(d / "x.errors.yaml")]) != 0
+    assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_one_line(rig):
+    """diagnose with a board and no cameras, a pixel file without cameras, and a pixel calibration given to
+    check and accuracy: one line each, naming what to give or use."""
+    from gecgen.cli import main
+
+    d = rig
+    for args, message in ((["--board", str(d / "b.yaml")], "give --cameras too"),
+                          ([], "which identify, diagnose, calibrate, redundancy and evaluate read")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), *args]) != 0
+        assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+    # a pixel calibration given to the commands that compare tracker points with a tracker calibration
+    run_json("identify", d / "arm.yaml", d / "train.csv", "--errors", ROBOTS / "constant.errors.yaml", "--cameras",
+             d / "cams.yaml", "-o", d / "plain.json")
+    run_json("simulate", d / "arm.yaml", "--truth", d / "truth.yaml", "--poses", "10", "-o", d / "tracker.csv")
+    for command in (["check", d / "plain.json", d / "tracker.csv"],
+                    ["accuracy", d / "plain.json", ROBOTS / "pps.volume.yaml", d / "tracker.csv"]):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(list(map(str, command))) != 0
+        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points: score " \
+               f"held-out images with gecgen evaluate" in err.getvalue()
+        assert len(err.getvalue().strip().splitlines()) == 1
