@@ -94,14 +94,15 @@ def run(args) -> dict:
 
 
 def _why(status: int, residual: float, moved: list[str]) -> str:
-    """What a failed row's status means, in a few words; moved: the joints the correction moves (fewer
-    than 6 cannot place a tool's position and orientation, whatever the posture)."""
+    """What a failed row's status means, in a few words; moved: the joints the correction moves (with
+    fewer than 6 it places the tool's position alone, and fewer than 3 cannot place even that, whatever
+    the posture)."""
     from gecgen.runtime.compiled import BOUNDED, NONFINITE, SINGULAR
 
     left = f"the tool is off by {1e3 * residual:.3g} mm"
-    if status != NONFINITE and status != BOUNDED and len(moved) < 6:
+    if status != NONFINITE and status != BOUNDED and len(moved) < 3:
         return (f"the correction did not converge: the {len(moved)} joints it moves ({', '.join(moved)}) cannot "
-                f"place the tool's position and orientation ({left})")
+                f"place the tool's position ({left})")
     return {NONFINITE: "the correction is not finite (the command, wrench or aux values overflow the model)",
             SINGULAR: f"near a singular posture, corrected only as far as the model's error justifies ({left})",
             BOUNDED: f"a joint's correction reached --bound ({left})"}.get(
