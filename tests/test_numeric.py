@@ -1,0 +1,67 @@
+"""The numpy evaluation of the generated code's entry points (`runtime.numeric`), the backend a new
+model runs on while its C compiles, against the compiled C: targets at eps(c), H_e, J_e, the nominal
+targets, eps and the basis terms, on a serial arm, a coupled arm, a prismatic table, a tree with a
+passive joint and frame loads, joint loads and auxiliary signals; and identify's result either way."""
+import numpy as np
+import pytest
+from conftest import FRAME_LOADS, JOINT_LOADS, ROBOTS, random_q, run_json
+
+from gecgen.model import load_robot
+from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.numeric import NumericModel
+from gecgen.symbolic.terms import error_model_from_dict, load_error_model
+
+#: 1e-9 mm: the numpy and C values may differ by rounding only
+TOL = 1e-12
+
+CASES = {  # robot -> its error model: the models other tests compile too, so their C is built once
+    "industrial6r": "industrial6r.errors.yaml",  # serial, q and q**2 terms and the wrench
+    "fanuc": None,                                # J2/J3 coupling, with its ratio term
+    "pps": "pps.errors.yaml",                     # three prismatic joints
+    "tiago": "tiago.elastic.errors.yaml",         # auxiliary signals (gravity torques)
+    "humanoid": FRAME_LOADS,                      # tree, passive joint, frame loads
+    "panda": JOINT_LOADS,                         # joint loads, sign and abs
+}
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_numpy_evaluation_agrees_with_the_compiled_c(name, rng):
+    robot = load_robot(ROBOTS / f"{name}.yaml")
+    spec = CASES[name]
+    model = error_model_from_dict(spec, robot, "<loads>") if isinstance(spec, dict) else \
+        load_error_model(spec and ROBOTS / spec, robot)
+    c, numeric = CompiledModel(robot, model, "c"), NumericModel(robot, model)
+    N = 5
+    q, w = random_q(robot, rng, N), rng.normal(0, 30, (N, 6))
+    aux = rng.normal(0, 20, (N, len(model.aux))) if model.aux else None
+    coef = rng.normal(0, 1e-3, c.dims.nc)
+    assert c.dims.nc > robot.n_errors / 6 and (name != "fanuc" or any(t.text == "q2" for t in model.unique_terms()))
+    f = c.basis(q, w, aux)
+    assert np.ptp(f, axis=0).max() > 0.1  # the terms vary: the comparison sees them
+    np.testing.assert_allclose(numeric.basis(q, w, aux), f, rtol=1e-13, atol=TOL)
+    eps = c.eps(q, w, aux, coef)
+    np.testing.assert_allclose(numeric.eps(q, w, aux, coef), eps, rtol=1e-13, atol=TOL)
+    p, H = c.model_targets(q, w, aux, coef, with_H=True)
+    p_n, H_n = numeric.model_targets(q, w, aux, coef, with_H=True)
+    np.testing.assert_allclose(p_n, p, rtol=0, atol=TOL)
+    np.testing.assert_allclose(H_n, H, rtol=1e-13, atol=TOL)
+    np.testing.assert_allclose(numeric.model_targets(q, w, aux, coef), p, rtol=0, atol=TOL)
+    for got, want in zip(numeric.J_e(q, eps), c.J_e(q, eps)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=TOL)
+    np.testing.assert_allclose(numeric.nominal_targets(q), c.nominal_targets(q), rtol=0, atol=TOL)
+    assert np.abs(p - c.nominal_targets(q)).max() > 1e-4  # the errors move the targets
+
+
+def test_numpy_jacobian_is_the_derivative_of_the_chain(rng):
+    """J_e at nonzero errors against central differences of the targets, on the tree (a column of the
+    other branch's frames is zero)."""
+    robot = load_robot(ROBOTS / "humanoid.yaml")
+    numeric = NumericModel(robot, load_error_model(None, robot))
+    q, eps = random_q(robot, rng, 2), rng.normal(0, 0.02, (2, robot.n_errors))
+    p, J = numeric.J_e(q, eps)
+    h = 1e-6
+    for k in rng.choice(robot.n_errors, 12, replace=False):
+        step = np.zeros(robot.n_errors)
+        step[k] = h
+        d = (numeric.J_e(q, eps + step)[0] - numeric.J_e(q, eps - step)[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], d.reshape(2, -1), atol=1e-8)
