@@ -1,6 +1,7 @@
 import contextlib
 import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,11 @@ from gecgen.cli import main
 from gecgen.model import load_robot
 
 from gecgen.symbolic.terms import load_error_model
+
+# the tests run the compiled C: "auto" would run a model new to the cache in numpy and leave a build
+# of its C running in the background. Every command a test starts inherits it; the tests of that
+# first run set GECGEN_BACKEND themselves.
+os.environ.setdefault("GECGEN_BACKEND", "c")
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robots"

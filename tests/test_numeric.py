@@ -2,11 +2,13 @@
 model runs on while its C compiles, against the compiled C: targets at eps(c), H_e, J_e, the nominal
 targets, eps and the basis terms, on a serial arm, a coupled arm, a prismatic table, a tree with a
 passive joint and frame loads, joint loads and auxiliary signals; and identify's result either way."""
+import json
+
 import numpy as np
 import pytest
-from conftest import FRAME_LOADS, JOINT_LOADS, ROBOTS, random_q, run_json
+from conftest import FRAME_LOADS, JOINT_LOADS, ROBOTS, ROOT, random_q, run_json
 
-from gecgen.model import load_robot
+from gecgen.model import ModelError, load_robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.numeric import NumericModel
 from gecgen.symbolic.terms import error_model_from_dict, load_error_model
@@ -65,3 +67,40 @@ def test_numpy_jacobian_is_the_derivative_of_the_chain(rng):
         step[k] = h
         d = (numeric.J_e(q, eps + step)[0] - numeric.J_e(q, eps - step)[0]) / (2 * h)
         np.testing.assert_allclose(J[:, :, k], d.reshape(2, -1), atol=1e-8)
+
+
+def test_identify_gives_the_same_calibration_in_numpy_and_in_c(tmp_path, monkeypatch):
+    """TIAGo's training file as docs/real-data-tiago.md imports it, the default model: the fit, its
+    residuals and every coefficient the same to 1e-9 mm (or 1e-12 rad) on either backend."""
+    data = tmp_path / "train.csv"
+    run_json("import", ROBOTS / "tiago.yaml", ROOT / "tests" / "data" / "tiago-mocap" / "train_2021-11-30.csv",
+             "--mapping", ROBOTS / "tiago.import.yaml", "-o", data)
+    fits, calibrations = {}, {}
+    for backend in ("c", "numpy"):
+        monkeypatch.setenv("GECGEN_BACKEND", backend)
+        out = tmp_path / f"{backend}.json"
+        fits[backend] = run_json("identify", ROBOTS / "tiago.yaml", data, "-o", out)
+        calibrations[backend] = json.loads(out.read_text())
+    c, n = fits["c"], fits["numpy"]
+    assert c["n_carried"] == n["n_carried"] > 20 and c["eliminated"] == n["eliminated"]
+    assert c["iterations"] == n["iterations"] and c["held"] == n["held"]
+    for key in ("before", "train"):
+        for stat in ("rms_mm", "max_mm"):
+            assert abs(c[key][stat] - n[key][stat]) < 1e-9
+    coef_c, coef_n = calibrations["c"]["coefficients"], calibrations["numpy"]["coefficients"]
+    assert [(k["name"], k["identified"]) for k in coef_c] == [(k["name"], k["identified"]) for k in coef_n]
+    assert calibrations["c"]["kept"] == calibrations["numpy"]["kept"] and any(k["value"] for k in coef_c)
+    assert max(abs(a["value"] - b["value"]) for a, b in zip(coef_c, coef_n)) < 1e-12  # m, rad
+
+
+def test_compensation_on_the_numpy_backend_is_the_c_and_a_wrong_backend_is_one_line(rng, monkeypatch):
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    model = load_error_model(ROBOTS / "industrial6r.errors.yaml", robot)
+    c, numeric = CompiledModel(robot, model, "c"), CompiledModel(robot, model, "numpy")
+    q, coef = random_q(robot, rng, 4), rng.normal(0, 1e-4, c.dims.nc)
+    for got, want in zip(numeric.correct(q, None, None, coef), c.correct(q, None, None, coef)):
+        np.testing.assert_array_equal(got, want)
+    monkeypatch.setenv("GECGEN_BACKEND", "fortran")
+    with pytest.raises(ModelError, match=r"^GECGEN_BACKEND='fortran' is not a backend; set it to auto, c, numpy, "
+                                         r"casadi, or unset it$"):
+        CompiledModel(robot, model)
