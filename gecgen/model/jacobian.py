@@ -29,19 +29,18 @@ def target_jacobian(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) 
     pre, post, tools = chain_frames(robot, q, eps)
     P = targets_of(robot, tools)
     paths = [set(robot.path(tip)) for tip, _ in robot.tips()]
-    on_path = [paths[robot.branch_of(name)] for name in robot.targets]  # the frames that move each target
-    J = np.zeros((N, nt, 3, robot.n_frames + 1, 6))
-    for j in range(robot.n_frames + 1):
-        moves = np.array([j in path for path in on_path])
-        if not moves.any():
-            continue
-        Rp, Rq = pre[j][:, :3, :3], post[j][:, :3, :3]
-        es = eps[:, 6 * j + 3]
-        er_axis = Rp[:, :, 0] * np.sin(es)[:, None] + Rp[:, :, 2] * np.cos(es)[:, None]  # R(W_j') Ry(es) z
-        d = P - post[j][:, None, :3, 3]  # (N, nt, 3)
-        block = J[:, :, :, j, :]  # (N, nt, 3, 6), a view
-        block[:, :, :, :3] = Rp[:, None]
-        for e, axis in enumerate((Rp[:, :, 1], er_axis, Rq[:, :, 0]), start=3):
-            block[:, :, :, e] = np.cross(axis[:, None], d)
-        block[:, ~moves] = 0.0
-    return P, J.reshape(N, 3 * nt, ne)
+    # moves[j, k]: frame j moves target k (on a tree, the frames of its own branch and the trunk)
+    moves = np.array([[j in paths[robot.branch_of(name)] for name in robot.targets] for j in range(robot.n_frames + 1)])
+    Rp, Wq = np.stack(pre, axis=1)[..., :3, :3], np.stack(post, axis=1)  # (N, F, 3, 3), (N, F, 4, 4)
+    es = eps.reshape(N, -1, 6)[..., 3]
+    er_axis = Rp[..., 0] * np.sin(es)[..., None] + Rp[..., 2] * np.cos(es)[..., None]  # R(W_j') Ry(es) z
+    axes = np.stack([Rp[..., 1], er_axis, Wq[..., :3, 0]], axis=2)  # (N, F, 3 rotations, 3)
+    d = P[:, None] - Wq[:, :, None, :3, 3]  # (N, F, nt, 3): each target from each frame's origin
+    a, b = axes[:, :, None], d[:, :, :, None]  # (N, F, 1, 3, 3), (N, F, nt, 1, 3)
+    turns = np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)  # (N, F, nt, 3 rotations, xyz)
+    J = np.empty((N, robot.n_frames + 1, nt, 6, 3))  # [pose, frame, target, error, xyz]
+    J[..., :3, :] = Rp.transpose(0, 1, 3, 2)[:, :, None]  # translation e along R(W_j') column e
+    J[..., 3:, :] = turns
+    J *= moves[None, :, :, None, None]
+    return P, J.transpose(0, 2, 4, 1, 3).reshape(N, 3 * nt, ne)

@@ -7,6 +7,8 @@ in m, angles in rad.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from gecgen.model.robot import Elementary, Robot
@@ -45,6 +47,15 @@ def constant(ops: tuple[Elementary, ...]) -> np.ndarray:
     return T
 
 
+@functools.lru_cache(maxsize=1024)
+def _fixed(ops: tuple[Elementary, ...]) -> np.ndarray:
+    """`constant(ops)`, computed once per process and read-only: the chain is walked again at every
+    step of a fit."""
+    T = constant(ops)
+    T.setflags(write=False)
+    return T
+
+
 def error_transform(e: np.ndarray) -> np.ndarray:
     """E = Trans(ex, ey, ez) RotY(es) RotZ(er) RotX(ep) for e (..., 6)."""
     return _trans(e[..., :3]) @ _rot(1, e[..., 3]) @ _rot(2, e[..., 4]) @ _rot(0, e[..., 5])
@@ -78,14 +89,14 @@ def chain_frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None
     q = np.atleast_2d(np.asarray(q, float))
     N = q.shape[0]
     eps = np.zeros((N, robot.n_errors)) if eps is None else np.broadcast_to(eps, (N, robot.n_errors))
-    pre = [np.broadcast_to(constant(robot.base), (N, 4, 4))]
+    pre = [np.broadcast_to(_fixed(robot.base), (N, 4, 4))]
     post = [pre[0] @ error_transform(eps[:, 0:6])]
     v = joint_values(robot, q)
     for i, joint in enumerate(robot.chain):
-        A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ constant(joint.post)
+        A = _fixed(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ _fixed(joint.post)
         pre.append(post[robot.parent(i + 1)] @ A)
         post.append(pre[-1] @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)]))
-    return pre, post, [post[tip] @ constant(tool) for tip, tool in robot.tips()]
+    return pre, post, [post[tip] @ _fixed(tool) for tip, tool in robot.tips()]
 
 
 def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
