@@ -41,6 +41,9 @@ def test_numpy_evaluation_agrees_with_the_compiled_c(name, rng):
     f = c.basis(q, w, aux)
     assert np.ptp(f, axis=0).max() > 0.1  # the terms vary: the comparison sees them
     np.testing.assert_allclose(numeric.basis(q, w, aux), f, rtol=1e-13, atol=TOL)
+    back = slice(None, None, -1)  # other poses: the basis of the last ones is not reused for them
+    np.testing.assert_allclose(numeric.basis(q[back], w[back], None if aux is None else aux[back]), f[back],
+                               rtol=1e-13, atol=TOL)
     eps = c.eps(q, w, aux, coef)
     np.testing.assert_allclose(numeric.eps(q, w, aux, coef), eps, rtol=1e-13, atol=TOL)
     p, H = c.model_targets(q, w, aux, coef, with_H=True)

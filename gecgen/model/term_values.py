@@ -14,7 +14,7 @@ import ast
 import numpy as np
 
 from gecgen.model.errors import ErrorModel
-from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms, catalog, signal_values
+from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms, signal_values
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, excerpt
 
@@ -38,9 +38,7 @@ def basis_values(robot: Robot, model: ErrorModel, q: np.ndarray, w: np.ndarray, 
     loads = LoadTerms(robot, variables)
     used = model.load_signals(robot)
     if used:
-        names = catalog(robot).names
-        L = signal_values(robot, q, w)
-        values.update({name: L[:, names.index(name)] for name in used})
+        values.update(zip(used, signal_values(robot, q, w, used).T))
     where = model.source or "<error model>"
 
     def fail(text, why):

@@ -446,7 +446,7 @@ class CompiledModel:
         q, w, aux, N = self._poses(q, w, aux)
         nf = len(self.model.unique_terms())
         if self.backend == "numpy":
-            return self._numeric.basis(q, w, aux)
+            return self._numeric.basis(q, w, aux).copy()
         if self.backend == "casadi":
             return self._casadi("basis", N, q, w, aux)[0].reshape(N, nf)
         out = np.empty((N, nf))

@@ -26,10 +26,18 @@ class NumericModel:
         texts = [t.text for t in model.unique_terms()]
         self.coef_error = np.array([k.error for k in model.coefficients], dtype=int)
         self.coef_term = np.array([texts.index(k.term.text) for k in model.coefficients], dtype=int)
+        self._last: tuple[list, np.ndarray] | None = None  # (q, w, aux) of the last basis call, and f
 
     def basis(self, q, w, aux) -> np.ndarray:
-        """The distinct basis terms f (N, nf), `model.unique_terms()` order."""
-        return basis_values(self.robot, self.model, q, w, aux)
+        """The distinct basis terms f (N, nf), `model.unique_terms()` order (read-only: the last poses'
+        are kept, since a fit evaluates the model at the same poses at every step)."""
+        poses = [np.array(a, float, copy=True) if a is not None else None for a in (q, w, aux)]
+        if self._last is None or not all(a is b is None or a is not None and b is not None and np.array_equal(a, b)
+                                         for a, b in zip(poses, self._last[0])):
+            f = basis_values(self.robot, self.model, q, w, aux)
+            f.setflags(write=False)
+            self._last = poses, f
+        return self._last[1]
 
     def _eps(self, f: np.ndarray, c: np.ndarray) -> np.ndarray:
         eps = np.zeros((len(f), self.robot.n_errors))
