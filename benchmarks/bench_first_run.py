@@ -92,7 +92,10 @@ def main():
              "CPU time is not in the figures (\"C built after\": from the start of the run until that build "
              "ended). Cold, C first: GECGEN_BACKEND=c, the run waits for its C to be generated, printed and "
              "compiled. Warm: the first cold run's cache after one more run (calibrate compiles, one at a time, the "
-             "models of its candidates that its first run left in numpy). "
+             "models of its candidates that its first run left in numpy). calibrate writes the C of the model it "
+             "chooses and compensates with it, so it prints and compiles that model in the foreground either way; "
+             "on two loaded cores the background build also competes with the run it serves, which shows in the "
+             "cold wall times. "
              "Best of 3 cold and 5 warm for identify, 2 each for calibrate. TIAGo: the files imported as "
              "docs/real-data-tiago.md does. Wall times depend on the machine's load; the CPU time (the process "
              "and the compiler it waits for, user and system) much less.",
