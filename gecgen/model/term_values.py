@@ -36,7 +36,8 @@ def basis_values(robot: Robot, model: ErrorModel, q: np.ndarray, w: np.ndarray, 
     variables = {f"q{i + 1}": f"q{i + 1}" for i in range(robot.n)}
     variables.update({j.name: f"q{i + 1}" for i, j in enumerate(robot.joints)})
     loads = LoadTerms(robot, variables)
-    used = model.load_signals(robot)
+    # a load signal's name is a call (the catalog, whose rank tests take a while, only when one is used)
+    used = model.load_signals(robot) if any("(" in v for v in model.variables()) else []
     if used:
         values.update(zip(used, signal_values(robot, q, w, used).T))
     where = model.source or "<error model>"
