@@ -107,3 +107,15 @@ def test_compensation_on_the_numpy_backend_is_the_c_and_a_wrong_backend_is_one_l
     with pytest.raises(ModelError, match=r"^GECGEN_BACKEND='fortran' is not a backend; set it to auto, c, numpy, "
                                          r"casadi, or unset it$"):
         CompiledModel(robot, model)
+
+
+def test_no_background_build_into_a_cache_that_lasts_one_run(tmp_path, monkeypatch):
+    """A cache folder that cannot be written is replaced by a temporary one for the run: no C built
+    there would be found by the next run, so none is started."""
+    from gecgen.runtime.compiled import build_in_background
+
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "file" / "cache"))
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    with pytest.warns(UserWarning, match="cannot be written"):
+        assert not build_in_background(robot, load_error_model(None, robot), "key")

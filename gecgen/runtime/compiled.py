@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model.files import cache_dir, write_atomically
+from gecgen.model.files import cache_dir, cache_kept, write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
@@ -279,10 +279,10 @@ _background: list[subprocess.Popen] = []
 def build_in_background(robot: Robot, model: ErrorModel, key: str) -> bool:
     """Start building the shared library of a robot and model in a detached process of this Python
     (`runtime.background`, at low priority; it outlives this one), unless this process's last one
-    is still running: one at a time, so the candidate models of diagnose and calibrate do not start
-    a compiler each. The cache's locks keep it from colliding with any other build of the entry.
-    Whether one was started."""
-    if _background and _background[-1].poll() is None:
+    is still running (one at a time: the candidate models of diagnose and calibrate do not start a
+    compiler each) or the cache is this run's temporary folder (no next run would find the C). The
+    cache's locks keep it from colliding with any other build of the entry. Whether one was started."""
+    if not cache_kept() or _background and _background[-1].poll() is None:
         return False
     try:
         proc = subprocess.Popen([sys.executable, "-m", "gecgen.runtime.background"], stdin=subprocess.PIPE,
