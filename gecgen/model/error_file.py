@@ -2,14 +2,17 @@
 
 Its keys, frame numbers, error names and aux columns are checked here, the coupling ratios added, and
 each list of terms handed to a reader: `symbolic.parse.terms_of` reads the term language (it needs
-sympy: a term's identity is sympy's canonical text); `constant_terms` reads the constant term alone
-without it, so a first run with the constant model loads no computer algebra.
+sympy: a term's identity is sympy's canonical text); `simple_terms` reads constants, variables and
+their whole powers without it (the shipped default models), so a first run with such a model loads
+no computer algebra.
 """
 from __future__ import annotations
 
+import keyword
+import re
 from collections.abc import Callable
 
-from gecgen.model.errors import Term, is_aux_name, variable_names
+from gecgen.model.errors import MAX_EXPONENT, MAX_TERM_LENGTH, Term, is_aux_name, variable_names
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import excerpt, is_name, require, require_keys
 
@@ -21,14 +24,31 @@ class NeedsParser(Exception):
     """A list of terms that only the term parser reads."""
 
 
-def constant_terms(items: list, where: str, robot: Robot, names: dict) -> tuple[Term, ...]:
-    """The terms of `["1"]` (or `[1]`) and of an empty list, as the term parser reads them; any other
-    list raises NeedsParser."""
-    if not items:
-        return ()
-    if len(items) == 1 and type(items[0]) in (str, int) and items[0] in ("1", 1):
-        return (Term("1", "1", ()),)
-    raise NeedsParser(where)
+#: a term that is a variable or a whole power of one, such as "q2" or "q2**2": its canonical text is
+#: the variable's name and the power as sympy prints them (`symbolic.parse`)
+SIMPLE = re.compile(r"\s*([A-Za-z_]\w*)\s*(?:\*\*\s*(\d+)\s*)?")
+
+
+def simple_terms(items: list, where: str, robot: Robot, names: dict) -> tuple[Term, ...]:
+    """The terms of a list of constants "1" (or 1), variables and their whole powers 2..MAX_EXPONENT,
+    as the term parser reads them (`symbolic.parse.terms_of`: text, label and variables); any other
+    list, and one the parser would refuse, raises NeedsParser."""
+    out: dict[str, Term] = {}
+    for item in items:
+        if type(item) is int and item == 1 or item == "1":
+            term = Term("1", "1", ())
+        else:
+            found = SIMPLE.fullmatch(item) if type(item) is str and len(item) <= MAX_TERM_LENGTH else None
+            name, power = found.groups() if found else (None, None)
+            if name not in names or name == "pi" or not name.isascii() or keyword.iskeyword(name) \
+                    or power and not 2 <= int(power) <= MAX_EXPONENT:
+                raise NeedsParser(where)
+            variable = names[name]
+            term = Term(variable + (f"**{int(power)}" if power else ""), item.strip(), (variable,))
+        if term.text in out:
+            raise NeedsParser(where)  # the parser says which term repeats
+        out[term.text] = term
+    return tuple(out.values())
 
 
 def read_model(spec, robot: Robot, where: str, aux_columns: tuple[str, ...], read_terms: TermReader

@@ -1,7 +1,8 @@
 """Error-model files read into `model.errors.ErrorModel`s, through the cache.
 
 Reading a model's terms needs sympy (`symbolic.parse`: a term's identity is sympy's canonical text),
-except the constant model's (`model.error_file.constant_terms`); a model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
+except those of constants, variables and their whole powers (`model.error_file.simple_terms`); a
+model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
 the content of the mapping, the robot and the parser), so a command whose code is compiled loads no
 sympy at all: this module imports the parser only on a miss.
 """
@@ -12,7 +13,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from gecgen.model.error_file import NeedsParser, constant_terms, read_model
+from gecgen.model.error_file import NeedsParser, read_model, simple_terms
 from gecgen.model.errors import ErrorModel, Term
 from gecgen.model.files import cache_dir, write_atomically
 from gecgen.model.robot import Robot
@@ -57,9 +58,10 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
 
 
 def _parsed(spec, robot: Robot, where: str, aux_columns: tuple[str, ...] = ()):
-    """(terms per error, aux) of a model mapping: the constant model without sympy, any other with it."""
+    """(terms per error, aux) of a model mapping: of constants, variables and their whole powers without
+    sympy, any other with it."""
     try:
-        return read_model(spec, robot, where, aux_columns, constant_terms)
+        return read_model(spec, robot, where, aux_columns, simple_terms)
     except NeedsParser:
         from gecgen.symbolic.parse import parse_model
 
