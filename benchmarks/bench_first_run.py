@@ -88,7 +88,7 @@ def main():
              f"Machine: {cpu_model()}, {len(os.sched_getaffinity(0))} cores, load average {load_average:.1f} when the "
              "benchmark started. Regenerate: `python benchmarks/bench_first_run.py`. A whole fresh process each, "
              "with the robot's default error model. Cold: an empty code cache; the model runs in numpy (no sympy, "
-             "jinja2 or emitter for identify's constant model) while a background process builds its C, whose "
+             "jinja2 or emitter for identify: these default models' terms are read without sympy) while a background process builds its C, whose "
              "CPU time is not in the figures (\"C built after\": from the start of the run until that build "
              "ended). Cold, C first: GECGEN_BACKEND=c, the run waits for its C to be generated, printed and "
              "compiled. Warm: the first cold run's cache after one more run (calibrate compiles, one at a time, the "
