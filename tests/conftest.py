@@ -1,6 +1,7 @@
 import contextlib
 import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +12,22 @@ from gecgen.model import load_robot
 
 from gecgen.symbolic.terms import load_error_model
 
+# the tests run the compiled C: "auto" would run a model new to the cache in numpy and leave a build
+# of its C running in the background. Every command a test starts inherits it; the tests of that
+# first run set GECGEN_BACKEND themselves.
+os.environ.setdefault("GECGEN_BACKEND", "c")
+
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robots"
 SHIPPED = ["pps", "industrial6r", "puma560"]
+#: an error model of the Panda with joint load terms (shared: its code is compiled once per run)
+JOINT_LOADS = {"default": ["1"], "frames": {6: {"er": ["1", "sign(gravity_torque(q6))", "gravity(panda_joint6)",
+                                                    "q3*wrench_torque(q2)", "abs(gravity(panda_joint4, 2))"]}}}
+#: an error model of the humanoid tree with frame load terms
+FRAME_LOADS = {"default": ["1"], "frames": {
+    4: {"es": ["1", "gravity_load(torso_4_joint, my)"]},
+    2: {"ep": ["1", "gravity(torso_2_joint, mx)"], "er": ["q1*wrench_load(2, mz)"]},
+    5: {"ep": ["1", "sign(gravity(arm_left_1_joint, mx, 1))"]}}}
 
 
 def random_q(robot, rng, n=None):

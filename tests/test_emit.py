@@ -116,6 +116,7 @@ def test_without_a_c_compiler_the_casadi_form_is_used_and_said(monkeypatch, rng)
     model = load_error_model(ROBOTS / "puma560.errors.yaml", robot)
     c_model = CompiledModel(robot, model, "c")
     monkeypatch.setattr(compiled, "compiler", lambda: None)
+    monkeypatch.delenv("GECGEN_BACKEND")  # the choice left to gecgen
     with pytest.warns(UserWarning, match="no C compiler found"):
         fallback = CompiledModel(robot, model)
     assert fallback.backend == "casadi"

@@ -8,7 +8,7 @@ import csv
 
 import numpy as np
 import pytest
-from conftest import ROBOTS, random_q
+from conftest import FRAME_LOADS, ROBOTS, random_q
 
 from gecgen.cli import main
 from gecgen.model import ModelError, load_robot
@@ -117,11 +117,7 @@ def test_wrench_load_moves_the_measured_wrench_to_each_frame(rng):
 
 def test_frame_loads_in_generated_c_and_casadi_and_their_spellings(rng):
     robot = load_robot(ROBOTS / "humanoid.yaml")
-    spec = {"default": ["1"], "frames": {
-        4: {"es": ["1", "gravity_load(torso_4_joint, my)"]},
-        2: {"ep": ["1", "gravity(torso_2_joint, mx)"], "er": ["q1*wrench_load(2, mz)"]},
-        5: {"ep": ["1", "sign(gravity(arm_left_1_joint, mx, 1))"]}}}
-    model = error_model_from_dict(spec, robot, "<frame loads>")
+    model = error_model_from_dict(FRAME_LOADS, robot, "<frame loads>")
     assert [t.text for t in model.terms[6 * 4 + 3]] == ["1", "gravity_load(4,my)", "q2", "q3"]  # and its ratios
     rank = catalog(robot).frame_rank(2, 3)
     assert [t.text for t in model.terms[6 * 2 + 5]] == ["1"] + [f"gravity(2,mx,{r})" for r in range(1, rank + 1)]

@@ -5,6 +5,8 @@ import json
 import os
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 
@@ -26,20 +28,27 @@ targets:
 """
 
 
-def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(tmp_path, monkeypatch):
+def _arm3(folder):
+    """arm3.yaml and 40 simulated poses of it, data.csv, in folder; the robot."""
     from gecgen.model import load_robot
     from gecgen.model.kinematics import target_positions
-    from gecgen.runtime.compiled import CompiledModel
-    from gecgen.symbolic.terms import load_error_model
 
-    (tmp_path / "arm3.yaml").write_text(ROBOT)
-    robot = load_robot(tmp_path / "arm3.yaml")
+    (folder / "arm3.yaml").write_text(ROBOT)
+    robot = load_robot(folder / "arm3.yaml")
     rng = np.random.default_rng(3)
     q = rng.uniform(-1.2, 1.2, (40, 3))
     P = target_positions(robot, q) + rng.normal(0, 1e-5, (40, 2, 3))  # (poses, targets, xyz)
     rows = [f"{i},{','.join(map(str, q[i].tolist()))},{t},{','.join(map(str, P[i, k].tolist()))}"
             for i in range(40) for k, t in enumerate("ab")]
-    (tmp_path / "data.csv").write_text("\n".join(["pose,q1,q2,q3,target,x,y,z", *rows]) + "\n")
+    (folder / "data.csv").write_text("\n".join(["pose,q1,q2,q3,target,x,y,z", *rows]) + "\n")
+    return robot
+
+
+def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(tmp_path, monkeypatch):
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.symbolic.terms import load_error_model
+
+    robot = _arm3(tmp_path)
     (tmp_path / "cmd.csv").write_text("q1,q2,q3\n0.1,0.2,0.3\n-0.4,0.5,0.6\n")
     monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
     CompiledModel(robot, load_error_model(None, robot))  # the first run's work: the code of the default model
@@ -62,3 +71,46 @@ def test_building_any_commands_parser_loads_no_sympy():
             "print(sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
+
+
+#: runs one command line (a JSON list) with no backend chosen, then prints what it loaded and the
+#: background builds it started
+FIRST = ("import json, sys\nfrom gecgen.cli import main\nfrom gecgen.runtime import compiled\n"
+         "assert main(json.loads(sys.argv[1])) == 0\n"
+         "print(json.dumps({'loaded': sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules),"
+         " 'builds': [p.pid for p in compiled._background]}))")
+
+
+def _running(pid: int) -> bool:
+    """Whether a process runs (one that has ended but was not reaped yet, a zombie, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_new_robot_is_fitted_in_numpy_while_its_c_is_built_in_the_background(tmp_path):
+    """The first run of a robot (an empty cache, no backend chosen) loads no sympy, jinja2 or emitter,
+    and leaves one process building the C, which ends; the next run uses that C (it starts no build)
+    and fits the same to 1e-9 mm."""
+    _arm3(tmp_path)
+    env = {k: v for k, v in os.environ.items() if k != "GECGEN_BACKEND"} | {"GECGEN_CACHE": str(tmp_path / "cache")}
+    runs = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", FIRST, json.dumps(["identify", "arm3.yaml", "data.csv", "-o",
+                                                                        "c.json", "--json"])],
+                              capture_output=True, text=True, cwd=tmp_path, env=env, timeout=600)
+        assert done.returncode == 0, done.stderr
+        fit, ran = (json.loads(line) for line in done.stdout.strip().splitlines()[-2:])
+        runs.append((fit, ran))
+        for pid in ran["builds"]:
+            deadline = time.monotonic() + 300
+            while _running(pid) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert not _running(pid), "the background build did not end"
+    (first, cold), (second, warm) = runs
+    assert cold == {"loaded": [], "builds": cold["builds"]} and len(cold["builds"]) == 1
+    assert warm == {"loaded": [], "builds": []}
+    assert len(list((tmp_path / "cache").glob("arm3-*.so"))) == 1
+    assert first["n_params"] == second["n_params"] > 0
+    assert abs(first["train"]["rms_mm"] - second["train"]["rms_mm"]) < 1e-9

@@ -8,7 +8,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import ROBOTS, random_q
+from conftest import JOINT_LOADS, ROBOTS, random_q
 
 from gecgen.cli import main
 from gecgen.emit import render
@@ -129,9 +129,7 @@ def test_wrench_torque_is_the_virtual_work_of_the_wrench_on_a_dh_robot(rng):
 
 def test_load_terms_agree_in_c_casadi_and_sympy_and_compose(rng):
     robot = load_robot(ROBOTS / "panda.yaml")
-    spec = {"default": ["1"], "frames": {6: {"er": ["1", "sign(gravity_torque(q6))", "gravity(panda_joint6)",
-                                                    "q3*wrench_torque(q2)", "abs(gravity(panda_joint4, 2))"]}}}
-    model = error_model_from_dict(spec, robot, "<loads>")
+    model = error_model_from_dict(JOINT_LOADS, robot, "<loads>")
     c_model, ca_model = CompiledModel(robot, model, "c"), CompiledModel(robot, model, "casadi")
     fns = {f.name: f for f in all_functions(robot, model)}
     q, w = random_q(robot, rng, 3), rng.normal(0, 30, (3, 6))

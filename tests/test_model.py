@@ -136,3 +136,30 @@ def test_exact_numbers_are_sympys_to_the_last_bit():
             x = PiMultiple(f, power)
             assert float(x) == float(sympy_number(x)) == float(sp.Rational(f.numerator, f.denominator) * sp.pi**power), x
     assert exact_norm((0, 0, Fraction("-9.80665"))) == float(sp.sqrt(sp.Rational("9.80665") ** 2))
+
+
+@pytest.mark.parametrize("items", [
+    ["1", "q1", "q1**2", "fx", "mz"], [1, " q2 ** 3 ", "shoulder", "shoulder**2", "q1**16"], [],
+    ["q1", "shoulder"], ["q1**1"], ["q1**0"], ["q1**17"], ["pi"], ["q1*q2"], ["sin(q1)"], ["unknown"], [True], ["2"],
+    ["lambda"], ["q1**2.0"], ["1", "1"]])
+def test_constants_variables_and_powers_are_read_without_sympy_as_the_parser_reads_them(items):
+    """`simple_terms` gives the parser's terms (text, label, variables) or leaves the list to it
+    (NeedsParser), on a robot whose joints have names (aliases of q1..q6)."""
+    from gecgen.model.error_file import NeedsParser, simple_terms
+    from gecgen.model.errors import variable_names
+    from gecgen.symbolic.parse import terms_of
+
+    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    names = variable_names(robot, ())
+    names["shoulder"] = names.pop(robot.joints[0].name)  # a joint name that reads as one
+    try:
+        ours = simple_terms(items, "m", robot, names)
+    except NeedsParser:
+        ours = None
+    try:
+        theirs = terms_of(items, "m", robot, names)
+    except ModelError:
+        theirs = None
+    assert ours == theirs or ours is None, (ours, theirs)
+    simple = items in (["1", "q1", "q1**2", "fx", "mz"], [1, " q2 ** 3 ", "shoulder", "shoulder**2", "q1**16"], [])
+    assert (ours is not None) == simple

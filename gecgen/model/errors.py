@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from gecgen.model.loads import catalog
 from gecgen.model.orientation import PREFIXES as ORIENTATION_PREFIXES
-from gecgen.model.robot import ERROR_NAMES, RESERVED, Robot
+from gecgen.model.robot import ERROR_NAMES, RESERVED, WRENCH, Robot
 from gecgen.model.validation import is_name
 
 MAX_TERM_LENGTH = 200
@@ -103,3 +103,12 @@ def is_aux_name(name: str) -> bool:
     prefixes of orientation columns are not theirs."""
     return (is_name(name) and not name.startswith(("_", *ORIENTATION_PREFIXES)) and name not in RESERVED
             and not re.fullmatch(r"[tq]\d+", name))
+
+
+def variable_names(robot: Robot, aux: tuple[str, ...]) -> dict[str, str]:
+    """The names a term may use -> the variable each stands for: q1..qn, joint names as aliases of
+    theirs, the wrench components and the aux columns (themselves)."""
+    names = {f"q{i + 1}": f"q{i + 1}" for i in range(robot.n)}
+    names.update({j.name: f"q{i + 1}" for i, j in enumerate(robot.joints)})
+    names.update({w: w for w in (*WRENCH, *aux)})
+    return names

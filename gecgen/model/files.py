@@ -235,7 +235,17 @@ def _exchange(a: Path, b: Path):
 
 def cache_dir() -> Path:
     """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written."""
-    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen"))
+    return _usable_cache(_wanted_cache())
+
+
+def cache_kept() -> bool:
+    """Whether the cache folder outlives this run (it is not the temporary folder that stands in for
+    one that cannot be written)."""
+    return cache_dir() == _wanted_cache()
+
+
+def _wanted_cache() -> Path:
+    return Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen")
 
 
 @functools.cache

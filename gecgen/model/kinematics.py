@@ -7,6 +7,8 @@ in m, angles in rad.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from gecgen.model.robot import Elementary, Robot
@@ -45,6 +47,15 @@ def constant(ops: tuple[Elementary, ...]) -> np.ndarray:
     return T
 
 
+@functools.lru_cache(maxsize=1024)
+def _fixed(ops: tuple[Elementary, ...]) -> np.ndarray:
+    """`constant(ops)`, computed once per process and read-only: the chain is walked again at every
+    step of a fit."""
+    T = constant(ops)
+    T.setflags(write=False)
+    return T
+
+
 def error_transform(e: np.ndarray) -> np.ndarray:
     """E = Trans(ex, ey, ez) RotY(es) RotZ(er) RotX(ep) for e (..., 6)."""
     return _trans(e[..., :3]) @ _rot(1, e[..., 3]) @ _rot(2, e[..., 4]) @ _rot(0, e[..., 5])
@@ -70,18 +81,29 @@ def joint_values(robot: Robot, q: np.ndarray) -> np.ndarray:
                             for joint, (terms, o) in zip(robot.chain, robot.drives())])
 
 
-def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
-    """World transforms W_0..W_m (after each frame's errors) and the tool of each branch (one on a
-    serial chain), each (N, 4, 4)."""
+def chain_frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None
+                 ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """World transforms of frames 0..m before (W_j') and after (W_j) their generalized errors, and
+    the tool of each branch (one on a serial chain), each (N, 4, 4): W_j = W_j' E(eps_j), W_j' =
+    W_parent(j) Pre_j M_j(q) Post_j, W_0' the base."""
     q = np.atleast_2d(np.asarray(q, float))
     N = q.shape[0]
     eps = np.zeros((N, robot.n_errors)) if eps is None else np.broadcast_to(eps, (N, robot.n_errors))
-    out = [constant(robot.base) @ error_transform(eps[:, 0:6])]
+    pre = [np.broadcast_to(_fixed(robot.base), (N, 4, 4))]
+    post = [pre[0] @ error_transform(eps[:, 0:6])]
     v = joint_values(robot, q)
     for i, joint in enumerate(robot.chain):
-        A = constant(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ constant(joint.post)
-        out.append(out[robot.parent(i + 1)] @ A @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)]))
-    return out + [out[tip] @ constant(tool) for tip, tool in robot.tips()]
+        A = _fixed(joint.pre) @ joint_motion(joint.axis, joint.kind, v[:, i]) @ _fixed(joint.post)
+        pre.append(post[robot.parent(i + 1)] @ A)
+        post.append(pre[-1] @ error_transform(eps[:, 6 * (i + 1):6 * (i + 2)]))
+    return pre, post, [post[tip] @ _fixed(tool) for tip, tool in robot.tips()]
+
+
+def frames(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
+    """World transforms W_0..W_m (after each frame's errors) and the tool of each branch (one on a
+    serial chain), each (N, 4, 4)."""
+    _, post, tools = chain_frames(robot, q, eps)
+    return post + tools
 
 
 def tool_poses(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> list[np.ndarray]:
@@ -96,7 +118,11 @@ def tool_pose(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.
 
 def target_positions(robot: Robot, q: np.ndarray, eps: np.ndarray | None = None) -> np.ndarray:
     """World positions of every target, (N, n_targets, 3) in target-file order."""
-    tools = tool_poses(robot, q, eps)
+    return targets_of(robot, tool_poses(robot, q, eps))
+
+
+def targets_of(robot: Robot, tools: list[np.ndarray]) -> np.ndarray:
+    """World positions of every target (N, n_targets, 3) from each branch's tool pose (N, 4, 4)."""
     t = np.array(list(robot.targets.values()))  # (nt, 3)
     if len(tools) == 1:
         return np.einsum("nij,kj->nki", tools[0][:, :3, :3], t) + tools[0][:, None, :3, 3]

@@ -295,24 +295,26 @@ def _numeric_columns(robot: Robot, q: np.ndarray, geometry=None) -> list[np.ndar
             for J in range(1, robot.n + 1)]
 
 
-def signal_values(robot: Robot, q: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Every load signal of the robot's catalog (N, L) at joints q (N, n) and wrenches w (N, 6) or
-    (6,), by the formulas the generated code prints (module docstring), on the nominal chain in
-    numpy: diagnose's candidates use every signal, the generated code computes only a model's own."""
+def signal_values(robot: Robot, q: np.ndarray, w: np.ndarray, names: list[str] | None = None) -> np.ndarray:
+    """The load signals `names` (canonical spellings; None: every signal of the robot's catalog, in
+    its order) (N, L) at joints q (N, n) and wrenches w (N, 6) or (6,), by the formulas the generated
+    code prints (module docstring), on the nominal chain in numpy: diagnose's candidates use every
+    signal, an error model's terms only their own."""
     q = np.atleast_2d(np.asarray(q, float))
     w = np.broadcast_to(np.asarray(w, float), (len(q), 6))
     cat = catalog(robot)
+    signals = cat.signals if names is None else [cat.by_name(name) for name in names]
     geometry = W, axes, origins = _chain_geometry(robot, q)
     S = W[robot.n_frames + 1] if robot.wrench_frame == "tool" else W[robot.wrench_frame]  # the sensor frame
     force, moment = (np.einsum("nij,nj->in", S[:, :3, :3], w[:, k:k + 3]) for k in (0, 3))
     moving = set(robot.path(robot.sensor_frame()))  # the frames that move the sensor
     columns = _numeric_columns(robot, q, geometry) if any(s.kind in ("gravity", "gravity_torque")
-                                                         for s in cat.signals) else []
+                                                         for s in signals) else []
     by_frame = _numeric_frame_columns(robot, q, geometry) if any(s.kind in ("frame_gravity", "gravity_load")
-                                                                 for s in cat.signals) else []
+                                                                 for s in signals) else []
     poses = _poses(robot, W)
-    out = np.empty((len(q), len(cat.signals)))
-    for i, s in enumerate(cat.signals):
+    out = np.empty((len(q), len(signals)))
+    for i, s in enumerate(signals):
         if s.kind == "frame_gravity":
             out[:, i] = by_frame[s.frame][s.component][:, s.column]
         elif s.kind == "gravity_load":

@@ -6,7 +6,10 @@ J_e, two thirds of the compiler's time) is the same for every error model of a r
 once per robot into an object file that each model's own code is linked to, so a new model (each
 round of diagnose, each candidate of calibrate) compiles only its own part. Two processes that want
 the same entry build it once: the second waits for the first. Without a C compiler the
-same functions come from the generated CasADi module, and a warning says so. Every cache entry is
+same functions come from the generated CasADi module, and a warning says so. A model whose library
+is not in the cache yet runs on the numpy evaluation of the same functions (`runtime.numeric`: no
+computer algebra, no compiler), while a detached process of the same Python builds its C for the
+next run (`runtime.background`); `GECGEN_BACKEND` (c, numpy, casadi) chooses instead. Every cache entry is
 checked against its content hash before it is used, and a library or object file against its
 own headers (every byte they place is there): a truncated or corrupt entry is rebuilt, never loaded. A cache folder that cannot be written is replaced, with a warning, by a fresh
 temporary folder for the rest of the run.
@@ -20,6 +23,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import pickle
 import platform
 import shutil
 import struct
@@ -32,15 +36,21 @@ from pathlib import Path
 
 import numpy as np
 
-from gecgen.model.files import cache_dir, write_atomically
+from gecgen.model.files import cache_dir, cache_kept, write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
+from gecgen.model.validation import ModelError, excerpt
+from gecgen.runtime.numeric import NumericModel
 
 #: how every translation unit of the generated C is compiled
 COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror"]
 #: and linked into a shared library
 CFLAGS = [*COMPILE_FLAGS, "-shared"]
+
+#: the environment variable that chooses the backend of `CompiledModel(..., backend="auto")`
+BACKEND_VARIABLE = "GECGEN_BACKEND"
+BACKENDS = ("auto", "c", "numpy", "casadi")
 
 #: status codes of `CompiledModel.compensate`: the generated C's GECGEN_ codes
 OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE, BOUNDED = range(6)
@@ -254,7 +264,36 @@ def shared_library(robot: Robot, model: ErrorModel, key: str) -> Path:
         return _compiler_output(robot, {f"{name}.c": files[f"{name}.c"], f"{name}.h": files[f"{name}.h"],
                                         "chain.o": obj.read_bytes()}, [*CFLAGS, f"{name}.c", "chain.o", "-lm"])
 
-    return _built(cache_dir() / f"{name}-{key}.so", library)
+    return _built(library_path(robot, key), library)
+
+
+def library_path(robot: Robot, key: str) -> Path:
+    """Where the cache keeps the shared library of a robot and model (cache key `model_key`)."""
+    return cache_dir() / f"{robot.name}-{key}.so"
+
+
+#: the background build this process started last (`build_in_background`)
+_background: list[subprocess.Popen] = []
+
+
+def build_in_background(robot: Robot, model: ErrorModel, key: str) -> bool:
+    """Start building the shared library of a robot and model in a detached process of this Python
+    (`runtime.background`, at low priority; it outlives this one), unless this process's last one
+    is still running (one at a time: the candidate models of diagnose and calibrate do not start a
+    compiler each) or the cache is this run's temporary folder (no next run would find the C). The
+    cache's locks keep it from colliding with any other build of the entry. Whether one was started."""
+    if not cache_kept() or _background and _background[-1].poll() is None:
+        return False
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "gecgen.runtime.background"], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                                env={**os.environ, "GECGEN_CACHE": str(cache_dir()), BACKEND_VARIABLE: "c"})
+        with proc.stdin:
+            pickle.dump((robot, model, key), proc.stdin)
+    except OSError:  # no process to be had, or it ended at once: this run needs none, the next builds
+        return False
+    _background[:] = [proc]
+    return True
 
 
 def _ptr(a: np.ndarray | None):
@@ -275,6 +314,11 @@ class CompiledModel:
 
     Shapes: q (N, nq), w (N, 6), aux (N, naux), c (nc,), eps (N, ne). Returned target arrays
     are (N, nt, 3); Jacobians (N, 3 nt, ne) and (N, 3 nt, nc).
+
+    backend: "c" the compiled generated C (built first on a cache miss), "casadi" its CasADi form,
+    "numpy" the numpy evaluation (`runtime.numeric`; compensation loads the C, built first if it must
+    be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
+    numpy while a background process builds it when not, CasADi without a C compiler.
     """
 
     def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
@@ -283,17 +327,26 @@ class CompiledModel:
         self.key = model_key(robot, model)
         self.dims = Dims(robot.n, len(robot.targets), robot.n_errors, len(model.coefficients), len(model.aux))
         if backend == "auto":
-            backend = "c" if compiler() else "casadi"
+            backend = os.environ.get(BACKEND_VARIABLE) or "auto"
+            if backend not in BACKENDS:
+                raise ModelError(f"{BACKEND_VARIABLE}={excerpt(backend)} is not a backend; set it to "
+                                 f"{', '.join(BACKENDS)}, or unset it")
+        if backend == "auto":
+            backend = "casadi" if not compiler() else "c" if _intact(library_path(robot, self.key)) else "numpy"
             if backend == "casadi":
                 warnings.warn("no C compiler found (set CC): using the CasADi form of the generated code, "
                               "which is slower", stacklevel=2)
+            if backend == "numpy":
+                build_in_background(robot, model, self.key)
         self.backend = backend
         if backend == "c":
             self._lib = ctypes.CDLL(str(shared_library(robot, model, self.key)))
         elif backend == "casadi":
             self._ca = load_casadi_module(rendered(robot, model, self.key), robot.name).functions()
+        elif backend == "numpy":
+            self._numeric, self._lib = NumericModel(robot, model), None
         else:
-            raise ValueError(f"unknown backend {backend!r}; use auto, c or casadi")
+            raise ValueError(f"unknown backend {backend!r}; use {', '.join(BACKENDS)}")
 
     # -- argument handling -------------------------------------------------------------
     def _poses(self, q, w=None, aux=None):
@@ -328,6 +381,8 @@ class CompiledModel:
         q, w, aux, N = self._poses(q, w, aux)
         c = np.ascontiguousarray(c, float)
         d = self.dims
+        if self.backend == "numpy":
+            return self._numeric.model_targets(q, w, aux, c, with_H)
         if self.backend == "casadi":
             (p,) = self._casadi("model", N, q, w, aux, c)
             if not with_H:
@@ -345,6 +400,8 @@ class CompiledModel:
         q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
         N, d = q.shape[0], self.dims
         eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, float), (N, d.ne)))
+        if self.backend == "numpy":
+            return self._numeric.J_e(q, eps)
         if self.backend == "casadi":
             p, J = self._casadi("J_e", N, q, eps)
             return p.reshape(N, d.nt, 3), J.reshape(N, 3 * d.nt, d.ne)
@@ -365,6 +422,8 @@ class CompiledModel:
         if self.backend == "casadi":
             return self.J_e(q, np.zeros(self.dims.ne))[0]
         q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
+        if self.backend == "numpy":
+            return self._numeric.nominal_targets(q)
         p = np.empty((len(q), self.dims.nt, 3))
         self._fn("nominal_batch")(ctypes.c_int(len(q)), _ptr(q), _ptr(p))
         return p
@@ -373,6 +432,8 @@ class CompiledModel:
         """Generalized errors (N, ne) at each pose for coefficients c."""
         q, w, aux, N = self._poses(q, w, aux)
         c = np.ascontiguousarray(c, float)
+        if self.backend == "numpy":
+            return self._numeric.eps(q, w, aux, c)
         if self.backend == "casadi":
             return self._casadi("eps", N, q, w, aux, c)[0].reshape(N, self.dims.ne)
         out = np.empty((N, self.dims.ne))
@@ -384,6 +445,8 @@ class CompiledModel:
         order; coefficient k scales term `terms.index(coefficients[k].term.text)` of its error)."""
         q, w, aux, N = self._poses(q, w, aux)
         nf = len(self.model.unique_terms())
+        if self.backend == "numpy":
+            return self._numeric.basis(q, w, aux).copy()
         if self.backend == "casadi":
             return self._casadi("basis", N, q, w, aux)[0].reshape(N, nf)
         out = np.empty((N, nf))
@@ -409,11 +472,14 @@ class CompiledModel:
         correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
         as 1 m; a branch with fewer than six joints of its own places its tool's position alone, and the
         residual is that position's error, `emit.task_rows`). On a tree, the tool of `branch` (index) is
-        placed by its own joints, every other reading held."""
+        placed by its own joints, every other reading held. With the numpy backend the C is loaded here,
+        built first unless a background build has finished it (waiting for one under way)."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
         if self.backend == "casadi":
             raise RuntimeError("compensation runs in the generated C; install a C compiler (or set CC)")
+        if self._lib is None:
+            self._lib = ctypes.CDLL(str(shared_library(self.robot, self.model, self.key)))
         out, status, residual = np.empty_like(q), np.empty(N, dtype=np.intc), np.empty(N)
         limit = None if bound is None else np.ascontiguousarray(np.broadcast_to(np.asarray(bound, float), (self.dims.nq,)))
         name = "compensate_bounded_batch" + (f"_{self.robot.branches[branch].name}" if self.robot.branches else "")

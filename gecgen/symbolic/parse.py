@@ -7,11 +7,12 @@ import math
 
 import sympy as sp
 
+from gecgen.model.error_file import read_model
 from gecgen.model.errors import (ALLOWED, MAX_EXPONENT, MAX_LOG2, MAX_SCALE, MAX_TERM_LENGTH, ErrorModel, Term,
-                                 is_aux_name)
+                                 variable_names)
 from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
-from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
-from gecgen.model.validation import ModelError, excerpt, is_name, require, require_keys
+from gecgen.model.robot import Robot
+from gecgen.model.validation import ModelError, excerpt, require
 
 FUNCTIONS = {"sin": sp.sin, "cos": sp.cos, "sign": sp.sign, "abs": sp.Abs}  # and sqrt, a power
 
@@ -195,13 +196,8 @@ def _degree(expr: sp.Expr, x: sp.Symbol) -> float:
 
 
 def variables(robot: Robot, aux: tuple[str, ...]) -> dict[str, sp.Symbol]:
-    """The names a term may use: q1..qn, joint names as aliases, the wrench and aux columns."""
-    q = joint_symbols(robot)
-    names = {f"q{i + 1}": s for i, s in enumerate(q)}
-    names.update({j.name: s for j, s in zip(robot.joints, q)})
-    names.update({w: sp.Symbol(w, real=True) for w in WRENCH})
-    names.update({a: sp.Symbol(a, real=True) for a in aux})
-    return names
+    """The names a term may use (`model.errors.variable_names`) -> their sympy symbols."""
+    return {k: sp.Symbol(v, real=True) for k, v in variable_names(robot, aux).items()}
 
 
 def joint_symbols(robot: Robot) -> tuple[sp.Symbol, ...]:
@@ -212,62 +208,26 @@ def _canonical(expr: sp.Expr) -> str:
     return sp.sstr(expr, order="lex")
 
 
+def terms_of(items: list, where: str, robot: Robot, names: dict[str, str]) -> tuple[Term, ...]:
+    """The terms of one list of the term language (`model.error_file.TermReader`), names the variables
+    a term may use (`model.errors.variable_names`)."""
+    parser = TermParser({k: sp.Symbol(v, real=True) for k, v in names.items()}, where, LoadTerms(robot, names))
+    out: dict[str, Term] = {}
+    for item in items:
+        for expr, label in parser.parse(item):
+            if expr.is_number:
+                require(expr == 1, f"{where}: term {excerpt(item)} is a constant; write the constant term as \"1\"")
+            text = _canonical(expr)
+            require(text not in out, f"{where}: term {excerpt(item)} repeats {excerpt(text)}; each term may appear once")
+            out[text] = Term(text, "1" if expr == 1 else label, _names(expr))
+    return tuple(out.values())
+
+
 def parse_model(spec, robot: Robot, where: str, aux_columns: tuple[str, ...] = ()
                 ) -> tuple[tuple[tuple[Term, ...], ...], tuple[str, ...]]:
-    """The terms of each generalized error, and the aux columns used, of an error-model mapping;
-    every problem is one line naming `where`, the key and the fix."""
-    require(isinstance(spec, dict), f"{where}: expected a mapping with 'default' and/or 'frames'")
-    require_keys(spec, where, optional={"default", "frames", "aux", "description"})
-    declared = spec.get("aux", [])
-    require(isinstance(declared, list) and all(is_name(a) for a in declared),
-            f"{where}: aux: expected a list of data column names")
-    symbols = variables(robot, ())
-    clash = [a for a in declared if a in symbols or not is_aux_name(a)]
-    require(not clash, f"{where}: aux: {excerpt(clash[0]) if clash else ''} is a joint, wrench or reserved name "
-                       f"(q, eps, w, aux, c, f, p, J, T, Jq, t<k>); rename the data column")
-    aux_all = tuple(dict.fromkeys(list(declared) + [a for a in aux_columns if a not in symbols and is_aux_name(a)]))
-    symbols = variables(robot, aux_all)
-    loads = LoadTerms(robot, {k: s.name for k, s in symbols.items()})
-
-    def parse_list(items, w) -> tuple[Term, ...]:
-        require(isinstance(items, list), f"{w}: expected a list of terms such as [\"1\", \"q1\"]")
-        parser = TermParser(symbols, w, loads)
-        out: dict[str, Term] = {}
-        for item in items:
-            for expr, label in parser.parse(item):
-                if expr.is_number:
-                    require(expr == 1, f"{w}: term {excerpt(item)} is a constant; write the constant term as \"1\"")
-                text = _canonical(expr)
-                require(text not in out, f"{w}: term {excerpt(item)} repeats {excerpt(text)}; each term may appear once")
-                out[text] = Term(text, "1" if expr == 1 else label, _names(expr))
-        return tuple(out.values())
-
-    default = parse_list(spec.get("default", ["1"]), f"{where}: default")
-    terms = [default] * robot.n_errors
-    frames = spec.get("frames") or {}
-    require(isinstance(frames, dict), f"{where}: frames: expected a mapping from frame number to terms")
-    for key, block in frames.items():
-        require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n_frames,
-                f"{where}: frames: key {excerpt(key)} is not a frame number 0..{robot.n_frames}")
-        fw = f"{where}: frames.{key}"
-        if isinstance(block, list):
-            terms[6 * key:6 * key + 6] = [parse_list(block, fw)] * 6
-            continue
-        require(isinstance(block, dict), f"{fw}: expected a list of terms or a mapping from ex..ep to terms")
-        for err, items in block.items():
-            require(err in ERROR_NAMES, f"{fw}: unknown error {excerpt(str(err))}; use one of {', '.join(ERROR_NAMES)}")
-            terms[6 * key + ERROR_NAMES.index(err)] = parse_list(items, f"{fw}.{err}")
-    for error, ratios in robot.ratio_terms().items():
-        if any(t.text == "1" for t in terms[error]):  # its coupling's offset is modelled: so are its ratios
-            have = {t.text for t in terms[error]}
-            terms[error] = terms[error] + tuple(Term(r, r, (r,)) for r in ratios if r not in have)
-    used = set()
-    for ts in terms:
-        for t in ts:
-            used |= set(t.variables)
-    aux = tuple(a for a in aux_all if a in used or a in declared)
-    require(any(terms), f"{where}: the model has no terms at all")
-    return tuple(terms), aux
+    """The terms of each generalized error, and the aux columns used, of an error-model mapping
+    (`model.error_file.read_model` with the term parser)."""
+    return read_model(spec, robot, where, aux_columns, terms_of)
 
 
 def load_symbol(name: str) -> sp.Symbol:

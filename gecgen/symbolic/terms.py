@@ -1,7 +1,8 @@
 """Error-model files read into `model.errors.ErrorModel`s, through the cache.
 
-Reading a model's terms needs sympy (`symbolic.parse`: a term's identity is sympy's canonical text);
-a model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
+Reading a model's terms needs sympy (`symbolic.parse`: a term's identity is sympy's canonical text),
+except those of constants, variables and their whole powers (`model.error_file.simple_terms`); a
+model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
 the content of the mapping, the robot and the parser), so a command whose code is compiled loads no
 sympy at all: this module imports the parser only on a miss.
 """
@@ -12,6 +13,7 @@ import hashlib
 import json
 from pathlib import Path
 
+from gecgen.model.error_file import NeedsParser, read_model, simple_terms
 from gecgen.model.errors import ErrorModel, Term
 from gecgen.model.files import cache_dir, write_atomically
 from gecgen.model.robot import Robot
@@ -40,9 +42,7 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
     path = cache_dir() / f"{robot.name}-{key}.terms.json" if key else None
     found = _cached(path) if path else None
     if found is None:
-        from gecgen.symbolic.parse import parse_model
-
-        found = parse_model(spec, robot, where, aux_columns)
+        found = _parsed(spec, robot, where, aux_columns)
         unique = list(dict.fromkeys(t for ts in found[0] for t in ts))
         text = json.dumps({"terms": [[t.text, t.label, list(t.variables)] for t in unique],
                            "errors": [[unique.index(t) for t in ts] for ts in found[0]], "aux": list(found[1])})
@@ -50,11 +50,22 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
         # the model as a calibration stores it (`to_yaml_dict`) is read by every command after
         # identify: it is kept too, once it has read back into the same model
         written = ErrorModel(*found).to_yaml_dict(robot)
-        if written != spec and parse_model(written, robot, where) == found:
+        if written != spec and _parsed(written, robot, where) == found:
             keys.append(_key(written, robot, ()))
         for k in dict.fromkeys(filter(None, keys)):
             write_atomically(cache_dir() / f"{robot.name}-{k}.terms.json", text + "\n")
     return ErrorModel(terms=found[0], aux=found[1], source=where, source_hash=digest)
+
+
+def _parsed(spec, robot: Robot, where: str, aux_columns: tuple[str, ...] = ()):
+    """(terms per error, aux) of a model mapping: of constants, variables and their whole powers without
+    sympy, any other with it."""
+    try:
+        return read_model(spec, robot, where, aux_columns, simple_terms)
+    except NeedsParser:
+        from gecgen.symbolic.parse import parse_model
+
+        return parse_model(spec, robot, where, aux_columns)
 
 
 @functools.cache
@@ -62,7 +73,8 @@ def _parser_hash() -> str:
     """Hash of the code that reads terms: a change to it reads every model again."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for path in (root / "symbolic" / "parse.py", root / "model" / "errors.py", root / "model" / "loads.py"):
+    for path in (root / "symbolic" / "parse.py", root / "model" / "errors.py", root / "model" / "loads.py",
+                 root / "model" / "error_file.py"):
         h.update(path.read_bytes())
     return h.hexdigest()
 

@@ -1,0 +1,99 @@
+"""An error-model mapping (a model file's content) read into the terms of each generalized error.
+
+Its keys, frame numbers, error names and aux columns are checked here, the coupling ratios added, and
+each list of terms handed to a reader: `symbolic.parse.terms_of` reads the term language (it needs
+sympy: a term's identity is sympy's canonical text); `simple_terms` reads constants, variables and
+their whole powers without it (the shipped default models), so a first run with such a model loads
+no computer algebra.
+"""
+from __future__ import annotations
+
+import keyword
+import re
+from collections.abc import Callable
+
+from gecgen.model.errors import MAX_EXPONENT, MAX_TERM_LENGTH, Term, is_aux_name, variable_names
+from gecgen.model.robot import ERROR_NAMES, Robot
+from gecgen.model.validation import excerpt, is_name, require, require_keys
+
+#: (items, where, robot, variable names) -> the terms of one list
+TermReader = Callable[[list, str, Robot, dict], tuple[Term, ...]]
+
+
+class NeedsParser(Exception):
+    """A list of terms that only the term parser reads."""
+
+
+#: a term that is a variable or a whole power of one, such as "q2" or "q2**2": its canonical text is
+#: the variable's name and the power as sympy prints them (`symbolic.parse`)
+SIMPLE = re.compile(r"\s*([A-Za-z_]\w*)\s*(?:\*\*\s*(\d+)\s*)?")
+
+
+def simple_terms(items: list, where: str, robot: Robot, names: dict) -> tuple[Term, ...]:
+    """The terms of a list of constants "1" (or 1), variables and their whole powers 2..MAX_EXPONENT,
+    as the term parser reads them (`symbolic.parse.terms_of`: text, label and variables); any other
+    list, and one the parser would refuse, raises NeedsParser."""
+    out: dict[str, Term] = {}
+    for item in items:
+        if type(item) is int and item == 1 or item == "1":
+            term = Term("1", "1", ())
+        else:
+            found = SIMPLE.fullmatch(item) if type(item) is str and len(item) <= MAX_TERM_LENGTH else None
+            name, power = found.groups() if found else (None, None)
+            if name not in names or name == "pi" or not name.isascii() or keyword.iskeyword(name) \
+                    or power and not 2 <= int(power) <= MAX_EXPONENT:
+                raise NeedsParser(where)
+            variable = names[name]
+            term = Term(variable + (f"**{int(power)}" if power else ""), item.strip(), (variable,))
+        if term.text in out:
+            raise NeedsParser(where)  # the parser says which term repeats
+        out[term.text] = term
+    return tuple(out.values())
+
+
+def read_model(spec, robot: Robot, where: str, aux_columns: tuple[str, ...], read_terms: TermReader
+               ) -> tuple[tuple[tuple[Term, ...], ...], tuple[str, ...]]:
+    """The terms of each generalized error, and the aux columns used, of an error-model mapping;
+    every problem is one line naming `where`, the key and the fix."""
+    require(isinstance(spec, dict), f"{where}: expected a mapping with 'default' and/or 'frames'")
+    require_keys(spec, where, optional={"default", "frames", "aux", "description"})
+    declared = spec.get("aux", [])
+    require(isinstance(declared, list) and all(is_name(a) for a in declared),
+            f"{where}: aux: expected a list of data column names")
+    names = variable_names(robot, ())
+    clash = [a for a in declared if a in names or not is_aux_name(a)]
+    require(not clash, f"{where}: aux: {excerpt(clash[0]) if clash else ''} is a joint, wrench or reserved name "
+                       f"(q, eps, w, aux, c, f, p, J, T, Jq, t<k>); rename the data column")
+    aux_all = tuple(dict.fromkeys(list(declared) + [a for a in aux_columns if a not in names and is_aux_name(a)]))
+    names = variable_names(robot, aux_all)
+
+    def parse_list(items, w) -> tuple[Term, ...]:
+        require(isinstance(items, list), f"{w}: expected a list of terms such as [\"1\", \"q1\"]")
+        return read_terms(items, w, robot, names)
+
+    default = parse_list(spec.get("default", ["1"]), f"{where}: default")
+    terms = [default] * robot.n_errors
+    frames = spec.get("frames") or {}
+    require(isinstance(frames, dict), f"{where}: frames: expected a mapping from frame number to terms")
+    for key, block in frames.items():
+        require(isinstance(key, int) and not isinstance(key, bool) and 0 <= key <= robot.n_frames,
+                f"{where}: frames: key {excerpt(key)} is not a frame number 0..{robot.n_frames}")
+        fw = f"{where}: frames.{key}"
+        if isinstance(block, list):
+            terms[6 * key:6 * key + 6] = [parse_list(block, fw)] * 6
+            continue
+        require(isinstance(block, dict), f"{fw}: expected a list of terms or a mapping from ex..ep to terms")
+        for err, items in block.items():
+            require(err in ERROR_NAMES, f"{fw}: unknown error {excerpt(str(err))}; use one of {', '.join(ERROR_NAMES)}")
+            terms[6 * key + ERROR_NAMES.index(err)] = parse_list(items, f"{fw}.{err}")
+    for error, ratios in robot.ratio_terms().items():
+        if any(t.text == "1" for t in terms[error]):  # its coupling's offset is modelled: so are its ratios
+            have = {t.text for t in terms[error]}
+            terms[error] = terms[error] + tuple(Term(r, r, (r,)) for r in ratios if r not in have)
+    used = set()
+    for ts in terms:
+        for t in ts:
+            used |= set(t.variables)
+    aux = tuple(a for a in aux_all if a in used or a in declared)
+    require(any(terms), f"{where}: the model has no terms at all")
+    return tuple(terms), aux
