@@ -46,6 +46,21 @@ ELASTIC = "## Elastic effects from pixels"
 PLATE, WIDE_PLATE = 0.3, 0.45
 
 
+def write_section(heading: str, lines: list[str]):
+    """Put `lines` (which start with `heading`) in docs/camera.md in place of the section under that
+    heading, or after the rest when there is none; the other sections are kept as they are."""
+    doc = ROOT / "docs" / "camera.md"
+    text = doc.read_text()
+    section = "\n".join(lines)
+    if heading in text:
+        start = text.index(heading)
+        end = text.find("\n## ", start + 1)
+        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    doc.write_text(text)
+
+
 def rotvec_t(R, t):
     return [*Rotation.from_matrix(R).as_rotvec(), *t]
 

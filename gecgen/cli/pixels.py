@@ -86,6 +86,19 @@ def identified(args) -> dict:
     return result
 
 
+def _loop_cameras(args):
+    """diagnose's and calibrate's --cameras and --board, read, after refusing (one line) the tracker
+    options that mean nothing for image points: (cameras, board or None)."""
+    from gecgen.model.cameras import read_board, read_cameras
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
+                            ("--orientation-length", args.orientation_length)) if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
+                       f"with the robot; the corners' noise is --noise-px); leave it out")
+    return read_cameras(args.cameras), read_board(args.board) if args.board else None
+
+
 def diagnosed(args) -> dict:
     """`gecgen diagnose ROBOT PIXELS.csv --cameras FILE`: the closed loop on image points
     (`loop.pixels.ImagePoints`), its new error model and code, and its JSON result (mm at the target and
@@ -94,18 +107,11 @@ def diagnosed(args) -> dict:
     from gecgen.emit import generate
     from gecgen.loop.diagnose import diagnose, verdict, write_error_model
     from gecgen.loop.pixels import ImagePoints
-    from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.measurements import hold_out
     from gecgen.model.pixels import read_pixels
     from gecgen.runtime.compiled import printed_code
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
-    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
-                            ("--orientation-length", args.orientation_length)) if v]
-    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
-                       f"with the robot; the corners' noise is --noise-px); leave it out")
-    cameras = read_cameras(args.cameras)
-    board = read_board(args.board) if args.board else None
+    cameras, board = _loop_cameras(args)
     robot, model = robot_and_model(args.robot, args.errors)
     data = read_pixels(args.data, robot, cameras, board)
     val = read_pixels(args.val, robot, cameras, board) if args.val else None
@@ -165,19 +171,12 @@ def calibrated(args, out, build, status) -> dict:
     from gecgen.loop.diagnose import write_error_model
     from gecgen.loop.pixels import ImagePoints
     from gecgen.model import load_robot
-    from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.files import write_atomically
     from gecgen.model.measurements import hold_out
     from gecgen.model.pixels import read_pixels
     from gecgen.runtime.compiled import CompiledModel
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
-    given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
-                            ("--orientation-length", args.orientation_length)) if v]
-    require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
-                       f"with the robot; the corners' noise is --noise-px); leave it out")
-    cameras = read_cameras(args.cameras)
-    board = read_board(args.board) if args.board else None
+    cameras, board = _loop_cameras(args)
     robot = load_robot(args.robot)
     data = read_pixels(args.train, robot, cameras, board)
     val = read_pixels(args.val, robot, cameras, board) if args.val else None
