@@ -19,6 +19,13 @@ os.environ.setdefault("GECGEN_BACKEND", "c")
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robots"
+#: two fixed cameras (a cameras file) 1280 x 960 px with the distortion the camera tests simulate
+FIXED_CAMERAS = """cameras:
+  cam1: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
+         width: 1280, height: 960}
+  cam2: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
+         width: 1280, height: 960}
+"""
 SHIPPED = ["pps", "industrial6r", "puma560"]
 #: an error model of the Panda with joint load terms (shared: its code is compiled once per run)
 JOINT_LOADS = {"default": ["1"], "frames": {6: {"er": ["1", "sign(gravity_torque(q6))", "gravity(panda_joint6)",

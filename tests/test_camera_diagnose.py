@@ -8,16 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROBOTS, run_json
+from conftest import FIXED_CAMERAS as CAMERAS, ROBOTS, run_json
 
 pytest.importorskip("cv2")
 
-CAMERAS = """cameras:
-  cam1: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
-         width: 1280, height: 960}
-  cam2: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
-         width: 1280, height: 960}
-"""
 #: robots/industrial6r.truth.yaml with one gravity-compliant joint: the shoulder, 3e-6 rad per N m
 TRUTH = """seed: 7
 gravity: [0, 0, -9.81]

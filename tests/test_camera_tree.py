@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import ROBOTS, run_json
+from conftest import FIXED_CAMERAS as CAMERAS, ROBOTS, run_json
 from gecgen.fit.calibration import load as load_calibration
 from gecgen.fit.camera import fit_pixels, fitted_tools
 from gecgen.fit.registration import kabsch
@@ -21,12 +21,6 @@ from gecgen.symbolic.terms import load_error_model
 
 pytest.importorskip("cv2")
 
-CAMERAS = """cameras:
-  cam1: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
-         width: 1280, height: 960}
-  cam2: {mount: world, fx: 1800, fy: 1800, cx: 640, cy: 480, distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0],
-         width: 1280, height: 960}
-"""
 HOME = "0,0.2,-0.2,-0.3,0.9,0,-1.2,0,0.3,-0.9,0,-1.2,0"
 SPAN = "0.2,0.15,0.15,0.3,0.3,0.5,0.3,0.5,0.3,0.3,0.5,0.3,0.5"
 
