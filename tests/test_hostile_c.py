@@ -36,7 +36,7 @@ static int read_all(double *a, int n)
 int main(void)
 {
     double tol, q[%(N)s_NQ], w[6], aux[%(N)s_NAUX + 1], c[%(N)s_NC], qo[%(N)s_NQ];
-    double eps[%(N)s_NE], Tn[16], T[16], Jq[6 * %(N)s_NQ];
+    double eps[%(N)s_NE], Tn[16], T[16], Jq[6 * %(N)s_NQ], L[%(N)s_NL + 1], f[%(N)s_NF];
     int max_iter, it, k;
     while (scanf("%%d %%lf", &max_iter, &tol) == 2 && read_all(q, %(N)s_NQ) && read_all(w, 6)
            && read_all(aux, %(N)s_NAUX) && read_all(c, %(N)s_NC)) {
@@ -45,7 +45,11 @@ int main(void)
         int st = %(name)s_compensate(q, w, a, c, max_iter, tol, qo, &it);
         if (st == GECGEN_OK) {
             %(name)s_fk(q, Tn);
-            %(name)s_eps(qo, w, a, c, eps);
+            /* the errors at q_out with the loads held at q_cmd, as compensate defines its fixed point */
+            %(name)s_loads(q, w, L);
+            %(name)s_basis_at_loads(qo, w, a, L, f);
+            for (k = 0; k < %(N)s_NE; ++k) eps[k] = 0.0;
+            for (k = 0; k < %(N)s_NC; ++k) eps[%(name)s_coef_error[k]] += c[k] * f[%(name)s_coef_term[k]];
             %(name)s_tool_jacobian(qo, eps, T, Jq);
             for (k = 0; k < 12; ++k) dev = fmax(dev, fabs(T[k] - Tn[k]));
         }
@@ -124,6 +128,18 @@ def test_a_nan_joint_is_never_ok(driver):
         [(status, q_out, _)] = run_cases(driver, [{"max_iter": 50, "tol": 1e-11, "q": q, "w": [0.0] * 6,
                                                    "c": list(1e-6 * SMALL_C)}])
         assert status == NONFINITE, k
+
+
+def test_an_error_too_small_to_square_is_never_ok_at_a_smaller_tolerance(driver):
+    """A tool turned by 1e-234 rad with tol 5e-324: squared, the residual underflowed to 0 and
+    compensate returned GECGEN_OK with the tool still turned (found by the property below). Taken with
+    hypot, the error stays, no step can move the joints by it, and the row is not converged."""
+    c = [0.0] * NC
+    c[MANIFEST["coefficients"].index("6.er:1")] = 1e-234
+    case = {"max_iter": 50, "tol": 5e-324, "q": list((LO + HI) / 2), "w": [0.0] * 6, "c": c}
+    [(status, _, _)] = run_cases(driver, [case])
+    # not converged; under -ffast-math the subnormal tol is flushed to zero and refused as no tolerance
+    assert status in (NOT_CONVERGED, NONFINITE), status
 
 
 def test_a_tool_turned_half_a_turn_is_never_ok(driver):

@@ -1983,11 +1983,12 @@ static void eigen_symmetric(double A[NQ][NQ], double V[NQ][NQ])
  * Tn: r = [dp; rotation axis taking the axes of T onto those of Tn, times sin(angle)] (6), the joint
  * Jacobian Jq (6 x NQ); returns sqrt(|dp|^2 + a^2), a = sin(angle) up to 90 degrees and
  * 2 - sin(angle) beyond. sin alone falls again towards 180 degrees: a pose turned half a turn away
- * would pass for converged, and a step towards it for progress. */
+ * would pass for converged, and a step towards it for progress. The lengths are taken with hypot:
+ * squared, an error below 1e-162 would vanish and pass any tolerance. */
 static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
                             const double *Tn, double *r, double *Jq)
 {
-    double f[NF], eps[NE], T[16], position = 0.0, turn = 0.0, trace = 0.0;
+    double f[NF], eps[NE], T[16], position, trace = 0.0;
     int i, k;
     pps_basis_at_loads(q, w, aux, L, f);
     combine(f, c, eps);
@@ -2000,12 +2001,13 @@ static double pose_residual(const double *q, const double *w, const double *aux,
             r[3 + i] += 0.5 * (T[4 * u + k] * Tn[4 * v + k] - T[4 * v + k] * Tn[4 * u + k]);
             trace += T[4 * i + k] * Tn[4 * i + k];  /* trace(R^T Rn) = 1 + 2 cos(angle) */
         }
-        position += r[i] * r[i];
-        turn += r[3 + i] * r[3 + i];
     }
-    turn = sqrt(turn);
-    if (trace < 1.0) turn = 2.0 - turn;  /* past 90 degrees */
-    return sqrt(position + turn * turn);
+    position = hypot(hypot(r[0], r[1]), r[2]);
+    {
+        double turn = hypot(hypot(r[3], r[4]), r[5]);
+        if (trace < 1.0) turn = 2.0 - turn;  /* past 90 degrees */
+        return hypot(position, turn);
+    }
 }
 
 /* The Gauss-Newton step dq (NQ) of |r - Jq dq|^2 + (d + dq)^T P (d + dq), d = q - q_cmd (P NULL: 0),
