@@ -1777,9 +1777,10 @@ static void eigen_symmetric(double A[NQ][NQ], double V[NQ][NQ])
  * Jacobian Jq (6 x NQ); returns sqrt(|dp|^2 + a^2), a = sin(angle) up to 90 degrees and
  * 2 - sin(angle) beyond. sin alone falls again towards 180 degrees: a pose turned half a turn away
  * would pass for converged, and a step towards it for progress. The lengths are taken with hypot:
- * squared, an error below 1e-162 would vanish and pass any tolerance. */
+ * squared, an error below 1e-162 would vanish and pass any tolerance. rows 3: the position alone (the
+ * orientation rows of r and Jq zero), for a tool too few joints move to turn it to every orientation. */
 static double pose_residual(const double *q, const double *w, const double *aux, const double *L, const double *c,
-                            const double *Tn, double *r, double *Jq)
+                            const double *Tn, int rows, double *r, double *Jq)
 {
     double f[NF], eps[NE], T[16], position, trace = 0.0;
     int i, k;
@@ -1796,6 +1797,11 @@ static double pose_residual(const double *q, const double *w, const double *aux,
         }
     }
     position = hypot(hypot(r[0], r[1]), r[2]);
+    if (rows == 3) {
+        for (i = 3 * NQ; i < 6 * NQ; ++i) Jq[i] = 0.0;
+        for (i = 3; i < 6; ++i) r[i] = 0.0;
+        return position;
+    }
     {
         double turn = hypot(hypot(r[3], r[4]), r[5]);
         if (trace < 1.0) turn = 2.0 - turn;  /* past 90 degrees */
@@ -1852,12 +1858,12 @@ static double penalty(const double *P, const double *q, const double *q_cmd)
  * GECGEN_NONLINEAR_SHARE: what it does to the tool, r0 - r, is J0 (q - q_cmd) to that share of the error
  * r0; and it is the first-order correction (J0^T J0 + P)^-1 J0^T r0 to that share of the latter's size,
  * P the damping of sigma (0: none; see damping()) over the eigen-decomposition of J0^T J0 (eigenvalues
- * lam, order[] largest first, the ntask largest the tool's directions, eigenvectors the columns of V),
+ * lam, order[] largest first, eigenvectors the columns of V),
  * without the eigenvalues at or below 1e-12 of the largest. The first fails an exact correction of
  * second order (an elbow bent far at a stretched arm), the second a correction the descent carried
  * away from the first-order one. */
 static int justified(const double *r0, const double *J0, const double *lam, double V[NQ][NQ], const int *order,
-                     int ntask, double sigma, const double *r, const double *q, const double *q_cmd)
+                     double sigma, const double *r, const double *q, const double *q_cmd)
 {
     double miss = 0.0, error = 0.0, g[NQ], extra = 0.0, size = 0.0;
     const double top = lam[order[0]];
@@ -1876,7 +1882,7 @@ static int justified(const double *r0, const double *J0, const double *lam, doub
         double first = 0.0; /* component j of the first-order correction */
         for (k = 0; k < NQ; ++k) {
             const int e = order[k];
-            const double eig = (k < ntask && lam[e] < sigma * sigma) ? sigma * sigma : lam[e];
+            const double eig = lam[e] < sigma * sigma ? sigma * sigma : lam[e];
             double along = 0.0;
             if (!(eig > 1e-12 * top)) continue;
             for (i = 0; i < NQ; ++i) along += V[i][e] * g[i];
@@ -1889,21 +1895,22 @@ static int justified(const double *r0, const double *J0, const double *lam, doub
            && extra <= GECGEN_NONLINEAR_SHARE * GECGEN_NONLINEAR_SHARE * size;
 }
 
-/* The damping of one rung: P = sum over the tool's directions (the ntask largest eigenvalues lam of
- * J0^T J0, order[] largest first, eigenvectors the columns of V) of (sigma^2 - lam) v v^T where
- * lam < sigma^2. The linearised correction then moves along a direction of singular value s by
- * s / sigma^2 times the error there instead of 1 / s: at most 1 / sigma, and not at all along a
- * direction the tool cannot move in. */
-static void damping(const double *lam, double V[NQ][NQ], const int *order, int ntask, double sigma, double *P)
+/* The damping of one rung: P = sum over every direction of J0^T J0 (eigenvalues lam, eigenvectors the
+ * columns of V) of (sigma^2 - lam) v v^T where lam < sigma^2. The linearised correction then moves
+ * along a direction of singular value s by s / sigma^2 times the error there instead of 1 / s: at most
+ * 1 / sigma. A direction the tool does not move in at the command (a redundant joint's, or the turns
+ * left free when the position alone is placed) costs sigma^2 per rad^2 too: undamped, the iterates
+ * drifted along it as the Jacobian turned (a five-joint arm near a straight elbow swung a joint by
+ * turns). */
+static void damping(const double *lam, double V[NQ][NQ], double sigma, double *P)
 {
     int i, j, k;
     for (i = 0; i < NQ * NQ; ++i) P[i] = 0.0;
-    for (k = 0; k < ntask; ++k) {
-        const int e = order[k];
-        const double weight = sigma * sigma - lam[e];
+    for (k = 0; k < NQ; ++k) {
+        const double weight = sigma * sigma - lam[k];
         if (!(weight > 0.0)) continue;
         for (i = 0; i < NQ; ++i)
-            for (j = 0; j < NQ; ++j) P[i * NQ + j] += weight * V[i][e] * V[j][e];
+            for (j = 0; j < NQ; ++j) P[i * NQ + j] += weight * V[i][k] * V[j][k];
     }
 }
 
@@ -1943,14 +1950,14 @@ static int nonfinite(const double *q_cmd, double *q_out, double *residual, int *
  * or no shorter step lowering it), -1 when it overflowed. q, r, Jq and *norm hold the last iterate, held
  * the joints at their bound; *steps grows by the steps taken. */
 static int solve(const double *q_cmd, const double *w, const double *aux, const double *L, const double *c,
-                   const double *Tn, const double *P, const double *bound, int max_iter, double tol, double *q,
-                   double *r, double *Jq, double *norm, int *held, int *steps)
+                   const double *Tn, int rows, const double *P, const double *bound, int max_iter, double tol,
+                   double *q, double *r, double *Jq, double *norm, int *held, int *steps)
 {
     double dq[NQ], d[NQ], q_try[NQ], r_try[6], J_try[6 * NQ], merit, merit_try = 0.0, norm_try = 0.0;
     int it, j, halvings, stalled = 0, clipped[NQ];
     memcpy(q, q_cmd, sizeof(double) * NQ);
     for (j = 0; j < NQ; ++j) held[j] = bound && bound[j] == 0.0;
-    *norm = pose_residual(q, w, aux, L, c, Tn, r, Jq);
+    *norm = pose_residual(q, w, aux, L, c, Tn, rows, r, Jq);
     merit = *norm * *norm;
     for (it = 0;; ++it) {
         double alpha = 1.0;
@@ -1968,7 +1975,7 @@ static int solve(const double *q_cmd, const double *w, const double *aux, const 
                 clipped[j] = bound && fabs(q_try[j] - q_cmd[j]) >= bound[j];
                 if (clipped[j]) q_try[j] = q_cmd[j] + (q_try[j] > q_cmd[j] ? bound[j] : -bound[j]);
             }
-            norm_try = pose_residual(q_try, w, aux, L, c, Tn, r_try, J_try);
+            norm_try = pose_residual(q_try, w, aux, L, c, Tn, rows, r_try, J_try);
             merit_try = norm_try * norm_try + penalty(P, q_try, q_cmd);
             if (merit_try < merit) break;
         }
@@ -1987,9 +1994,10 @@ static int solve(const double *q_cmd, const double *w, const double *aux, const 
     }
 }
 
-int puma560_compensate_bounded(const double *q_cmd, const double *w, const double *aux, const double *c,
-                                  int max_iter, double tol, const double *bound, double *q_out, double *residual,
-                                  int *iterations)
+/* compensate_bounded placing `rows` of the tool's pose: 6, its position and orientation; 3, its
+ * position alone. */
+static int place(const double *q_cmd, const double *w, const double *aux, const double *c, int max_iter,
+                   double tol, const double *bound, int rows, double *q_out, double *residual, int *iterations)
 {
     double Tn[16], L[NL > 0 ? NL : 1], r[6], Jq[6 * NQ], r0[6], J0[6 * NQ], norm = 0.0, norm0;
     double A[NQ][NQ], V[NQ][NQ], lam[NQ], P[NQ * NQ], q[NQ], smallest;
@@ -2005,10 +2013,10 @@ int puma560_compensate_bounded(const double *q_cmd, const double *w, const doubl
     /* loads at the command, not at the iterate: the robot will carry (nearly) the command's load, and
      * a sign(load) term would otherwise have no fixed point when the correction crosses its change */
     puma560_loads(q_cmd, w, L);
-    norm0 = pose_residual(q_cmd, w, aux, L, c, Tn, r0, J0);
+    norm0 = pose_residual(q_cmd, w, aux, L, c, Tn, rows, r0, J0);
     if (!finite_bits(norm0)) return nonfinite(q_cmd, q_out, residual, iterations, 0);
     /* the tool's directions at the command: J0^T J0's ntask largest eigenvalues, ntask the joints that
-     * move the tool (a branch's own) up to 6 */
+     * move the tool (a branch's own) up to the rows placed */
     for (j = 0; j < NQ; ++j) {
         int moves = 0;
         for (k = 0; k < NQ; ++k) {
@@ -2019,7 +2027,7 @@ int puma560_compensate_bounded(const double *q_cmd, const double *w, const doubl
         for (k = 0; k < 6; ++k) moves |= J0[k * NQ + j] != 0.0;
         ntask += moves;
     }
-    if (ntask > 6) ntask = 6;
+    if (ntask > rows) ntask = rows;
     eigen_symmetric(A, V);
     for (j = 0; j < NQ; ++j) { /* order: eigenvalues largest first */
         lam[j] = A[j][j];
@@ -2033,22 +2041,22 @@ int puma560_compensate_bounded(const double *q_cmd, const double *w, const doubl
     smallest = ntask ? sqrt(lam[order[ntask - 1]] > 0.0 ? lam[order[ntask - 1]] : 0.0) : 0.0;
     got = 0;
     if (smallest >= GECGEN_NEAR_SINGULAR) {
-        got = solve(q_cmd, w, aux, L, c, Tn, NULL, bound, max_iter, tol, q_out, r, Jq, &norm, held, &steps);
+        got = solve(q_cmd, w, aux, L, c, Tn, rows, NULL, bound, max_iter, tol, q_out, r, Jq, &norm, held, &steps);
         if (got < 0) return nonfinite(q_cmd, q_out, residual, iterations, steps);
         status = got ? GECGEN_OK : GECGEN_NOT_CONVERGED;
     }
-    if (smallest < GECGEN_NEAR_SINGULAR || (max_iter > 0 && !justified(r0, J0, lam, V, order, ntask, 0.0, r, q_out, q_cmd))) {
+    if (smallest < GECGEN_NEAR_SINGULAR || (max_iter > 0 && !justified(r0, J0, lam, V, order, 0.0, r, q_out, q_cmd))) {
         /* damp the directions of small singular value at the command, at GECGEN_NEAR_SINGULAR first and
          * doubling, and keep the least damped correction that is justified: the smallest joint change the
          * model's error calls for, never the exact correction of second order nor a swing */
         status = GECGEN_NOT_CONVERGED;
         for (rung = 0; rung < 10; ++rung) {
             const double sigma = GECGEN_NEAR_SINGULAR * (double)(1 << rung);
-            damping(lam, V, order, ntask, sigma, P);
-            got = solve(q_cmd, w, aux, L, c, Tn, P, bound, max_iter, tol, q, r, Jq, &norm, held, &steps);
+            damping(lam, V, sigma, P);
+            got = solve(q_cmd, w, aux, L, c, Tn, rows, P, bound, max_iter, tol, q, r, Jq, &norm, held, &steps);
             if (got < 0) return nonfinite(q_cmd, q_out, residual, iterations, steps);
             memcpy(q_out, q, sizeof(q));
-            if (justified(r0, J0, lam, V, order, ntask, sigma, r, q, q_cmd)) {
+            if (justified(r0, J0, lam, V, order, sigma, r, q, q_cmd)) {
                 status = got ? GECGEN_OK : GECGEN_SINGULAR;
                 break;
             }
@@ -2063,6 +2071,13 @@ int puma560_compensate_bounded(const double *q_cmd, const double *w, const doubl
     for (j = 0; j < NQ; ++j)
         if (q_out[j] < puma560_q_min[j] || q_out[j] > puma560_q_max[j]) return GECGEN_OUTSIDE_LIMITS;
     return GECGEN_OK;
+}
+
+int puma560_compensate_bounded(const double *q_cmd, const double *w, const double *aux, const double *c,
+                                  int max_iter, double tol, const double *bound, double *q_out, double *residual,
+                                  int *iterations)
+{
+    return place(q_cmd, w, aux, c, max_iter, tol, bound, 6, q_out, residual, iterations);
 }
 
 int puma560_compensate(const double *q_cmd, const double *w, const double *aux, const double *c,
