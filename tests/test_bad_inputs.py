@@ -232,6 +232,10 @@ IN_PROCESS = {
         lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6\n0,0,0,90,0,0\n"),
                    "-o", t / "out.csv"],
         "cmds.csv", "row 2, column 'q4': 90 is outside the joint limits"),
+    "commands of a robot with more joints (compensate)": (
+        lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6,q7\n0,0,0,0,0,0,0\n"),
+                   "-o", t / "out.csv"],
+        "cmds.csv", "row 1: column 'q7' but robot pps has 6 joints; remove it or use the calibration or robot file"),
     "two outputs naming one file": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / "s.csv", "--val-out",
                                                t / "s.csv"], "s.csv", "--val-out names the same file as --output"),
     "an output onto a device": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", "/dev/null"],

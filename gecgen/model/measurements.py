@@ -173,9 +173,7 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
             f"x, y, z)")
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
-    extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
-    require(not extra_q, f"{where}: row 1: column {excerpt(extra_q[0]) if extra_q else ''} but robot {robot.name} has "
-                         f"{robot.n} joints; remove it or use the right robot file")
+    no_other_joints(header, robot, where, "use the right robot file")
     wcols = [c for c in WRENCH if c in header]
     convention = file_convention(header, where)
     # station names the tracker frame of a row and orientation columns its measured frame, not
@@ -345,6 +343,15 @@ class Commands:
     source: str = ""
 
 
+def no_other_joints(header: list[str], robot: Robot, where: str, fix: str):
+    """Refuse a joint column the robot does not have (q7 for a six-joint robot): the file is another
+    robot's, and reading only q1..qn of it would give that robot's poses to this one."""
+    qcols = {f"q{i + 1}" for i in range(robot.n)}
+    extra = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
+    require(not extra, f"{where}: row 1: column {excerpt(extra[0]) if extra else ''} but robot {robot.name} has "
+                       f"{robot.n} joints; remove it or {fix}")
+
+
 def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
     """A CSV (path or pandas DataFrame) of nominal joint commands q1..qn, optional wrench and the aux
     columns the model uses."""
@@ -355,6 +362,7 @@ def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Comman
     header = table.header
     for col in qcols:
         require(col in header, f"{where}: row 1: missing column '{col}'")
+    no_other_joints(header, robot, where, "use the calibration or robot file of the robot these commands are for")
     for col in aux_names:
         require(col in header, f"{where}: row 1: missing column {excerpt(col)}, an auxiliary signal the error model uses; "
                                f"add it" + (" (gecgen gravity writes tau_<joint> columns)" if col.startswith("tau_") else ""))
