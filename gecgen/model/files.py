@@ -234,8 +234,10 @@ def _exchange(a: Path, b: Path):
 
 
 def cache_dir() -> Path:
-    """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written."""
-    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen"))
+    """`$GECGEN_CACHE` (default `~/.cache/gecgen`), or a temporary folder when that cannot be written. A
+    leading `~` is the home folder: set in quotes or a service's environment, no shell expanded it, and the
+    cache would be a folder named `~` in whatever folder the command runs in."""
+    return _usable_cache(Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen").expanduser())
 
 
 @functools.cache
