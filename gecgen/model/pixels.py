@@ -62,6 +62,9 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
     required = ["pose", *qcols, *PIXEL_COLUMNS]
     table = read_table(path, "pixel measurement file", ", ".join(required), text=("camera", "point"))
     where, header = table.where, table.header
+    require(is_pixel_file(header) or not {"target", "x", "y", "z"} <= set(header),
+            f"{where}: row 1: columns target, x, y, z: tracker measurements, not image points; read them without "
+            f"--cameras (and --board)")
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (a pixel file needs: {', '.join(required)})")
     for col in ("target", "x", "y", "z"):
