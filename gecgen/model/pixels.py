@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.cameras import Board, Camera
-from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Poses, pose_id_column, pose_subset, within_limits,
-                                       write_csv)
+from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Poses, no_other_joints, pose_id_column, pose_subset,
+                                       within_limits, write_csv)
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, require
@@ -70,6 +70,7 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
     for col in ("target", "x", "y", "z"):
         require(col not in header, f"{where}: row 1: column '{col}' in a pixel file; give tracker points and "
                                    f"image points in separate files")
+    no_other_joints(header, robot, where, "use the right robot file")
     mounts = {c.mount for c in cameras.values()}
     mount = "tool" if "tool" in mounts else "world"
     if mount == "tool":
