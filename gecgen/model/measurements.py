@@ -172,7 +172,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
             f"images, in place of accuracy and check); this step takes tracker measurements (pose, q1..qn, target, "
             f"x, y, z)")
     for col in required:
-        require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
+        require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})"
+                               f"{named_joints(header, robot, IMPORT) if col in qcols else ''}")
     no_other_joints(header, robot, where, "use the right robot file")
     wcols = [c for c in WRENCH if c in header]
     convention = file_convention(header, where)
@@ -343,6 +344,19 @@ class Commands:
     source: str = ""
 
 
+#: how a measurement file that names its joints is converted
+IMPORT = "rename the columns, or convert the file with gecgen import --mapping"
+
+
+def named_joints(header: list[str], robot: Robot, how: str = "rename the columns") -> str:
+    """What to say beside a missing joint column when the header names the robot's joints instead of
+    q1..qn (a controller's or a tracker software's export): how gecgen numbers them, and `how` to convert."""
+    if not any(j.name in header for j in robot.joints):
+        return ""
+    return (f"; the file names joints ({robot.joints[0].name}, ...): gecgen reads q1..q{robot.n} in the robot file's "
+            f"order (q1 = {robot.joints[0].name}); {how}")
+
+
 def no_other_joints(header: list[str], robot: Robot, where: str, fix: str):
     """Refuse a joint column the robot does not have (q7 for a six-joint robot): the file is another
     robot's, and reading only q1..qn of it would give that robot's poses to this one."""
@@ -361,7 +375,7 @@ def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Comman
     where = table.where
     header = table.header
     for col in qcols:
-        require(col in header, f"{where}: row 1: missing column '{col}'")
+        require(col in header, f"{where}: row 1: missing column '{col}'{named_joints(header, robot)}")
     no_other_joints(header, robot, where, "use the calibration or robot file of the robot these commands are for")
     for col in aux_names:
         require(col in header, f"{where}: row 1: missing column {excerpt(col)}, an auxiliary signal the error model uses; "
