@@ -232,6 +232,20 @@ IN_PROCESS = {
         lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6\n0,0,0,90,0,0\n"),
                    "-o", t / "out.csv"],
         "cmds.csv", "row 2, column 'q4': 90 is outside the joint limits"),
+    "commands of a robot with more joints (compensate)": (
+        lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "q1,q2,q3,q4,q5,q6,q7\n0,0,0,0,0,0,0\n"),
+                   "-o", t / "out.csv"],
+        "cmds.csv", "row 1: column 'q7' but robot pps has 6 joints; remove it or use the calibration or robot file"),
+    "commands naming their joints (compensate)": (
+        lambda t: ["compensate", calibrated(t, '["1"]'), write(t, "cmds.csv", "lateral,vertical,longitudinal,theta,roll,"
+                                                                               "pitch\n0,0,0,0,0,0\n"), "-o", t / "out.csv"],
+        "cmds.csv", "missing column 'q1'; the file names joints (lateral, ...): gecgen reads q1..q6 in the robot file's "
+                    "order (q1 = lateral); rename the columns"),
+    "measurements naming their joints": (
+        lambda t: ["identify", pps(t), write(t, "data.csv", table(header=HEADER.replace("q1,q2", "lateral,vertical")))],
+        "data.csv", "missing column 'q1' (needed: pose, q1, q2, q3, q4, q5, q6, target, x, y, z); the file names joints "
+                    "(lateral, ...): gecgen reads q1..q6 in the robot file's order (q1 = lateral); rename the columns, "
+                    "or convert the file with gecgen import --mapping"),
     "two outputs naming one file": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", t / "s.csv", "--val-out",
                                                t / "s.csv"], "s.csv", "--val-out names the same file as --output"),
     "an output onto a device": (lambda t: ["simulate", pps(t), "--poses", "3", "-o", "/dev/null"],

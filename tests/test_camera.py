@@ -239,6 +239,33 @@ def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
     assert err.getvalue().strip().endswith("see gecgen compensate --help")
 
 
+def test_tracker_measurements_given_with_cameras_are_refused_naming_the_fix(arm, tmp_path):
+    """The other way round: a tracker file given with --cameras is not "missing column 'camera'", it is
+    tracker data, read without the camera file."""
+    from gecgen.model.pixels import read_pixels
+
+    robot, *_ = arm
+    (tmp_path / "poses.csv").write_text("pose,q1,q2,q3,q4,q5,q6,target,x,y,z\n0,0,-1,1,0,0.5,0,smr,2,0,1\n")
+    with pytest.raises(ModelError, match=r"poses.csv: row 1: columns target, x, y, z: tracker measurements, not image "
+                                         r"points; read them without --cameras \(and --board\)"):
+        read_pixels(tmp_path / "poses.csv", robot, {})
+
+
+
+def test_a_pixel_file_of_a_robot_with_more_joints_is_refused(arm, tmp_path):
+    """A seven-joint arm's image points given for a six-joint robot: its q7 is named, not dropped (the first
+    six joints may well lie within this robot's limits)."""
+    from gecgen.model.cameras import Camera
+    from gecgen.model.pixels import read_pixels
+
+    robot, *_ = arm
+    (tmp_path / "px.csv").write_text("pose,q1,q2,q3,q4,q5,q6,q7,camera,point,u,v\n0,0,-1,1,0,0.5,0,0.3,cam1,smr,600,400\n")
+    cam = Camera("cam1", 1800, 1800, 640, 480, np.zeros(5), 1280, 960)
+    with pytest.raises(ModelError, match=r"px.csv: row 1: column 'q7' but robot industrial6r has 6 joints; remove it "
+                                         r"or use the right robot file"):
+        read_pixels(tmp_path / "px.csv", robot, {"cam1": cam})
+
+
 def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
     from conftest import run_json
 

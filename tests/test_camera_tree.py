@@ -58,6 +58,9 @@ def test_fixed_cameras_calibrate_both_hands_of_a_tree_to_the_oracles_floor(tree)
     fit = run_json("identify", d / "humanoid.yaml", d / "train.csv", "--errors", ROBOTS / "constant.errors.yaml",
                    "--cameras", d / "cams.yaml", "--noise-px", "0.1", "-o", d / "cal.json")
     assert fit["converged"] and fit["train"]["rms_px"] < 0.3
+    # compensate refuses a tree's calibration without --branch: the next step names each branch
+    assert f"gecgen compensate {d / 'cal.json'} POSES.csv -o OUT.csv --branch left, gecgen compensate " \
+           f"{d / 'cal.json'} POSES.csv -o OUT.csv --branch right" in fit["next"], fit["next"]
     scored = run_json("evaluate", d / "cal.json", d / "val.csv", "--cameras", d / "cams.yaml")
     assert scored["after"]["rms_px"] < 1.5 * fit["train"]["rms_px"] < 0.2 * scored["before"]["rms_px"]
     # the oracle: the same pixels, the true cameras' poses given

@@ -92,6 +92,9 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     print_human({"val_registered": False, "significance": {"t_min": 2, "insignificant_carried": True}})
     assert capsys.readouterr().out.splitlines() == ["val_registered: no", "significance: t_min 2, "
                                                     "insignificant_carried yes"]
+    # one next step, the verdict's (identify --cameras also lists the commands after it as JSON `next`)
+    print_human({"next": "gecgen compensate C.json POSES.csv -o OUT.csv", "next_step": "Score the calibration first"})
+    assert capsys.readouterr().out.splitlines() == ["next_step: Score the calibration first"]
 
 
 def test_a_librarys_resource_warning_is_not_shown_but_gecgens_own_warnings_are(monkeypatch, capsys):

@@ -190,6 +190,17 @@ def test_the_model_covers_the_data_only_when_the_residual_is_noise():
     assert wrong["covered"] is False and "nothing in the candidate dictionary explains" in verdict(wrong)
 
 
+def test_the_verdict_on_image_points_names_their_noise_option_and_ranks_them_in_px():
+    """diagnose --cameras refuses --noise-mm, so its verdict must ask for --noise-px; its largest points are
+    ranked by pixels (mm at the target varies with depth), so the pixels are what it shows first."""
+    largest = [{"row": 9, "pose": 1, "camera": "cam1", "point": "r0c0", "residual_px": 0.8, "residual_mm": 0.31},
+               {"row": 4, "pose": 0, "camera": "cam1", "point": "r1c0", "residual_px": 0.7, "residual_mm": 0.36}]
+    text = verdict({"train_rms_mm": 0.12, "train_rms_px": 0.28, "cv_rms_mm": 0.12, "sigma_mm": 0.085,
+                    "sigma_px": 0.2, "noise": None, "covered": None, "outliers": 0, "largest": largest})
+    assert "--noise-px" in text and "--noise-mm" not in text
+    assert "row 9 (0.800 px, 0.310 mm), row 4 (0.700 px, 0.360 mm)" in text
+
+
 def test_noise_floor_from_repeated_poses(rng):
     """Every pose measured twice (two pose ids, the same joints): the pooled spread of the repeats
     is the tracker noise."""

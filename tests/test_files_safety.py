@@ -119,6 +119,18 @@ def test_an_unwritable_cache_falls_back_to_a_temporary_folder_with_one_warning(t
     assert len(lines) == 1 and "warning: the cache folder" in lines[0] and "compiling into" in lines[0], run.stderr
 
 
+def test_a_cache_set_with_an_unexpanded_tilde_is_in_the_home_folder(tmp_path, monkeypatch):
+    """GECGEN_CACHE='~/gc' (quoted, or from a service's environment) is the home folder's gc, not a folder
+    named '~' in the working folder."""
+    from gecgen.runtime.compiled import cache_dir
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("GECGEN_CACHE", "~/gc")
+    monkeypatch.chdir(tmp_path)
+    assert cache_dir() == tmp_path / "home" / "gc" and (tmp_path / "home" / "gc").is_dir()
+    assert not (tmp_path / "~").exists()
+
+
 @pytest.mark.parametrize("command, expect", [
     (["identify", ROBOTS / "pps.yaml", "missing.csv", "-o", "{folder}"], "is a folder; give a file name for the calibration"),
     (["compensate", "missing.json", "missing.csv", "-o", "{folder}"], "is a folder; give a file name"),

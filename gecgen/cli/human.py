@@ -39,7 +39,8 @@ def print_human(result: dict):
         # the warnings are on stderr already, one line each
         if key in ("identifiable", "training_ranges", "warnings") or (key.endswith("_units") and key[:-6] in result):
             continue
-        if key == "next" and "assessment" in result:  # the verdict's next step says what to do, once
+        # the verdict's next step (identify --cameras gives it alone, as `next_step`) says what to do, once
+        if key == "next" and ("assessment" in result or "next_step" in result):
             continue
         units = result.get(f"{key}_units", {})
         if key == "outliers":

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.cli.common import number, numbers
+from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 
 
@@ -62,7 +63,7 @@ def identified(args) -> dict:
             **({"board": calibration.report["board"]} if board is not None else {}),
             **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "warnings": warning_lines(caught),
-            "next": f"gecgen compensate {out} POSES.csv -o OUT.csv, gecgen export {out} --c DIR"}
+            "next": f"{compensate_next(robot, out)}, gecgen export {out} --c DIR"}
     from shlex import quote
 
     from gecgen.fit.significance import overall
@@ -222,8 +223,8 @@ def calibrated(args, out, build, status) -> dict:
     result["files"] = {k: str(v) for k, v in files.items()}
     result["warnings"] = warning_lines(caught)
     rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
-    result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, gecgen compensate "
-                      f"{out / 'calibration.json'} POSES.csv -o OUT.csv")
+    result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, "
+                      f"{compensate_next(robot, out / 'calibration.json')}")
     content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
                                     result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
@@ -328,3 +329,9 @@ def simulated(args, robot, truth, rng) -> dict:
         files["rig"] = args.rig_out
     return {"robot": robot.name, "design": "cameras", "mount": data.mount, "poses": data.n_poses,
             "rows": len(data.uv), "noise_px": noise, **rig_spec, "files": files}
+
+
+def compensate_next(robot: Robot, calibration) -> str:
+    """The compensate command(s) a next step names: on a tree one per branch, which compensate needs."""
+    return ", ".join(f"gecgen compensate {calibration} POSES.csv -o OUT.csv" + (f" --branch {b.name}" if b else "")
+                     for b in robot.branches or [None])

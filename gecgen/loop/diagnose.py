@@ -306,14 +306,18 @@ def verdict(remaining: dict) -> str:
     if r["covered"]:
         return (f"The residual ({r['sigma_mm']:.4f} mm per coordinate) is consistent with the measurement noise "
                 f"({r['noise']['noise_mm']:.4f} mm, {r['noise']['source']}): the model covers the data.")
-    largest = ", ".join(f"row {p['row']} ({p['residual_mm']:.3f} mm)" for p in r["largest"][:3])
+    # image points are ranked by their pixel residual, so it leads
+    largest = ", ".join(f"row {p['row']} (" + (f"{p['residual_px']:.3f} px, " if "residual_px" in p else "")
+                        + f"{p['residual_mm']:.3f} mm)" for p in r["largest"][:3])
     cv = f", cross-validated {r['cv_rms_mm']:.4f} mm" if r["cv_rms_mm"] is not None else ""
     outliers = f" without its {r['outliers']} outliers" if r["outliers"] else ""
     what = f"Structure remains: training RMS{outliers} {r['train_rms_mm']:.4f} mm{cv}; largest residuals {largest}"
     if r["covered"] is False:
         return (f"{what}. The residual is {r['sigma_over_noise']:.2f}x the noise floor ({r['noise']['noise_mm']:.4f} mm, "
                 f"{r['noise']['source']}) and nothing in the candidate dictionary explains the rest.")
-    return (f"{what}. The noise floor is unknown (no repeated poses; give --noise-mm, noise_mm in Python), so whether the model covers "
+    how = ("give the corners' noise, --noise-px" if "sigma_px" in r
+           else "no repeated poses; give --noise-mm, noise_mm in Python")
+    return (f"{what}. The noise floor is unknown ({how}), so whether the model covers "
             f"the data cannot be decided; nothing in the candidate dictionary explains the rest.")
 
 

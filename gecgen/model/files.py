@@ -245,7 +245,10 @@ def cache_kept() -> bool:
 
 
 def _wanted_cache() -> Path:
-    return Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen")
+    """`$GECGEN_CACHE` or the default. A leading `~` is the home folder: set in quotes or a service's
+    environment, no shell expanded it, and the cache would be a folder named `~` in whatever folder the
+    command runs in."""
+    return Path(os.environ.get("GECGEN_CACHE") or Path.home() / ".cache" / "gecgen").expanduser()
 
 
 @functools.cache

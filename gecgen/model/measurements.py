@@ -172,10 +172,9 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
             f"images, in place of accuracy and check); this step takes tracker measurements (pose, q1..qn, target, "
             f"x, y, z)")
     for col in required:
-        require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})")
-    extra_q = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
-    require(not extra_q, f"{where}: row 1: column {excerpt(extra_q[0]) if extra_q else ''} but robot {robot.name} has "
-                         f"{robot.n} joints; remove it or use the right robot file")
+        require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})"
+                               f"{named_joints(header, robot, IMPORT) if col in qcols else ''}")
+    no_other_joints(header, robot, where, "use the right robot file")
     wcols = [c for c in WRENCH if c in header]
     convention = file_convention(header, where)
     # station names the tracker frame of a row and orientation columns its measured frame, not
@@ -345,6 +344,28 @@ class Commands:
     source: str = ""
 
 
+#: how a measurement file that names its joints is converted
+IMPORT = "rename the columns, or convert the file with gecgen import --mapping"
+
+
+def named_joints(header: list[str], robot: Robot, how: str = "rename the columns") -> str:
+    """What to say beside a missing joint column when the header names the robot's joints instead of
+    q1..qn (a controller's or a tracker software's export): how gecgen numbers them, and `how` to convert."""
+    if not any(j.name in header for j in robot.joints):
+        return ""
+    return (f"; the file names joints ({robot.joints[0].name}, ...): gecgen reads q1..q{robot.n} in the robot file's "
+            f"order (q1 = {robot.joints[0].name}); {how}")
+
+
+def no_other_joints(header: list[str], robot: Robot, where: str, fix: str):
+    """Refuse a joint column the robot does not have (q7 for a six-joint robot): the file is another
+    robot's, and reading only q1..qn of it would give that robot's poses to this one."""
+    qcols = {f"q{i + 1}" for i in range(robot.n)}
+    extra = [h for h in header if h.startswith("q") and h[1:].isdigit() and h not in qcols]
+    require(not extra, f"{where}: row 1: column {excerpt(extra[0]) if extra else ''} but robot {robot.name} has "
+                       f"{robot.n} joints; remove it or {fix}")
+
+
 def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Commands:
     """A CSV (path or pandas DataFrame) of nominal joint commands q1..qn, optional wrench and the aux
     columns the model uses."""
@@ -354,7 +375,8 @@ def read_commands(path, robot: Robot, aux_names: tuple[str, ...] = ()) -> Comman
     where = table.where
     header = table.header
     for col in qcols:
-        require(col in header, f"{where}: row 1: missing column '{col}'")
+        require(col in header, f"{where}: row 1: missing column '{col}'{named_joints(header, robot)}")
+    no_other_joints(header, robot, where, "use the calibration or robot file of the robot these commands are for")
     for col in aux_names:
         require(col in header, f"{where}: row 1: missing column {excerpt(col)}, an auxiliary signal the error model uses; "
                                f"add it" + (" (gecgen gravity writes tau_<joint> columns)" if col.startswith("tau_") else ""))

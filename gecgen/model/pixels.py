@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.cameras import Board, Camera
-from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Poses, pose_id_column, pose_subset, within_limits,
-                                       write_csv)
+from gecgen.model.measurements import (MAX_AUX, MAX_WRENCH, Poses, named_joints, no_other_joints, pose_id_column,
+                                       pose_subset, within_limits, write_csv)
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.table import at, read_table
 from gecgen.model.validation import excerpt, require
@@ -62,11 +62,16 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
     required = ["pose", *qcols, *PIXEL_COLUMNS]
     table = read_table(path, "pixel measurement file", ", ".join(required), text=("camera", "point"))
     where, header = table.where, table.header
+    require(is_pixel_file(header) or not {"target", "x", "y", "z"} <= set(header),
+            f"{where}: row 1: columns target, x, y, z: tracker measurements, not image points; read them without "
+            f"--cameras (and --board)")
     for col in required:
-        require(col in header, f"{where}: row 1: missing column '{col}' (a pixel file needs: {', '.join(required)})")
+        require(col in header, f"{where}: row 1: missing column '{col}' (a pixel file needs: {', '.join(required)})"
+                               f"{named_joints(header, robot) if col in qcols else ''}")
     for col in ("target", "x", "y", "z"):
         require(col not in header, f"{where}: row 1: column '{col}' in a pixel file; give tracker points and "
                                    f"image points in separate files")
+    no_other_joints(header, robot, where, "use the right robot file")
     mounts = {c.mount for c in cameras.values()}
     mount = "tool" if "tool" in mounts else "world"
     if mount == "tool":
