@@ -70,7 +70,7 @@ def registered_mm(p: np.ndarray, y: np.ndarray, scaled: bool = False) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum((pc - s * yc @ R.T) ** 2, axis=1))))
 
 
-def hand(robot, truth, model, seed: int, noise: float) -> dict:
+def hand(robot, truth, model, seed: int, noise: float, significance: bool = True) -> dict:
     rng = np.random.default_rng(seed)
     cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
     board = Board(9, 6, 0.04)
@@ -82,7 +82,7 @@ def hand(robot, truth, model, seed: int, noise: float) -> dict:
     Rb, tb = rig.board_pose
     out = {}
     for name, fixed in (("fit", None), ("oracle", np.array([*rotvec_t(R, t), *rotvec_t(Rb, tb)]))):
-        fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed)
+        fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed, significance=significance)
         Rbf, tbf = fit.board
         Rf, tf = fit.tool_camera()  # X_tool = Rf X_cam + tf
         T_true = true_tools(robot, truth, held)

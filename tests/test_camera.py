@@ -256,6 +256,41 @@ def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
     assert sum(d.startswith(SCALE) for d in details) == 1
     assert any(d.startswith(CAMERA_POSE) for d in details)
     assert out["n_identifiable"] + len(out["eliminated"]) == out["n_params"]
+    # what the fit would hold as weakly determined, merged by name into eliminated, as identify lists it
+    held = {e["param"]: e["detail"] for e in out["eliminated"] if e["reason"] == "held"}
+    assert held and held == {h["param"]: h["reason"] for h in out["held"]} and out["n_held"] == len(held)
+    fit = fit_pixels(robot1, model, data, rig.cameras)
+    assert [h["param"] for h in out["held"]] == [h.param for h in fit.held]
+
+
+def test_redundancy_with_cameras_says_a_marker_seen_from_one_direction_is_not_placed_along_its_ray(arm):
+    """One fixed camera; the wrist never turns, so the tool turns only with the first three joints and a
+    marker left to estimate is seen along nearly one ray: its weakest direction is that ray. With the
+    wrist turning the same camera places it several times better."""
+    from gecgen.fit.camera import pixel_redundancy
+
+    robot, truth, model = arm
+    robot = replace(robot, targets=MARKERS)
+    estimated = replace(robot, targets={**MARKERS, "m1": (0.0, 0.0, 0.0)}, estimated=("m1",))
+    cams = [Camera("cam1", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960)]
+    placed = {}
+    for wrist in (1, 0):
+        rng = np.random.default_rng(4)
+        span = np.radians([12, 10, 10, *(wrist * np.array([60, 40, 90]))])
+        rig, q = eye_to_hand(robot, truth, cams, np.array([[1.9, -2.4, 1.7]]), np.array([2.0, 0, 1.0]),
+                             np.radians([0, -80, -100, 0, 30, 0]), span, 30, rng)
+        data = simulate_pixels(robot, truth, rig, q, 0.2, rng)
+        [placed[wrist]] = pixel_redundancy(estimated, model, data, rig.cameras, noise_px=0.2)["targets"]
+    one, turning = placed[0], placed[1]
+    assert one["target"] == "m1" and one["rays_span_deg"] < 15 < 60 < turning["rays_span_deg"]
+    assert one["off_ray_deg"] < 2 and one["std_mm"] > 5 * turning["std_mm"]
+    assert one["placed"] and turning["placed"] and "reason" not in one  # a millimetre at 0.2 px: placed, if badly
+    # the fit on these images puts it within a few of that 1-sigma of where it is
+    fit = fit_pixels(estimated, model, data, rig.cameras, noise_px=0.2)
+    assert np.linalg.norm(fit.targets["m1"] - MARKERS["m1"]) < 4e-3 * one["std_mm"]
+    # stated as a blurrier camera's (2 px), the same images leave it undetermined along the ray, and say so
+    [blurred] = pixel_redundancy(estimated, model, data, rig.cameras, noise_px=2.0)["targets"]
+    assert not blurred["placed"] and blurred["reason"].startswith("target m1: the images see it from one direction")
 
 
 def test_eye_to_hand_places_a_marker_left_to_estimate(arm):

@@ -427,12 +427,97 @@ def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Ca
 
 @one_blas_thread
 def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
-                     board: Board | None = None) -> dict:
-    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
-    `eliminated` (structural, and what pixels cannot give: `camera pose`, `scale`, not excited)."""
-    _, _, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+                     board: Board | None = None, noise_px: float | None = None) -> dict:
+    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`, `eliminated`
+    (structural; what pixels cannot give: `camera pose`, `scale`, not excited; and, merged by name, the
+    coefficients `fit_pixels` would hold as weakly determined against the noise, reason `held`, as it
+    holds them before its first step), `held` (those, each with why, as `fit_pixels` lists them) and
+    `targets` (every target left to estimate: how well the images place it, `_placed_along_rays`).
+    noise_px: the corners' noise per coordinate (px), else the linearised fit's residual at the nominal
+    model, at most NOISE_CAP_PX."""
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+    c = np.zeros(problem.cm.dims.nc)
+    e = np.linalg.norm(problem.residual(g, c), axis=1)
+    wr = robust.weights(e, _limit(e, "cauchy"), "cauchy")
+    held = ()
+    if kept:
+        kept, held, eliminated = _with_held(problem, g, c, kept, eliminated, wr, True, noise_px)
     return {"n_params": len(model.coefficients), "n_identifiable": len(kept),
-            "eliminated": [e.to_dict() for e in eliminated]}
+            **({"n_held": len(held)} if held else {}), "eliminated": [x.to_dict() for x in eliminated],
+            "held": [h.to_dict() for h in held], "targets": _placed_along_rays(problem, g, c, kept, noise_px)}
+
+
+def _limit(e: np.ndarray, loss: str) -> float:
+    """The outlier limit (px) of residual lengths e (R,): robust.THRESHOLD times their noise, from the median."""
+    return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
+
+
+def _with_held(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int], eliminated: tuple,
+               wr: np.ndarray, free_g: bool, noise_px: float | None):
+    """kept without the coefficients the images determine too weakly (`_hold_weak`), those held
+    (`weak.Held`), and eliminated with them merged in by index (reason `held`)."""
+    kept, held = _hold_weak(problem, g, c, kept, wr, free_g, noise_px)
+    merged = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
+                          key=lambda x: x.index))
+    return kept, held, merged
+
+
+#: a target left to estimate whose position the images fix only to more than this (m, 1 sigma, along
+#: its weakest direction) is not placed by them: as a generalized error of that size (`weak.PLAUSIBLE_M`)
+PLACED_M = weak.PLAUSIBLE_M
+
+
+def _placed_along_rays(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
+                       noise_px: float | None) -> list[dict]:
+    """How well the images place each target left to estimate, the cameras' poses and the coefficients
+    kept fitted with it (about the nominal model): `std_mm` the 1-sigma along its worst determined direction, `off_ray_deg` that
+    direction's angle from the mean ray to it (camera to marker, in the tool frame), `rays_span_deg`
+    the largest angle of a ray to it from that mean (how far apart the directions it is seen from
+    are), `placed` (std_mm within PLACED_M) and, when not, `reason`. A marker seen from one direction
+    is fixed across its ray by a pixel and along it only by the spread of the rays."""
+    if not problem.estimated:
+        return []
+    cols = np.array(kept, int)
+    # every point weighs 1: before a fit a target left to estimate sits at the tool origin, and robust
+    # weights of the residual there would count its own points out
+    wr = np.ones(len(problem.data.uv))
+    A, b, scale = _system(problem, g, c, cols, wr, True)
+    dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
+    sigma = noise_px if noise_px is not None else min(float(np.linalg.norm(
+        b - A @ np.linalg.lstsq(A, b, rcond=None)[0]) / np.sqrt(dof)), NOISE_CAP_PX)
+    o, R, _ = problem.frames(c)
+    poses, _, targets = problem.unpack(g)
+    d = problem.data
+    k0 = 6 * len(problem.cams)
+    out = []
+    for i, name in enumerate(problem.estimated):
+        own = list(range(k0 + 3 * i, k0 + 3 * i + 3))
+        rest = [j for j in range(A.shape[1]) if j not in own]
+        # its three columns after everything else has taken what it can: the bottom block of R
+        Rt = np.linalg.qr(A[:, rest + own], mode="r")[-3:, -3:]
+        with np.errstate(all="ignore"):
+            cov = sigma ** 2 * np.linalg.pinv(Rt.T @ Rt) / np.outer(scale[own], scale[own])
+        w, V = np.linalg.eigh(cov)
+        worst = V[:, -1]
+        rows = np.nonzero(np.array(d.points)[d.point] == name)[0]
+        at = problem.at[0][rows], problem.at[1][rows]
+        x = np.einsum("rij,j->ri", R[at], targets[name]) + o[at]
+        centres = np.array([-Rc.T @ tc for Rc, tc in poses])[d.camera[rows]]
+        rays = np.einsum("rji,rj->ri", R[at], x - centres)  # in the tool frame
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        mean = rays.mean(axis=0) / np.linalg.norm(rays.mean(axis=0))
+        span = float(np.degrees(np.arccos(np.clip(rays @ mean, -1, 1)).max()))
+        std_mm = 1e3 * float(np.sqrt(max(w[-1], 0.0)))
+        entry = {"target": name, "std_mm": std_mm,
+                 "off_ray_deg": float(np.degrees(np.arccos(min(abs(float(worst @ mean)), 1.0)))),
+                 "rays_span_deg": span, "placed": bool(std_mm <= 1e3 * PLACED_M)}
+        if not entry["placed"]:
+            entry["reason"] = (f"target {name}: the images see it from one direction (its rays span {span:.3g} deg on "
+                               f"the tool): its position along them is determined only to {std_mm:.3g} mm (1 sigma); "
+                               f"see it from directions that differ more (poses that turn the tool, or another "
+                               f"camera), or give its position in the robot file")
+        out.append(entry)
+    return out
 
 
 @one_blas_thread  # small dense algebra: more threads than one on a shared machine only contend
@@ -461,15 +546,14 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     before = _summary(problem, g, c, e)
 
     def limit_of(e):
-        return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
+        return _limit(e, loss)
 
     limit = limit_of(e)
     held = ()
     determinable = len(kept)
     if hold_weak and kept:
-        kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
-        eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
-                                  key=lambda x: x.index))
+        kept, held, eliminated = _with_held(problem, g, c, kept, eliminated, robust.weights(e, limit, loss), free_g,
+                                            noise_px)
     def solve(g, c, cols, e, limit):
         """Levenberg-Marquardt over the poses (free_g) and c[cols], robustly reweighted."""
         lam, converged, it = 0.0, False, 0
