@@ -2,6 +2,7 @@
 the fit against simulated truths (eye-in-hand and eye-to-hand), the files and their refusals."""
 import contextlib
 import io
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -339,6 +340,44 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     # what holding spares: the same images fitted with every direction free do not settle
     free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
     assert not free.converged and free.failures
+
+
+def test_with_the_noise_stated_a_value_beyond_a_plausible_size_is_held_as_for_a_tracker(arm, tmp_path):
+    """A camera on the tool, every frame's errors linear in its joint: with the corners' noise stated, the fit
+    that stands still gives a generalized error beyond a plausible size along directions the images determine
+    weakly; those are held too, at no cost beyond the noise, and the warning, `held` and the verdict say so.
+    The constant model on the same images holds nothing."""
+    from gecgen.fit.camera import _noted
+    from gecgen.report.verdict import pixels_next_step
+    from gecgen.fit import weak
+
+    robot, truth, constant = arm
+    (tmp_path / "linear.errors.yaml").write_text(
+        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
+    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
+    rig, _, _, data = hand_rig(arm, n=40, seed=3)
+    cm = CompiledModel(frame_robot(robot), model)
+    plain, _ = _noted(robot, model, data, rig.cameras, rig.board, 0.2, {})
+    before, where = weak.largest(cm, data, plain.c)
+    assert before > 1.5 and not plain.failures
+    with pytest.warns(UserWarning, match=rf"the fit gives {where} .* times a plausible size") as caught:
+        fit = fit_pixels(robot, model, data, rig.cameras, rig.board, noise_px=0.2)
+    assert weak.largest(cm, data, fit.c)[0] <= 1.0 and not fit.failures
+    added = {h.param for h in fit.held} - {h.param for h in plain.held}
+    assert added and all(h.reason and h.beyond > 1 for h in fit.held)
+    assert added <= {e.param for e in fit.eliminated if e.reason == "held"}
+    assert fit.train["rms_px"] < 1.01 * plain.train["rms_px"]  # within the noise: held, not fitted away
+    assert sum("plausible size" in str(w.message) for w in caught) == 1  # only the returned fit speaks
+    result = {"train": fit.train, "before": fit.before, "n_identifiable": len(fit.kept),
+              "eliminated": [e.to_dict() for e in fit.eliminated], "held": [h.to_dict() for h in fit.held]}
+    limits = pixels_next_step(result, None, {}, "gecgen evaluate").limits
+    assert any("held at zero as the data determine them too weakly" in line for line in limits)
+    # well excited: the constant model on the same images carries no implausible value and holds none
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        steady = fit_pixels(robot, constant, data, rig.cameras, rig.board, noise_px=0.2)
+    assert not steady.held and weak.largest(CompiledModel(frame_robot(robot), constant), data, steady.c)[0] < 1
+    assert not any("plausible size" in str(w.message) for w in caught)
 
 
 def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_similarity_fit(arm, rng):

@@ -36,7 +36,7 @@ from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust, weak
-from gecgen.fit.identify import RSS_TOL, structural_analysis
+from gecgen.fit.identify import HOLD_P, RSS_TOL, WIDEN, structural_analysis
 from gecgen.fit.redundancy import Eliminated
 from gecgen.fit.significance import judge
 from gecgen.runtime.compiled import CompiledModel
@@ -525,6 +525,70 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
                intrinsics: bool = False, significance: bool = True) -> PixelFit:
+    """`_fit_pixels` (its docstring says what it does and what each option means), and then, as identify
+    does for a tracker (`identify._plausible`), when the corners' noise is stated (noise_px) and the fit
+    stands but gives a generalized error beyond a plausible size (`weak.largest`): the same images
+    fitted again with the directions determined to within WIDEN times a plausible size held, in turn, as
+    long as what holding them costs in residual is what the stated noise explains (`_costs_only_noise`);
+    the fit with the fewest held that lowers the largest value most is returned, with a warning that
+    says so, its held coefficients in `held` with why."""
+    options = dict(loss=loss, max_iter=max_iter, fixed_poses=fixed_poses, backend=backend, hold_weak=hold_weak,
+                   intrinsics=intrinsics, significance=significance)
+    fit, notes = _noted(robot, model, data, cameras, board, noise_px, options)
+    if hold_weak and noise_px is not None and not fit.failures:
+        cm = CompiledModel(frame_robot(robot), model, backend)
+        size, where = weak.largest(cm, data, fit.c)
+        best, best_size, best_notes = fit, size, notes
+        for widen in WIDEN if size > 1.0 else ():
+            held, held_notes = _noted(robot, model, data, cameras, board, noise_px * widen, options)
+            if held.failures or not _costs_only_noise(fit, held, noise_px, fixed_poses is None):
+                break
+            after, _ = weak.largest(cm, data, held.c)
+            if len(held.held) > len(fit.held) and after < best_size:
+                best, best_size, best_notes = held, after, held_notes
+            if best_size <= 1.0:
+                break
+        if best is not fit:
+            fit, notes = best, [
+                f"the fit gives {where} {size:.3g} times a plausible size ({1e3 * weak.PLAUSIBLE_M:g} mm, "
+                f"{1e3 * weak.PLAUSIBLE_RAD:g} mrad) along directions the images determine only weakly: refitted with "
+                f"those held ({best_size:.3g} times at most), the residual {fit.train['rms_px']:.4g} -> "
+                f"{best.train['rms_px']:.4g} px rms, within the noise", *best_notes]
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return fit
+
+
+def _noted(robot, model, data, cameras, board, noise_px, options) -> tuple[PixelFit, list[str]]:
+    """`_fit_pixels` and the warnings it gives, not yet warned: of the fits `fit_pixels` tries, only the
+    one it returns speaks."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = _fit_pixels(robot, model, data, cameras, board, noise_px=noise_px, **options)
+    return fit, [str(w.message) for w in caught]
+
+
+def _rss(fit: PixelFit, free_g: bool) -> float:
+    """The fit's weighted residual sum of squares (px^2), from its residual per coordinate and degrees of
+    freedom (`_uncertainty`'s: the poses counted when fitted, free_g)."""
+    unknowns = len(fit.kept) + (len(fit.g) if free_g else 0)
+    return fit.sigma_px ** 2 * max(2 * float(fit.weights.sum()) - unknowns, 1.0)
+
+
+def _costs_only_noise(full: PixelFit, held: PixelFit, noise_px: float, free_g: bool) -> bool:
+    """Whether the held fit's larger residual is what the noise alone makes of the coefficients it holds:
+    the rise in the weighted residual sum of squares within the identify.HOLD_P chi-square quantile, in
+    units of the stated noise noise_px (px per coordinate; `identify._costs_only_noise` for a tracker)."""
+    from scipy.stats import chi2
+
+    rise = _rss(held, free_g) - _rss(full, free_g)
+    return rise / noise_px ** 2 <= chi2.ppf(HOLD_P, max(len(full.kept) - len(held.kept), 1))
+
+
+def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
+                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
+                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
+                intrinsics: bool = False, significance: bool = True) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
