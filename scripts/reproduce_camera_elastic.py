@@ -41,7 +41,7 @@ from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
 from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 
-from reproduce_camera import DIST, ELASTIC as HEADING, registered_mm
+from reproduce_camera import DIST, ELASTIC as HEADING, registered_mm, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = 0.1
@@ -171,16 +171,7 @@ def write(rows: dict):
               "The same truth and seeds with the shoulder and elbow spanning +-6 to 10 deg, as in the other figures "
               "above, so that the load on joint 2 varies less (pixels trace an elastic effect only from poses that "
               "vary its load):", "", *narrow, ""]
-    doc = ROOT / "docs" / "camera.md"
-    text = doc.read_text()
-    section = "\n".join(lines)
-    if HEADING in text:
-        start = text.index(HEADING)
-        end = text.find("\n## ", start + 1)
-        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    doc.write_text(text)
+    write_section(HEADING, lines)
 
 
 def main():

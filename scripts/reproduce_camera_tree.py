@@ -35,7 +35,7 @@ from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_to_hand, simulate_pixels, true_tools
 from gecgen.symbolic.terms import load_error_model
 
-from reproduce_camera import DIST, registered_mm, rotvec_t
+from reproduce_camera import DIST, registered_mm, rotvec_t, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## A two-armed tree"
@@ -115,16 +115,7 @@ def write(rows: list):
               "(pixels cannot tell them apart), so the registered figures are the ones to compare. Part of what "
               "registration leaves beyond the oracle is scale, which four markers 150 mm apart on each hand fix "
               "only weakly from 2.6 m (compare the last two ratios); at 0.3 px the rest grows too.", ""]
-    doc = ROOT / "docs" / "camera.md"
-    text = doc.read_text()
-    section = "\n".join(lines)
-    if HEADING in text:
-        start = text.index(HEADING)
-        end = text.find("\n## ", start + 1)
-        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    doc.write_text(text)
+    write_section(HEADING, lines)
 
 
 def main():

@@ -14,7 +14,7 @@ from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera, read_board, read_cameras
 from gecgen.model.pixels import read_pixels, write_pixels
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, fit_pixels, fitted_tools, frame_robot
+from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, _smaller_images, fit_pixels, fitted_tools, frame_robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
@@ -144,7 +144,7 @@ def test_one_target_leaves_the_scale_and_says_so(arm):
 
 
 def test_pixel_file_round_trip_and_refusals(arm, tmp_path):
-    robot, truth, _ = arm
+    robot, truth, model = arm
     rig, *_, data = hand_rig(arm, n=4)
     path = tmp_path / "pixels.csv"
     write_pixels(path, robot, data)
@@ -161,6 +161,13 @@ def test_pixel_file_round_trip_and_refusals(arm, tmp_path):
     small = {"cam": replace(rig.cameras["cam"], width=640, height=480, cx=320.0, cy=240.0)}
     with pytest.raises(ModelError, match="outside camera cam's 640 x 480 image; intrinsics of another resolution"):
         read_pixels(path, robot, small, rig.board)
+    # intrinsics made for images twice the size: every row is inside that image, the fit fails, and says why
+    cam = rig.cameras["cam"]
+    large = {"cam": replace(cam, width=2 * cam.width, height=2 * cam.height, fx=2 * cam.fx, fy=2 * cam.fy,
+                            cx=2 * cam.cx, cy=2 * cam.cy)}
+    failed = fit_pixels(robot, model, read_pixels(path, robot, large, rig.board), large, rig.board)
+    assert failed.failures and "top-left quarter of the 2560 x 1920 image its intrinsics are for" in failed.failures[0]
+    assert _smaller_images(data, rig.cameras) == ""  # the images' own size: nothing said
 
 
 def test_camera_and_board_files_refuse_what_they_cannot_use(tmp_path):

@@ -691,6 +691,12 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
                                      f"px rms left): the images may not determine this model (fewer terms, e.g. "
                                      f"--errors with constant errors, or more images), or the camera file is not "
                                      f"this camera's"]
+    smaller = _smaller_images(data, cameras)
+    if smaller and not converged:
+        failures[0] += f" ({smaller})"
+    elif smaller and np.sqrt(np.mean(e ** 2)) > NOISE_CAP_PX:  # converged on what no corner detector leaves
+        failures.append(f"{np.sqrt(np.mean(e ** 2)):.3g} px rms left after the fit, more than corners are found to "
+                        f"({NOISE_CAP_PX:g} px): {smaller}")
     poses, board_pose, targets = problem.unpack(g)
     inliers = e <= limit
     train = _summary(problem, g, c, e) | {
@@ -718,6 +724,19 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
                     {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
                     np.column_stack([e, at_target_mm(problem, g, c, e)[0]]), g, wr)
+
+
+def _smaller_images(data: Pixels, cameras: dict[str, Camera]) -> str:
+    """What the points say of a camera file made for larger images than these (intrinsics of another
+    resolution: every point then lies in the top-left quarter of the image the file states, where the
+    pixel file's own rows cannot be refused as outside it), in words; "" when nothing."""
+    for k, name in enumerate(data.cameras):
+        cam, uv = cameras[name], data.uv[data.camera == k]
+        if len(uv) and uv[:, 0].max() < cam.width / 2 and uv[:, 1].max() < cam.height / 2:
+            return (f"camera {name}: every point lies in the top-left quarter of the {cam.width} x {cam.height} "
+                    f"image its intrinsics are for (u < {uv[:, 0].max():.0f}, v < {uv[:, 1].max():.0f}): intrinsics "
+                    f"of a larger resolution? give the camera's at the images' size, or scale fx fy cx cy by it")
+    return ""
 
 
 @dataclass(frozen=True)
