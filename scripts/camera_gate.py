@@ -2,7 +2,7 @@
 scripts/reproduce_camera.py (its docstring) over more seeds, each fitted with and without the gate (fit and
 oracle alike); writes the section "The significance gate on pixels" of docs/camera.md.
 
-    python scripts/camera_gate.py [--seeds 20]
+    python scripts/camera_gate.py [--seeds 20] [--write-only]
 """
 from __future__ import annotations
 
@@ -27,7 +27,12 @@ JUDGED = {"eye-in-hand": "fit", "eye-to-hand": "fit_registered", "eye-in-hand-ri
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--write-only", action="store_true", help="write docs/camera.md from the last run's figures")
     args = parser.parse_args()
+    saved = ROOT / "out" / "camera" / "gate.json"
+    if args.write_only:
+        write(json.loads(saved.read_text()), args.seeds)
+        return
     warnings.simplefilter("ignore")
     robot = load_robot(ROOT / "robots" / "industrial6r.yaml")
     truth = load_truth(read_yaml(ROOT / "robots" / "industrial6r.truth.yaml", "truth file"), robot)
@@ -46,7 +51,6 @@ def main():
                     row |= {f"{key}_{k}": r[k] for k in ("fit", "oracle", "fit_registered", "oracle_registered")}
                 rows.append(row)
                 print(json.dumps(row), flush=True)
-    saved = ROOT / "out" / "camera" / "gate.json"
     saved.parent.mkdir(parents=True, exist_ok=True)
     saved.write_text(json.dumps(rows))
     write(rows, args.seeds)
@@ -73,7 +77,22 @@ def write(rows: list[dict], seeds: int):
                          f"{none.max():.3f} | {np.median(ratio):.2f} ({ratio.min():.2f} to {ratio.max():.2f}) | "
                          f"{int(np.sum(ratio > 1))} of {len(on)} | {np.median(by['gate']):.2f}, {by['gate'].max():.2f} "
                          f"| {np.median(by['none']):.2f}, {by['none'].max():.2f} |")
-    write_section(HEADING, lines + [""])
+    ratio = {(r["kind"], r["noise"]): [] for r in rows}
+    for r in rows:
+        ratio[r["kind"], r["noise"]].append(r[f"none_{JUDGED[r['kind']]}"] / r[f"gate_{JUDGED[r['kind']]}"])
+
+    def said(kind):
+        on = [(noise, v) for (k, noise), v in ratio.items() if k == kind]
+        return (f"median {' and '.join(f'{np.median(v):.2f} at {noise} px' for noise, v in on)}; without worse in "
+                f"{' and '.join(str(int(np.sum(np.array(v) > 1))) for _, v in on)} of {len(on[0][1])}")
+
+    lines += ["", f"Against the truth, the gate costs the constant model eye-in-hand nothing the seeds resolve (without / "
+              f"with: {said('eye-in-hand')}); it helps eye-to-hand ({said('eye-to-hand')}) and the richer model most "
+              f"({said('eye-in-hand-rich')}). So it stays the default for pixels, as for a tracker. Eye-in-hand, the "
+              "fit / oracle ratios that move away from 1.00 with the gate are not the fit growing worse against the "
+              "truth: the gate holds different coefficients in the fit and in the oracle, which without it agree "
+              "to the digit.", ""]
+    write_section(HEADING, lines)
 
 
 if __name__ == "__main__":
