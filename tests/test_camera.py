@@ -299,6 +299,8 @@ def test_redundancy_with_cameras_says_a_marker_seen_from_one_direction_is_not_pl
     # stated as a blurrier camera's (2 px), the same images leave it undetermined along the ray, and say so
     [blurred] = pixel_redundancy(estimated, model, data, rig.cameras, noise_px=2.0)["targets"]
     assert not blurred["placed"] and blurred["reason"].startswith("target m1: the images see it from one direction")
+    with pytest.warns(UserWarning, match="target m1: the images see it from one direction .* places it where the fit"):
+        fit_pixels(estimated, model, data, rig.cameras, noise_px=2.0)
 
 
 def test_eye_to_hand_places_a_marker_left_to_estimate(arm):

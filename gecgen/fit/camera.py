@@ -470,7 +470,8 @@ PLACED_M = weak.PLAUSIBLE_M
 def _placed_along_rays(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
                        noise_px: float | None) -> list[dict]:
     """How well the images place each target left to estimate, the cameras' poses and the coefficients
-    kept fitted with it (about the nominal model): `std_mm` the 1-sigma along its worst determined direction, `off_ray_deg` that
+    kept fitted with it (linearised at poses g and coefficients c: the nominal model's before a fit, the
+    fit's after it): `std_mm` the 1-sigma along its worst determined direction, `off_ray_deg` that
     direction's angle from the mean ray to it (camera to marker, in the tool frame), `rays_span_deg`
     the largest angle of a ray to it from that mean (how far apart the directions it is seen from
     are), `placed` (std_mm within PLACED_M) and, when not, `reason`. A marker seen from one direction
@@ -706,6 +707,10 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
     names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
+    if free_g and converged and np.isfinite(e).all():
+        for target in _placed_along_rays(problem, g, c, kept, noise_px):
+            if not target["placed"]:
+                warnings.warn(f"{target['reason']}; the calibration places it where the fit put it", stacklevel=2)
     refined = problem.cameras_of(g)
     intrinsics_std = {}
     if intrinsics and free_g:
