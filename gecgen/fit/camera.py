@@ -610,10 +610,7 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
     e = np.linalg.norm(problem.residual(g, c), axis=1)
     before = _summary(problem, g, c, e)
 
-    def limit_of(e):
-        return _limit(e, loss)
-
-    limit = limit_of(e)
+    limit = _limit(e, loss)
     held = ()
     determinable = len(kept)
     if hold_weak and kept:
@@ -644,7 +641,7 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
             else:
                 break
             g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
-            new_limit = limit_of(e)
+            new_limit = _limit(e, loss)
             settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
             limit = new_limit
             if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
@@ -668,7 +665,7 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
             c = c.copy()
             c[list(insignificant)] = 0.0
             e = np.linalg.norm(problem.residual(g, c), axis=1)
-            g, c, e, limit, converged, it = solve(g, c, cols, e, limit_of(e))
+            g, c, e, limit, converged, it = solve(g, c, cols, e, _limit(e, loss))
             eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "insignificant", why)
                                                       for j, why in insignificant.items())], key=lambda x: x.index))
     kept = [int(j) for j in cols]
