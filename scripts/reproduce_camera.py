@@ -85,7 +85,7 @@ def registered_mm(p: np.ndarray, y: np.ndarray, scaled: bool = False) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum((pc - s * yc @ R.T) ** 2, axis=1))))
 
 
-def hand(robot, truth, model, seed: int, noise: float) -> dict:
+def hand(robot, truth, model, seed: int, noise: float, significance: bool = True) -> dict:
     rng = np.random.default_rng(seed)
     cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
     board = Board(9, 6, 0.04)
@@ -97,7 +97,7 @@ def hand(robot, truth, model, seed: int, noise: float) -> dict:
     Rb, tb = rig.board_pose
     out = {}
     for name, fixed in (("fit", None), ("oracle", np.array([*rotvec_t(R, t), *rotvec_t(Rb, tb)]))):
-        fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed)
+        fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed, significance=significance)
         Rbf, tbf = fit.board
         Rf, tf = fit.tool_camera()  # X_tool = Rf X_cam + tf
         T_true = true_tools(robot, truth, held)
@@ -129,7 +129,7 @@ def hand(robot, truth, model, seed: int, noise: float) -> dict:
     return out
 
 
-def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3) -> dict:
+def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, significance: bool = True) -> dict:
     from dataclasses import replace
 
     rng = np.random.default_rng(seed)
@@ -145,7 +145,7 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3) -> d
     fixed = np.array([v for c in cams for v in rotvec_t(*rig.poses[c.name])])
     out = {}
     for name, given in (("fit", None), ("oracle", fixed)):
-        fit = fit_pixels(robot, model, data, {c.name: c for c in cams}, fixed_poses=given)
+        fit = fit_pixels(robot, model, data, {c.name: c for c in cams}, fixed_poses=given, significance=significance)
         (Rt, tt), (Rf, tf) = rig.poses["cam1"], fit.poses["cam1"]
         p_true = true_tools(robot, truth, held)[:, :3, 3]
         p_true = (p_true @ Rt.T + tt - tf) @ Rf  # into the fit's world (the first camera's)
@@ -160,6 +160,20 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3) -> d
             out["eliminated"] = fit.eliminated
             out["held"], out["converged"] = len(fit.held), fit.converged
     return out
+
+
+def write_section(heading: str, lines: list[str]):
+    """docs/camera.md with its section under `heading` (a "## " line) replaced by `lines`, or added at the end."""
+    doc = ROOT / "docs" / "camera.md"
+    text = doc.read_text()
+    section = "\n".join(lines)
+    if heading in text:
+        start = text.index(heading)
+        end = text.find("\n## ", start + 1)
+        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    doc.write_text(text)
 
 
 #: measured by tests/test_camera_images.py (test_real_images_match_the_sources_calibration)

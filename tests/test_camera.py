@@ -2,6 +2,7 @@
 the fit against simulated truths (eye-in-hand and eye-to-hand), the files and their refusals."""
 import contextlib
 import io
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -13,7 +14,7 @@ from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera, read_board, read_cameras
 from gecgen.model.pixels import read_pixels, write_pixels
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, fit_pixels, fitted_tools, frame_robot
+from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, _smaller_images, fit_pixels, fitted_tools, frame_robot
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
@@ -143,7 +144,7 @@ def test_one_target_leaves_the_scale_and_says_so(arm):
 
 
 def test_pixel_file_round_trip_and_refusals(arm, tmp_path):
-    robot, truth, _ = arm
+    robot, truth, model = arm
     rig, *_, data = hand_rig(arm, n=4)
     path = tmp_path / "pixels.csv"
     write_pixels(path, robot, data)
@@ -160,6 +161,13 @@ def test_pixel_file_round_trip_and_refusals(arm, tmp_path):
     small = {"cam": replace(rig.cameras["cam"], width=640, height=480, cx=320.0, cy=240.0)}
     with pytest.raises(ModelError, match="outside camera cam's 640 x 480 image; intrinsics of another resolution"):
         read_pixels(path, robot, small, rig.board)
+    # intrinsics made for images twice the size: every row is inside that image, the fit fails, and says why
+    cam = rig.cameras["cam"]
+    large = {"cam": replace(cam, width=2 * cam.width, height=2 * cam.height, fx=2 * cam.fx, fy=2 * cam.fy,
+                            cx=2 * cam.cx, cy=2 * cam.cy)}
+    failed = fit_pixels(robot, model, read_pixels(path, robot, large, rig.board), large, rig.board)
+    assert failed.failures and "top-left quarter of the 2560 x 1920 image its intrinsics are for" in failed.failures[0]
+    assert _smaller_images(data, rig.cameras) == ""  # the images' own size: nothing said
 
 
 def test_camera_and_board_files_refuse_what_they_cannot_use(tmp_path):
@@ -283,6 +291,43 @@ def test_redundancy_with_cameras_names_what_pixels_cannot_give(arm, tmp_path):
     assert sum(d.startswith(SCALE) for d in details) == 1
     assert any(d.startswith(CAMERA_POSE) for d in details)
     assert out["n_identifiable"] + len(out["eliminated"]) == out["n_params"]
+    # what the fit would hold as weakly determined, merged by name into eliminated, as identify lists it
+    held = {e["param"]: e["detail"] for e in out["eliminated"] if e["reason"] == "held"}
+    assert held and held == {h["param"]: h["reason"] for h in out["held"]} and out["n_held"] == len(held)
+    fit = fit_pixels(robot1, model, data, rig.cameras)
+    assert [h["param"] for h in out["held"]] == [h.param for h in fit.held]
+
+
+def test_redundancy_with_cameras_says_a_marker_seen_from_one_direction_is_not_placed_along_its_ray(arm):
+    """One fixed camera; the wrist never turns, so the tool turns only with the first three joints and a
+    marker left to estimate is seen along nearly one ray: its weakest direction is that ray. With the
+    wrist turning the same camera places it several times better."""
+    from gecgen.fit.camera import pixel_redundancy
+
+    robot, truth, model = arm
+    robot = replace(robot, targets=MARKERS)
+    estimated = replace(robot, targets={**MARKERS, "m1": (0.0, 0.0, 0.0)}, estimated=("m1",))
+    cams = [Camera("cam1", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960)]
+    placed = {}
+    for wrist in (1, 0):
+        rng = np.random.default_rng(4)
+        span = np.radians([12, 10, 10, *(wrist * np.array([60, 40, 90]))])
+        rig, q = eye_to_hand(robot, truth, cams, np.array([[1.9, -2.4, 1.7]]), np.array([2.0, 0, 1.0]),
+                             np.radians([0, -80, -100, 0, 30, 0]), span, 30, rng)
+        data = simulate_pixels(robot, truth, rig, q, 0.2, rng)
+        [placed[wrist]] = pixel_redundancy(estimated, model, data, rig.cameras, noise_px=0.2)["targets"]
+    one, turning = placed[0], placed[1]
+    assert one["target"] == "m1" and one["rays_span_deg"] < 15 < 60 < turning["rays_span_deg"]
+    assert one["off_ray_deg"] < 2 and one["std_mm"] > 5 * turning["std_mm"]
+    assert one["placed"] and turning["placed"] and "reason" not in one  # a millimetre at 0.2 px: placed, if badly
+    # the fit on these images puts it within a few of that 1-sigma of where it is
+    fit = fit_pixels(estimated, model, data, rig.cameras, noise_px=0.2)
+    assert np.linalg.norm(fit.targets["m1"] - MARKERS["m1"]) < 4e-3 * one["std_mm"]
+    # stated as a blurrier camera's (2 px), the same images leave it undetermined along the ray, and say so
+    [blurred] = pixel_redundancy(estimated, model, data, rig.cameras, noise_px=2.0)["targets"]
+    assert not blurred["placed"] and blurred["reason"].startswith("target m1: the images see it from one direction")
+    with pytest.warns(UserWarning, match="target m1: the images see it from one direction .* places it where the fit"):
+        fit_pixels(estimated, model, data, rig.cameras, noise_px=2.0)
 
 
 def test_eye_to_hand_places_a_marker_left_to_estimate(arm):
@@ -331,6 +376,44 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     # what holding spares: the same images fitted with every direction free do not settle
     free = fit_pixels(robot, model, data, rig.cameras, max_iter=15, hold_weak=False)
     assert not free.converged and free.failures
+
+
+def test_with_the_noise_stated_a_value_beyond_a_plausible_size_is_held_as_for_a_tracker(arm, tmp_path):
+    """A camera on the tool, every frame's errors linear in its joint: with the corners' noise stated, the fit
+    that stands still gives a generalized error beyond a plausible size along directions the images determine
+    weakly; those are held too, at no cost beyond the noise, and the warning, `held` and the verdict say so.
+    The constant model on the same images holds nothing."""
+    from gecgen.fit.camera import _noted
+    from gecgen.report.verdict import pixels_next_step
+    from gecgen.fit import weak
+
+    robot, truth, constant = arm
+    (tmp_path / "linear.errors.yaml").write_text(
+        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
+    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
+    rig, _, _, data = hand_rig(arm, n=40, seed=3)
+    cm = CompiledModel(frame_robot(robot), model)
+    plain, _ = _noted(robot, model, data, rig.cameras, rig.board, 0.2, {})
+    before, where = weak.largest(cm, data, plain.c)
+    assert before > 1.5 and not plain.failures
+    with pytest.warns(UserWarning, match=rf"the fit gives {where} .* times a plausible size") as caught:
+        fit = fit_pixels(robot, model, data, rig.cameras, rig.board, noise_px=0.2)
+    assert weak.largest(cm, data, fit.c)[0] <= 1.0 and not fit.failures
+    added = {h.param for h in fit.held} - {h.param for h in plain.held}
+    assert added and all(h.reason and h.beyond > 1 for h in fit.held)
+    assert added <= {e.param for e in fit.eliminated if e.reason == "held"}
+    assert fit.train["rms_px"] < 1.01 * plain.train["rms_px"]  # within the noise: held, not fitted away
+    assert sum("plausible size" in str(w.message) for w in caught) == 1  # only the returned fit speaks
+    result = {"train": fit.train, "before": fit.before, "n_identifiable": len(fit.kept),
+              "eliminated": [e.to_dict() for e in fit.eliminated], "held": [h.to_dict() for h in fit.held]}
+    limits = pixels_next_step(result, None, {}, "gecgen evaluate").limits
+    assert any("held at zero as the data determine them too weakly" in line for line in limits)
+    # well excited: the constant model on the same images carries no implausible value and holds none
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        steady = fit_pixels(robot, constant, data, rig.cameras, rig.board, noise_px=0.2)
+    assert not steady.held and weak.largest(CompiledModel(frame_robot(robot), constant), data, steady.c)[0] < 1
+    assert not any("plausible size" in str(w.message) for w in caught)
 
 
 def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_similarity_fit(arm, rng):

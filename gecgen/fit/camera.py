@@ -36,7 +36,7 @@ from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust, weak
-from gecgen.fit.identify import RSS_TOL, structural_analysis
+from gecgen.fit.identify import HOLD_P, RSS_TOL, WIDEN, structural_analysis
 from gecgen.fit.redundancy import Eliminated
 from gecgen.fit.significance import judge
 from gecgen.runtime.compiled import CompiledModel
@@ -427,12 +427,98 @@ def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Ca
 
 @one_blas_thread
 def pixel_redundancy(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera],
-                     board: Board | None = None) -> dict:
-    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`,
-    `eliminated` (structural, and what pixels cannot give: `camera pose`, `scale`, not excited)."""
-    _, _, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+                     board: Board | None = None, noise_px: float | None = None) -> dict:
+    """What image points leave undetermined, without a fit: `n_params`, `n_identifiable`, `eliminated`
+    (structural; what pixels cannot give: `camera pose`, `scale`, not excited; and, merged by name, the
+    coefficients `fit_pixels` would hold as weakly determined against the noise, reason `held`, as it
+    holds them before its first step), `held` (those, each with why, as `fit_pixels` lists them) and
+    `targets` (every target left to estimate: how well the images place it, `_placed_along_rays`).
+    noise_px: the corners' noise per coordinate (px), else the linearised fit's residual at the nominal
+    model, at most NOISE_CAP_PX."""
+    problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, None, "auto")
+    c = np.zeros(problem.cm.dims.nc)
+    e = np.linalg.norm(problem.residual(g, c), axis=1)
+    wr = robust.weights(e, _limit(e, "cauchy"), "cauchy")
+    held = ()
+    if kept:
+        kept, held, eliminated = _with_held(problem, g, c, kept, eliminated, wr, True, noise_px)
     return {"n_params": len(model.coefficients), "n_identifiable": len(kept),
-            "eliminated": [e.to_dict() for e in eliminated]}
+            **({"n_held": len(held)} if held else {}), "eliminated": [x.to_dict() for x in eliminated],
+            "held": [h.to_dict() for h in held], "targets": _placed_along_rays(problem, g, c, kept, noise_px)}
+
+
+def _limit(e: np.ndarray, loss: str) -> float:
+    """The outlier limit (px) of residual lengths e (R,): robust.THRESHOLD times their noise, from the median."""
+    return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
+
+
+def _with_held(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int], eliminated: tuple,
+               wr: np.ndarray, free_g: bool, noise_px: float | None):
+    """kept without the coefficients the images determine too weakly (`_hold_weak`), those held
+    (`weak.Held`), and eliminated with them merged in by index (reason `held`)."""
+    kept, held = _hold_weak(problem, g, c, kept, wr, free_g, noise_px)
+    merged = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
+                          key=lambda x: x.index))
+    return kept, held, merged
+
+
+#: a target left to estimate whose position the images fix only to more than this (m, 1 sigma, along
+#: its weakest direction) is not placed by them: as a generalized error of that size (`weak.PLAUSIBLE_M`)
+PLACED_M = weak.PLAUSIBLE_M
+
+
+def _placed_along_rays(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
+                       noise_px: float | None) -> list[dict]:
+    """How well the images place each target left to estimate, the cameras' poses and the coefficients
+    kept fitted with it (linearised at poses g and coefficients c: the nominal model's before a fit, the
+    fit's after it): `std_mm` the 1-sigma along its worst determined direction, `off_ray_deg` that
+    direction's angle from the mean ray to it (camera to marker, in the tool frame), `rays_span_deg`
+    the largest angle of a ray to it from that mean (how far apart the directions it is seen from
+    are), `placed` (std_mm within PLACED_M) and, when not, `reason`. A marker seen from one direction
+    is fixed across its ray by a pixel and along it only by the spread of the rays."""
+    if not problem.estimated:
+        return []
+    cols = np.array(kept, int)
+    # every point weighs 1: before a fit a target left to estimate sits at the tool origin, and robust
+    # weights of the residual there would count its own points out
+    wr = np.ones(len(problem.data.uv))
+    A, b, scale = _system(problem, g, c, cols, wr, True)
+    dof = max(2 * float(wr.sum()) - A.shape[1], 1.0)
+    sigma = noise_px if noise_px is not None else min(float(np.linalg.norm(
+        b - A @ np.linalg.lstsq(A, b, rcond=None)[0]) / np.sqrt(dof)), NOISE_CAP_PX)
+    o, R, _ = problem.frames(c)
+    poses, _, targets = problem.unpack(g)
+    d = problem.data
+    k0 = 6 * len(problem.cams)
+    out = []
+    for i, name in enumerate(problem.estimated):
+        own = list(range(k0 + 3 * i, k0 + 3 * i + 3))
+        rest = [j for j in range(A.shape[1]) if j not in own]
+        # its three columns after everything else has taken what it can: the bottom block of R
+        Rt = np.linalg.qr(A[:, rest + own], mode="r")[-3:, -3:]
+        with np.errstate(all="ignore"):
+            cov = sigma ** 2 * np.linalg.pinv(Rt.T @ Rt) / np.outer(scale[own], scale[own])
+        w, V = np.linalg.eigh(cov)
+        worst = V[:, -1]
+        rows = np.nonzero(np.array(d.points)[d.point] == name)[0]
+        at = problem.at[0][rows], problem.at[1][rows]
+        x = np.einsum("rij,j->ri", R[at], targets[name]) + o[at]
+        centres = np.array([-Rc.T @ tc for Rc, tc in poses])[d.camera[rows]]
+        rays = np.einsum("rji,rj->ri", R[at], x - centres)  # in the tool frame
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        mean = rays.mean(axis=0) / np.linalg.norm(rays.mean(axis=0))
+        span = float(np.degrees(np.arccos(np.clip(rays @ mean, -1, 1)).max()))
+        std_mm = 1e3 * float(np.sqrt(max(w[-1], 0.0)))
+        entry = {"target": name, "std_mm": std_mm,
+                 "off_ray_deg": float(np.degrees(np.arccos(min(abs(float(worst @ mean)), 1.0)))),
+                 "rays_span_deg": span, "placed": bool(std_mm <= 1e3 * PLACED_M)}
+        if not entry["placed"]:
+            entry["reason"] = (f"target {name}: the images see it from one direction (its rays span {span:.3g} deg on "
+                               f"the tool): its position along them is determined only to {std_mm:.3g} mm (1 sigma); "
+                               f"see it from directions that differ more (poses that turn the tool, or another "
+                               f"camera), or give its position in the robot file")
+        out.append(entry)
+    return out
 
 
 @one_blas_thread  # small dense algebra: more threads than one on a shared machine only contend
@@ -440,6 +526,70 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
                intrinsics: bool = False, significance: bool = True) -> PixelFit:
+    """`_fit_pixels` (its docstring says what it does and what each option means), and then, as identify
+    does for a tracker (`identify._plausible`), when the corners' noise is stated (noise_px) and the fit
+    stands but gives a generalized error beyond a plausible size (`weak.largest`): the same images
+    fitted again with the directions determined to within WIDEN times a plausible size held, in turn, as
+    long as what holding them costs in residual is what the stated noise explains (`_costs_only_noise`);
+    the fit with the fewest held that lowers the largest value most is returned, with a warning that
+    says so, its held coefficients in `held` with why."""
+    options = dict(loss=loss, max_iter=max_iter, fixed_poses=fixed_poses, backend=backend, hold_weak=hold_weak,
+                   intrinsics=intrinsics, significance=significance)
+    fit, notes = _noted(robot, model, data, cameras, board, noise_px, options)
+    if hold_weak and noise_px is not None and not fit.failures:
+        cm = CompiledModel(frame_robot(robot), model, backend)
+        size, where = weak.largest(cm, data, fit.c)
+        best, best_size, best_notes = fit, size, notes
+        for widen in WIDEN if size > 1.0 else ():
+            held, held_notes = _noted(robot, model, data, cameras, board, noise_px * widen, options)
+            if held.failures or not _costs_only_noise(fit, held, noise_px, fixed_poses is None):
+                break
+            after, _ = weak.largest(cm, data, held.c)
+            if len(held.held) > len(fit.held) and after < best_size:
+                best, best_size, best_notes = held, after, held_notes
+            if best_size <= 1.0:
+                break
+        if best is not fit:
+            fit, notes = best, [
+                f"the fit gives {where} {size:.3g} times a plausible size ({1e3 * weak.PLAUSIBLE_M:g} mm, "
+                f"{1e3 * weak.PLAUSIBLE_RAD:g} mrad) along directions the images determine only weakly: refitted with "
+                f"those held ({best_size:.3g} times at most), the residual {fit.train['rms_px']:.4g} -> "
+                f"{best.train['rms_px']:.4g} px rms, within the noise", *best_notes]
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return fit
+
+
+def _noted(robot, model, data, cameras, board, noise_px, options) -> tuple[PixelFit, list[str]]:
+    """`_fit_pixels` and the warnings it gives, not yet warned: of the fits `fit_pixels` tries, only the
+    one it returns speaks."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = _fit_pixels(robot, model, data, cameras, board, noise_px=noise_px, **options)
+    return fit, [str(w.message) for w in caught]
+
+
+def _rss(fit: PixelFit, free_g: bool) -> float:
+    """The fit's weighted residual sum of squares (px^2), from its residual per coordinate and degrees of
+    freedom (`_uncertainty`'s: the poses counted when fitted, free_g)."""
+    unknowns = len(fit.kept) + (len(fit.g) if free_g else 0)
+    return fit.sigma_px ** 2 * max(2 * float(fit.weights.sum()) - unknowns, 1.0)
+
+
+def _costs_only_noise(full: PixelFit, held: PixelFit, noise_px: float, free_g: bool) -> bool:
+    """Whether the held fit's larger residual is what the noise alone makes of the coefficients it holds:
+    the rise in the weighted residual sum of squares within the identify.HOLD_P chi-square quantile, in
+    units of the stated noise noise_px (px per coordinate; `identify._costs_only_noise` for a tracker)."""
+    from scipy.stats import chi2
+
+    rise = _rss(held, free_g) - _rss(full, free_g)
+    return rise / noise_px ** 2 <= chi2.ppf(HOLD_P, max(len(full.kept) - len(held.kept), 1))
+
+
+def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
+                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
+                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
+                intrinsics: bool = False, significance: bool = True) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
@@ -460,16 +610,12 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     e = np.linalg.norm(problem.residual(g, c), axis=1)
     before = _summary(problem, g, c, e)
 
-    def limit_of(e):
-        return np.inf if loss == "l2" else robust.THRESHOLD * max(float(np.median(e)) / MEDIAN_CHI2, 1e-6)
-
-    limit = limit_of(e)
+    limit = _limit(e, loss)
     held = ()
     determinable = len(kept)
     if hold_weak and kept:
-        kept, held = _hold_weak(problem, g, c, kept, robust.weights(e, limit, loss), free_g, noise_px)
-        eliminated = tuple(sorted([*eliminated, *(Eliminated(h.param, h.index, "held", h.reason) for h in held)],
-                                  key=lambda x: x.index))
+        kept, held, eliminated = _with_held(problem, g, c, kept, eliminated, robust.weights(e, limit, loss), free_g,
+                                            noise_px)
     def solve(g, c, cols, e, limit):
         """Levenberg-Marquardt over the poses (free_g) and c[cols], robustly reweighted."""
         lam, converged, it = 0.0, False, 0
@@ -495,7 +641,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             else:
                 break
             g, c, e, lam = g_t, c_t, e_t, lam / 10 if lam > 1e-9 else 0.0
-            new_limit = limit_of(e)
+            new_limit = _limit(e, loss)
             settled = loss == "l2" or abs(new_limit - limit) <= 0.01 * limit
             limit = new_limit
             if settled and obj - obj_t <= RSS_TOL * max(obj, 1e-30):
@@ -519,7 +665,7 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
             c = c.copy()
             c[list(insignificant)] = 0.0
             e = np.linalg.norm(problem.residual(g, c), axis=1)
-            g, c, e, limit, converged, it = solve(g, c, cols, e, limit_of(e))
+            g, c, e, limit, converged, it = solve(g, c, cols, e, _limit(e, loss))
             eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "insignificant", why)
                                                       for j, why in insignificant.items())], key=lambda x: x.index))
     kept = [int(j) for j in cols]
@@ -543,6 +689,12 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
                                      f"px rms left): the images may not determine this model (fewer terms, e.g. "
                                      f"--errors with constant errors, or more images), or the camera file is not "
                                      f"this camera's"]
+    smaller = _smaller_images(data, cameras)
+    if smaller and not converged:
+        failures[0] += f" ({smaller})"
+    elif smaller and np.sqrt(np.mean(e ** 2)) > NOISE_CAP_PX:  # converged on what no corner detector leaves
+        failures.append(f"{np.sqrt(np.mean(e ** 2)):.3g} px rms left after the fit, more than corners are found to "
+                        f"({NOISE_CAP_PX:g} px): {smaller}")
     poses, board_pose, targets = problem.unpack(g)
     inliers = e <= limit
     train = _summary(problem, g, c, e) | {
@@ -552,6 +704,10 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     names = [f"q{i + 1}" for i in range(robot.n)] + list(WRENCH) + list(model.aux)
     values = np.column_stack([d.q, d.w, *(() if problem.inputs[2] is None else (problem.inputs[2],))])
     ranges = {n: [float(v.min()), float(v.max())] for n, v in zip(names, values.T)}
+    if free_g and converged and np.isfinite(e).all():
+        for target in _placed_along_rays(problem, g, c, kept, noise_px):
+            if not target["placed"]:
+                warnings.warn(f"{target['reason']}; the calibration places it where the fit put it", stacklevel=2)
     refined = problem.cameras_of(g)
     intrinsics_std = {}
     if intrinsics and free_g:
@@ -570,6 +726,19 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
                     outliers, it, converged, loss, tuple(failures), std, cov, sigma, ranges, held, scale,
                     {cam.name: cam for cam in refined} if intrinsics else None, intrinsics_std or None,
                     np.column_stack([e, at_target_mm(problem, g, c, e)[0]]), g, wr)
+
+
+def _smaller_images(data: Pixels, cameras: dict[str, Camera]) -> str:
+    """What the points say of a camera file made for larger images than these (intrinsics of another
+    resolution: every point then lies in the top-left quarter of the image the file states, where the
+    pixel file's own rows cannot be refused as outside it), in words; "" when nothing."""
+    for k, name in enumerate(data.cameras):
+        cam, uv = cameras[name], data.uv[data.camera == k]
+        if len(uv) and uv[:, 0].max() < cam.width / 2 and uv[:, 1].max() < cam.height / 2:
+            return (f"camera {name}: every point lies in the top-left quarter of the {cam.width} x {cam.height} "
+                    f"image its intrinsics are for (u < {uv[:, 0].max():.0f}, v < {uv[:, 1].max():.0f}): intrinsics "
+                    f"of a larger resolution? give the camera's at the images' size, or scale fx fy cx cy by it")
+    return ""
 
 
 @dataclass(frozen=True)

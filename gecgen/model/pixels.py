@@ -96,7 +96,8 @@ def read_pixels(path, robot: Robot, cameras: dict[str, Camera], board: Board | N
                                        | (uv[:, 1] > cm.height - 0.5)))[0]
         require(not len(out), f"{where}: row {out[0] + 2 if len(out) else 0}, columns u v: "
                               f"{uv[out[0]].tolist() if len(out) else ''} outside camera {c}'s {cm.width} x "
-                              f"{cm.height} image; intrinsics of another resolution, or the wrong camera?")
+                              f"{cm.height} image; intrinsics of another resolution, or the wrong camera? give the "
+                              f"camera file this camera's intrinsics at the images' size (or scale fx fy cx cy by it)")
     key = (ids * len(names) + cam) * len(points) + pt
     _, first = np.unique(key, return_index=True)
     dup = np.setdiff1d(np.arange(len(table)), first)

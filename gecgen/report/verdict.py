@@ -128,20 +128,8 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
                       "zero: the poses do not excite them.")
         steps.append(f"measure more poses where they are excited (designed to add to the training data): "
                      f"`{commands.more_poses}`, then calibrate again on both")
-    # one line per fix: a direction known only to some times a plausible size says its own times, so
-    # those coefficients are said together, with the range of them
-    by_fix: dict[str, list[dict]] = {}
-    for h in weak or ():
-        by_fix.setdefault(h["reason"].partition("; held at zero")[2].strip(" ()"), []).append(h)
-    for fix, hs in by_fix.items():
-        causes = {h["reason"].partition("; held at zero")[0] for h in hs}
-        beyond = [h["beyond_plausible"] for h in hs if h.get("beyond_plausible") is not None]
-        cause = causes.pop() if len(causes) == 1 else (
-            f"their directions are known only to {min(beyond):.3g} to {max(beyond):.3g} times a plausible size"
-            if beyond else "; ".join(sorted(causes)))
-        n = len(hs)
-        limits.append(f"{n} coefficient{'s are' if n > 1 else ' is'} held at zero as the data determine "
-                      f"{'them' if n > 1 else 'it'} too weakly: {cause}.")
+    for limit, fix in weak_limits(weak):
+        limits.append(limit)
         if fix:  # the data's own cause comes before the general advice to measure more
             steps.insert(min(len(steps), 0 if held_out else 1), fix)
     if extrapolation:
@@ -290,6 +278,27 @@ def iso9283_next_step(result: dict, tolerance_mm: float | None, robot: str) -> A
     return Assessment(verdict, statement, limits, step[0].upper() + step[1:] + ".", tolerance_mm)
 
 
+def weak_limits(weak: list[dict] | None) -> list[tuple[str, str]]:
+    """What the coefficients held as weakly determined (a fit's `held`, each with its reason: why the data
+    leave it, and the fix in parentheses) say of a calibration: per fix, the limit in words and the fix
+    ("" when none is said). A direction known only to some times a plausible size says its own times, so
+    those coefficients are said together, with the range of them."""
+    by_fix: dict[str, list[dict]] = {}
+    for h in weak or ():
+        by_fix.setdefault(h["reason"].partition("; held at zero")[2].strip(" ()"), []).append(h)
+    out = []
+    for fix, hs in by_fix.items():
+        causes = {h["reason"].partition("; held at zero")[0] for h in hs}
+        beyond = [h["beyond_plausible"] for h in hs if h.get("beyond_plausible") is not None]
+        cause = causes.pop() if len(causes) == 1 else (
+            f"their directions are known only to {min(beyond):.3g} to {max(beyond):.3g} times a plausible size"
+            if beyond else "; ".join(sorted(causes)))
+        n = len(hs)
+        out.append((f"{n} coefficient{'s are' if n > 1 else ' is'} held at zero as the data determine "
+                    f"{'them' if n > 1 else 'it'} too weakly: {cause}.", fix))
+    return out
+
+
 def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple[int, int]],
                      evaluate: str) -> Assessment:
     """The verdict on a calibration from image points (`gecgen identify --cameras`'s result): its
@@ -322,6 +331,8 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
         limits.append(f"The images determine {kept} of the {kept + len(weak)} coefficients the model can have; "
                       f"{len(weak)} {'is' if len(weak) == 1 else 'are'} held at zero, too weakly determined "
                       f"(\"Eliminated parameters\" says why).")
+        # those held as weakly determined, by cause, as for a tracker; the fixes are the images' own
+        limits += [limit for limit, _ in weak_limits(result.get("held"))]
         steps.append("record more images at poses that turn the joints those coefficients name, and identify again")
     for name, (cells, total) in coverage.items():
         if cells < total:
