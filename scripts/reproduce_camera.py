@@ -162,20 +162,6 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, sign
     return out
 
 
-def write_section(heading: str, lines: list[str]):
-    """docs/camera.md with its section under `heading` (a "## " line) replaced by `lines`, or added at the end."""
-    doc = ROOT / "docs" / "camera.md"
-    text = doc.read_text()
-    section = "\n".join(lines)
-    if heading in text:
-        start = text.index(heading)
-        end = text.find("\n## ", start + 1)
-        text = text[:start] + section + ("\n" + text[end + 1:] if end >= 0 else "")
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    doc.write_text(text)
-
-
 #: measured by tests/test_camera_images.py (test_real_images_match_the_sources_calibration)
 REAL_IMAGES = (
     "Detection on real photographs: `gecgen import --images` on OpenCV's 13 sample photographs of a "
