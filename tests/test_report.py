@@ -342,13 +342,37 @@ def test_a_pixel_calibration_is_judged_against_the_stated_corner_noise():
               "eliminated": [{"param": "2.ep:1", "reason": "insignificant"},
                              {"param": "0.ez:1", "reason": "structural"}]}
     command = "gecgen evaluate cal.json HELD_OUT_PIXELS.csv --cameras cams.yaml"
-    at = pixels_next_step(result, overall(0.2, 4000, 0.2), {"cam": (16, 16)}, command)
-    beyond = pixels_next_step(result, overall(0.25, 4000, 0.2), {"cam": (9, 16)}, command)
+    px = 1e-3  # overall() takes m and reports mm: px in, px out
+    at = pixels_next_step(result, overall(0.2 * px, 4000, 0.2 * px), {"cam": (16, 16)}, command)
+    beyond = pixels_next_step(result, overall(0.25 * px, 4000, 0.2 * px), {"cam": (9, 16)}, command)
     assert at.verdict == AT_NOISE and beyond.verdict == BEYOND_NOISE
     assert at.next_step.startswith(f"Score the calibration on images it was not fitted on: `{command}`; then record")
     assert "The images determine 10 of the 11 coefficients the model can have; 1 is held" in " ".join(at.limits)
     assert "--refine-intrinsics" in beyond.next_step and any("9 of 16 cells" in line for line in beyond.limits)
+    assert any("the residual is 0.25 px per coordinate against the stated 0.2 px" in line for line in beyond.limits)
     assert not any("cells" in line for line in at.limits)
+    assert not any("less than half the noise stated" in line for line in at.limits + beyond.limits)
+    overstated = pixels_next_step(result, overall(0.2 * px, 4000, 0.5 * px), {"cam": (16, 16)}, command)
+    assert overstated.verdict == AT_NOISE
+    assert any("0.2 px per coordinate) is less than half the noise stated (0.5 px)" in line for line in overstated.limits)
+    assert "measure a few poses twice" in overstated.next_step
+
+
+def test_a_noise_stated_far_above_the_residual_is_named_as_such():
+    """identify --noise-mm 10 on data the model fits to 0.099 mm per coordinate said the residual was the
+    instrument's noise: a figure that large hides effects nearly that size, and the verdict says so."""
+    from gecgen.report.verdict import AT_NOISE, Commands, Noise, assess
+
+    commands = Commands("gecgen diagnose R D", "gecgen design R --given D", "gecgen evaluate C V", "gecgen export C")
+    kw = dict(after={"rms_mm": 0.17, "max_mm": 0.4}, before=None, held_out=False, n_poses=40, tolerance_mm=None,
+              held=None, n_train_poses=40, extrapolation={}, inside=None, relative=False, commands=commands)
+    far = assess(noise=Noise(0.099, 10.0, False, "stated (--noise-mm)"), **kw)
+    near = assess(noise=Noise(0.099, 0.1, False, "stated (--noise-mm)"), **kw)
+    assert far.verdict == near.verdict == AT_NOISE
+    assert any("less than half the noise stated (10 mm)" in line for line in far.limits)
+    assert not any("is the instrument's noise" in line for line in far.limits)
+    assert any("is the instrument's noise (0.1 mm" in line for line in near.limits)
+    assert not any("less than half" in line for line in near.limits)
 
 
 def _reads_only_what_exists_or_is_written(step: str, folder) -> None:

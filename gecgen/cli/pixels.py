@@ -74,7 +74,8 @@ def identified(args) -> dict:
     if args.noise_px is not None:
         fitted = (len(fit.kept) + 6 * (len(fit.poses) + (fit.board is not None))
                   + sum(len(v) for v in (fit.intrinsics_std or {}).values()))
-        noise = overall(fit.sigma_px, 2 * len(data.uv) - fitted, args.noise_px)
+        # overall() takes metres and reports mm: px scaled by 1e-3 come back as px (chi-square is scale-free)
+        noise = overall(1e-3 * fit.sigma_px, 2 * len(data.uv) - fitted, 1e-3 * args.noise_px)
     evaluate = (f"gecgen evaluate {quote(str(out))} HELD_OUT_PIXELS.csv --cameras {quote(str(args.cameras))}"
                 + (f" --board {quote(str(args.board))}" if args.board else ""))
     assessment = pixels_next_step(result, noise, image_coverage(data, cameras), evaluate)

@@ -17,6 +17,9 @@ AT_NOISE, BEYOND_NOISE, NOISE_UNKNOWN = "at the noise", "beyond the noise", "noi
 PHRASE = {MEETS: "It meets", DOES_NOT_MEET: "It does not meet", CANNOT_TELL: "These poses cannot tell whether it meets"}
 #: an interval wider than this share of its RMS is too few poses to say much
 WIDE_INTERVAL = 0.25
+#: a residual below this share of the stated noise says the noise stated is too large: at the degrees of
+#: freedom of any calibration, a true 1 sigma leaves a residual this low with vanishing probability
+FAR_BELOW = 0.5
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,15 @@ class Assessment:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def _overstated(sigma: float, noise: float, unit: str) -> tuple[str, str]:
+    """The limit and the step when a fit's residual (sigma per coordinate) is far below the noise stated."""
+    return (f"The fit's residual ({sigma:.3g} {unit} per coordinate) is less than half the noise stated ({noise:.3g} "
+            f"{unit}): that figure is larger than this set-up's 1 sigma (a maker's bound over its whole range?), "
+            f"and judged against it the model could miss effects nearly that large unseen.",
+            "state this set-up's own 1 sigma, or measure a few poses twice so that the noise is pooled from the data, "
+            "and run again")
 
 
 def _interval(score: dict) -> tuple[float, float] | None:
@@ -149,6 +161,10 @@ def assess(*, after: dict, before: dict | None, held_out: bool, n_poses: int | N
     if noise is None:
         limits.append("The instrument noise is not known, so whether the model explains the robot cannot be decided.")
         steps.append(f"state the instrument's noise per coordinate ({commands.noise}) and run again")
+    elif noise.sigma_mm < FAR_BELOW * noise.noise_mm:
+        limit, step = _overstated(noise.sigma_mm, noise.noise_mm, "mm")
+        limits.append(limit)
+        steps.append(step)
     elif not noise.beyond:
         limits.append(f"The fit's residual ({noise.sigma_mm:.3g} mm per coordinate) is the instrument's noise "
                       f"({noise.noise_mm:.3g} mm, {noise.source}): a larger model will not lower it; a better "
@@ -325,6 +341,10 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
                      "model (`--errors`)")
     else:
         verdict = AT_NOISE
+        if noise["sigma_mm"] < FAR_BELOW * noise["noise_mm"]:
+            limit, step = _overstated(noise["sigma_mm"], noise["noise_mm"], "px")
+            limits.append(limit)
+            steps.append(step)
     weak = [e["param"] for e in result["eliminated"] if e["reason"] in ("insignificant", "held")]
     if weak:
         kept = result["n_identifiable"]
