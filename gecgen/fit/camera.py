@@ -901,19 +901,22 @@ def _intrinsics(cam: Camera) -> dict:
             "width": cam.width, "height": cam.height}
 
 
-def _differing(given: dict, recorded, where: str) -> str | None:
-    """The first key of `recorded` (a calibration's record, read from `where`) whose value `given`
-    differs from beyond `SAME`, None when none does; a record that is not a mapping of the keys of
-    `given` to numbers, strings or lists of numbers is refused."""
-    ok = isinstance(recorded, dict) and set(recorded) <= set(given)
-    require(ok and all(isinstance(v, (str, int, float, list)) for v in recorded.values()),
-            f"{where}: the board's or cameras' record is not one gecgen writes ({', '.join(given)}); identify again")
-    for key, value in recorded.items():
-        if isinstance(value, str) or isinstance(given[key], str):
-            if value != given[key]:
+def _differing(given: dict, recorded, where: str, keys: dict) -> str | None:
+    """The first key of `recorded` (a calibration's record, read from `where`, of some of `keys`) whose
+    value `given` lacks or differs from beyond `SAME`, None when none does; a record that is not a
+    mapping of `keys` to numbers, strings or lists of numbers is refused."""
+    ok = isinstance(recorded, dict) and set(recorded) <= set(keys)
+    require(ok and all(isinstance(v, (str, int, float)) or isinstance(v, list) and all(isinstance(x, (int, float))
+                                                                                     for x in v)
+                       for v in recorded.values()),
+            f"{where}: the board's or cameras' record is not one gecgen writes ({', '.join(keys)}); identify again")
+    for key in (k for k in keys if k in recorded):
+        value, mine = recorded[key], given.get(key)
+        if isinstance(value, str) or not isinstance(mine, (int, float, list)):
+            if value != mine:
                 return key
             continue
-        a, b = np.asarray(given[key], float), np.asarray(value, float)
+        a, b = np.asarray(mine, float), np.asarray(value, float)
         if a.shape != b.shape or not np.allclose(a, b, rtol=SAME, atol=1e-9):
             return key
     return None
@@ -934,9 +937,9 @@ def refuse_another_rig(calibration, where: str, cameras: dict[str, Camera], came
     recorded = report.get("board_geometry")
     if board is not None and recorded is not None:
         given = _geometry(board)
-        key = _differing(given, recorded, f"{where}: board_geometry")
+        key = _differing(given, recorded, f"{where}: board_geometry", BOARD_KEYS)
         unit = BOARD_KEYS.get(key, "")
-        require(key is None, f"{board.source}, key '{key}': {_shown(given.get(key), unit)} against the "
+        require(key is None, f"{board.source}, key '{key}': {_shown(given.get(key, 'none'), unit)} against the "
                              f"calibration's {_shown(recorded.get(key), unit)} ({where}); give the board file the "
                              f"calibration was made with, or identify again with this board")
     recorded = report.get("camera_intrinsics") or {}
@@ -946,7 +949,7 @@ def refuse_another_rig(calibration, where: str, cameras: dict[str, Camera], came
         given, record = _intrinsics(cameras[name]), recorded[name]
         if name in refined and isinstance(record, dict):  # scored with the refined values: the image size counts
             record = {k: v for k, v in record.items() if k not in REFINED_KEYS}
-        key = _differing(given, record, f"{where}: camera_intrinsics.{name}")
+        key = _differing(given, record, f"{where}: camera_intrinsics.{name}", CAMERA_KEYS)
         unit = CAMERA_KEYS.get(key, "")
         require(key is None, f"{cameras_file}, camera '{name}', key '{key}': {_shown(given.get(key), unit)} against "
                              f"the calibration's {_shown(record.get(key), unit)} ({where}); give the camera file the "
