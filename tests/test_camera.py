@@ -2,6 +2,7 @@
 the fit against simulated truths (eye-in-hand and eye-to-hand), the files and their refusals."""
 import contextlib
 import io
+import json
 import warnings
 from dataclasses import replace
 
@@ -350,7 +351,7 @@ def test_a_pixel_calibration_exports(arm, tmp_path):
     rig, *_, data = hand_rig(arm, n=40)
     fit = fit_pixels(robot, model, data, rig.cameras, rig.board)
     assert fit.ranges["q1"] == [data.q[:, 0].min(), data.q[:, 0].max()]
-    save(calibration_of(robot, model, fit), tmp_path / "cal.json")
+    save(calibration_of(robot, model, fit, rig.cameras, rig.board), tmp_path / "cal.json")
     out = run_json("export", tmp_path / "cal.json", "--c", tmp_path / "c")
     assert (tmp_path / "c").is_dir() and out
 
@@ -483,6 +484,13 @@ def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(a
     said = [w for w in fit["warnings"] if w.startswith("camera cam: the images determine ")]
     named = said[0].split("determine ")[1].split(" only")[0].split(", ") if said else []
     assert sorted(named) == sorted(k for k, m in moved.items() if m > 1.0), (named, moved)
+    # evaluate scores with the refined intrinsics, so a camera file off in those is no other camera
+    off = (tmp_path / "hand.yaml").read_text().replace("fx: 1400.0", "fx: 1414.0")
+    assert "fx: 1414.0" in off
+    (tmp_path / "off.yaml").write_text(off)
+    scored = run_json("evaluate", tmp_path / "cal.json", tmp_path / "pixels.csv", "--cameras", tmp_path / "off.yaml",
+                      "--board", tmp_path / "board.yaml")
+    assert scored["after"]["rms_px"] == pytest.approx(fit["train"]["rms_px"], rel=0.2)
     (tmp_path / "world.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("mount: tool", "mount: world"))
     for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
                            (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),
@@ -536,6 +544,7 @@ def test_evaluate_scores_held_out_images_with_the_cameras_the_calibration_fitted
     images are, and well below the nominal model's; a tracker calibration or a tool set-up of another
     kind is refused in one line."""
     from conftest import run_json
+    from gecgen.cli import main
 
     (tmp_path / "hand.yaml").write_text("cameras:\n  cam: {mount: tool, fx: 1400, fy: 1400, cx: 640, cy: 480, "
                                         "distortion: [-0.1, 0.05, 0.0, 0.0, 0.0], width: 1280, height: 960}\n")
@@ -550,3 +559,22 @@ def test_evaluate_scores_held_out_images_with_the_cameras_the_calibration_fitted
     assert out["measurement"] == "pixels" and out["n_points"] == out["n_poses"] * 54
     assert out["after"]["rms_px"] < 1.5 * fit["train"]["rms_px"] and out["after"]["rms_px"] < 0.5 * out["before"]["rms_px"]
     assert out["after"]["rms_mm_at_target"] > 0 and set(out["after"]["cameras"]) == {"cam"}
+    # the calibration records the board it saw and the intrinsics it used: another board (30 mm squares for
+    # 40 mm) or another fx is refused in one line naming the file, the key and both values
+    (tmp_path / "board30.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.03\n")
+    (tmp_path / "fx.yaml").write_text((tmp_path / "hand.yaml").read_text().replace("fx: 1400", "fx: 1414"))
+    for files, message in (
+            (["--cameras", tmp_path / "hand.yaml", "--board", tmp_path / "board30.yaml"],
+             f"{tmp_path / 'board30.yaml'}, key 'square': 0.03 m against the calibration's 0.04 m"),
+            (["--cameras", tmp_path / "fx.yaml", "--board", tmp_path / "board.yaml"],
+             f"{tmp_path / 'fx.yaml'}, camera 'cam', key 'fx': 1414 px against the calibration's 1400 px")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(["evaluate", str(tmp_path / "cal.json"), str(tmp_path / "val.csv"), *map(str, files)]) != 0
+        assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+    # a calibration written before the record still evaluates, as before
+    old = json.loads((tmp_path / "cal.json").read_text())
+    assert old.pop("board_geometry") == {"type": "chessboard", "columns": 9, "rows": 6, "square": 0.04}
+    assert old.pop("camera_intrinsics")["cam"]["fx"] == 1400
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert run_json("evaluate", tmp_path / "old.json", tmp_path / "val.csv", *rig)["after"] == out["after"]

@@ -38,7 +38,7 @@ def run(args) -> dict:
 def _pixels(args) -> dict:
     """Held-out image points before and after a pixel calibration (`fit.camera.score_pixels`)."""
     from gecgen.fit.calibration import load
-    from gecgen.fit.camera import score_pixels
+    from gecgen.fit.camera import refuse_another_rig, score_pixels
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
@@ -52,6 +52,7 @@ def _pixels(args) -> dict:
         calibration = load(args.calibration)
         cameras = read_cameras(args.cameras)
         board = read_board(args.board) if args.board else None
+        refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
         data = read_pixels(args.data, calibration.robot, cameras, board)
         scores = score_pixels(calibration, args.calibration, data, cameras, board)
     return {"robot": calibration.robot.name, "data": str(args.data), "measurement": "pixels",

@@ -53,7 +53,7 @@ def identified(args) -> dict:
         fit = fit_pixels(robot, model, data, cameras, board, loss=args.loss, noise_px=args.noise_px,
                          intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
     refuse_untrustworthy(fit, str(args.data))
-    calibration = calibration_of(robot, model, fit)
+    calibration = calibration_of(robot, model, fit, cameras, board)
     out = args.output or f"{robot.name}.calib.json"
     save(calibration, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
@@ -145,7 +145,7 @@ def diagnosed(args) -> dict:
         from gecgen.fit.camera import calibration_of
 
         final = diag.final
-        content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit),
+        content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit, cameras, board),
                                         str(out), cameras, command="diagnose",
                                         lead=report.content.pixel_diagnosis(result))
         result.update(report.write(content, args.report))
@@ -198,7 +198,7 @@ def calibrated(args, out, build, status) -> dict:
             raise ModelError(f"{args.train}: {str(exc).splitlines()[0]}") from None
     refuse_untrustworthy(choice.fit, str(args.train))
     say(status, f"writing the calibration, its code and the report into {out}")
-    calib = calibration_of(robot, choice.model, choice.fit)
+    calib = calibration_of(robot, choice.model, choice.fit, cameras, board)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
     save(calib, build / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []

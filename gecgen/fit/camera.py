@@ -849,10 +849,12 @@ def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarr
     return std, cov, sigma, np.sqrt(np.abs(np.diag(full)[:k0]))
 
 
-def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
+def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit, cameras: dict[str, Camera], board: Board | None):
     """The calibration of a pixel fit (`fit.calibration.Calibration`): coefficients in the robot's
-    world (the cameras' or the board's poses are in it, in `report`). Targets the robot file leaves to
-    estimate are placed where the fit put them; on a carried camera, at its optical centre."""
+    world (the cameras' or the board's poses are in it, in `report`, with the board's geometry and each
+    camera's intrinsics as the fit used them: `cameras` and `board`, the files given to it, or the
+    intrinsics as refined). Targets the robot file leaves to estimate are placed where the fit put
+    them; on a carried camera, at its optical centre."""
     from gecgen.fit.calibration import Calibration
     from gecgen.fit.placement import with_targets
     from gecgen.fit.registration import IDENTITY
@@ -870,8 +872,88 @@ def calibration_of(robot: Robot, model: ErrorModel, fit: PixelFit):
               "cameras": {n: {"rotation": R.tolist(), "translation": t.tolist()} for n, (R, t) in fit.poses.items()},
               **({"intrinsics": intrinsics_report(fit)} if fit.cameras else {}),
               **({"board": {"rotation": fit.board[0].tolist(), "translation": fit.board[1].tolist()}}
-                 if fit.board is not None else {})}
+                 if fit.board is not None else {}),
+              "camera_intrinsics": {n: _intrinsics((fit.cameras or {}).get(n, cameras[n])) for n in fit.poses},
+              **({"board_geometry": _geometry(board)} if board is not None else {})}
     return Calibration(robot, model, fit.c, fit.std, fit.kept, fit.cov, IDENTITY, report)
+
+
+#: the keys of a board's geometry a pixel calibration records, with their unit, as the board file names them
+BOARD_KEYS = {"type": "", "columns": "", "rows": "", "square": " m", "marker": " m", "dictionary": ""}
+#: the keys of a camera's intrinsics a pixel calibration records, with their unit, as the camera file names them
+CAMERA_KEYS = {"fx": " px", "fy": " px", "cx": " px", "cy": " px", "distortion": "", "width": " px", "height": " px"}
+#: the intrinsics --refine-intrinsics fits (a camera file may differ from the calibration in these)
+REFINED_KEYS = ("fx", "fy", "cx", "cy", "distortion")
+#: a number in a board or camera file is the calibration's when within this relative difference (or 1e-9
+#: absolute, for distortion near zero): what a value copied with fewer digits differs by
+SAME = 1e-6
+
+
+def _geometry(board: Board) -> dict:
+    """The board's geometry as its file gives it (`BOARD_KEYS`; marker and dictionary on a ChArUco board)."""
+    out = {"type": board.kind, "columns": board.columns, "rows": board.rows, "square": board.square}
+    return out | ({"marker": board.marker, "dictionary": board.dictionary} if board.kind == "charuco" else {})
+
+
+def _intrinsics(cam: Camera) -> dict:
+    """The camera's intrinsics and image size as its file gives them (`CAMERA_KEYS`)."""
+    return {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "distortion": list(cam.distortion),
+            "width": cam.width, "height": cam.height}
+
+
+def _differing(given: dict, recorded, where: str, keys: dict) -> str | None:
+    """The first key of `recorded` (a calibration's record, read from `where`, of some of `keys`) whose
+    value `given` lacks or differs from beyond `SAME`, None when none does; a record that is not a
+    mapping of `keys` to numbers, strings or lists of numbers is refused."""
+    ok = isinstance(recorded, dict) and set(recorded) <= set(keys)
+    require(ok and all(isinstance(v, (str, int, float)) or isinstance(v, list) and all(isinstance(x, (int, float))
+                                                                                     for x in v)
+                       for v in recorded.values()),
+            f"{where}: the board's or cameras' record is not one gecgen writes ({', '.join(keys)}); identify again")
+    for key in (k for k in keys if k in recorded):
+        value, mine = recorded[key], given.get(key)
+        if isinstance(value, str) or not isinstance(mine, (int, float, list)):
+            if value != mine:
+                return key
+            continue
+        a, b = np.asarray(mine, float), np.asarray(value, float)
+        if a.shape != b.shape or not np.allclose(a, b, rtol=SAME, atol=1e-9):
+            return key
+    return None
+
+
+def _shown(value, unit: str) -> str:
+    if isinstance(value, list):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    return f"{value:g}{unit}" if isinstance(value, (int, float)) else str(value)
+
+
+def refuse_another_rig(calibration, where: str, cameras: dict[str, Camera], cameras_file: str, board: Board | None):
+    """Refuse (one line naming the file, the key and the fix) a board file or a camera file whose values
+    differ from those the pixel calibration (read from `where`) recorded: its board's geometry, and each
+    camera's intrinsics and image size, but for the intrinsics it refined (it scores with those). A
+    calibration written before these were recorded is not checked."""
+    report = calibration.report
+    recorded = report.get("board_geometry")
+    if board is not None and recorded is not None:
+        given = _geometry(board)
+        key = _differing(given, recorded, f"{where}: board_geometry", BOARD_KEYS)
+        unit = BOARD_KEYS.get(key, "")
+        require(key is None, f"{board.source}, key '{key}': {_shown(given.get(key, 'none'), unit)} against the "
+                             f"calibration's {_shown(recorded.get(key), unit)} ({where}); give the board file the "
+                             f"calibration was made with, or identify again with this board")
+    recorded = report.get("camera_intrinsics") or {}
+    require(isinstance(recorded, dict), f"{where}: camera_intrinsics is not one gecgen writes; identify again")
+    refined = report.get("intrinsics") or {}
+    for name in sorted(set(recorded) & set(cameras)):
+        given, record = _intrinsics(cameras[name]), recorded[name]
+        if name in refined and isinstance(record, dict):  # scored with the refined values: the image size counts
+            record = {k: v for k, v in record.items() if k not in REFINED_KEYS}
+        key = _differing(given, record, f"{where}: camera_intrinsics.{name}", CAMERA_KEYS)
+        unit = CAMERA_KEYS.get(key, "")
+        require(key is None, f"{cameras_file}, camera '{name}', key '{key}': {_shown(given.get(key), unit)} against "
+                             f"the calibration's {_shown(record.get(key), unit)} ({where}); give the camera file the "
+                             f"calibration was made with, or identify again with this one")
 
 
 def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camera],
@@ -914,7 +996,7 @@ def summary_at(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str,
 def intrinsics_report(fit: PixelFit) -> dict:
     """Per camera its refined intrinsics (fx, fy, cx, cy px; distortion [k1, k2, p1, p2, k3]) and their
     1-sigma (`std`), as the camera file and OpenCV write them."""
-    return {n: {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "distortion": list(c.distortion),
+    return {n: {**{k: v for k, v in _intrinsics(c).items() if k in REFINED_KEYS},
                 **({"std": fit.intrinsics_std[n]} if fit.intrinsics_std else {})} for n, c in fit.cameras.items()}
 
 
