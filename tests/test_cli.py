@@ -93,6 +93,10 @@ def test_the_summary_prints_three_digits_and_the_units_given_beside_a_dict(capsy
     assert capsys.readouterr().out.splitlines() == ["val_registered: no", "significance: t_min 2, "
                                                     "insignificant_carried yes"]
     # one next step, the verdict's (identify --cameras also lists the commands after it as JSON `next`)
+    # records by name are named, not counted (one board printed as "board: 2", its rotation and translation)
+    print_human({"board": {"rotation": [1, 0, 0], "translation": [0, 0, 1]}, "cameras": {"cam1": {"fx": 1}}})
+    assert capsys.readouterr().out.splitlines() == ["board: rotation, translation (use --json for them)",
+                                                    "cameras: cam1 (use --json for them)"]
     print_human({"next": "gecgen compensate C.json POSES.csv -o OUT.csv", "next_step": "Score the calibration first"})
     assert capsys.readouterr().out.splitlines() == ["next_step: Score the calibration first"]
 

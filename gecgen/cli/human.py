@@ -87,8 +87,11 @@ def print_human(result: dict):
             print(f"{key}: {len(value)} (use --json for the list)")
         elif isinstance(value, dict):
             scalars = {k: v for k, v in value.items() if not isinstance(v, (dict, list)) or _interval(v)}
-            if not scalars:
-                print(f"{key}: {len(value)} (use --json for them)")
+            if not scalars:  # records by name (cameras, branches) or parts of one (a board's pose): their names
+                names = list(value)
+                shown = ", ".join(map(str, names[:MAX_LISTED])) + (f" and {len(names) - MAX_LISTED} more"
+                                                                  if len(names) > MAX_LISTED else "")
+                print(f"{key}: {shown} (use --json for them)")
                 continue
             more = " (more with --json)" if len(scalars) < len(value) else ""
             print(f"{key}: " + ", ".join(f"{k} {scalar(v)}{' ' + units[k] if k in units else ''}"
