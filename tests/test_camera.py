@@ -578,3 +578,36 @@ def test_evaluate_scores_held_out_images_with_the_cameras_the_calibration_fitted
     assert old.pop("camera_intrinsics")["cam"]["fx"] == 1400
     (tmp_path / "old.json").write_text(json.dumps(old))
     assert run_json("evaluate", tmp_path / "old.json", tmp_path / "val.csv", *rig)["after"] == out["after"]
+
+
+def test_an_eye_in_hand_urdf_carries_the_camera_where_the_fit_put_it(tmp_path):
+    """export --urdf of a camera on the tool: the images measured the camera, not the robot file's
+    targets, so the camera is the tool link (z its optical axis, at its optical centre), and pinocchio
+    puts it where the calibration does at poses the fit never saw (it exported the file's targets and
+    no camera)."""
+    pin = pytest.importorskip("pinocchio")
+    from conftest import run_json
+    from gecgen.fit.calibration import save
+    from gecgen.fit.camera import calibration_of
+
+    robot = load_robot(ROBOTS / "panda.yaml")
+    truth = load_truth(read_yaml(ROBOTS / "panda.truth.yaml", "truth file"), robot)
+    model = load_error_model(ROBOTS / "constant.errors.yaml", robot)
+    rng = np.random.default_rng(3)
+    cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
+    rig, q = eye_in_hand(robot, truth, cam, Board(9, 6, 0.04), np.array([0, -0.3, 0, -2.2, 0, 2.0, 0.8]),
+                         np.radians([10, 8, 10, 8, 20, 20, 30]), 50, rng)
+    fit = fit_pixels(robot, model, simulate_pixels(robot, truth, rig, q[:30], 0.2, rng), rig.cameras, rig.board)
+    save(calibration_of(robot, model, fit, rig.cameras, rig.board), tmp_path / "cal.json")
+    out = run_json("export", tmp_path / "cal.json", "--urdf", tmp_path / "cal.urdf")
+    link = out["urdf"]["tool_links"]["camera_cam"]
+    assert list(out["urdf"]["tool_links"]) == ["camera_cam"]
+    assert "not applied" in (tmp_path / "cal.urdf").read_text() and "tracker" not in (tmp_path / "cal.urdf").read_text()
+    R, t = fit.tool_camera()
+    T = fitted_tools(robot, model, fit.c, q[30:])
+    urdf = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    data, frame = urdf.createData(), urdf.getFrameId(link)
+    for qi, Ti in zip(q[30:], T):
+        pin.framesForwardKinematics(urdf, data, np.concatenate([qi, np.zeros(urdf.nq - len(qi))]))
+        np.testing.assert_allclose(data.oMf[frame].rotation, Ti[:3, :3] @ R, atol=1e-9)
+        np.testing.assert_allclose(data.oMf[frame].translation, Ti[:3, :3] @ t + Ti[:3, 3], atol=1e-9)

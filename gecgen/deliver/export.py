@@ -155,6 +155,23 @@ def tool_points(robot: Robot) -> list[dict[str, np.ndarray]]:
 ERRORS_MM = ("ex", "ey", "ez")
 
 
+def carried_cameras(calib: Calibration) -> list[dict[str, np.ndarray]] | None:
+    """For a calibration from a camera on the tool (image points of a board): the camera's frame as
+    the fit placed it, `camera_<name>` -> 4x4 in the last frame (the tool transform, then the camera:
+    its z along the optical axis, its origin the optical centre), on the first branch, the one
+    `tool_points` gives; None for any other calibration."""
+    report = calib.report
+    if report.get("measurement") != "pixels" or "board" not in report:
+        return None
+    out = {}
+    for name, pose in report["cameras"].items():
+        R, t = np.asarray(pose["rotation"], float), np.asarray(pose["translation"], float)
+        camera = np.eye(4)  # the fit's pose maps the tool frame into the camera's: X_cam = R X_tool + t
+        camera[:3, :3], camera[:3, 3] = R.T, -R.T @ t
+        out[f"camera_{name}"] = constant(calib.robot.tips()[0][1]) @ camera
+    return [out]
+
+
 def tool_offset_carried(calib: Calibration) -> dict | None:
     """When a translation of a branch's last frame (the measured tool's offset from the flange) is
     eliminated as indistinguishable from other errors, and the kept coefficients it merges into hold
@@ -281,11 +298,16 @@ def urdf_copy(calib: Calibration, cm: CompiledModel, where: str) -> tuple[str, d
         eps, carried["reexpressed"] = reexpress_tool_offset(calib, carried, where)
         warnings.warn(_carried_warning(carried))
     E = [error_transform(eps[6 * i:6 * i + 6]) for i in range(robot.n_frames + 1)]
+    cameras = carried_cameras(calib)
+    # the images measured the camera on the tool, not the robot file's targets: the camera is the tool
+    measured, frame = (("the camera's link camera_<name> (z its optical axis, at its optical centre)",
+                        "the board's pose in the world") if cameras else
+                       ("the measured tool points' links", "the tracker registration"))
     note = (f"calibrated by gecgen export from {Path(where).name}: the constant generalized errors are folded "
-            f"into the joint origins, the last frame's into the measured tool points' links; the tracker "
-            f"registration is not applied")
+            f"into the joint origins, the last frame's into {measured}; {frame} is not applied")
     tip_links = [b.tip_link for b in robot.branches] or [robot.tip_link]
-    text, tips, tool_links, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note, tool_points(robot))
+    text, tips, tool_links, changed = folded_copy(robot.urdf, robot.base_link, tip_links, E, note,
+                                                  cameras or tool_points(robot))
     left = not_carried(calib, cm, where)
     reg = calib.registration.to_dict()
     branch_tips = {"tip_links": {b.name: t for b, t in zip(robot.branches, tips)}} if robot.branches else {}
