@@ -66,12 +66,16 @@ def mapped(calls: list[tuple[Callable, tuple]]) -> Iterator[Iterable]:
         return
     pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start,
                                initargs=(os.getpid(),))
+    # submitted one by one rather than through pool.map, whose results iterator cancels the pending
+    # futures as an interrupt passes through it; with the workers then killed, Python 3.11's executor
+    # fails those cancelled futures from its own thread with InvalidStateError, a traceback on stderr
+    futures = [pool.submit(_call, fn, args) for fn, args in calls]
     try:
-        yield (_reissued(*out) for out in pool.map(_call, *zip(*calls)))
+        yield (_reissued(*future.result()) for future in futures)
     except BaseException:
         _stop(pool)
         raise
-    pool.shutdown(wait=True)
+    pool.shutdown(wait=True, cancel_futures=True)  # the workers are alive: cancelling is safe
 
 
 def _stop(pool: ProcessPoolExecutor):
