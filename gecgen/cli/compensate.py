@@ -95,8 +95,8 @@ def run(args) -> dict:
 
 def _why(status: int, residual: float, moved: list[str]) -> str:
     """What a failed row's status means, in a few words; moved: the joints the correction moves (with
-    fewer than 6 it places the tool's position alone, and fewer than 3 cannot place even that, whatever
-    the posture)."""
+    fewer than 6 it places the tool's position where the whole pose is out of reach, and fewer than 3
+    cannot place even that, whatever the posture)."""
     from gecgen.runtime.compiled import BOUNDED, NONFINITE, SINGULAR
 
     left = f"the tool is off by {1e3 * residual:.3g} mm"

@@ -94,9 +94,10 @@ def branch_suffixes(robot: Robot) -> list[str]:
 
 
 def task_rows(robot: Robot) -> list[int]:
-    """Per branch (one on a chain), what compensation places: 6, the tool's position and orientation, when
-    at least six joints of its own move it; 3, its position alone, when fewer do (a five-joint arm cannot
-    turn its tool to every orientation, and asked to, its correction would never converge)."""
+    """Per branch (one on a chain), the rows of the tool's pose compensation settles for: 6, its position and
+    orientation, when at least six joints of its own move it; 3 when fewer do, whose compensation places
+    the whole pose where those joints can and otherwise the position alone (a five-joint arm cannot turn
+    its tool to every orientation, and held to it, its correction would never converge)."""
     return [6 if len(robot.moved_joints(k)) >= 6 else 3 for k in range(len(robot.tips()))]
 
 

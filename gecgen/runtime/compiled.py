@@ -470,9 +470,9 @@ class CompiledModel:
         the limits; NONFINITE (4) an input is NaN or infinite, tol is not > 0, max_iter < 0 or the
         computation overflowed, and the row holds q_cmd unchanged (residual inf); BOUNDED (5) a joint's
         correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
-        as 1 m; a branch with fewer than six joints of its own places its tool's position alone, and the
-        residual is that position's error, `emit.task_rows`). On a tree, the tool of `branch` (index) is
-        placed by its own joints, every other reading held. With the numpy backend the C is loaded here,
+        as 1 m; a branch with fewer than six joints of its own places its tool's whole pose where they can,
+        otherwise its position alone, and the residual is then that position's error, `emit.task_rows`).
+        On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held. With the numpy backend the C is loaded here,
         built first unless a background build has finished it (waiting for one under way)."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
