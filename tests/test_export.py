@@ -6,12 +6,14 @@ import io
 import json
 import shlex
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
 from conftest import ROBOTS, random_q
 from test_urdf import ARM, MOVING, urdf_text, write_robot
 
+from gecgen.api import load_calibration
 from gecgen.cli import main
 from gecgen.model import load_robot
 from gecgen.model.kinematics import constant, error_transform, frames, target_positions
@@ -304,6 +306,14 @@ def test_urdf_of_an_elastic_calibration_states_what_leaving_the_load_terms_out_c
         assert cost["exported_max_mm"] == pytest.approx(e.max(), rel=1e-6)
         # the load term is what the fit needed: without it the error is tens of times the calibration's
         assert cost["exported_rms_mm"] > 10 * cost["calibration_rms_mm"]
+        # the gap between the two models, whatever the data measured: the URDF against the calibration
+        assert len(data.pose) == len(data.q) * len(calib.robot.targets)  # every target at every pose
+        with warnings.catch_warnings():  # the held-out poses leave the training ranges: said above
+            warnings.simplefilter("ignore")
+            want = load_calibration(tmp_path / "cal.json").predict(data.q, data.w)[data.pose, data.target]
+        gap = 1e3 * np.linalg.norm(got - want, axis=1)
+        assert cost["gap_rms_mm"] == pytest.approx(np.sqrt(np.mean(gap ** 2)), rel=1e-6)
+        assert cost["gap_max_mm"] == pytest.approx(gap.max(), rel=1e-6)
     warning = [line for line in run.err.splitlines() if "constant errors only" in line]
     assert len(warning) == 1 and f"{out['cost']['held_out']['exported_rms_mm']:.3g} mm" in warning[0]
 
