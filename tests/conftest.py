@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from gecgen.cli import main
 from gecgen.model import load_robot
@@ -16,6 +17,12 @@ from gecgen.symbolic.terms import load_error_model
 # of its C running in the background. Every command a test starts inherits it; the tests of that
 # first run set GECGEN_BACKEND themselves.
 os.environ.setdefault("GECGEN_BACKEND", "c")
+
+# The property tests draw the same examples on every run, so a red run is the change's, not a new
+# draw's; GECGEN_HYPOTHESIS=explore draws new ones (what finds new bugs: run it now and then).
+settings.register_profile("repeatable", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("GECGEN_HYPOTHESIS", "repeatable"))
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robots"
