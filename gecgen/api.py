@@ -170,7 +170,8 @@ class Compensation:
     those rows, 0-based), NONFINITE 4 (the row holds its command), BOUNDED 5 (a joint held at its
     bound); residual (N,) the tool error each row leaves (m, 1 rad of the tool counted as 1 m; inf
     where NONFINITE); `failed` the rows (0-based) whose tool is not placed (codes 1, 2, 4, 5);
-    max_correction the largest |q - q_cmd| per joint name; extrapolation as in `Score`."""
+    max_correction the largest |q - q_cmd| per joint name; extrapolation as in `Score`, on a robot
+    with branches only of the inputs the placed branch's tool depends on."""
 
     q: np.ndarray
     status: np.ndarray
@@ -366,9 +367,9 @@ class Calibrator:
                                   f"finite; give finite numbers")
         return q, np.broadcast_to(w, (N, 6)).copy(), np.broadcast_to(aux, (N, aux.shape[1])).copy()
 
-    def _extrapolation(self, q, w, aux) -> dict:
+    def _extrapolation(self, q, w, aux, inputs: set[str] | None = None) -> dict:
         calib = self.calibration_
-        counts = _calibration.extrapolation(calib, q, w, aux)
+        counts = _calibration.extrapolation(calib, q, w, aux, inputs)
         note = _calibration.extrapolation_note(counts, len(q), calib.robot)
         if note:
             warnings.warn(note, stacklevel=3)  # at the caller of score, predict or compensate
@@ -434,7 +435,9 @@ class Calibrator:
         dq = np.abs(q - cmds.q)
         return Compensation(q, status, np.nonzero(status == OUTSIDE_LIMITS)[0].tolist(),
                             {name: float(dq[:, j].max()) for j, name in enumerate(calib.robot.joint_names)},
-                            self._extrapolation(cmds.q, cmds.w, cmds.aux), residual,
+                            self._extrapolation(cmds.q, cmds.w, cmds.aux,
+                                                _calibration.branch_inputs(calib.robot, calib.model, index)),
+                            residual,
                             np.nonzero(np.isin(status, FAILED))[0].tolist())
 
     def score(self, data, register: bool | str = False) -> Score:

@@ -10,6 +10,7 @@ import pytest
 from conftest import ROOT, random_q
 
 from gecgen.model import ModelError, load_robot
+from gecgen.model.robot import WRENCH
 from gecgen.symbolic.terms import load_error_model
 from gecgen.model.kinematics import frames, target_positions
 from gecgen.runtime.compiled import CompiledModel
@@ -309,6 +310,29 @@ def test_a_branch_is_compensated_by_its_own_joints(talos, tmp_path):
         q_true, eps = true_state(talos, truth, q_cmd, np.zeros(len(fixed)), np.zeros(3), {}, np.ones_like(fixed))
         before = 1e3 * np.linalg.norm(target_positions(talos, q_true, eps)[:, k] - wanted[:, k], axis=1)
         assert before.max() > 1.0 and after.max() < 0.1, (branch, before.max(), after.max())
+    # the other arm's readings beyond its training ranges: no extrapolation of this hand's tool
+    ranges = cal.calibration_.report["training_ranges"]
+    for branch, own in (("left", range(2, 9)), ("right", range(9, 16))):
+        wide = q_cmd.copy()
+        other = [j for j in range(2, 16) if j not in own]
+        wide[:, other] = [ranges[f"q{j + 1}"][1] + 0.01 for j in other]
+        named = {f"q{j + 1}" for j in other}
+        assert not set(cal.compensate(wide, branch=branch).extrapolation) & named
+        assert named <= set(cal.compensate(wide, branch="right" if branch == "left" else "left").extrapolation)
+
+
+def test_a_hand_depends_on_its_path_and_on_every_reading_through_a_load(talos):
+    """The inputs whose training ranges matter to one hand: the trunk's and its own readings, and
+    every reading and the wrench once a frame on its path has a load term (gravity sums over the
+    tree)."""
+    from gecgen.fit.calibration import branch_inputs
+    from gecgen.symbolic.terms import error_model_from_dict
+
+    left = talos.branch_index("left")
+    own = {f"q{k + 1}" for k in range(talos.n) if talos.joint_names[k] not in talos.moved_joints(1 - left)}
+    assert branch_inputs(talos, load_error_model(None, talos), left) == own
+    trunk = error_model_from_dict({"default": ["1"], "frames": {2: {"er": ["1", "gravity_torque(q2)"]}}}, talos, "trunk")
+    assert branch_inputs(talos, trunk, left) == {f"q{k + 1}" for k in range(talos.n)} | set(WRENCH)
 
 
 def test_export_of_a_tree(talos, tmp_path, capsys):

@@ -119,10 +119,31 @@ def outside(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -
     return out
 
 
-def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray) -> dict[str, int]:
+def extrapolation(calib: Calibration, q: np.ndarray, w: np.ndarray, aux: np.ndarray,
+                  inputs: set[str] | None = None) -> dict[str, int]:
     """How many poses take each input outside the span it was fitted over ({name: poses}, only
-    the names with any; `outside`)."""
-    return {name: int(m.sum()) for name, m in outside(calib, q, w, aux).items() if m.any()}
+    the names with any; `outside`); inputs: only these names (`branch_inputs`), None: all."""
+    return {name: int(m.sum()) for name, m in outside(calib, q, w, aux).items()
+            if m.any() and (inputs is None or name in inputs)}
+
+
+def branch_inputs(robot: Robot, model: ErrorModel, branch: int) -> set[str] | None:
+    """The inputs (q1.., wrench components, aux names) the error of branch `branch`'s (index) tool
+    depends on: the readings that turn a frame on its path, and what those frames' error terms use.
+    A load signal sums over the whole tree, so a term with one depends on every reading and the
+    wrench. None on a serial robot: every input."""
+    if not robot.branches:
+        return None
+    path = robot.path(robot.tips()[branch][0])
+    drives = robot.drives()
+    every = {f"q{k + 1}" for k in range(robot.n)} | set(WRENCH)
+    plain = every | set(model.aux)
+    used = {f"q{k + 1}" for i in path if i > 0 for k, _ in drives[i - 1][0]}
+    for i in path:
+        for terms in model.terms[6 * i:6 * i + 6]:
+            for v in (v for t in terms for v in t.variables):
+                used |= {v} if v in plain else every
+    return used
 
 
 def extrapolation_note(counts: dict[str, int], n_poses: int, robot: Robot) -> str | None:
