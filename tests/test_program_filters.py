@@ -763,6 +763,26 @@ def test_public_krl_program_with_inline_joint_targets_is_corrected_and_keeps_eve
     assert outcome.changes[0].position_mm > 0.1
 
 
+@pytest.mark.parametrize("name, n_corrected", [("EXAMPLE.LS", 4), ("EXAMPLE_COOR.LS", 2)])
+def test_public_tp_programs_with_taught_positions_round_trip_and_are_corrected(fanuc_cal, tmp_path, name,
+                                                                               n_corrected):
+    """Two TP programs as a FANUC controller (or its simulator) writes them, with positions taught on its
+    arm (a circular move over two lines; a coordinated motion whose group 2 is a second robot, left as
+    it is): a zero
+    calibration leaves every byte, a real one rewrites only group 1's numbers and keeps every CONFIG
+    (landing nearer on the truth robot is shown on the programs written here). Taught on a smaller arm
+    than the test robot, P[5] (N D B) and P[6] of EXAMPLE.LS are out of its reach: kept and listed."""
+    folder = DATA / "tp" / "fanuc_motion_program_exec"
+    source, out = folder / name, tmp_path / name
+    outcome = _round_trips(fanuc.FORMAT, fanuc_cal[0], source, out, folder / "frames.yaml")
+    assert outcome.corrected == n_corrected
+    assert all(c.reason.startswith("unreachable by the nominal model") for c in outcome.kept)
+    if name == "EXAMPLE_COOR.LS":  # group 2's lines are byte for byte those of the original
+        assert [line for line in out.read_text().splitlines() if "1512.343" in line or "-150.909" in line] == \
+            [line for line in source.read_text().splitlines() if "1512.343" in line or "-150.909" in line] != []
+    assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes if c.after is not None)
+
+
 def test_krl_points_the_program_sets_while_it_runs_are_listed_not_corrected(tmp_path):
     """A .dat point the .src assigns (whole, or a component) goes where the running program puts it:
     its motions are listed with the line that sets it and its declared value is not a target; a point
