@@ -37,7 +37,7 @@ def require_controller(robot, fmt: Format, program: str | Path) -> None:
         warnings.warn(f"robot {robot.name}: {source} names no controller, so nothing checks that this "
                       f"{fmt.label} program was written for it; add 'controller: {fmt.controller}' to {source} if it "
                       f"runs on it (then identify again: a calibration holds to its robot file as it was)",
-                      stacklevel=3)
+                      stacklevel=4)
     elif robot.controller != fmt.controller:
         raise ModelError(f"{program}: a {fmt.label} program, and the calibration is of robot {robot.name}, whose "
                          f"{source} names controller {robot.controller}; filter it with a calibration of the robot "
