@@ -251,8 +251,11 @@ def test_cli_filter_writes_program_dat_and_log(kuka_cal_file, tmp_path):
     code, out, err = _cli("filter", kuka_cal_file, source, "-o", tmp_path / "out" / "palletize.src",
                           "--frames", tmp_path / "frames.yaml")
     result = json.loads(out)
-    # two motions have no target of this program's own: listed, and the command says so
-    assert code == 1 and "kept as written" in err and len(err.strip().splitlines()) == 1
+    # two motions have no target of this program's own: listed, and the command says so; the robot file
+    # names no controller, which one warning line says
+    lines = err.strip().splitlines()
+    assert code == 1 and len(lines) == 2 and "kept as written" in lines[0]
+    assert lines[1].startswith("gecgen filter: warning: robot industrial6r: industrial6r.yaml names no controller")
     assert result["n_targets"] == 15 and result["corrected"] + len(result["kept"]) == 15
     assert {k["target"] for k in result["kept"]} >= {"LIN_REL line 25", "XHOME (line 14)"}
     assert (tmp_path / "out" / "palletize.dat").is_file() and Path(result["log"]).is_file()
@@ -723,6 +726,7 @@ def _motion_lines(fmt, path: Path) -> list[int]:
     (fanuc.FORMAT, "tp/fanex/fanex.ls", "fanuc_cal", 0),
     (fanuc.FORMAT, "tp/airo_fanuc/GRPRUN.LS", "fanuc_cal", 0),
     (abb.FORMAT, "rapid/abbrobotegm/MainModule.mod", "abb_cal", 3),
+    (kuka.FORMAT, "krl/kuka_experimental/ros_krlptp.src", "kuka_cal", 2),
 ])
 def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, cal, n_kept, request, tmp_path):
     """Drivers and examples their packages publish: ur_rtde's control script (every motion to a target
@@ -730,7 +734,8 @@ def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, ca
     sets again from registers, or to a function's parameter named like one); fanex's TP moves to a
     position register at a speed from a register, its and airo-fanuc's launchers without a motion;
     abbrobotegm's RAPID module moving to a robtarget and through EGM to an offset of it, both declared
-    outside the module. Zero and real calibrations leave every byte; each motion is listed with its
+    outside the module; the KRL program KUKA's ROS driver runs (a .src and the .dat a controller saved)
+    moving to a global point and to a point of its .dat it sets from the robot's readings. Zero and real calibrations leave every byte; each motion is listed with its
     line and why it is not corrected, none is dropped."""
     source = DATA / source
     outcome = _round_trips(fmt, request.getfixturevalue(cal)[0], source, tmp_path / source.name)
@@ -740,7 +745,60 @@ def test_public_driver_programs_round_trip_and_name_every_motion(fmt, source, ca
     assert outcome.corrected == 0 and len(kept) == n_kept == len(outcome.changes)
     assert sorted({c.target.line for c in kept}) == _motion_lines(fmt, source)
     assert all(c.reason.startswith(("declared without a value", "a target computed at run time",
-                                     "a position register", "a target computed or declared elsewhere")) for c in kept)
+                                     "a position register", "a target computed or declared elsewhere",
+                                     "declared outside the program", "set while the program runs")) for c in kept)
+
+
+def test_public_krl_program_with_inline_joint_targets_is_corrected_and_keeps_every_other_byte(kuka_cal, tmp_path):
+    """The RSI program of ROS-Industrial's KUKA driver, as written for a KR C4 (no .dat: its two motions
+    go to the same inline axis target, {A1 0, A2 -90, A3 90, A4 0, A5 90, A6 0}): a zero calibration
+    leaves every byte, a real one rewrites only the twelve numbers, both motions alike, by what
+    compensate gives for that posture."""
+    source = DATA / "krl" / "kuka_experimental" / "ros_rsi.src"
+    outcome = _round_trips(kuka.FORMAT, kuka_cal[0], source, tmp_path / "ros_rsi.src")
+    assert outcome.corrected == 2 == len(outcome.changes) and outcome.changes[0].after == outcome.changes[1].after
+    q = np.radians([[0.0, -90.0, 90.0, 0.0, 90.0, 0.0]])
+    expected = np.degrees(kuka_cal[0].compensate(q).q[0])
+    assert np.allclose([float(v) for v in outcome.changes[0].after], expected, atol=0.51e-4)
+    assert outcome.changes[0].position_mm > 0.1
+
+
+@pytest.mark.parametrize("name, n_corrected", [("EXAMPLE.LS", 4), ("EXAMPLE_COOR.LS", 2)])
+def test_public_tp_programs_with_taught_positions_round_trip_and_are_corrected(fanuc_cal, tmp_path, name,
+                                                                               n_corrected):
+    """Two TP programs as a FANUC controller (or its simulator) writes them, with positions taught on its
+    arm (a circular move over two lines; a coordinated motion whose group 2 is a second robot, left as
+    it is): a zero
+    calibration leaves every byte, a real one rewrites only group 1's numbers and keeps every CONFIG
+    (landing nearer on the truth robot is shown on the programs written here). Taught on a smaller arm
+    than the test robot, P[5] (N D B) and P[6] of EXAMPLE.LS are out of its reach: kept and listed."""
+    folder = DATA / "tp" / "fanuc_motion_program_exec"
+    source, out = folder / name, tmp_path / name
+    outcome = _round_trips(fanuc.FORMAT, fanuc_cal[0], source, out, folder / "frames.yaml")
+    assert outcome.corrected == n_corrected
+    assert all(c.reason.startswith("unreachable by the nominal model") for c in outcome.kept)
+    if name == "EXAMPLE_COOR.LS":  # group 2's lines are byte for byte those of the original
+        assert [line for line in out.read_text().splitlines() if "1512.343" in line or "-150.909" in line] == \
+            [line for line in source.read_text().splitlines() if "1512.343" in line or "-150.909" in line] != []
+    assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes if c.after is not None)
+
+
+def test_krl_points_the_program_sets_while_it_runs_are_listed_not_corrected(tmp_path):
+    """A .dat point the .src assigns (whole, or a component) goes where the running program puts it:
+    its motions are listed with the line that sets it and its declared value is not a target; a point
+    only compared (`==`) is still one."""
+    (tmp_path / "run.src").write_text("DEF run( )\n$TOOL=TOOL_DATA[1]\n$BASE=BASE_DATA[2]\nXNEXT = $AXIS_ACT_MEAS\n"
+                                      "XP2.X = 100\nIF XP3 == XP3 THEN\nENDIF\nPTP XNEXT\nLIN XP2\nLIN XP3\nEND\n")
+    (tmp_path / "run.dat").write_text("DEFDAT run\nE6AXIS XNEXT={A1 1,A2 -90,A3 90,A4 0,A5 30,A6 0}\n"
+                                      "DECL E6POS XP2={X 1,Y 2,Z 3,A 4,B 5,C 6,S 2,T 10}\n"
+                                      "DECL E6POS XP3={X 7,Y 8,Z 9,A 1,B 2,C 3,S 6,T 2}\nENDDAT\n")
+    found = [(t.name, t.kind, t.note) for t in kuka.parse(tmp_path / "run.src").targets]
+    assert found == [
+        ("XNEXT (line 8)", "motion", "set while the program runs (run.src:4): its declared value is not where the "
+                                     "robot goes, not corrected"),
+        ("XP2 (line 9)", "motion", "set while the program runs (run.src:5): its declared value is not where the robot "
+                                   "goes, not corrected"),
+        ("XP3", "pose", None)]
 
 
 def test_cli_names_a_public_programs_first_kept_target_by_file_and_line(ur_cal, tmp_path):
@@ -822,3 +880,44 @@ def test_a_robot_that_is_not_a_six_axis_revolute_arm_is_refused_naming_why(robot
     assert str(err.value).startswith(f"robot {robot}: program filters correct serial arms of six revolute joints")
     assert f", and {why}; correct this robot's commands with gecgen compensate" in str(err.value)
     assert "\n" not in str(err.value)
+
+
+# -- the controller a calibration's robot runs on ------------------------------------------------------
+
+def test_a_program_of_another_controller_is_refused_naming_both(ur_cal, tmp_path):
+    """A FANUC TP program filtered with the calibration of a robot whose file names controller ur (the
+    UR10's): refused in one line naming the program's controller and the robot's, nothing written; the
+    calibration file records the controller and the command names it."""
+    cal = tmp_path / "cal.json"
+    ur_cal[0].save(cal)
+    assert json.loads(cal.read_text())["controller"] == "ur"
+    source = _copy_tp(tmp_path)
+    code, out, err = _cli("filter", cal, source, "-o", tmp_path / "out" / "weld_seam.ls", "--frames",
+                          tmp_path / "frames.yaml")
+    assert code == 2 and out == "" and not (tmp_path / "out").exists()
+    assert err.strip() == (f"gecgen filter: {source}: a FANUC TP program, and the calibration is of robot ur10, whose "
+                           f"ur10.yaml names controller ur; filter it with a calibration of the robot that runs it")
+    code, out, err = _cli("filter", cal, DATA / "ur" / "pick_place.script", "-o", tmp_path / "p.script")
+    assert json.loads(out)["controller"] == "ur" and "warning" not in err
+
+
+def test_a_robot_file_without_a_controller_filters_with_a_warning_naming_the_key(fanuc_cal, tmp_path):
+    source = _copy_tp(tmp_path)
+    with pytest.warns(UserWarning) as caught:
+        outcome, _, _ = filter_program(fanuc_cal[0], source, tmp_path / "out" / "weld_seam.ls", tmp_path / "frames.yaml")
+    assert outcome.corrected == 8
+    messages = [str(w.message) for w in caught if "controller" in str(w.message)]
+    assert messages == ["robot fanuc: fanuc.yaml names no controller, so nothing checks that this FANUC TP program was "
+                        "written for it; add 'controller: fanuc' to fanuc.yaml if it runs on it (then identify again: a "
+                        "calibration holds to its robot file as it was)"]
+
+
+def test_a_robot_files_controller_must_be_one_the_filters_know(tmp_path):
+    text = (DATA / "robots" / "ur10.yaml").read_text()
+    (tmp_path / "r.yaml").write_text(text.replace("controller: ur", "controller: UR10 CB3"))
+    with pytest.raises(ModelError) as err:
+        load_robot(tmp_path / "r.yaml")
+    assert str(err.value) == (f"{tmp_path / 'r.yaml'}: controller: 'UR10 CB3'; give one of kuka, abb, fanuc, ur (the "
+                              f"controller whose programs gecgen filter corrects for this robot), or leave the key out")
+    assert load_robot(DATA / "robots" / "ur10.yaml").controller == "ur"
+    assert load_robot(ROOT / "robots" / "fanuc.yaml").controller == ""

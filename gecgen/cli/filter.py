@@ -28,7 +28,7 @@ def run(args) -> dict:
     done = filter_program(cal, args.program, args.output, frames=args.frames, format=args.format,
                           max_iter=args.max_iter)
     kept = done.kept
-    result = {"robot": cal.robot_.name, "program": str(args.program),
+    result = {"robot": cal.robot_.name, "controller": cal.robot_.controller or None, "program": str(args.program),
               "written": [str(p) for p in done.written.values()], "log": str(done.log),
               "n_targets": len(done.targets), "corrected": done.corrected, "status_counts": done.counts,
               "kept": [{"target": t.name, "file": t.file.name, "line": t.line, "reason": t.reason} for t in kept],

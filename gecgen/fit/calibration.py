@@ -58,6 +58,7 @@ class Calibration:
         return {
             "gecgen_version": __version__,
             "robot": self.robot.name,
+            **({"controller": self.robot.controller} if self.robot.controller else {}),
             "robot_file": str(Path(self.robot.source).resolve()),
             "robot_hashes": self.robot.source_hashes,
             "error_model": self.model.to_yaml_dict(self.robot),
@@ -98,7 +99,8 @@ def from_fit(robot: Robot, model: ErrorModel, fit: Fit, ratio_loads: list[dict] 
 #: keys every calibration file holds; the rest, but for these three, is its report
 REQUIRED = ("robot_file", "robot_hashes", "error_model", "error_model_hash", "coefficients", "kept",
             "covariance", "registration")
-NOT_REPORT = {"gecgen_version", "robot", "robot_file_relative", "registrations", "targets", "target_frames", *REQUIRED}
+NOT_REPORT = {"gecgen_version", "robot", "controller", "robot_file_relative", "registrations", "targets",
+              "target_frames", *REQUIRED}
 #: R^T R may differ from the identity by this much (JSON keeps R to full precision)
 ROTATION_TOL = 1e-6
 

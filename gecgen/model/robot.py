@@ -44,6 +44,9 @@ ERROR_NAMES = ("ex", "ey", "ez", "es", "er", "ep")
 MATCHING = ("fx", "fy", "fz", "my", "mz", "mx")
 #: standard gravity, m/s^2, in the robot file's world frame unless the file's `gravity` says otherwise
 GRAVITY = (0, 0, -9.80665)
+#: the controllers a robot file may name (`controller`), by the programs `gecgen filter` corrects:
+#: KUKA KRL, ABB RAPID, FANUC TP, Universal Robots' script
+CONTROLLERS = ("kuka", "abb", "fanuc", "ur")
 #: names of the term language (functions, pi) and of the generated code's variables: neither a joint
 #: nor an auxiliary signal may take them
 RESERVED = {"pi", "sqrt", "sin", "cos", "sign", "abs", "poly", "fourier", "wrench_torque", "gravity",
@@ -145,6 +148,9 @@ class Robot:
     target_branch: dict[str, int] = field(default_factory=dict)
     #: the robot file's unit of angles (deg or rad): reports show revolute joints in it (prismatic in m)
     angle_unit: str = "rad"
+    #: the controller the robot runs on, as the robot file names it (`CONTROLLERS`), else "": program
+    #: filters refuse a program written for another controller
+    controller: str = ""
 
     def parent(self, i: int) -> int:
         """The frame that frame i (1..m) hangs from."""

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.model.exact import decimal_number, degrees, pi_factor, pi_multiple
-from gecgen.model.robot import GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
+from gecgen.model.robot import CONTROLLERS, GRAVITY, RESERVED, WRENCH, Branch, Coupling, Elementary, Joint, Robot
 from gecgen.model.urdf import urdf_chain
 from gecgen.model.validation import ModelError, excerpt, is_name, read_yaml, require, require_keys
 
@@ -415,13 +415,18 @@ def load_robot(path: str | Path) -> Robot:
                                   f"(the unit of every angle in the file)")
     require_keys(spec, where, required={"name", "angle_unit"} | (set() if "branches" in spec else {"targets"}),
                  optional={"description", "base", "tool", "joints", "urdf", "base_link", "targets",
-                           "tip_link", "wrench_frame", "points", "gravity", "couplings", "branches"})
+                           "tip_link", "wrench_frame", "points", "gravity", "couplings", "branches",
+                           "controller"})
     unit = spec["angle_unit"]
     require(unit in ("deg", "rad"), f"{where}: angle_unit: {excerpt(unit)}; use deg or rad")
     deg = unit == "deg"
     name = spec["name"]
     require(is_name(name),
             f"{where}: name: {excerpt(name)} must be an identifier (it names C functions)")
+    controller = spec.get("controller", "")
+    require(controller == "" or controller in CONTROLLERS,
+            f"{where}: controller: {excerpt(controller)}; give one of {', '.join(CONTROLLERS)} (the controller whose "
+            f"programs gecgen filter corrects for this robot), or leave the key out")
     hashes = {path.name: file_hash(path)}
     base = _transform(spec.get("base"), f"{where}: base", deg)
     urdf_path = None
@@ -484,7 +489,7 @@ def load_robot(path: str | Path) -> Robot:
                   parents=tuple(parents) if tree else (),
                   branches=tuple(Branch(n, tip, tool, str(b.get("tip_link", "")))
                                  for (n, b, _), (tip, _), tool in zip(branches, tips, tools)) if tree else (),
-                  target_branch=target_branch if tree else {}, angle_unit=unit)
+                  target_branch=target_branch if tree else {}, angle_unit=unit, controller=controller)
     for i, j in enumerate(robot.chain, start=1):
         if j.coupling and j.coupling.declared and len(j.coupling.terms) > j.coupling.own \
                 and robot.zero_offset_error(i) is None:

@@ -3,6 +3,7 @@ URDF: KUKA KRL, ABB RAPID, FANUC TP (ASCII .ls) and UR script, one module each o
 from __future__ import annotations
 
 import importlib
+import warnings
 from pathlib import Path
 
 from gecgen.deliver.programs.core import Format, Outcome, correct, read_frames, require_six_axis_arm, \
@@ -28,6 +29,21 @@ def program_format(path: str | Path, name: str | None = None) -> Format:
     return importlib.import_module(f"gecgen.deliver.programs.{FORMATS[name][0]}").FORMAT
 
 
+def require_controller(robot, fmt: Format, program: str | Path) -> None:
+    """A one-line refusal of a program written for another controller than the one the robot file
+    names; a warning when it names none (the program's format is then all gecgen knows)."""
+    source = Path(robot.source).name if robot.source else "its robot file"
+    if not robot.controller:
+        warnings.warn(f"robot {robot.name}: {source} names no controller, so nothing checks that this "
+                      f"{fmt.label} program was written for it; add 'controller: {fmt.controller}' to {source} if it "
+                      f"runs on it (then identify again: a calibration holds to its robot file as it was)",
+                      stacklevel=4)
+    elif robot.controller != fmt.controller:
+        raise ModelError(f"{program}: a {fmt.label} program, and the calibration is of robot {robot.name}, whose "
+                         f"{source} names controller {robot.controller}; filter it with a calibration of the robot "
+                         f"that runs it")
+
+
 def filter_program(cal, program: str | Path, output: str | Path | None, frames: str | Path | None = None,
                    format: str | None = None, max_iter: int = 50) -> tuple[Outcome, dict[Path, Path], Path | None]:
     """Read `program`, correct its targets through the fitted Calibrator `cal`, and write the corrected
@@ -36,6 +52,7 @@ def filter_program(cal, program: str | Path, output: str | Path | None, frames: 
     None: nothing is written)."""
     require_six_axis_arm(cal.robot_)
     fmt = program_format(program, format)
+    require_controller(cal.robot_, fmt, program)
     parsed = fmt.parse(Path(program))
     outcome = correct(fmt, parsed, cal, read_frames(frames, fmt), max_iter=max_iter)
     if output is None:

@@ -222,4 +222,5 @@ def parse(path: Path) -> Program:
     return Program(path, {path: text}, [targets[k] for k in sorted(targets)], tools, bases)
 
 
-FORMAT = Format("rapid", (".mod", ".modx", ".prg"), parse, pose, numbers, "deg", config, write_same_names, IDENTITY)
+FORMAT = Format("rapid", (".mod", ".modx", ".prg"), parse, pose, numbers, "deg", config, write_same_names, IDENTITY,
+                controller="abb", label="ABB RAPID")

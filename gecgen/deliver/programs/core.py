@@ -95,7 +95,9 @@ class Format:
     pose(values) -> (4, 4) in m from a pose target's numbers; numbers(T, target) -> the numbers of
     pose T (4, 4, m) in the target's order and units; joint_unit "deg" or "rad"; config(arm) -> a
     function mapping joints (K, n) to configurations (K, c) comparable with Target.config, or None;
-    identity: frame names that are the flange or the robot base by definition."""
+    identity: frame names that are the flange or the robot base by definition; controller: the
+    controller that runs such programs, as a robot file names it (`model.robot.CONTROLLERS`), and
+    label how a person names the format."""
 
     name: str
     suffixes: tuple[str, ...]
@@ -106,6 +108,8 @@ class Format:
     config: Callable[[Arm], Callable[[np.ndarray], np.ndarray]] | None
     write: Callable[[Program, Path, dict[Path, str]], dict[Path, Path]]
     identity: tuple[str, ...] = ()
+    controller: str = ""
+    label: str = ""
 
 
 @dataclass(frozen=True)

@@ -107,4 +107,5 @@ def parse(path: Path) -> Program:
     return Program(path, {path: text}, targets)
 
 
-FORMAT = Format("tp", (".ls",), parse, pose, numbers, "deg", config, write_same_names, IDENTITY)
+FORMAT = Format("tp", (".ls",), parse, pose, numbers, "deg", config, write_same_names, IDENTITY,
+                controller="fanuc", label="FANUC TP")

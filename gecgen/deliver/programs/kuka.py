@@ -33,6 +33,8 @@ TOOL_SET = re.compile(r"^[ \t]*\$(TOOL|BASE)[ \t]*=[ \t]*(?:(?:TOOL|BASE)_DATA\[
 FRAME_SET = re.compile(r"^[ \t]*\$(TOOL|BASE)[ \t]*=[ \t]*\{([^}\n]*)\}", re.M | re.I)
 BAS_SET = re.compile(r"^[ \t]*BAS[ \t]*\([ \t]*#(TOOL|BASE)[ \t]*,[ \t]*(\d+)", re.M | re.I)
 FDAT_ACT = re.compile(r"^[ \t]*FDAT_ACT[ \t]*=[ \t]*(\w+)", re.M | re.I)
+#: a statement that sets a variable or one of its components (`NEXT = $AXIS_ACT_MEAS`, `XP1.X = 100`)
+ASSIGN = re.compile(r"^[ \t]*(\w+)(?:\.\w+|\[[^\]\n]*\])*[ \t]*=(?!=)", re.M)
 POSE_KEYS, JOINT_KEYS = ("X", "Y", "Z", "A", "B", "C"), ("A1", "A2", "A3", "A4", "A5", "A6")
 IDENTITY = ("0", "$NULLFRAME", "NULLFRAME")
 
@@ -139,6 +141,10 @@ def parse(path: Path) -> Program:
         name = f"${m.group(1).upper()} line {line_of(src, m.start())}"
         (tools if m.group(1).upper() == "TOOL" else bases)[name] = _frame(_fields(code[path], m.start(2), m.end(2)),
                                                                             path, line_of(src, m.start()))
+    # a point the program sets while it runs goes where that value says, not where the .dat's value does
+    assigned = {}
+    for m in ASSIGN.finditer(code[path]):
+        assigned.setdefault(m.group(1).upper(), line_of(src, m.start()))
     targets, first_use = {}, {}
     state = {"TOOL": "$TOOL", "BASE": "$BASE"}
     e = 0
@@ -176,7 +182,12 @@ def parse(path: Path) -> Program:
                                                       state["BASE"])
                 continue
             name = token.group().upper()
-            if name in decls:
+            if name in decls and name in assigned:
+                targets[at + token.start()] = Target(
+                    f"{token.group()} (line {line})", path, line, "motion", (),
+                    note=f"set while the program runs ({path.name}:{assigned[name]}): its declared value is not "
+                         f"where the robot goes, not corrected")
+            elif name in decls:
                 first_use.setdefault(name, (state["TOOL"], state["BASE"]))
             elif name in frames:  # a FRAME names no S and T, and may also be a tool or base of the program
                 where, at_line = frames[name]
@@ -198,6 +209,8 @@ def parse(path: Path) -> Program:
                                                      note="declared outside the program: correct it where it is "
                                                           "declared")
     for name, (p, kind, start, end) in decls.items():
+        if name in assigned:
+            continue  # its motions are listed above
         fd = fdat.get("F" + name[1:]) if name.startswith("X") else None
         if not fd and name not in first_use and kind in ("E6POS", "POS"):
             targets[(0 if p == path else 1, start)] = Target(
@@ -224,4 +237,5 @@ def write(program: Program, output: Path, texts: dict[Path, str]) -> dict[Path, 
     return written
 
 
-FORMAT = Format("krl", (".src",), parse, pose, numbers, "deg", config, write, IDENTITY)
+FORMAT = Format("krl", (".src",), parse, pose, numbers, "deg", config, write, IDENTITY,
+                controller="kuka", label="KUKA KRL")

@@ -135,4 +135,5 @@ def _target(text: str, path: Path, at: int, literal: re.Match, name: str, tool: 
                   tool=tool if is_pose else None)
 
 
-FORMAT = Format("ur", (".script", ".urscript"), parse, pose, numbers, "rad", None, write_same_names)
+FORMAT = Format("ur", (".script", ".urscript"), parse, pose, numbers, "rad", None, write_same_names,
+                controller="ur", label="UR script")
