@@ -134,6 +134,6 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             assert main(list(map(str, command))) != 0
-        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points: score " \
-               f"held-out images with gecgen evaluate" in err.getvalue()
+        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points with " \
+               f"tracker data, or this one with images: gecgen {command[0]} " in err.getvalue()
         assert len(err.getvalue().strip().splitlines()) == 1
