@@ -120,6 +120,8 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
 
     d = rig
     for args, message in ((["--board", str(d / "b.yaml")], "give --cameras too"),
+                          (["--refine-intrinsics"], "--refine-intrinsics refines the intrinsics of the cameras of "
+                                                    "image points: give --cameras too"),
                           ([], "which identify, diagnose, calibrate, redundancy and evaluate read")):
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
@@ -137,3 +139,32 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
         assert f"a calibration from image points; {command[0]} takes a calibration from tracker points with " \
                f"tracker data, or this one with images: gecgen {command[0]} " in err.getvalue()
         assert len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_the_loop_refines_the_intrinsics_when_asked_and_scores_held_out_images_through_them(rig, floor):
+    """diagnose's and calibrate's fits with --refine-intrinsics (`ImagePoints(intrinsics=True)`): from a camera
+    file 1 % off in fx (and fy, cx) the held-out images come back to the true intrinsics' residual, where the
+    file's intrinsics leave them well above it; the screening's system has the intrinsics' columns."""
+    import numpy as np
+
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model import load_robot
+    from gecgen.model.cameras import read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.symbolic.terms import load_error_model
+
+    d = rig
+    (d / "off.yaml").write_text(CAMERAS.replace("fx: 1800, fy: 1800, cx: 640", "fx: 1818, fy: 1791, cx: 646", 1))
+    robot = load_robot(d / "arm.yaml")
+    model = load_error_model(d / "oracle.errors.yaml", robot)
+    off = read_cameras(d / "off.yaml")
+    train, val = (read_pixels(d / f, robot, off) for f in ("train.csv", "val.csv"))
+    scored = {}
+    for refine in (False, True):
+        measure = ImagePoints(robot, off, None, 0.1, intrinsics=refine)
+        rnd = measure.fit(robot, model, train)
+        scored[refine] = measure.scores(rnd, val)["val_rms_px"]
+    assert scored[True] < 1.1 * floor["rms_px"] < 2 * 1.1 * floor["rms_px"] < scored[False], scored
+    A = measure.system(rnd, train)[0]
+    assert A.shape[1] == len(rnd.fit.g) + len(rnd.fit.kept) and len(rnd.fit.g) == 2 * (6 + 9)
+    assert np.isfinite(A).all()

@@ -758,9 +758,10 @@ class Linearised:
 
 def linearised(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
                fit: PixelFit) -> Linearised:
-    """The `Linearised` system of `fit` (fit_pixels of cm's model on data, the cameras' intrinsics as
-    given); cm: the compiled model of `frame_robot(robot)` and that model."""
-    problem = _Problem(cm, robot, data, cameras, board)
+    """The `Linearised` system of `fit` (fit_pixels of cm's model on data with `cameras`, its columns
+    the refined intrinsics' too when it refined them); cm: the compiled model of `frame_robot(robot)`
+    and that model."""
+    problem = _Problem(cm, robot, data, cameras, board, fit.cameras is not None)
     cols = np.array(fit.kept, int)
     g, c = fit.g, fit.c
     r, A = problem.jacobian(g, c, cols)
@@ -1012,10 +1013,11 @@ def refit_pose(problem: _Problem, g: np.ndarray, c: np.ndarray, block: int, rows
 
 
 def summary_at(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
-               g: np.ndarray, c: np.ndarray) -> dict:
+               g: np.ndarray, c: np.ndarray, intrinsics: bool = False) -> dict:
     """The residual of image points at the poses g (`PixelFit.g`, none fitted) and coefficients c (nc,),
-    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`."""
-    return summary_of(_Problem(cm, robot, data, cameras, board), g, c)
+    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`;
+    intrinsics: g holds the cameras' refined intrinsics too (`cameras` those the fit was given)."""
+    return summary_of(_Problem(cm, robot, data, cameras, board, intrinsics), g, c)
 
 
 def summary_of(problem: _Problem, g: np.ndarray, c: np.ndarray) -> dict:
