@@ -135,3 +135,11 @@ def test_check_with_cameras_from_the_command_line(hand, tmp_path):
                          *map(str, extra)])
         assert code != 0 and message in err.getvalue(), err.getvalue()
         assert len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+    # accuracy from a carried camera's images: it sees no marker from two places, so no position in mm
+    (tmp_path / "vol.yaml").write_text("angle_unit: deg\njoints: {a1: [-5, 5]}\nsamples: 20\n")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["accuracy", str(tmp_path / "cal.json"), str(tmp_path / "vol.yaml"), str(tmp_path / "new.csv"),
+                     "--val", str(tmp_path / "val.csv"), *map(str, rig_files)]) != 0
+    assert "a camera on the tool: accuracy --cameras triangulates markers" in err.getvalue()
+    assert len(err.getvalue().strip().splitlines()) == 1, err.getvalue()

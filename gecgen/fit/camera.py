@@ -1048,3 +1048,18 @@ def fitted_tools(robot: Robot, model: ErrorModel, c: np.ndarray, q: np.ndarray, 
     T[:, :3, :3] = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], -1) / FRAME_ARM
     T[:, :3, 3], T[:, 3, 3] = p[:, 0], 1.0
     return T
+
+
+def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, loss: str) -> np.ndarray:
+    """The covariance (k, k) of c[cols] fitted with the poses g to the problem's image points, taken image
+    by image (the sandwich A^-1 (sum_p a_p a_p^T) A^-1, a_p the gradient of image p's rows, scaled by
+    P / (P - n) for P images and n unknowns), as `verify.volume.pose_covariance` takes a tracker's: the
+    points of one image share the robot's misfit at its pose and are not independent."""
+    e = np.linalg.norm(problem.residual(g, c), axis=1)
+    A, b, scale = _system(problem, g, c, cols, robust.weights(e, _limit(e, loss), loss), True)
+    P, n = problem.data.n_poses, A.shape[1]
+    grad = np.zeros((P, n))
+    np.add.at(grad, np.repeat(problem.data.pose, 2), A * b[:, None])
+    A_inv = np.linalg.pinv(A.T @ A)
+    full = P / max(P - n, 1) * A_inv @ (grad.T @ grad) @ A_inv / np.outer(scale, scale)
+    return full[n - len(cols):, n - len(cols):]
