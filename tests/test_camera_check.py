@@ -126,7 +126,7 @@ def test_check_with_cameras_from_the_command_line(hand, tmp_path):
                    "--history", tmp_path / "h.csv")
     assert out["looks_like"]["kind"] == "camera moved" and out["looks_like"]["moved"] == ["cam"]
     assert out["next_step"].startswith("cam moved") and out["history"]["checks"] == 1
-    assert out["calibration"]["val"] == str(tmp_path / "val.csv")
+    assert out["judged_against"] == f"the held-out images {tmp_path / 'val.csv'}"
     for extra, message in ((["--baseline", tmp_path / "val.csv"], "--baseline is not supported with --cameras"),
                            (["--board", tmp_path / "board30.yaml"], "key 'square': 0.03 m against the calibration's")):
         err = io.StringIO()

@@ -94,6 +94,11 @@ def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig,
     assert "# gecgen calibrate: industrial6r from image points" in text and "Chosen: `diagnosed`." in text
     scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")
     assert scored["after"]["rms_px"] == pytest.approx(out["val"]["rms_px"], rel=1e-6)
+    # the calibration records its validation images' residual, which check --cameras judges new images against
+    checked = run_json("check", out["files"]["calibration"], d / "train.csv", "--cameras", d / "cams.yaml")
+    assert checked["judged_against"] == f"the calibration's validation images ({d / 'val.csv'})"
+    assert checked["reference_sigma_px"] == pytest.approx(out["val"]["rms_px"] / 2 ** 0.5, rel=1e-9)
+    assert checked["looks_like"] == {"kind": "as calibrated"}
 
 
 @pytest.mark.parametrize("extra, message", [

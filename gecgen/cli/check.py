@@ -47,8 +47,9 @@ def add_parser(command):
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
     g.add_argument("--val", metavar="PIXELS", help="held-out images taken with the calibration (not fitted to): "
                                                    "their residual, the model's misfit away from the training poses "
-                                                   "in it, is what DATA is judged against (default: the "
-                                                   "calibration's training residual, which is strict)")
+                                                   "in it, is what DATA is judged against (default: the validation "
+                                                   "images' a calibrate --cameras with --val or --holdout recorded, "
+                                                   "else the calibration's training residual, which is strict)")
 
 
 def run(args) -> dict:
@@ -132,20 +133,24 @@ def _pixels(args) -> dict:
     require(report.get("sigma_px", 0) > 0, f"{args.calibration}: its fit left no residual (sigma 0 px): noise "
                                            f"cannot be told from a change; check against a calibration from "
                                            f"measured images")
-    reference = None
+    reference, against = None, ("the calibration's training residual (strict: new poses carry the model's misfit "
+                                "away from the training poses; give held-out images as --val)")
+    recorded = report.get("validation_px")
     if args.val:
         reference = pixel_reference(calibration, args.calibration, read_pixels(args.val, calibration.robot, cameras,
                                                                                 board), cameras, board)
+        against = f"the held-out images {args.val}"
+    elif isinstance(recorded, dict) and recorded.get("sigma_px", 0) > 0 and recorded.get("dof", 0) > 0:
+        reference = float(recorded["sigma_px"]), float(recorded["dof"])
+        against = f"the calibration's validation images ({recorded.get('images')})"
     verdict = check_pixels(calibration, args.calibration, data, cameras, board, args.tolerance_mm, reference)
     train = report.get("train", {})
     result = {"robot": calibration.robot.name, "data": str(args.data), "measurement": "pixels",
               "n_poses": data.n_poses, "n_points": len(data.uv),
               "calibration": {"sigma_px": report["sigma_px"], "train_rms_px": train.get("rms_px"),
                               "train_rms_mm_at_target": train.get("rms_mm_at_target"),
-                              **({"val": str(args.val), "val_sigma_px": reference[0]} if reference else {})},
-              "judged_against": f"the held-out images {args.val}" if reference else
-              "the calibration's training residual (strict: new poses carry the model's misfit away from the "
-              "training poses; give held-out images as --val)",
+                              **({"val_sigma_px": reference[0]} if reference else {})},
+              "judged_against": against,
               **verdict.to_dict()}
     result["next_step"] = pixel_next_step(result, args)
     return _recorded(args, result)

@@ -209,6 +209,17 @@ def calibrated(args, out, build, status) -> dict:
     say(status, f"writing the calibration, its code and the report into {out}")
     calib = calibration_of(robot, choice.model, choice.fit, cameras, board)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
+    scored = {}
+    if val is not None:
+        cm = CompiledModel(frame_robot(robot), choice.model)
+        scored["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
+                                                              f"{args.seed})"
+        scored["val_before"], scored["val"] = (summary_at(cm, robot, val, cameras, board, choice.fit.g, c,
+                                                          args.refine_intrinsics)
+                                               for c in (np.zeros(len(choice.fit.c)), choice.fit.c))
+        # what `check --cameras` judges new images against: the residual where the fit did not look
+        calib.report["validation_px"] = {"images": scored["validation"], "rms_px": scored["val"]["rms_px"],
+                                         "sigma_px": scored["val"]["rms_px"] / np.sqrt(2), "dof": 2 * len(val.uv)}
     save(calib, build / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []
     write_error_model(robot, choice.model, effects, build / "errors.yaml")
@@ -222,13 +233,7 @@ def calibrated(args, out, build, status) -> dict:
               "train": fit.train, "outliers": [o.to_dict() for o in fit.outliers], "held": calib.report["held"],
               "effects": [e.to_dict() for e in effects], "cameras": calib.report["cameras"],
               **({"board": calib.report["board"]} if board is not None else {}),
-              **({"intrinsics": calib.report["intrinsics"]} if args.refine_intrinsics else {})}
-    if val is not None:
-        cm = CompiledModel(frame_robot(robot), choice.model)
-        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
-                                                              f"{args.seed})"
-        result["val_before"], result["val"] = (summary_at(cm, robot, val, cameras, board, fit.g, c,
-                                                          args.refine_intrinsics) for c in (np.zeros(len(fit.c)), fit.c))
+              **({"intrinsics": calib.report["intrinsics"]} if args.refine_intrinsics else {}), **scored}
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
     result["files"] = {k: str(v) for k, v in files.items()}
