@@ -93,11 +93,16 @@ def hand(arm):
     cal = calibration_of(robot, model, fit_pixels(robot, model, data, rig.cameras, rig.board), rig.cameras, rig.board)
     rng = np.random.default_rng(5)
     held = simulate_pixels(robot, truth, rig, new[:10], 0.2, rng)
-    return robot, truth, rig, new[10:], cal, held, rng
+    return robot, truth, rig, new[10:], cal, held, rng, data
+
+
+def data_of(hand):
+    """The training images of the `hand` fixture."""
+    return hand[-1]
 
 
 def test_a_camera_on_the_tool_tells_itself_from_the_board(hand):
-    robot, truth, rig, q, cal, held, rng = hand
+    robot, truth, rig, q, cal, held, rng, _ = hand
     ref = pixel_reference(cal, "cal", held, rig.cameras, rig.board)
     out = {name: check_pixels(cal, "cal", simulate_pixels(robot, truth, r, q, 0.2, rng), rig.cameras,
                               rig.board, None, ref).to_dict()
@@ -111,7 +116,7 @@ def test_check_with_cameras_from_the_command_line(hand, tmp_path):
     from gecgen.cli import main
     from gecgen.fit.calibration import save
 
-    robot, truth, rig, q, cal, held, rng = hand
+    robot, truth, rig, q, cal, held, rng, _ = hand
     save(cal, tmp_path / "cal.json")
     c = rig.cameras["cam"]
     (tmp_path / "cam.yaml").write_text(f"cameras:\n  cam: {{mount: tool, fx: {c.fx}, fy: {c.fy}, cx: {c.cx}, cy: "
@@ -135,11 +140,33 @@ def test_check_with_cameras_from_the_command_line(hand, tmp_path):
                          *map(str, extra)])
         assert code != 0 and message in err.getvalue(), err.getvalue()
         assert len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
-    # accuracy from a carried camera's images: it sees no marker from two places, so no position in mm
-    (tmp_path / "vol.yaml").write_text("angle_unit: deg\njoints: {a1: [-5, 5]}\nsamples: 20\n")
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        assert main(["accuracy", str(tmp_path / "cal.json"), str(tmp_path / "vol.yaml"), str(tmp_path / "new.csv"),
-                     "--val", str(tmp_path / "val.csv"), *map(str, rig_files)]) != 0
-    assert "a camera on the tool: accuracy --cameras triangulates markers" in err.getvalue()
-    assert len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+    # accuracy from a carried camera's images: its pose from the board places the targets at the held-out poses
+    (tmp_path / "vol.yaml").write_text("angle_unit: deg\njoints: {a1: [-4, 4], a2: [-93, -87], a3: [-93, -87], "
+                                       "a4: [-12, 12], a5: [50, 70], a6: [-15, 15]}\nsamples: 50\n")
+    write_pixels(tmp_path / "train.csv", robot, data_of(hand))
+    out = run_json("accuracy", tmp_path / "cal.json", tmp_path / "vol.yaml", tmp_path / "train.csv", "--val",
+                   tmp_path / "val.csv", *rig_files, "--tolerance-mm", "1", "--draws", "400")
+    by = out["measured_by"]
+    assert by["points"] == 10 and by["images_left_out"] == 0 and by["method"].startswith("the carried camera's pose")
+    assert 0 < by["std_mm_median"] <= by["std_mm_max"] < 2 and "not seen" in out["meaning"]
+    assert out["measured"]["n"] + out["measured"]["outside"] == 10 and out["bound_mm"] > 0
+
+
+@pytest.mark.parametrize("mount", ["world", "tool"])
+def test_image_positions_of_the_calibrations_own_model_are_where_it_puts_the_targets(mount, world, hand):
+    """Noise-free images of what the calibration predicts (its model, its recorded cameras and board): the
+    positions triangulated from two fixed cameras, or placed by the carried camera's PnP pose through the
+    board and the camera's pose on the tool, are where the calibrated model puts the targets."""
+    from gecgen.fit.camera import fitted_tools, recorded_problem
+    from gecgen.verify.images import from_carried_camera, triangulate
+
+    robot, truth, rig, q, cal, *_ = world if mount == "world" else hand
+    seen = simulate_pixels(robot, truth, rig, q, 0.2, np.random.default_rng(1))
+    problem, g = recorded_problem(cal, "cal", seen, rig.cameras, rig.board)
+    exact = replace(seen, uv=seen.uv - problem.residual(g, cal.c))
+    measure = triangulate if mount == "world" else from_carried_camera
+    data, y, info = measure(cal, "cal", exact, rig.cameras, rig.board, 0.2)
+    T = fitted_tools(cal.robot, cal.model, cal.c, data.q)[data.pose]
+    points = np.array(list(cal.robot.targets.values()), float)[data.target]
+    model = np.einsum("rij,rj->ri", T[:, :3, :3], points) + T[:, :3, 3]
+    assert info.points == len(y) > 0 and np.abs(y - model).max() < 1e-7

@@ -51,12 +51,13 @@ def add_parser(command):
     p.add_argument("--report", metavar="DIR", help="folder for report.md and report.html: the statement, its reasons, "
                                                    "where it is worst (the map) and what it was read from")
     g = p.add_argument_group("with cameras (docs/reference.md, \"Cameras\"): DATA and --val are pixel files")
-    g.add_argument("--cameras", metavar="FILE", help="camera file of the calibration's fixed cameras: the held-out "
-                                                     "markers (--val) seen by two of them or more are triangulated "
-                                                     "through the poses and intrinsics it fitted, and the statement "
-                                                     "is read from those positions")
-    g.add_argument("--board", metavar="FILE", help="board file (a camera on the tool: refused, it sees no marker "
-                                                   "from two places)")
+    g.add_argument("--cameras", metavar="FILE", help="camera file of the calibration's cameras: the held-out markers "
+                                                     "(--val) seen by two fixed cameras or more are triangulated "
+                                                     "through the poses and intrinsics it fitted (a camera on the "
+                                                     "tool: its pose from the board), and the statement is read from "
+                                                     "those positions")
+    g.add_argument("--board", metavar="FILE", help="board file of a camera on the tool: the held-out images' "
+                                                   "camera poses from the board give the targets' positions")
 
 
 def run(args) -> dict:
@@ -111,7 +112,7 @@ def _stated(args, caught: list, status) -> dict:
               "unreachable": samples.unreachable, **statement.to_dict(),
               "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst,
               **({"measurement": "pixels", "measured_by": measured_by.to_dict(),
-                  "meaning": MEANING} if measured_by else {})}
+                  "meaning": MEANING["tool" if args.board else "world"]} if measured_by else {})}
     kept = [("--noise-mm", args.noise_mm, None), ("--repeatability-mm", args.repeatability_mm, 0.0),
             ("--confidence", args.confidence, 0.95), ("--share", args.share, 0.95)]
     rig = "".join(f" {o} {v}" for o, v in (("--cameras", args.cameras), ("--board", args.board)) if v)
@@ -132,10 +133,15 @@ def _stated(args, caught: list, status) -> dict:
     return result
 
 
-#: what the statement from images is about, said with its figures
-MEANING = ("the compensated position error of the markers (the robot file's targets) in mm, over the volume, read "
-           "from held-out markers triangulated by two fixed cameras or more; not the tool's orientation, and not "
-           "what one camera alone sees (a pixel fixes a marker across its ray, not along it)")
+#: what the statement from images is about, said with its figures: fixed cameras, a camera on the tool
+MEANING = {"world": "the compensated position error of the markers (the robot file's targets) in mm, over the "
+                    "volume, read from held-out markers triangulated by two fixed cameras or more; not the tool's "
+                    "orientation, and not what one camera alone sees (a pixel fixes a marker across its ray, not "
+                    "along it)",
+           "tool": "the compensated position error of the robot file's targets in mm, over the volume, read from "
+                   "the tool poses the carried camera measures from the board at held-out poses (its pose from the "
+                   "board's corners, carried through the board's and the camera's poses the calibration fitted): "
+                   "an error the calibration shares with the camera's fitted pose on the tool is not seen"}
 
 
 def _without_aux(calib, where: str):
@@ -147,7 +153,7 @@ def _without_aux(calib, where: str):
 
 def _from_images(args, status):
     """The statement from images (`verify.images.accuracy_from_images`): (calibration, volume, samples,
-    statement, `Triangulated`)."""
+    statement, `verify.images.Positions`)."""
     import numpy as np
 
     from gecgen.fit.calibration import load
