@@ -201,8 +201,9 @@ def test_accuracy_with_cameras_states_the_markers_accuracy_from_triangulated_hel
     d = rig
     (d / "vol.yaml").write_text(VOLUME)
     out = run_json("accuracy", d / "oracle.json", d / "vol.yaml", d / "train.csv", "--val", d / "val.csv",
-                   "--cameras", d / "cams.yaml", "--tolerance-mm", "2", "--draws", "400")
+                   "--cameras", d / "cams.yaml", "--tolerance-mm", "2", "--draws", "400", "--report", d / "acc")
     by = out["measured_by"]
+    assert f"From images: {out['meaning']}." in (d / "acc" / "report.md").read_text()
     assert out["measurement"] == "pixels" and "not what one camera alone sees" in out["meaning"]
     assert by["points"] == 4 * 30 and by["single_camera_points"] == 0 and 0 < by["std_mm_median"] < 1
     assert out["verdict"] in ("meets", "cannot tell", "does not meet") and out["bound_mm"] > out["unmodelled_rms_mm"]

@@ -180,6 +180,10 @@ def pixel_next_step(result: dict, args) -> str:
         return (f"the robot changed: a reading offset of {looks['joint']} ({looks['name']}) of {looks['offset']:.3g} "
                 f"{looks['unit']} explains {looks['explained']:.0%} of it; recalibrate (gecgen identify ROBOT "
                 f"TRAIN.csv {rig}) or look at that joint's zero")
+    if result["judged_against"].startswith("the calibration's training residual"):
+        return ("the images differ from the calibration beyond its training residual, and no moved camera nor a "
+                "single joint's offset explains it: new poses exceed that residual by the model's own misfit too; "
+                f"check again against images held out from the calibration (--val HELD_OUT.csv) before recalibrating")
     return ("the images differ from the calibration beyond its noise, and no moved camera nor a single joint's "
             f"offset explains it: recalibrate (gecgen identify ROBOT TRAIN.csv {rig}) and look at what changed")
 
