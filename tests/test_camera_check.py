@@ -109,6 +109,12 @@ def test_a_camera_on_the_tool_tells_itself_from_the_board(hand):
            for name, r in (("same", rig), ("bumped", _bumped(rig, "cam")))}
     assert out["same"]["looks_like"]["kind"] == "as calibrated"
     assert out["bumped"]["looks_like"] == {**out["bumped"]["looks_like"], "kind": "camera moved", "moved": ["cam"]}
+    # joint 2 read 0.5 mrad off: over these poses the board's refit explains the images as well as the joint's
+    # offset does, and the check says both rather than choosing
+    drift = replace(simulate_pixels(robot, truth, rig, q + 5e-4 * np.eye(6)[1], 0.2, rng), q=q)
+    looks = check_pixels(cal, "cal", drift, rig.cameras, rig.board, None, ref).to_dict()["looks_like"]
+    assert looks["kind"] == "moved or joint" and looks["moved"] == ["board"] and looks["joint"]["joint"] == "q2"
+    assert abs(looks["joint"]["offset"] - 5e-4) < 0.5e-4
 
 
 def test_check_with_cameras_from_the_command_line(hand, tmp_path):
