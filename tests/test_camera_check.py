@@ -85,6 +85,18 @@ def test_the_base_joint_and_a_fixed_camera_cannot_be_told_apart_by_one_camera(wo
     assert out["looks_like"]["joint"]["joint"] == "q1"
 
 
+def test_a_camera_seen_at_too_few_points_is_not_refitted(world):
+    """A camera with two image points in the check: its pose is not refitted (six unknowns), the others are."""
+    robot, truth, rig, q, cal, ref, rng = world
+    seen = replace(simulate_pixels(robot, truth, rig, q, 0.2, rng), q=q)
+    keep = seen.camera == 0
+    keep[np.flatnonzero(~keep)[:2]] = True
+    seen = replace(seen, camera=seen.camera[keep], point=seen.point[keep], uv=seen.uv[keep], row=seen.row[keep],
+                   pose=seen.pose[keep])
+    out = check_pixels(cal, "cal", seen, rig.cameras, None, None, ref).to_dict()
+    assert [p["name"] for p in out["poses_refitted"]] == ["cam1"] and out["looks_like"] == {"kind": "as calibrated"}
+
+
 @pytest.fixture(scope="module")
 def hand(arm):
     """A camera on the tool: a calibration from 30 images, 10 held-out images for its reference, 10 poses."""

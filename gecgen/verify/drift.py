@@ -124,16 +124,22 @@ def _joint(cm: CompiledModel, data: Measurements, aux: np.ndarray, c: np.ndarray
             "unit": "rad" if cm.robot.joints[j].kind == "R" else "m", "explained": share}
 
 
+#: image points a camera's (or the board's) pose is refitted from at least: six unknowns, and as many points
+#: left over to judge the refit by
+MIN_REFIT_POINTS = 6
+
+
 @dataclass(frozen=True)
 class PixelCheck:
     """A QA check from images (`check_pixels`): `check` as for a tracker, its lengths (rms_mm, max_mm,
     the tolerance) those of the image points' residuals across their rays at the points (mm at the
     target, `fit.camera.at_target_mm`) with the calibration's cameras as it recorded them; rms_px and
     max_px the same residuals in px; sigma_px the residual (px per coordinate) the noise is judged against;
-    poses: per camera (and, for a camera on the tool, the board) what refitting its pose alone, the
-    robot held as calibrated, does: rotation_deg and translation_mm (its optical centre's, or the
-    board's origin's, move), rms_px and p_value of its image points before and after, and moved (they
-    were beyond the noise before and are not after)."""
+    poses: per camera (and, for a camera on the tool, the board) seen at MIN_REFIT_POINTS points or
+    more, what refitting its pose alone, the robot held as calibrated, does: rotation_deg and
+    translation_mm (its optical centre's, or the board's origin's, move), rms_px and p_value of its
+    image points before and after, and moved (they were beyond the noise before, and the refit took out
+    more than noise lets six unknowns take)."""
 
     check: Check
     rms_px: float
@@ -177,6 +183,8 @@ def check_pixels(calibration, where: str, data, cameras: dict, board, tolerance_
         blocks.append((1, "board", np.ones(len(e), bool)))
     poses = []
     for k, name, rows in blocks:
+        if rows.sum() < MIN_REFIT_POINTS:  # a pose's six unknowns from fewer points: any residual "moves" it
+            continue
         h = refit_pose(problem, g, c, k, np.flatnonzero(rows))
         after = problem.residual(h, c)[rows]
         R0, R1 = (Rotation.from_rotvec(x[6 * k:6 * k + 3]).as_matrix() for x in (g, h))
@@ -224,9 +232,9 @@ def _pixel_looks(problem, g: np.ndarray, c: np.ndarray, e: np.ndarray, sigma: fl
     if tool and len(moved) == 2:  # the carried camera or the board: the one whose refit takes out more
         moved = [max(moved, key=lambda p: p["p_value_after"])]
     left = e.copy()
-    for k, p in enumerate(poses):
-        if any(p is m for m in moved):
-            left[problem.data.camera == k if p["pose"] == "camera" else slice(None)] = p["_after"]
+    for p in moved:
+        left[problem.data.camera == problem.data.cameras.index(p["name"]) if p["pose"] == "camera" else
+             slice(None)] = p["_after"]
     # every moved pose refitted, the images are within the noise
     camera = bool(moved) and _p_value(left, sigma, left.size - 6 * len(moved), ref_dof) >= ALPHA
     n = problem.robot.n
