@@ -94,6 +94,11 @@ def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig,
     assert "# gecgen calibrate: industrial6r from image points" in text and "Chosen: `diagnosed`." in text
     scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")
     assert scored["after"]["rms_px"] == pytest.approx(out["val"]["rms_px"], rel=1e-6)
+    # the calibration records its validation images' residual, which check --cameras judges new images against
+    checked = run_json("check", out["files"]["calibration"], d / "train.csv", "--cameras", d / "cams.yaml")
+    assert checked["judged_against"] == f"the calibration's validation images ({d / 'val.csv'})"
+    assert checked["reference_sigma_px"] == pytest.approx(out["val"]["rms_px"] / 2 ** 0.5, rel=1e-9)
+    assert checked["looks_like"] == {"kind": "as calibrated"}
 
 
 @pytest.mark.parametrize("extra, message", [
@@ -120,6 +125,8 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
 
     d = rig
     for args, message in ((["--board", str(d / "b.yaml")], "give --cameras too"),
+                          (["--refine-intrinsics"], "--refine-intrinsics refines the intrinsics of the cameras of "
+                                                    "image points: give --cameras too"),
                           ([], "which identify, diagnose, calibrate, redundancy and evaluate read")):
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
@@ -134,6 +141,111 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             assert main(list(map(str, command))) != 0
-        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points: score " \
-               f"held-out images with gecgen evaluate" in err.getvalue()
+        assert f"a calibration from image points; {command[0]} takes a calibration from tracker points with " \
+               f"tracker data, or this one with images: gecgen {command[0]} " in err.getvalue()
         assert len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_the_loop_refines_the_intrinsics_when_asked_and_scores_held_out_images_through_them(rig, floor):
+    """diagnose's and calibrate's fits with --refine-intrinsics (`ImagePoints(intrinsics=True)`): from a camera
+    file 1 % off in fx (and fy, cx) the held-out images come back to the true intrinsics' residual, where the
+    file's intrinsics leave them well above it; the screening's system has the intrinsics' columns."""
+    import numpy as np
+
+    from gecgen.loop.pixels import ImagePoints
+    from gecgen.model import load_robot
+    from gecgen.model.cameras import read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.symbolic.terms import load_error_model
+
+    d = rig
+    (d / "off.yaml").write_text(CAMERAS.replace("fx: 1800, fy: 1800, cx: 640", "fx: 1818, fy: 1791, cx: 646", 1))
+    robot = load_robot(d / "arm.yaml")
+    model = load_error_model(d / "oracle.errors.yaml", robot)
+    off = read_cameras(d / "off.yaml")
+    train, val = (read_pixels(d / f, robot, off) for f in ("train.csv", "val.csv"))
+    scored = {}
+    for refine in (False, True):
+        measure = ImagePoints(robot, off, None, 0.1, intrinsics=refine)
+        rnd = measure.fit(robot, model, train)
+        scored[refine] = measure.scores(rnd, val)["val_rms_px"]
+    assert scored[True] < 1.1 * floor["rms_px"] < 2 * 1.1 * floor["rms_px"] < scored[False], scored
+    A = measure.system(rnd, train)[0]
+    assert A.shape[1] == len(rnd.fit.g) + len(rnd.fit.kept) and len(rnd.fit.g) == 2 * (6 + 9)
+    assert np.isfinite(A).all()
+
+
+#: a volume about the training poses of `rig` (the wrist kept away from a5 = 0, where it is singular)
+VOLUME = """angle_unit: deg
+targets: [m1, m2, m3, m4]
+joints: {a1: [-9, 9], a2: [-100, -75], a3: [-115, -80], a4: [-45, 45], a5: [15, 60], a6: [-80, 80]}
+samples: 100
+"""
+
+
+def test_accuracy_with_cameras_states_the_markers_accuracy_from_triangulated_held_out_images(rig, floor):
+    """accuracy --cameras: the held-out markers, seen by both fixed cameras, are triangulated through the
+    cameras as the calibration placed them (the same points as OpenCV's triangulatePoints from the two
+    cameras' projection matrices and undistorted points), and the statement is read from them, saying
+    what its mm mean; one camera alone, a tracker option and no held-out images are refused in one line."""
+    import cv2
+    import numpy as np
+
+    from gecgen.cli import main
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import recorded_problem
+    from gecgen.model.cameras import read_cameras
+    from gecgen.model.pixels import read_pixels, write_pixels
+    from gecgen.verify.images import triangulate
+
+    d = rig
+    (d / "vol.yaml").write_text(VOLUME)
+    out = run_json("accuracy", d / "oracle.json", d / "vol.yaml", d / "train.csv", "--val", d / "val.csv",
+                   "--cameras", d / "cams.yaml", "--tolerance-mm", "2", "--draws", "400", "--report", d / "acc")
+    by = out["measured_by"]
+    assert f"From images: {out['meaning']}." in (d / "acc" / "report.md").read_text()
+    assert out["measurement"] == "pixels" and "not what one camera alone sees" in out["meaning"]
+    assert by["points"] == 4 * 30 and by["single_camera_points"] == 0 and 0 < by["std_mm_median"] < 1
+    assert out["verdict"] in ("meets", "cannot tell", "does not meet") and out["bound_mm"] > out["unmodelled_rms_mm"]
+    assert any("triangulated from the calibration's cameras" in r for r in out["reasons"])
+    assert "--noise-mm" not in out["next_step"] and "--cameras" in out["next_step"]
+    # the triangulated points against OpenCV's, pose by pose
+    cal, cams = load(d / "oracle.json"), read_cameras(d / "cams.yaml")
+    val = read_pixels(d / "val.csv", cal.robot, cams)
+    data, y, _ = triangulate(cal, "cal", val, cams, None, cal.report["sigma_px"])
+    problem, g = recorded_problem(cal, "cal", val, cams, None)
+    (R1, t1), (R2, t2) = problem.unpack(g)[0]
+    k = 7  # a row: its pose and marker, seen by each camera
+    rows = [np.flatnonzero((val.pose == data.pose[k]) & (val.point == val.points.index(list(cal.robot.targets)[
+        data.target[k]])) & (val.camera == c))[0] for c in (0, 1)]
+    und = [cv2.undistortPoints(val.uv[r].reshape(1, 1, 2), problem.cams[c].K, np.array(problem.cams[c].distortion))
+           .reshape(2, 1) for c, r in enumerate(rows)]
+    X = cv2.triangulatePoints(np.column_stack([R1, t1]), np.column_stack([R2, t2]), *und).ravel()
+    X = X[:3] / X[3]
+    # OpenCV's is the algebraic least squares, ours the reprojection error's: the same point to a small share of
+    # its noise, and ours reprojects at least as close to the pixels
+    assert 1e3 * np.linalg.norm(X - y[k]) < 0.1 * by["std_mm_median"]
+    reprojected = [sum(np.sum((val.uv[r] - problem.cams[c].project((R @ P + t)[None])[0]) ** 2)
+                       for c, (r, (R, t)) in enumerate(zip(rows, ((R1, t1), (R2, t2))))) for P in (X, y[k])]
+    assert reprojected[1] <= reprojected[0]
+    # one camera's images: no position in mm
+    one = val.subset(np.arange(val.n_poses))
+    keep = one.camera == 0
+    from dataclasses import replace
+    write_pixels(d / "one.csv", cal.robot, replace(one, pose=one.pose[keep], camera=one.camera[keep],
+                                                   point=one.point[keep], uv=one.uv[keep], row=one.row[keep]))
+    for extra, message in (([d / "one.csv", "--cameras", d / "cams.yaml"], "no marker is seen by two cameras"),
+                           ([d / "val.csv", "--cameras", d / "cams.yaml", "--noise-mm", "0.1"],
+                            "--noise-mm is not supported with --cameras"),
+                           ([d / "val.csv", "--cameras", d / "cams.yaml", "--board", d / "board.yaml", "--noise-mm",
+                             "0.1"], "--noise-mm is not supported with --cameras")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            assert main(["accuracy", str(d / "oracle.json"), str(d / "vol.yaml"), str(d / "train.csv"), "--val",
+                         *map(str, extra)]) != 0
+        assert message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["accuracy", str(d / "oracle.json"), str(d / "vol.yaml"), str(d / "train.csv"), "--cameras",
+                     str(d / "cams.yaml")]) != 0
+    assert "give them as --val PIXELS.csv" in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1

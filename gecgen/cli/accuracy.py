@@ -50,6 +50,14 @@ def add_parser(command):
     p.add_argument("--plot", metavar="PNG", help="map of where in the volume the error bound is largest")
     p.add_argument("--report", metavar="DIR", help="folder for report.md and report.html: the statement, its reasons, "
                                                    "where it is worst (the map) and what it was read from")
+    g = p.add_argument_group("with cameras (docs/reference.md, \"Cameras\"): DATA and --val are pixel files")
+    g.add_argument("--cameras", metavar="FILE", help="camera file of the calibration's cameras: the held-out markers "
+                                                     "(--val) seen by two fixed cameras or more are triangulated "
+                                                     "through the poses and intrinsics it fitted (a camera on the "
+                                                     "tool: its pose from the board), and the statement is read from "
+                                                     "those positions")
+    g.add_argument("--board", metavar="FILE", help="board file of a camera on the tool: the held-out images' "
+                                                   "camera poses from the board give the targets' positions")
 
 
 def run(args) -> dict:
@@ -69,20 +77,22 @@ def _stated(args, caught: list, status) -> dict:
     from gecgen.report.verdict import accuracy_next_step
     from gecgen.verify.volume import accuracy
 
-    cal = load_calibration(args.calibration)
-    calib = cal.calibration_
-    not_from_pixels(calib.report, args.calibration, "accuracy")
-    require(not calib.model.aux, f"{args.calibration}: its model uses auxiliary signals "
-                                 f"({', '.join(calib.model.aux)}), which a volume file cannot range over yet; state "
-                                 f"the accuracy of a model without them")
-    volume = load_volume(args.volume, calib.robot)
-    data, y = _positions(args.data, calib)
-    held_out = _positions(args.val, calib) if args.val else None
-    say(status, f"bounding the compensated error over {args.volume} ({args.draws} draws of the coefficients)")
-    samples, statement, _ = accuracy(calib, volume, data, y, held_out,
-                                     None if args.noise_mm is None else 1e-3 * args.noise_mm,
-                                     1e-3 * args.repeatability_mm, args.tolerance_mm,
-                                     args.confidence, args.draws, np.random.default_rng(args.seed), args.share)
+    if args.cameras or args.board:
+        calib, volume, samples, statement, measured_by = _from_images(args, status)
+    else:
+        cal = load_calibration(args.calibration)
+        calib = cal.calibration_
+        not_from_pixels(calib.report, args.calibration, "accuracy")
+        _without_aux(calib, args.calibration)
+        volume = load_volume(args.volume, calib.robot)
+        data, y = _positions(args.data, calib)
+        held_out = _positions(args.val, calib) if args.val else None
+        say(status, f"bounding the compensated error over {args.volume} ({args.draws} draws of the coefficients)")
+        samples, statement, _ = accuracy(calib, volume, data, y, held_out,
+                                         None if args.noise_mm is None else 1e-3 * args.noise_mm,
+                                         1e-3 * args.repeatability_mm, args.tolerance_mm,
+                                         args.confidence, args.draws, np.random.default_rng(args.seed), args.share)
+        measured_by = None
     k = statement.worst
     units = [(180 / np.pi, "deg") if j.kind == "R" else (1.0, "m") for j in calib.robot.joints]
     worst = {"bound_mm": float(statement.per_point_mm[k]), "worst_in_draws": statement.worst_share,
@@ -100,11 +110,14 @@ def _stated(args, caught: list, status) -> dict:
                 {"target": list(calib.robot.targets)[samples.target[k]]})}
     result = {"robot": calib.robot.name, "volume": str(args.volume), "samples": len(samples.q),
               "unreachable": samples.unreachable, **statement.to_dict(),
-              "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst}
+              "residual_from": str(args.val or args.data), "held_out": bool(args.val), "worst_at": worst,
+              **({"measurement": "pixels", "measured_by": measured_by.to_dict(),
+                  "meaning": MEANING["tool" if args.board else "world"]} if measured_by else {})}
     kept = [("--noise-mm", args.noise_mm, None), ("--repeatability-mm", args.repeatability_mm, 0.0),
             ("--confidence", args.confidence, 0.95), ("--share", args.share, 0.95)]
+    rig = "".join(f" {o} {v}" for o, v in (("--cameras", args.cameras), ("--board", args.board)) if v)
     assessment = accuracy_next_step(result, args.calibration, args.volume, args.data,
-                                    "".join(f" {o} {v:g}" for o, v, default in kept if v != default))
+                                    "".join(f" {o} {v:g}" for o, v, default in kept if v != default) + rig)
     result["next_step"], result["warnings"] = assessment.next_step, warning_lines(caught)
     if args.plot or args.report:
         from gecgen.model.files import write_atomically
@@ -118,6 +131,58 @@ def _stated(args, caught: list, status) -> dict:
         if args.report:
             result.update(write(content.accuracy(result, figure, assessment, warning_lines(caught)), args.report))
     return result
+
+
+#: what the statement from images is about, said with its figures: fixed cameras, a camera on the tool
+MEANING = {"world": "the compensated position error of the markers (the robot file's targets) in mm, over the "
+                    "volume, read from held-out markers triangulated by two fixed cameras or more; not the tool's "
+                    "orientation, and not what one camera alone sees (a pixel fixes a marker across its ray, not "
+                    "along it)",
+           "tool": "the compensated position error of the robot file's targets in mm, over the volume, read from "
+                   "the tool poses the carried camera measures from the board at held-out poses (its pose from the "
+                   "board's corners, carried through the board's and the camera's poses the calibration fitted): "
+                   "an error the calibration shares with the camera's fitted pose on the tool is not seen"}
+
+
+def _without_aux(calib, where: str):
+    from gecgen.model.validation import require
+
+    require(not calib.model.aux, f"{where}: its model uses auxiliary signals ({', '.join(calib.model.aux)}), which "
+                                 f"a volume file cannot range over yet; state the accuracy of a model without them")
+
+
+def _from_images(args, status):
+    """The statement from images (`verify.images.accuracy_from_images`): (calibration, volume, samples,
+    statement, `verify.images.Positions`)."""
+    import numpy as np
+
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import refuse_another_rig
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.model.validation import require
+    from gecgen.model.volume import load_volume
+    from gecgen.verify.images import accuracy_from_images
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    given = [o for o, v in (("--noise-mm", args.noise_mm is not None), ("--repeatability-mm", args.repeatability_mm))
+             if v]
+    require(not given, f"{given[0] if given else ''} is not supported with --cameras: the triangulated points' noise "
+                       f"is counted as model error (safe); leave it out")
+    require(args.val, "--cameras: the statement in mm is read from held-out images (markers triangulated by two "
+                      "cameras or more): give them as --val PIXELS.csv")
+    calibration = load(args.calibration)
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+    _without_aux(calibration, args.calibration)
+    volume = load_volume(args.volume, calibration.robot)
+    train, val = (read_pixels(f, calibration.robot, cameras, board) for f in (args.data, args.val))
+    say(status, f"bounding the compensated error over {args.volume} ({args.draws} draws of the coefficients)")
+    samples, statement, _, info = accuracy_from_images(calibration, args.calibration, volume, train, val, cameras,
+                                                       board, args.tolerance_mm, args.confidence, args.draws,
+                                                       np.random.default_rng(args.seed), args.share)
+    return calibration, volume, samples, statement, info
 
 
 def _positions(path: str, calib):

@@ -43,7 +43,7 @@ def add_parser(command):
     add_keep_insignificant(p)
     add_noise(p)
     add_tolerance(p)
-    pixels.add_options(p, intrinsics=False)
+    pixels.add_options(p)
 
 
 def run(args) -> dict:
@@ -55,7 +55,7 @@ def run(args) -> dict:
         # aside, replacing the old one whole at the end (files.output_folder)
         with output_folder(out, "calibration folder") as build, progress_status(not args.json) as status, \
                 warned() as caught:
-            if args.cameras or args.board:
+            if args.cameras or args.board or args.refine_intrinsics:
                 return pixels.calibrated(args, out, build, status)
             return _calibrate(args, out, build, status, caught)
     except KeyboardInterrupt as exc:

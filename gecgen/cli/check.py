@@ -39,9 +39,26 @@ def add_parser(command):
                         "repeatability); default the calibration's sigma, which also holds its misfit (safe)")
     p.add_argument("--history", help="CSV of checks to append this one to (created if absent); plotted beside it")
     p.add_argument("--label", help="this check's name in the history (default: the data file's name)")
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file of new images")
+    g.add_argument("--cameras", metavar="FILE", help="camera file of the calibration's cameras: DATA's image points "
+                                                     "are judged with the poses and intrinsics it fitted, and each "
+                                                     "camera's pose is refitted to tell a moved camera from a "
+                                                     "changed robot")
+    g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
+    g.add_argument("--val", metavar="PIXELS", help="held-out images taken with the calibration (not fitted to): "
+                                                   "their residual, the model's misfit away from the training poses "
+                                                   "in it, is what DATA is judged against (default: the validation "
+                                                   "images' a calibrate --cameras with --val or --holdout recorded, "
+                                                   "else the calibration's training residual, which is strict)")
 
 
 def run(args) -> dict:
+    if args.cameras or args.board:
+        return _pixels(args)
+    from gecgen.model.validation import require
+
+    require(not args.val, "--val gives held-out images: it goes with --cameras; for tracker data compare against "
+                          "a --baseline")
     from gecgen.api import load_calibration
     from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
@@ -62,10 +79,7 @@ def run(args) -> dict:
     y = to_world(calib.frames, data, "measure the check from the calibration's tracker stationing")
     require(args.noise_mm is None or args.baseline, "--noise-mm goes with --baseline: without one the change is "
                                                     "judged against the calibration's own sigma")
-    if args.history:
-        # the plot is written beside the history as H.png: a history of that name would be replaced by it
-        require(Path(args.history).suffix.lower() != ".png", f"--history {args.history}: the history is a CSV of "
-                f"checks (its plot is written beside it as .png); give a .csv file")
+    _history_is_csv(args)
     baseline = None
     if args.baseline:
         points, q_base = _baseline(args.baseline, calib, data)
@@ -76,9 +90,107 @@ def run(args) -> dict:
               "calibration_sigma_mm": 1e3 * sigma_m,
               **({"baseline": str(args.baseline), "noise_mm": 1e3 * noise_m} if baseline is not None else {}),
               **verdict.to_dict()}
+    return _recorded(args, result)
+
+
+def _recorded(args, result: dict) -> dict:
+    """result, with the check appended to --history when given."""
     if args.history:
         result["history"] = _append(Path(args.history), args.label or Path(args.data).name, result)
     return result
+
+
+def _history_is_csv(args):
+    from gecgen.model.validation import require
+
+    # the plot is written beside the history as H.png: a history of that name would be replaced by it
+    require(not args.history or Path(args.history).suffix.lower() != ".png",
+            f"--history {args.history}: the history is a CSV of checks (its plot is written beside it as .png); give "
+            f"a .csv file")
+
+
+def _pixels(args) -> dict:
+    """`check CALIB PIXELS.csv --cameras FILE [--board FILE]`: new images of the calibrated robot judged
+    with the cameras (and board) as the calibration recorded them (`verify.drift.check_pixels`)."""
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import refuse_another_rig
+    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.model.pixels import read_pixels
+    from gecgen.model.validation import require
+    from gecgen.verify.drift import check_pixels, pixel_reference
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    require(not (args.baseline or args.noise_mm is not None),
+            f"{'--baseline' if args.baseline else '--noise-mm'} is not supported with --cameras: new images are "
+            f"judged against the calibration's own residual (px); leave it out")
+    _history_is_csv(args)
+    calibration = load(args.calibration)
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+    data = read_pixels(args.data, calibration.robot, cameras, board)
+    report = calibration.report
+    require(report.get("sigma_px", 0) > 0, f"{args.calibration}: its fit left no residual (sigma 0 px): noise "
+                                           f"cannot be told from a change; check against a calibration from "
+                                           f"measured images")
+    reference, against = None, ("the calibration's training residual (strict: new poses carry the model's misfit "
+                                "away from the training poses; give held-out images as --val)")
+    recorded = report.get("validation_px")
+    if args.val:
+        reference = pixel_reference(calibration, args.calibration, read_pixels(args.val, calibration.robot, cameras,
+                                                                                board), cameras, board)
+        against = f"the held-out images {args.val}"
+    elif isinstance(recorded, dict) and recorded.get("sigma_px", 0) > 0 and recorded.get("dof", 0) > 0:
+        reference = float(recorded["sigma_px"]), float(recorded["dof"])
+        against = f"the calibration's validation images ({recorded.get('images')})"
+    verdict = check_pixels(calibration, args.calibration, data, cameras, board, args.tolerance_mm, reference)
+    train = report.get("train", {})
+    result = {"robot": calibration.robot.name, "data": str(args.data), "measurement": "pixels",
+              "n_poses": data.n_poses, "n_points": len(data.uv),
+              "calibration": {"sigma_px": report["sigma_px"], "train_rms_px": train.get("rms_px"),
+                              "train_rms_mm_at_target": train.get("rms_mm_at_target"),
+                              **({"val_sigma_px": reference[0]} if reference else {})},
+              "judged_against": against,
+              **verdict.to_dict()}
+    result["next_step"] = pixel_next_step(result, args)
+    return _recorded(args, result)
+
+
+def pixel_next_step(result: dict, args) -> str:
+    """What to do after a check from images, in one sentence."""
+    from shlex import quote
+
+    looks = result["looks_like"]
+    kind = looks["kind"]
+    rig = f"--cameras {quote(args.cameras)}" + (f" --board {quote(args.board)}" if args.board else "")
+    if kind == "as calibrated":
+        return (f"the images are within the calibration's noise ({result['rms_px']:.3g} px rms against its "
+                f"{result['reference_sigma_px']:.3g} px per coordinate): nothing to do")
+    if kind in ("camera moved", "board moved"):
+        what = ", ".join(looks["moved"])
+        return (f"{what} moved ({'; '.join(_moves(result, looks['moved']))}) and the robot is as calibrated at these "
+                f"poses: put it back, or identify again with images taken where it is now "
+                f"(gecgen identify ROBOT TRAIN.csv {rig})")
+    if kind == "moved or joint":
+        j = looks["joint"]
+        return (f"{looks['why']}: check that {', '.join(looks['moved'])} stayed where it was (a mark, a second "
+                f"camera) before recalibrating; if it did, {j['joint']} ({j['name']}) is off by {j['offset']:.3g} "
+                f"{j['unit']}: recalibrate (gecgen identify ROBOT TRAIN.csv {rig})")
+    if kind == "joint":
+        return (f"the robot changed: a reading offset of {looks['joint']} ({looks['name']}) of {looks['offset']:.3g} "
+                f"{looks['unit']} explains {looks['explained']:.0%} of it; recalibrate (gecgen identify ROBOT "
+                f"TRAIN.csv {rig}) or look at that joint's zero")
+    if result["judged_against"].startswith("the calibration's training residual"):
+        return ("the images differ from the calibration beyond its training residual, and no moved camera nor a "
+                "single joint's offset explains it: new poses exceed that residual by the model's own misfit too; "
+                f"check again against images held out from the calibration (--val HELD_OUT.csv) before recalibrating")
+    return ("the images differ from the calibration beyond its noise, and no moved camera nor a single joint's "
+            f"offset explains it: recalibrate (gecgen identify ROBOT TRAIN.csv {rig}) and look at what changed")
+
+
+def _moves(result: dict, names: list[str]) -> list[str]:
+    return [f"{p['name']} {p['rotation_deg']:.3g} deg, {p['translation_mm']:.3g} mm" for p in result["poses_refitted"]
+            if p["name"] in names]
 
 
 def _baseline(path: str, calib, data):

@@ -26,13 +26,13 @@ def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str,
 
 
 def not_from_pixels(report: dict, where: str, command: str):
-    """Refuse, in one line, a calibration from image points (its report's `measurement`) to a command that
-    compares tracker points with a tracker calibration (its residual, its frames)."""
+    """Refuse, in one line, a calibration from image points (its report's `measurement`) given with tracker
+    data to a command that also reads images (`--cameras`)."""
     from gecgen.model.validation import require
 
     require(report.get("measurement") != "pixels",
-            f"{where}: a calibration from image points; {command} takes a calibration from tracker points: score "
-            f"held-out images with gecgen evaluate {where} PIXELS.csv --cameras CAMERAS.yaml")
+            f"{where}: a calibration from image points; {command} takes a calibration from tracker points with "
+            f"tracker data, or this one with images: gecgen {command} {where} ... PIXELS.csv --cameras CAMERAS.yaml")
 
 
 def progress_status(enabled: bool):

@@ -40,7 +40,7 @@ def add_parser(command):
                         "from repeated poses, if any)")
     add_orientation_length(p)
     add_tolerance(p)
-    pixels.add_options(p, intrinsics=False)
+    pixels.add_options(p)
 
 
 #: the report's stages -> their keys in the JSON's per-branch figures: before and after as diagnose's own
@@ -48,7 +48,7 @@ STAGES = {"uncalibrated": "uncalibrated", "calibrated (declared model)": "before
 
 
 def run(args) -> dict:
-    if args.cameras or args.board:
+    if args.cameras or args.board or args.refine_intrinsics:
         return pixels.diagnosed(args)
     with warned() as caught:
         return _diagnosed(args, caught)

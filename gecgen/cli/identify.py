@@ -39,7 +39,7 @@ def add_parser(command):
 
 
 def run(args) -> dict:
-    if args.cameras or args.board:
+    if args.cameras or args.board or args.refine_intrinsics:
         return pixels.identified(args)
     with warned() as caught:
         return _identified(args, caught)

@@ -12,15 +12,15 @@ from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 
 
-def add_options(p, intrinsics: bool = True):
-    """identify's options for image points (diagnose's: without --refine-intrinsics)."""
+def add_options(p):
+    """identify's, diagnose's and calibrate's options for image points."""
     g = p.add_argument_group("with a camera (docs/reference.md, \"Cameras\"): DATA is a pixel file")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="board file of the chessboard a camera on the tool sees")
-    if intrinsics:
-        g.add_argument("--refine-intrinsics", action="store_true",
-                       help="refine each camera's fx, fy, cx, cy and distortion in the same fit, from the camera "
-                            "file's values (JSON intrinsics, with their std)")
+    g.add_argument("--refine-intrinsics", action="store_true",
+                   help="refine each camera's fx, fy, cx, cy and distortion in the same fit (in every fit of "
+                        "diagnose's and calibrate's loop), from the camera file's values (JSON intrinsics, with "
+                        "their std)")
     g.add_argument("--noise-px", type=number(0, 100, above=True), metavar="PX",
                    help="the corners' noise per coordinate, px (1 sigma): the coefficients the images determine too "
                         "weakly against it are held at zero and named (default: the fit's own residual)")
@@ -35,7 +35,7 @@ def identified(args) -> dict:
     from gecgen.fit.calibration import save
     from gecgen.fit.camera import calibration_of, fit_pixels, refuse_untrustworthy
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    _cameras_given(args)
     for option in ("ridge", "rank_tol", "noise_mm"):
         value = getattr(args, option, None)
         require(value in (None, "0", False), f"--{option.replace('_', '-')} is not supported with --cameras yet; "
@@ -88,12 +88,19 @@ def identified(args) -> dict:
     return result
 
 
+def _cameras_given(args):
+    """Refuse --board or --refine-intrinsics without --cameras, in one line."""
+    what = ("--board names the board a carried camera sees" if args.board else
+            "--refine-intrinsics refines the intrinsics of the cameras of image points")
+    require(args.cameras, f"{what}: give --cameras too")
+
+
 def _loop_cameras(args):
     """diagnose's and calibrate's --cameras and --board, read, after refusing (one line) the tracker
     options that mean nothing for image points: (cameras, board or None)."""
     from gecgen.model.cameras import read_board, read_cameras
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    _cameras_given(args)
     given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
                             ("--orientation-length", args.orientation_length)) if v]
     require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
@@ -122,7 +129,7 @@ def diagnosed(args) -> dict:
     require(not model.aux or set(model.aux) <= set(data.aux_names),
             f"{args.data}: the error model uses auxiliary signals {', '.join(model.aux)} the pixel file lacks; "
             f"add the columns or use another error model")
-    measure = ImagePoints(robot, cameras, board, args.noise_px)
+    measure = ImagePoints(robot, cameras, board, args.noise_px, intrinsics=args.refine_intrinsics)
     try:
         diag = diagnose(robot, model, data, val, seed=args.seed, noise_mm=args.noise_px, max_rounds=args.max_rounds,
                         measure=measure)
@@ -132,7 +139,8 @@ def diagnosed(args) -> dict:
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
     generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
-    rig = f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+    rig = (f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
+           + (" --refine-intrinsics" if args.refine_intrinsics else ""))
     result = {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
             "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
             "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
@@ -186,7 +194,8 @@ def calibrated(args, out, build, status) -> dict:
         data, val = hold_out(data, args.holdout, args.seed)
     default = error_model(args.errors, robot, data.aux_names, constant=False)
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
-    measure = ImagePoints(robot, cameras, board, args.noise_px, significance=not args.keep_insignificant)
+    measure = ImagePoints(robot, cameras, board, args.noise_px, significance=not args.keep_insignificant,
+                          intrinsics=args.refine_intrinsics)
     say(status, "choosing the model by cross-validation over the training images")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -200,6 +209,17 @@ def calibrated(args, out, build, status) -> dict:
     say(status, f"writing the calibration, its code and the report into {out}")
     calib = calibration_of(robot, choice.model, choice.fit, cameras, board)
     calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
+    scored = {}
+    if val is not None:
+        cm = CompiledModel(frame_robot(robot), choice.model)
+        scored["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
+                                                              f"{args.seed})"
+        scored["val_before"], scored["val"] = (summary_at(cm, robot, val, cameras, board, choice.fit.g, c,
+                                                          args.refine_intrinsics)
+                                               for c in (np.zeros(len(choice.fit.c)), choice.fit.c))
+        # what `check --cameras` judges new images against: the residual where the fit did not look
+        calib.report["validation_px"] = {"images": scored["validation"], "rms_px": scored["val"]["rms_px"],
+                                         "sigma_px": scored["val"]["rms_px"] / np.sqrt(2), "dof": 2 * len(val.uv)}
     save(calib, build / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []
     write_error_model(robot, choice.model, effects, build / "errors.yaml")
@@ -212,13 +232,8 @@ def calibrated(args, out, build, status) -> dict:
               "n_params": len(choice.model.coefficients), "n_identifiable": len(fit.kept), "before": fit.before,
               "train": fit.train, "outliers": [o.to_dict() for o in fit.outliers], "held": calib.report["held"],
               "effects": [e.to_dict() for e in effects], "cameras": calib.report["cameras"],
-              **({"board": calib.report["board"]} if board is not None else {})}
-    if val is not None:
-        cm = CompiledModel(frame_robot(robot), choice.model)
-        result["validation"] = str(args.val) if args.val else f"--holdout {args.holdout:g} of {args.train} (seed " \
-                                                              f"{args.seed})"
-        result["val_before"], result["val"] = (summary_at(cm, robot, val, cameras, board, fit.g, c)
-                                               for c in (np.zeros(len(fit.c)), fit.c))
+              **({"board": calib.report["board"]} if board is not None else {}),
+              **({"intrinsics": calib.report["intrinsics"]} if args.refine_intrinsics else {}), **scored}
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",
              "coefficient_header": out / "generated" / f"{robot.name}_calibration.h"}
     result["files"] = {k: str(v) for k, v in files.items()}

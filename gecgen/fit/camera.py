@@ -758,9 +758,10 @@ class Linearised:
 
 def linearised(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
                fit: PixelFit) -> Linearised:
-    """The `Linearised` system of `fit` (fit_pixels of cm's model on data, the cameras' intrinsics as
-    given); cm: the compiled model of `frame_robot(robot)` and that model."""
-    problem = _Problem(cm, robot, data, cameras, board)
+    """The `Linearised` system of `fit` (fit_pixels of cm's model on data with `cameras`, its columns
+    the refined intrinsics' too when it refined them); cm: the compiled model of `frame_robot(robot)`
+    and that model."""
+    problem = _Problem(cm, robot, data, cameras, board, fit.cameras is not None)
     cols = np.array(fit.kept, int)
     g, c = fit.g, fit.c
     r, A = problem.jacobian(g, c, cols)
@@ -962,6 +963,16 @@ def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camer
     the cameras' (and board's) poses and refined intrinsics it fitted, none fitted again (the cameras
     must not have moved): `before` (the nominal model) and `after` (the calibrated one), each as identify's
     `_summary` states a residual (px, and mm at the target)."""
+    problem, g = recorded_problem(calibration, where, data, cameras, board)
+    return {stage: summary_of(problem, g, c) for stage, c in (("before", np.zeros(problem.cm.dims.nc)),
+                                                              ("after", calibration.c))}
+
+
+def recorded_problem(calibration, where: str, data: Pixels, cameras: dict[str, Camera], board: Board | None):
+    """The residual problem of `data` seen through a pixel calibration (read from `where`) as it recorded
+    its set-up, and its cameras' (and board's) fitted poses g (`PixelFit.g`'s order): its refined
+    intrinsics where it refined them, the camera files' otherwise. A tracker calibration, a camera it did
+    not fit or another mount is refused in one line."""
     report = calibration.report
     require(report.get("measurement") == "pixels", f"{where}: a calibration from tracker points; "
                                                    f"score tracker measurements with it (leave out --cameras)")
@@ -976,20 +987,41 @@ def score_pixels(calibration, where: str, data: Pixels, cameras: dict[str, Camer
     cams = {n: replace(cam, fx=refined[n]["fx"], fy=refined[n]["fy"], cx=refined[n]["cx"], cy=refined[n]["cy"],
                        distortion=tuple(refined[n]["distortion"])) if n in refined else cam
             for n, cam in cameras.items()}
-    robot = calibration.robot
-    cm = CompiledModel(frame_robot(robot), calibration.model)
+    cm = CompiledModel(frame_robot(calibration.robot), calibration.model)
     poses = [fitted[n] for n in data.cameras] + ([report["board"]] if data.mount == "tool" else [])
     g = np.concatenate([[*Rotation.from_matrix(np.array(p["rotation"])).as_rotvec(), *p["translation"]]
                         for p in poses])
-    return {stage: summary_at(cm, robot, data, cams, board, g, c)
-            for stage, c in (("before", np.zeros(cm.dims.nc)), ("after", calibration.c))}
+    return _Problem(cm, calibration.robot, data, cams, board), g
+
+
+def refit_pose(problem: _Problem, g: np.ndarray, c: np.ndarray, block: int, rows: np.ndarray) -> np.ndarray:
+    """g with its pose `block` (6 unknowns from 6 * block: a camera's, in data.cameras' order, or the
+    board's after them) refitted to the image points `rows` (R,) by least squares, the coefficients c
+    and every other pose held: where a camera (or board) is now if it moved and the robot did not."""
+    from scipy.optimize import least_squares
+
+    o, R, _ = problem.frames(c)
+
+    def residual(x):
+        h = g.copy()
+        h[6 * block:6 * block + 6] = x
+        return (problem.data.uv - problem.project(problem.camera_points(h, o, R), h))[rows].ravel()
+
+    out = g.copy()
+    out[6 * block:6 * block + 6] = least_squares(residual, g[6 * block:6 * block + 6], method="lm", x_scale="jac").x
+    return out
 
 
 def summary_at(cm: CompiledModel, robot: Robot, data: Pixels, cameras: dict[str, Camera], board: Board | None,
-               g: np.ndarray, c: np.ndarray) -> dict:
+               g: np.ndarray, c: np.ndarray, intrinsics: bool = False) -> dict:
     """The residual of image points at the poses g (`PixelFit.g`, none fitted) and coefficients c (nc,),
-    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`."""
-    problem = _Problem(cm, robot, data, cameras, board)
+    as `_summary` states it (px, and mm at the target); cm: the compiled model of `frame_robot(robot)`;
+    intrinsics: g holds the cameras' refined intrinsics too (`cameras` those the fit was given)."""
+    return summary_of(_Problem(cm, robot, data, cameras, board, intrinsics), g, c)
+
+
+def summary_of(problem: _Problem, g: np.ndarray, c: np.ndarray) -> dict:
+    """The residual of the problem's image points at poses g and coefficients c, as `_summary` states it."""
     return _summary(problem, g, c, np.linalg.norm(problem.residual(g, c), axis=1))
 
 
@@ -1016,3 +1048,18 @@ def fitted_tools(robot: Robot, model: ErrorModel, c: np.ndarray, q: np.ndarray, 
     T[:, :3, :3] = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], -1) / FRAME_ARM
     T[:, :3, 3], T[:, 3, 3] = p[:, 0], 1.0
     return T
+
+
+def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, loss: str) -> np.ndarray:
+    """The covariance (k, k) of c[cols] fitted with the poses g to the problem's image points, taken image
+    by image (the sandwich A^-1 (sum_p a_p a_p^T) A^-1, a_p the gradient of image p's rows, scaled by
+    P / (P - n) for P images and n unknowns), as `verify.volume.pose_covariance` takes a tracker's: the
+    points of one image share the robot's misfit at its pose and are not independent."""
+    e = np.linalg.norm(problem.residual(g, c), axis=1)
+    A, b, scale = _system(problem, g, c, cols, robust.weights(e, _limit(e, loss), loss), True)
+    P, n = problem.data.n_poses, A.shape[1]
+    grad = np.zeros((P, n))
+    np.add.at(grad, np.repeat(problem.data.pose, 2), A * b[:, None])
+    A_inv = np.linalg.pinv(A.T @ A)
+    full = P / max(P - n, 1) * A_inv @ (grad.T @ grad) @ A_inv / np.outer(scale, scale)
+    return full[n - len(cols):, n - len(cols):]

@@ -685,7 +685,7 @@ def accuracy(result: dict, figure: Figure, assessment=None, warnings: list[str] 
     return Report(f"gecgen accuracy: {result['robot']}",
                   [f"The worst compensated error over the volume `{result['volume']}` ({result['samples']} samples, "
                    f"{result['draws']} Monte Carlo draws), its unmodelled part read from `{result['residual_from']}` "
-                   f"({source})."],
+                   f"({source})." + (f" From images: {result['meaning']}." if "meaning" in result else "")],
                   [*verdict_sections(assessment, warnings), Section("Statement", [Table(("", "value"), rows)]),
                    Section("Why, and what it assumes", [Bullets(result["reasons"]) if result["reasons"] else
                                                         "Nothing keeps it from being signed."]),

@@ -224,7 +224,7 @@ def accuracy_next_step(result: dict, calibration: str, volume: str, data: str, o
                  f"({result['worst_at']['bound_mm']:.3g} mm); " + ("no tolerance was given." if tol is None else f"the tolerance is {tol:.3g} mm."))
     again = f"gecgen accuracy {calibration} {volume} {data}{options}"
     outside = any(r.startswith((OUTSIDE_TRAINING, COMPENSATED_OUTSIDE)) for r in result["reasons"])
-    if result["noise_mm"] is None:
+    if result["noise_mm"] is None and result.get("measurement") != "pixels":  # triangulated points' noise is kept
         step = (f"state the tracker's noise and the robot's repeatability, without which the noise counts as model "
                 f"error: `{again} --noise-mm S --repeatability-mm R`")
     elif outside and verdict != DOES_NOT_MEET:

@@ -54,9 +54,13 @@ class Check:
                 "p_value": self.p_value, "beyond_noise": self.beyond_noise, "looks_like": self.looks_like}
 
 
-def _p_value(e: np.ndarray, sigma_m: float, dof: int) -> float:
-    """Probability that noise of sigma_m per coordinate leaves residuals e (R, 3) as large, over dof."""
-    return float(special.chdtrc(max(dof, 1), float(np.sum(e ** 2)) / sigma_m ** 2))
+def _p_value(e: np.ndarray, sigma_m: float, dof: int, ref_dof: float | None = None) -> float:
+    """Probability that noise of sigma_m per coordinate leaves residuals e (R, 3) as large, over dof;
+    with ref_dof, sigma_m is itself estimated over that many degrees of freedom (an F test)."""
+    x = float(np.sum(e ** 2)) / sigma_m ** 2
+    if ref_dof is not None:
+        return float(special.fdtrc(max(dof, 1), ref_dof, x / max(dof, 1)))
+    return float(special.chdtrc(max(dof, 1), x))
 
 
 def check(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, sigma_m: float,
@@ -118,3 +122,173 @@ def _joint(cm: CompiledModel, data: Measurements, aux: np.ndarray, c: np.ndarray
     j, share, offset = best
     return {"kind": "joint", "joint": f"q{j + 1}", "name": cm.robot.joints[j].name, "offset": offset,
             "unit": "rad" if cm.robot.joints[j].kind == "R" else "m", "explained": share}
+
+
+#: image points a camera's (or the board's) pose is refitted from at least: six unknowns, and as many points
+#: left over to judge the refit by
+MIN_REFIT_POINTS = 6
+
+
+@dataclass(frozen=True)
+class PixelCheck:
+    """A QA check from images (`check_pixels`): `check` as for a tracker, its lengths (rms_mm, max_mm,
+    the tolerance) those of the image points' residuals across their rays at the points (mm at the
+    target, `fit.camera.at_target_mm`) with the calibration's cameras as it recorded them; rms_px and
+    max_px the same residuals in px; sigma_px the residual (px per coordinate) the noise is judged against;
+    poses: per camera (and, for a camera on the tool, the board) seen at MIN_REFIT_POINTS points or
+    more, what refitting its pose alone, the robot held as calibrated, does: rotation_deg and
+    translation_mm (its optical centre's, or the board's origin's, move), rms_px and p_value of its
+    image points before and after, and moved (they were beyond the noise before, and the refit took out
+    more than noise lets six unknowns take)."""
+
+    check: Check
+    rms_px: float
+    max_px: float
+    sigma_px: float
+    poses: list[dict]
+
+    def to_dict(self) -> dict:
+        return {**self.check.to_dict(), "rms_px": self.rms_px, "max_px": self.max_px,
+                "reference_sigma_px": self.sigma_px, "poses_refitted": self.poses}
+
+
+def check_pixels(calibration, where: str, data, cameras: dict, board, tolerance_mm: float | None = None,
+                 reference: tuple[float, float] | None = None) -> PixelCheck:
+    """The verdict on image points `data` (`model.pixels.Pixels`) of the robot a pixel calibration (read
+    from `where`) calibrated, seen by the same cameras (and board): their residuals with the cameras as
+    it recorded them, judged against its residual sigma_px (chi-square over two coordinates per point);
+    when beyond it, what it looks like: a camera (or the board) moved, when refitting that pose alone
+    brings its points within the noise; a joint, when one reading offset does (or explains at least
+    EXPLAINS of the residual, as for a tracker); both, when either does (the images cannot tell them
+    apart: a turn of the base joint is a turn of every fixed camera about it; with two cameras or more
+    all moved, the joint is named and the cameras given as the other reading), else unexplained.
+    reference: (sigma px per coordinate, its degrees of freedom) of held-out images taken with the
+    calibration, judged against by an F test instead (the model's misfit at poses it was not fitted to
+    is in both); None: the calibration's training sigma, taken as known (strict: new poses carry the
+    misfit the fit did not see)."""
+    from scipy.spatial.transform import Rotation
+
+    from gecgen.fit.camera import at_target_mm, recorded_problem, refit_pose
+
+    problem, g = recorded_problem(calibration, where, data, cameras, board)
+    c = calibration.c
+    sigma, ref_dof = reference or (float(calibration.report["sigma_px"]), None)
+    e = problem.residual(g, c)
+    length = np.linalg.norm(e, axis=1)
+    mm, _ = at_target_mm(problem, g, c, length)
+    p_value = _p_value(e, sigma, e.size, ref_dof)
+    beyond = p_value < ALPHA
+    blocks = [(k, name, data.camera == k) for k, name in enumerate(data.cameras)]
+    if data.mount == "tool":  # the carried camera on the tool and the board in the world: each could have moved
+        blocks.append((1, "board", np.ones(len(e), bool)))
+    poses = []
+    for k, name, rows in blocks:
+        if rows.sum() < MIN_REFIT_POINTS:  # a pose's six unknowns from fewer points: any residual "moves" it
+            continue
+        h = refit_pose(problem, g, c, k, np.flatnonzero(rows))
+        after = problem.residual(h, c)[rows]
+        R0, R1 = (Rotation.from_rotvec(x[6 * k:6 * k + 3]).as_matrix() for x in (g, h))
+        if data.mount == "tool" and name == "board":  # X_w = R x_b + t: its origin t
+            move = h[6 * k + 3:6 * k + 6] - g[6 * k + 3:6 * k + 6]
+        else:  # X_cam = R X + t: its optical centre -R^T t
+            move = R1.T @ h[6 * k + 3:6 * k + 6] - R0.T @ g[6 * k + 3:6 * k + 6]
+        drop = float(np.sum(e[rows] ** 2) - np.sum(after ** 2)) / sigma ** 2
+        before_p = _p_value(e[rows], sigma, e[rows].size, ref_dof)
+        poses.append({"pose": "board" if name == "board" else "camera", "name": name,
+                      "rotation_deg": float(np.degrees(Rotation.from_matrix(R1 @ R0.T).magnitude())),
+                      "translation_mm": float(1e3 * np.linalg.norm(move)),
+                      "rms_px_before": float(np.sqrt(np.mean(np.sum(e[rows] ** 2, axis=1)))),
+                      "rms_px_after": float(np.sqrt(np.mean(np.sum(after ** 2, axis=1)))),
+                      "p_value_before": before_p,
+                      "p_value_after": _p_value(after, sigma, after.size - 6, ref_dof),
+                      # its points beyond the noise, and its refit takes out more than noise lets six unknowns take
+                      "moved": before_p < ALPHA and _taken(drop, 6, ref_dof) < ALPHA, "_after": after})
+    looks = {"kind": "as calibrated"}
+    if beyond:
+        looks = _pixel_looks(problem, g, c, e, sigma, ref_dof, poses, data.mount == "tool")
+    for p in poses:
+        del p["_after"]
+    rms, worst = float(np.sqrt(np.mean(mm ** 2))), float(mm.max())
+    verdict = Check(rms, worst, tolerance_mm, None if tolerance_mm is None else worst <= tolerance_mm, p_value,
+                    beyond, looks)
+    return PixelCheck(verdict, float(np.sqrt(np.mean(length ** 2))), float(length.max()), sigma, poses)
+
+
+def pixel_reference(calibration, where: str, data, cameras: dict, board) -> tuple[float, float]:
+    """(sigma px per coordinate, degrees of freedom) of held-out images `data` taken with a pixel
+    calibration, their residuals with its cameras as recorded: what `check_pixels` judges new images
+    against, the model's misfit at poses it was not fitted to included."""
+    from gecgen.fit.camera import recorded_problem
+
+    problem, g = recorded_problem(calibration, where, data, cameras, board)
+    e = problem.residual(g, calibration.c)
+    return float(np.sqrt(np.mean(e ** 2))), float(e.size)
+
+
+def _pixel_looks(problem, g: np.ndarray, c: np.ndarray, e: np.ndarray, sigma: float, ref_dof: float | None,
+                 poses: list[dict], tool: bool) -> dict:
+    """What a residual e (R, 2) px beyond the noise sigma looks like (`check_pixels`)."""
+    moved = [p for p in poses if p["moved"]]
+    if tool and len(moved) == 2:  # the carried camera or the board: the one whose refit takes out more
+        moved = [max(moved, key=lambda p: p["p_value_after"])]
+    left = e.copy()
+    for p in moved:
+        left[problem.data.camera == problem.data.cameras.index(p["name"]) if p["pose"] == "camera" else
+             slice(None)] = p["_after"]
+    # every moved pose refitted, the images are within the noise
+    camera = bool(moved) and _p_value(left, sigma, left.size - 6 * len(moved), ref_dof) >= ALPHA
+    n = problem.robot.n
+    r = e.ravel()
+    best = None
+    for j in range(n):
+        step = np.zeros(n)
+        step[j] = STEP
+        J = ((_at_readings(problem, step).residual(g, c) - _at_readings(problem, -step).residual(g, c))
+             / (2 * STEP)).ravel()
+        jj = float(J @ J)
+        if jj <= 0:
+            continue
+        share = float((J @ r) ** 2 / (jj * max(float(r @ r), 1e-300)))
+        if best is None or share > best[1]:
+            best = (j, share, -float(J @ r) / jj)
+    joint = None
+    if best is not None:
+        j, share, offset = best
+        rest = float(r @ r) * (1 - share)
+        p_after = _p_value(np.sqrt(rest), sigma, r.size - 1, ref_dof)
+        # the offset takes out more than noise alone lets one unknown take, and leaves the noise
+        significant = _taken(float(r @ r) * share / sigma ** 2, 1, ref_dof) < ALPHA
+        joint = {"kind": "joint", "joint": f"q{j + 1}", "name": problem.robot.joints[j].name, "offset": offset,
+                 "unit": "rad" if problem.robot.joints[j].kind == "R" else "m", "explained": share,
+                 "p_value_after": p_after}
+    joint_explains = joint is not None and significant and joint["p_value_after"] >= ALPHA
+    names = [p["name"] for p in moved]
+    if camera and joint_explains and len(moved) >= 2:
+        # one reading offset against every camera moved at once, by 6 unknowns each: the robot, named so
+        return joint | {"or": f"every camera moved ({', '.join(names)}), each refit alone explaining its images"}
+    if camera and joint_explains:
+        return {"kind": "moved or joint", "moved": names, "joint": joint,
+                "why": f"refitting {', '.join(names)} alone and a reading offset of {joint['joint']} alone each bring "
+                       f"the images within the noise: these images cannot tell them apart"}
+    if camera:
+        return {"kind": "board moved" if names == ["board"] else "camera moved", "moved": names,
+                "best_joint_share": None if joint is None else joint["explained"]}
+    if joint is not None and (joint_explains or joint["explained"] >= EXPLAINS):
+        return joint
+    return {"kind": "unexplained", "best_joint_share": None if joint is None else joint["explained"]}
+
+
+def _taken(drop: float, k: int, ref_dof: float | None) -> float:
+    """Probability that noise alone lets k unknowns take `drop` (the fall of the residual sum of squares
+    over sigma^2) or more; with ref_dof, sigma estimated over that many degrees of freedom."""
+    drop = max(drop, 0.0)
+    return float(special.chdtrc(k, drop) if ref_dof is None else special.fdtrc(k, ref_dof, drop / k))
+
+
+def _at_readings(problem, step: np.ndarray):
+    """The pixel problem with every pose's joint readings moved by step (n,)."""
+    import copy
+
+    shifted = copy.copy(problem)
+    shifted.inputs = (problem.data.q + step, *problem.inputs[1:])
+    return shifted

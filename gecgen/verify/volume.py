@@ -38,7 +38,7 @@ import numpy as np
 from scipy import special, stats
 
 from gecgen.model.kinematics import sensor_wrench, tool_pose
-from gecgen.model.measurements import Measurements
+from gecgen.model.measurements import Measurements, Poses
 from gecgen.model.robot import Robot
 from gecgen.model.validation import require
 from gecgen.model.volume import Volume
@@ -454,9 +454,15 @@ def _measured_reasons(m: Measured, tolerance_mm: float) -> tuple[list[str], list
     return [], [said]
 
 
+#: what a statement without a stated noise says of it (`state`'s unstated)
+NO_NOISE = ("no measurement noise stated (--noise-mm): the whole residual is counted as error the model does not "
+            "describe, so the bound is pessimistic")
+
+
 def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
           tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
-          blocks: list[str], doubts: list[str], notes: list[str], held: Measured | None = None) -> Statement:
+          blocks: list[str], doubts: list[str], notes: list[str], held: Measured | None = None,
+          unstated: str = NO_NOISE) -> Statement:
     """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
     maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated noise per coordinate (None: unknown).
     blocks: what undermines the model's figures (the verdict is then "cannot tell", whatever they
@@ -472,8 +478,7 @@ def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, nois
     at = np.argmax(norms[:, worst >= np.quantile(worst, confidence)], axis=0)
     counts = np.bincount(at, minlength=len(G))
     if noise_m is None:
-        notes = ["no measurement noise stated (--noise-mm): the whole residual is counted as error the model does "
-                 "not describe, so the bound is pessimistic", *notes]
+        notes = [unstated, *notes]
     if tolerance_mm is None:
         verdict, reasons = "no tolerance given", blocks + doubts + notes
     elif blocks:
@@ -534,7 +539,7 @@ def _commanded_span(calib: Calibration, q_c: np.ndarray, names: dict[str, int]) 
     return "; ".join(parts)
 
 
-def _findings(calib: Calibration, data: Measurements, samples: Samples, q_c: np.ndarray, status: np.ndarray,
+def _findings(calib: Calibration, data: Poses, samples: Samples, q_c: np.ndarray, status: np.ndarray,
               gain: float, held_out: bool, n_columns: int,
               n_declared: int) -> tuple[list[str], list[str], list[str]]:
     """(blocks, doubts, notes) about a statement: what undermines the model's figures (no verdict but
@@ -664,9 +669,44 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     robot repeatability per coordinate (m); with held-out data, the share of the volume the measured
     statement (`Measured`) is about. Returns the samples, the statement, and the compiled model whose
     targets are the stated points (the tool box's affine basis, or the robot's)."""
+    _require_draws(draws, confidence)
+    fitted = CompiledModel(calib.robot, calib.model)
+    _require_fitted(calib, fitted, data, y)
+    data, y, dropped = _inliers(calib, data, y)
+    columns = held_columns(calib)
+    cov = pose_covariance(fitted, data, y, calib.c, columns)
+    m = 3 * len(data.xyz)
+    residuals, shrink = held_out or (data, y), 1.0 if held_out else m / max(m - len(calib.kept), 1)
+    unmod = unmodelled(fitted, *residuals, calib.c, noise_m, repeatability_m, shrink)
+    notes = [f"{dropped} measured rows the fit found to be outliers are left out of the covariance and the "
+             f"unmodelled error"] if dropped else []
+    return stated(calib, volume, data, columns, cov, unmod, held_out, noise_m, tolerance_mm, confidence, draws, rng,
+                  share, notes)
+
+
+def held_columns(calib: Calibration) -> list[int]:
+    """The coefficients the statement's covariance is over: those fitted, and those held at zero for want
+    of significance, which are not known to be zero and stay uncertain."""
+    names = calib.model.coefficient_names(calib.robot)
+    held = {names.index(e["param"]) for e in calib.report.get("eliminated", []) if e["reason"] == "insignificant"}
+    return sorted(set(calib.kept) | held)
+
+
+def _require_draws(draws: int, confidence: float):
     require(draws >= 20 / (1 - confidence) if confidence < 1 else False,
             f"{draws} draws for a {confidence:g} confidence: give at least {20 / max(1 - confidence, 1e-12):.0f} "
             f"(20 beyond the quantile), or a lower confidence")
+
+
+def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: np.ndarray, unmod: Unmodelled,
+           held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, tolerance_mm: float | None,
+           confidence: float, draws: int, rng: np.random.Generator, share: float,
+           notes: list[str], unstated: str = NO_NOISE) -> tuple[Samples, Statement, CompiledModel]:
+    """`accuracy`'s statement from what it read off the data: the training poses (`Poses`: their count
+    and the forces they carried), the covariance cov of c[columns], the unmodelled error, the held-out
+    (data, world points) when given, and notes of how they were read (said after the statement's own);
+    unstated: what it says of the noise when none is stated (noise_m None)."""
+    _require_draws(draws, confidence)
     samples = sample(calib.robot, volume, rng)
     require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
                             f"the tool box and the joint ranges against the robot")
@@ -677,34 +717,22 @@ def accuracy(calib: Calibration, volume: Volume, data: Measurements, y: np.ndarr
     cm = CompiledModel(robot, calib.model)
     w, gain = read_wrench(cm, calib.c, samples, volume)
     samples = dataclasses.replace(samples, w=w)
-    fitted = CompiledModel(calib.robot, calib.model)
-    _require_fitted(calib, fitted, data, y)
-    data, y, dropped = _inliers(calib, data, y)
-    # a coefficient held at zero for want of significance is not known to be zero: it stays uncertain
-    names = calib.model.coefficient_names(calib.robot)
-    held = {names.index(e["param"]) for e in calib.report.get("eliminated", []) if e["reason"] == "insignificant"}
-    columns = sorted(set(calib.kept) | held)
-    cov = pose_covariance(fitted, data, y, calib.c, columns)
-    m = 3 * len(data.xyz)
-    residuals, shrink = held_out or (data, y), 1.0 if held_out else m / max(m - len(calib.kept), 1)
-    unmod = unmodelled(fitted, *residuals, calib.c, noise_m, repeatability_m, shrink)
     U = unmod.maps(tool_pose(calib.robot, samples.q)[:, :3, :3], samples.point)
     q_c, status = cm.compensate(samples.q, samples.w, None, calib.c)
-    blocks, doubts, notes = _findings(calib, data, samples, q_c, status, gain, held_out is not None, len(columns),
-                                      volume.samples)
+    blocks, doubts, own = _findings(calib, poses, samples, q_c, status, gain, held_out is not None, len(columns),
+                                    volume.samples)
     held = None if held_out is None else measured(*held_out_errors(calib, volume, samples, *held_out), share,
                                                   confidence)
-    if dropped:
-        notes.append(f"{dropped} measured rows the fit found to be outliers are left out of the covariance and the "
-                     f"unmodelled error")
+    own += notes
     if unmod.twist_cov is None and volume.tool_box is not None:
-        notes.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
-                     "poses): a tilt's growth with the lever arm to the tool box is not in it")
+        own.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
+                   "poses): a tilt's growth with the lever arm to the tool box is not in it")
     statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, blocks, doubts, notes, held)
+                      confidence, draws, rng, blocks, doubts, own, held, unstated)
     return samples, statement, cm
 
 
-__all__ = ["Measured", "Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "held_out_errors", "measured",
+__all__ = ["Measured", "Samples", "Statement", "Unmodelled", "accuracy", "affine_model", "held_columns",
+           "held_out_errors", "measured",
            "order_statistic", "point_rows", "pose_covariance", "poses_needed", "random_poses", "read_wrench",
-           "sample", "state", "unmodelled", "worst_over_draws"]
+           "sample", "state", "stated", "unmodelled", "worst_over_draws"]
