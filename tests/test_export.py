@@ -219,6 +219,19 @@ def test_dh_robot_urdf_refused_in_one_line(offsets_calib, tmp_path, capsys):
     assert not (tmp_path / "x.urdf").exists() and not (tmp_path / "c").exists()
 
 
+def test_a_calibration_whose_poses_are_all_singular_is_refused_with_why(ur10_calib, tmp_path, capsys):
+    """Training ranges that hold only a stretched elbow (the UR10's q3 = 0): no command there can be
+    compensated without a swing, and the refusal says so instead of only that none converged."""
+    calib = json.loads(ur10_calib.read_text())
+    for k, q in enumerate([0.3, -1.0, 0.0, -1.0, 1.2, 0.2]):
+        calib["training_ranges"][f"q{k + 1}"] = [q - 1e-4, q + 1e-4]
+    (tmp_path / "calib.json").write_text(json.dumps(calib))
+    assert main(["export", str(tmp_path / "calib.json"), "--c", str(tmp_path / "c")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(singular at 21)" in err[0] and "near a singular posture" in err[0], err
+    assert not (tmp_path / "c").exists()
+
+
 # -- --table ----------------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["industrial6r", "ur10"])
 def test_zero_offset_error_is_the_joint_reading_off(name, tmp_path, rng):

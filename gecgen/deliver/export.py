@@ -25,7 +25,7 @@ from gecgen.model.kinematics import constant, error_transform, frames, target_po
 from gecgen.model.robot import ERROR_NAMES, WRENCH, Robot
 from gecgen.model.validation import require
 from gecgen.fit.calibration import Calibration, model_hash
-from gecgen.runtime.compiled import OK, CompiledModel, rendered
+from gecgen.runtime.compiled import OK, SINGULAR, STATUS_NAMES, CompiledModel, rendered
 from gecgen.fit.redundancy import generic_design
 
 #: the example program's compensation settings: `gecgen compensate`'s (Newton steps, residual m),
@@ -61,8 +61,13 @@ def example_command(calib: Calibration, cm: CompiledModel, where: str) -> dict[s
     _, status = cm.compensate(X[:, :n], X[:, n:n + 6], X[:, n + 6:], calib.c, EXAMPLE_MAX_ITER, EXAMPLE_TOL)
     ok = np.nonzero(status == OK)[0]
     if not len(ok):
+        counts = np.bincount(status, minlength=len(STATUS_NAMES))
+        why = ", ".join(f"{STATUS_NAMES[k].replace('_', ' ')} at {n}" for k, n in enumerate(counts) if n)
+        hint = (": the training poses lie near a singular posture (a stretched elbow, two axes in line), where a "
+                "correction would swing the joints; measure poses away from it too and identify again"
+                if counts[SINGULAR] else "")
         raise RuntimeError(f"{where}: compensation converges inside the joint limits at none of {len(X)} commands in "
-                           f"the training ranges; the calibration cannot be used to compensate")
+                           f"the training ranges ({why}); the calibration cannot be used to compensate{hint}")
     return {"q": X[ok[0], :n].tolist(), "w": X[ok[0], n:n + 6].tolist(), "aux": X[ok[0], n + 6:].tolist()}
 
 
