@@ -1,16 +1,17 @@
 """gecgen design --cameras: poses that keep the board or the markers in view, informative for the pixel fit
 (gecgen/plan/camera_design.py)."""
+import contextlib
 import csv
-import json
+import io
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import yaml
-from conftest import ROBOTS
-from test_cli import gecgen
+from conftest import ROBOTS, run_json
 
 from gecgen.api import design_images
+from gecgen.cli import main
 from gecgen.fit.camera import design_rows
 from gecgen.model import load_robot
 from gecgen.model.cameras import Board, Camera
@@ -131,7 +132,7 @@ def test_designed_set_is_better_conditioned_than_random(setup, arm, request):
     M = {}
     for name, q in (("design", out.q), ("random", out.random)):
         data = CD.nominal_pixels(robot, out.rig, q)
-        J, kept, _, _ = design_rows(robot, model, data, rig.cameras, rig.board, g, np.arange(len(q)), 100)
+        J, kept, _ = design_rows(robot, model, data, rig.cameras, rig.board, g, np.arange(len(q)), 100)
         assert list(kept) == [n for n in range(len(model.coefficient_names(robot)))
                               if model.coefficient_names(robot)[n] in d["identifiable"]]
         M[name] = J.T @ J
@@ -159,11 +160,9 @@ def _files(hand, tmp_path):
 def test_cli_writes_the_design_format(hand, tmp_path):
     """`gecgen design --cameras` writes pose, q1..qn, the contract's keys, and the API's poses."""
     out = tmp_path / "poses.csv"
-    run = gecgen("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses", 15,
-                 "--candidates", 6000, "--home", ",".join(map(str, HAND_HOME)), "--seed", 2, *_files(hand, tmp_path),
-                 "-o", out, "--json")
-    assert run.returncode == 0, run.stderr
-    result = json.loads(run.stdout)
+    result = run_json("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses",
+                      15, "--candidates", 6000, "--home", ",".join(map(str, HAND_HOME)), "--seed", 2,
+                      *_files(hand, tmp_path), "-o", out)
     assert {"n_poses", "criterion", "value", "random_value"} <= set(result) and result["mount"] == "tool"
     with open(out, newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -172,16 +171,22 @@ def test_cli_writes_the_design_format(hand, tmp_path):
     np.testing.assert_allclose(q, hand[1].q, atol=1e-12)
 
 
+def _refused(*args) -> str:
+    """A command's one-line refusal (its stderr), run in this process."""
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(list(map(str, args))) != 0
+    return err.getvalue().strip()
+
+
 def test_no_pose_in_view_is_refused_naming_the_camera_and_the_checks(hand, tmp_path):
     """A board placed 3 m above where the camera can look: one line naming the camera and each check."""
     rig, _ = hand
     args = _files(hand, tmp_path)
     far = replace(rig, board_pose=(rig.board_pose[0], rig.board_pose[1] + [0.0, 0.0, 3.0]))
     _rig_file(far, tmp_path / "rig.yaml")
-    run = gecgen("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses", 15,
-                 "--candidates", 2000, "--home", ",".join(map(str, HAND_HOME)), *args, "-o", tmp_path / "p.csv")
-    assert run.returncode != 0
-    message = run.stderr.strip()
+    message = _refused("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses",
+                       15, "--candidates", 2000, "--home", ",".join(map(str, HAND_HOME)), *args, "-o", tmp_path / "p.csv")
     assert len(message.splitlines()) == 1 and "Traceback" not in message
     for word in ("camera cam", "field of view 0", "angle", "distance", "all three 0"):
         assert word in message, message
@@ -190,9 +195,29 @@ def test_no_pose_in_view_is_refused_naming_the_camera_and_the_checks(hand, tmp_p
 def test_options_without_cameras_and_tracker_options_with_them_are_refused(hand, tmp_path):
     args = _files(hand, tmp_path)
     base = ["design", ROBOTS / "industrial6r.yaml", "--poses", 15, "-o", tmp_path / "p.csv"]
-    run = gecgen(*base, "--rig", tmp_path / "rig.yaml")
-    assert run.returncode != 0 and "--rig goes with --cameras" in run.stderr
-    run = gecgen(*base, *args, "--min-z", 0.5)
-    assert run.returncode != 0 and "--min-z does not apply to a design for images" in run.stderr
+    assert "--rig goes with --cameras" in _refused(*base, "--rig", tmp_path / "rig.yaml")
+    assert "--min-z does not apply to a design for images" in _refused(*base, *args, "--min-z", 0.5)
     with pytest.raises(ModelError, match="give the board"):
         design_images(load_robot(ROBOTS / "industrial6r.yaml"), hand[0].cameras, (hand[0].poses, None), 5)
+
+
+def test_rig_file_refusals_name_the_file_and_key(hand, tmp_path):
+    from gecgen.model.cameras import read_rig
+
+    rig, _ = hand
+    path = tmp_path / "rig.yaml"
+    _rig_file(rig, path)
+    poses, board = read_rig(path, rig.cameras, rig.board)
+    np.testing.assert_array_equal(poses["cam"][0], rig.poses["cam"][0])
+    np.testing.assert_array_equal(board[1], rig.board_pose[1])
+    spec = yaml.safe_load(path.read_text())
+    for change, expect in ((lambda s: s.pop("board"), "missing key 'board'"),
+                           (lambda s: s["cameras"]["cam"].update(rotation=[[1, 0, 0], [0, 2, 0], [0, 0, 1]]),
+                            "camera 'cam', key 'rotation': not a rotation matrix"),
+                           (lambda s: s["cameras"].update(other=s["cameras"]["cam"]), "camera 'other' is not in the "
+                                                                                      "camera file")):
+        bad = yaml.safe_load(yaml.safe_dump(spec))
+        change(bad)
+        path.write_text(yaml.safe_dump(bad))
+        with pytest.raises(ModelError, match=expect):
+            read_rig(path, rig.cameras, rig.board)

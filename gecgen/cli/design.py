@@ -343,13 +343,15 @@ def _figures(result: dict) -> dict:
             **result["observability"], **result["predicted_std"]}
 
 
-def _compared(figures: dict, noise: str, candidates: str = "candidate poses"):
-    """The designed poses' figures beside the random ones' (COMPARED), the noise as `noise` says it."""
+def _compared(figures: dict, noise: str, kind: str = "candidate"):
+    """The designed poses' figures beside the random ones' (COMPARED), the noise as `noise` says it, the
+    candidates named `kind` ("candidate", "in-view")."""
     from gecgen.cli.human import scalar
 
-    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many poses drawn from the same {candidates})")
+    same = "candidates" if kind == "candidate" else f"{kind} poses"
+    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many poses drawn from the same {same})")
     for key, random, label, means in COMPARED:
-        means = means.format(noise=noise, n=f"{figures['n_validation_poses']} {candidates}")
+        means = means.format(noise=noise, n=f"{figures['n_validation_poses']} {kind} poses")
         print(f"  {label:<38}{scalar(figures[key]):>10}{scalar(figures[random]):>10}  {means}".rstrip())
 
 
@@ -364,14 +366,14 @@ def _cameras_human(result: dict):
     print(f"output: {result['output']}")
     print(f"poses: {result['n_poses']}, chosen among {result['n_candidates']} of the {result['n_in_view']} candidate "
           f"poses in view ({result['n_sampled']} sampled with seed {result['seed']})")
-    print(f"in view: every {what} in every camera ({', '.join(result['cameras'])}) at least {scalar(view['margin_px'])} "
-          f"px inside the image, {view['distance_m'][0]:g}-{view['distance_m'][1]:g} m deep, angle to its face "
-          f"{angle}")
+    print(f"in view: every {what} for camera {', '.join(result['cameras'])}: {scalar(view['margin_px'])} px inside the "
+          f"image, {view['distance_m'][0]:g}-{view['distance_m'][1]:g} m deep, angle to its face {angle}")
     chosen = {"D": "D-optimal (the largest log det of the information", "I": "I-optimal (the smallest mean "
               "variance of the predicted image points"}[result["criterion"]]
-    print(f"criterion: {chosen} on the {result['n_pose_unknowns']} pose unknowns of the cameras and board and the "
-          f"{result['n_identifiable']} coefficients the images determine)")
-    _compared(_figures(result), f"{scalar(result['predicted_std']['noise_px'])} px", "in-view candidates")
+    print(f"criterion: {chosen})")
+    print(f"  over {result['n_pose_unknowns']} pose unknowns (cameras, board) and the {result['n_identifiable']} "
+          f"coefficients the images determine")
+    _compared(_figures(result), f"{scalar(result['predicted_std']['noise_px'])} px", "in-view")
     _volume(result, "the joint")
     left = [e["param"] for e in result["eliminated"] if e["detail"].startswith(("camera pose", "scale"))]
     print(f"left to the cameras' poses or the scale (pixels cannot give them): {', '.join(left) or 'none'}")

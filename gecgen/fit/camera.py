@@ -434,17 +434,12 @@ def design_rows(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
     step sees it. The coefficients it is taken in are those the images of the poses `sample` (indices)
     determine; it is computed `block` poses at a time. Returns J (2R, n_geom + k) over the poses and
     those k coefficients (rows (u, v) of every image point in the data's order), the coefficients
-    (indices), the ones eliminated (each with why), and H (P, 3, k): the tool origin's rows of H_e over
-    them at each pose."""
+    (indices) and the ones eliminated (each with why)."""
     problem, g, kept, eliminated = _set_up(robot, model, data.subset(sample), cameras, board, None, "auto", start=g)
     c = np.zeros(problem.cm.dims.nc)
-    cols = np.array(kept, int)
-    J, H = [], []
-    for s in range(0, data.n_poses, block):
-        part = _Problem(problem.cm, robot, data.subset(np.arange(s, min(s + block, data.n_poses))), cameras, board)
-        J.append(part.jacobian(g, c, cols)[1])
-        H.append(part.frames(c, with_H=True)[2][:, 0, 0][:, :, cols])
-    return np.vstack(J), kept, eliminated, np.concatenate(H)
+    parts = (_Problem(problem.cm, robot, data.subset(np.arange(s, min(s + block, data.n_poses))), cameras, board)
+             for s in range(0, data.n_poses, block))
+    return np.vstack([part.jacobian(g, c, np.array(kept, int))[1] for part in parts]), kept, eliminated
 
 
 @one_blas_thread

@@ -258,7 +258,7 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     rng, rng_random, rng_val = (np.random.default_rng([seed, s]) for s in range(3))
     data = nominal_pixels(robot, rig, q)
     sample = np.sort(rng.choice(K, min(K, BLOCK), replace=False))
-    J, kept, eliminated, H_tool = design_rows(robot, model, data, rig.cameras, rig.board, rig_unknowns(rig), sample,
+    J, kept, eliminated = design_rows(robot, model, data, rig.cameras, rig.board, rig_unknowns(rig), sample,
                                               BLOCK)
     ng = J.shape[1] - len(kept)
     blocks = _blocks(J, K)
