@@ -52,15 +52,15 @@ def hand(arm):
 
 @pytest.fixture(scope="module")
 def world(arm):
-    """Two fixed cameras and four markers on the tool; a design of 20 poses, the markers' plate (across tool z)
-    seen within 75 deg."""
+    """Two fixed cameras and four markers on the tool; a design of 20 poses, every marker 20 px inside the
+    images, the markers' plate (across tool z) seen within 75 deg."""
     robot, truth, model = arm
     robot = replace(robot, targets=MARKERS)
     cams = [Camera(f"cam{k + 1}", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960) for k in range(2)]
     rig, _ = eye_to_hand(robot, truth, cams, np.array([[1.9, -2.4, 1.7], [1.9, 2.4, 1.7]]), np.array([2.0, 0, 1.0]),
                          WORLD_HOME, np.radians([12, 10, 10, 60, 40, 90]), 1, np.random.default_rng(4))
     out = design_images(robot, rig.cameras, (rig.poses, None), 20, errors=model, candidates=3000, home=WORLD_HOME,
-                        seed=3, max_angle_deg=75.0, distance_m=(0.5, 4.0))
+                        seed=3, margin_px=20.0, max_angle_deg=75.0, distance_m=(0.5, 4.0))
     return robot, rig, out
 
 
@@ -102,7 +102,7 @@ def test_designed_poses_keep_every_point_in_view(setup, arm, request):
         robot, rig, out = request.getfixturevalue("world")
         npts, cos_max, (near, far) = 4, np.cos(np.radians(75.0)), (0.5, 4.0)
     assert len(out.q) == out.design.to_dict()["n_poses"] and out.n_in_view < out.n_sampled  # the view did reject
-    m = CD.MARGIN_PX
+    m = out.rig.margin_px
     for name, (X, uv, cos) in _sight(robot, rig, out.q).items():
         cam = rig.cameras[name]
         assert np.isfinite(uv).all()
@@ -186,7 +186,8 @@ def test_no_pose_in_view_is_refused_naming_the_camera_and_the_checks(hand, tmp_p
     far = replace(rig, board_pose=(rig.board_pose[0], rig.board_pose[1] + [0.0, 0.0, 3.0]))
     _rig_file(far, tmp_path / "rig.yaml")
     message = _refused("design", ROBOTS / "industrial6r.yaml", "--errors", ROBOTS / "constant.errors.yaml", "--poses",
-                       15, "--candidates", 2000, "--home", ",".join(map(str, HAND_HOME)), *args, "-o", tmp_path / "p.csv")
+                       15, "--candidates", 2000, "--home", ",".join(map(str, HAND_HOME)), *args,
+                       "-o", tmp_path / "p.csv")
     assert len(message.splitlines()) == 1 and "Traceback" not in message
     for word in ("camera cam", "field of view 0", "angle", "distance", "all three 0"):
         assert word in message, message

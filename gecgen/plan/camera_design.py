@@ -35,12 +35,13 @@ from gecgen.model.pixels import Pixels
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit.camera import design_rows
-from gecgen.plan.design import CRITERIA, MAX_PASSES, N_VALIDATION, RIDGE, _Basis, _finite, choose, \
+from gecgen.plan.design import CRITERIA, MAX_PASSES, N_VALIDATION, RIDGE, _Basis, _finite, choose, predicted_std, \
     reported_history, scores
 from gecgen.runtime.threads import one_blas_thread
 
-#: px: every point at least this far inside the image (a corner detector needs the pattern around it)
-MARGIN_PX = 20.0
+#: px: every point at least this far inside the image: a corner detector needs the pattern around it, and
+#: the rig is known roughly (0.5 deg and 10 mm move a corner about 30 px at 0.7 m for a 1400 px focal length)
+MARGIN_PX = 40.0
 #: deg: the largest angle between the line of sight and the board's face (corners blur and bunch beyond)
 MAX_ANGLE_DEG = 60.0
 #: m: the depths along the optical axis a camera is taken to focus on
@@ -143,8 +144,8 @@ def in_view(robot: Robot, rig: Rig, q: np.ndarray) -> np.ndarray:
     what = "the board" if rig.tool else "the markers"
     angle = f"within {rig.max_angle_deg:g} deg" if rig.max_angle_deg is not None else "at any angle"
     near, far = rig.distance_m
-    said = [f"camera {name}: field of view {int(c['field of view'].sum())} (every {rig.what} {rig.margin_px:g} px inside "
-            f"the image), angle {int(c['angle'].sum())} ({what} {angle}), distance {int(c['distance'].sum())} "
+    said = [f"camera {name}: field of view {int(c['field of view'].sum())} (every {rig.what} {rig.margin_px:g} px "
+            f"inside the image), angle {int(c['angle'].sum())} ({what} {angle}), distance {int(c['distance'].sum())} "
             f"({near:g}-{far:g} m deep), all three {int(np.all(list(c.values()), axis=0).sum())}"
             for name, c in checks.items()]
     raise ModelError(f"no candidate pose keeps {what} in view of every camera; of {K} candidates, how many pass each "
@@ -203,7 +204,8 @@ class CameraDesign:
     history: list
 
     def to_dict(self) -> dict:
-        both = {f"{prefix}{key}": _finite(self.values[name][c]) for name, prefix in (("design", ""), ("random", "random_"))
+        both = {f"{prefix}{key}": _finite(self.values[name][c])
+                for name, prefix in (("design", ""), ("random", "random_"))
                 for c, key in (("D", "log_det"), ("I", "mean_variance"))}
         obs = {**self.observability["design"], **{f"random_{k}": v for k, v in self.observability["random"].items()}}
         std = {**self.predicted_std["design"],
@@ -221,18 +223,6 @@ class CameraDesign:
 def _blocks(J: np.ndarray, K: int) -> np.ndarray:
     """Each pose's rows of J (2R, m), pose by pose, as (K, rows, m)."""
     return J.reshape(K, -1, J.shape[-1])
-
-
-def _predicted_px(M: np.ndarray, H: np.ndarray, noise_px: float) -> np.ndarray:
-    """Std (px) of every image point's predicted position, (V, npts), at the validation blocks H (V, 2 npts,
-    m) (rows u, v of each point) for unknowns estimated with covariance noise^2 M^-1: the square root of
-    the trace of that covariance carried to the point's (u, v)."""
-    try:
-        L = np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        return np.full((len(H), H.shape[1] // 2), np.inf)
-    Z = np.linalg.solve(L, H.reshape(-1, H.shape[-1]).T)
-    return noise_px * np.sqrt((Z ** 2).sum(axis=0).reshape(len(H), -1, 2).sum(axis=2))
 
 
 def _mm_per_px(robot: Robot, rig: Rig, q: np.ndarray) -> np.ndarray:
@@ -258,14 +248,13 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     rng, rng_random, rng_val = (np.random.default_rng([seed, s]) for s in range(3))
     data = nominal_pixels(robot, rig, q)
     sample = np.sort(rng.choice(K, min(K, BLOCK), replace=False))
-    J, kept, eliminated = design_rows(robot, model, data, rig.cameras, rig.board, rig_unknowns(rig), sample,
-                                              BLOCK)
+    J, kept, eliminated = design_rows(robot, model, data, rig.cameras, rig.board, rig_unknowns(rig), sample, BLOCK)
     ng = J.shape[1] - len(kept)
     blocks = _blocks(J, K)
     # whitened: the mean candidate informs every unknown alike (`design._Basis`), poses first
     R = np.linalg.qr(J, mode="r") / np.sqrt(K)
     R *= np.sign(np.diag(R))[:, None]
-    require(np.abs(np.diag(R)).min() > RANK_TOL * np.abs(np.diag(R)).max(),
+    require((np.abs(np.diag(R)) > RANK_TOL * np.linalg.norm(R, axis=0)).all(),
             "the candidate poses do not determine the cameras' poses: draw them over a wider span (--span)")
     basis = _Basis(np.arange(blocks.shape[1]), np.arange(J.shape[1]), R, np.linalg.norm(R, axis=0), np.linalg.inv(R))
     _, s, Vt = np.linalg.svd(basis.whiten(blocks), full_matrices=False)
@@ -283,7 +272,7 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     out = {}
     for name, idx in (("design", chosen), ("random", random_pick)):
         M = np.einsum("pik,pil->kl", Hw[idx], Hw[idx])
-        std = _predicted_px(M, H_val, noise_px)
+        std = predicted_std(M, H_val, noise_px, H_val.shape[1] // 2)  # px, (V, points)
         mm = std * mm_per_px
         out[name] = (*scores(basis, M, len(idx) * blocks.shape[1]),
                      {"rms_px": _finite(np.sqrt(np.mean(std ** 2))), "max_px": _finite(std.max()),

@@ -558,13 +558,14 @@ def given_information(cm: CompiledModel, given: Measurements, basis: _Basis) -> 
 def predicted_std(M: np.ndarray, H: np.ndarray, noise_m: float, nt: int) -> np.ndarray:
     """Std (m) of each measured target's predicted position, (V, nt), at validation blocks H (V, r, k)
     for coefficients estimated with covariance noise^2 M^-1 (M in H's coordinates): the square root
-    of the trace of that covariance propagated to the target's 3 coordinates."""
+    of the trace of that covariance propagated to the target's r / nt coordinates (a point's 3; an
+    image point's 2, in px for a noise in px)."""
     try:
         L = np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
         return np.full((len(H), nt), np.inf)
     Z = np.linalg.solve(L, H.reshape(-1, H.shape[-1]).T)  # (k, V r)
-    var = (Z ** 2).sum(axis=0).reshape(len(H), nt, 3).sum(axis=2)
+    var = (Z ** 2).sum(axis=0).reshape(len(H), nt, -1).sum(axis=2)
     return noise_m * np.sqrt(var)
 
 
