@@ -371,8 +371,10 @@ def _cameras_human(result: dict):
     chosen = {"D": "D-optimal (the largest log det of the information", "I": "I-optimal (the smallest mean "
               "variance of the predicted image points"}[result["criterion"]]
     print(f"criterion: {chosen})")
-    print(f"  over {result['n_pose_unknowns']} pose unknowns (cameras, board) and the {result['n_identifiable']} "
+    poses = "the camera's and the board's" if result["mount"] == "tool" else "the cameras'"
+    print(f"  over the {result['n_pose_unknowns']} unknowns of {poses} poses and the {result['n_identifiable']} "
           f"coefficients the images determine")
+    print("  (the predicted std is the image points', across the ray at each point)")
     _compared(_figures(result), f"{scalar(result['predicted_std']['noise_px'])} px", "in-view")
     _volume(result, "the joint")
     left = [e["param"] for e in result["eliminated"] if e["detail"].startswith(("camera pose", "scale"))]
