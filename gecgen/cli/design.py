@@ -10,6 +10,10 @@ With `--fixtures FILE.csv` (sockets and planes, `model/fixture_file.py`) the con
 for calibration without a tracker instead (`gecgen/plan/fixture_design.py`): POSES.csv is then a
 measurement file's rows, `point` or `plane` named and `x y z` empty, to be recorded with the joints
 read once the ball is seated or the probe touches.
+
+With `--cameras FILE` (and `--board`, `--rig`) the poses are chosen for images instead
+(`gecgen/plan/camera_design.py`, through the API's `design_images`): every board corner or marker in
+view, informative for the pixel fit; POSES.csv is `pose, q1..qn`, the joints to take the images at.
 """
 from __future__ import annotations
 
@@ -42,7 +46,8 @@ def add_parser(command):
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
     p.add_argument("--candidates", type=whole(1, MAX_POSES),
                    help=f"uniform samples within the joint limits to choose from (default {DEFAULT_CANDIDATES}); with "
-                        f"--fixtures, configurations tried per fixture (default {FD.CANDIDATES})")
+                        f"--fixtures, configurations tried per fixture (default {FD.CANDIDATES}); with --cameras, poses "
+                        f"drawn in --home +- --span, of which those in view are kept (default {CD.SAMPLED})")
     p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
                                                     "aux columns) instead of uniform samples")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
@@ -73,8 +78,8 @@ def add_parser(command):
     p.add_argument("--patch-mm", type=number(0, 10_000, above=True),
                    help=f"with --fixtures: half-width of the square of each plane the touches are planned in (mm, "
                         f"default {1e3 * FD.PATCH_M:g})")
-    g = p.add_argument_group("with a camera (docs/reference.md, \"Designing images\"): poses at which the cameras "
-                             "see the board or the markers, for the pixel fit")
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Designing the images\"): poses at which the "
+                             "cameras see the board or the markers, for the pixel fit")
     g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
     g.add_argument("--board", metavar="FILE", help="a camera on the tool: the board it sees, fixed in the world")
     g.add_argument("--rig", metavar="FILE", help="where the cameras (and the board) are: per camera its rotation and "
