@@ -30,7 +30,8 @@ from gecgen.model.validation import excerpt, nearest, require
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, STATUS_NAMES, CompiledModel
 
 __all__ = ["Calibrator", "Compensation", "Diagnoser", "Errors", "FilteredProgram", "ModelError", "ProgramTarget",
-           "Score", "Selection", "calibrate", "filter_program", "load_calibration", "load_robot", "read_measurements"]
+           "Score", "Selection", "calibrate", "design_images", "filter_program", "load_calibration", "load_robot",
+           "read_measurements"]
 
 LOSSES = ("cauchy", "huber", "l2")
 REGISTER = ("auto", "always", "never")
@@ -775,3 +776,80 @@ def filter_program(calibrator, program: str | Path, output: str | Path | None = 
                for c in outcome.changes}
     return FilteredProgram(program_format(program, format).name, list(targets.values()), outcome.corrected,
                            [targets[id(c)] for c in outcome.kept], outcome.counts(), outcome.texts, written, log)
+
+
+# -- planning images ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ImageDesign:
+    """What `design_images` chose: q (N, n) the joints to take the images at, in the order chosen;
+    `design` the figures (`plan.camera_design.CameraDesign`: the designed set against as many random
+    in-view candidates); n_sampled the candidates drawn or given, n_in_view those that keep
+    everything in view."""
+
+    q: np.ndarray
+    design: object
+    n_sampled: int
+    n_in_view: int
+    rig: object
+    candidates: np.ndarray
+
+    @property
+    def random(self) -> np.ndarray:
+        """(N, n) the joints of the random comparison: as many in-view candidates drawn at random."""
+        return self.candidates[self.design.random]
+
+
+def design_images(robot, cameras, rig, n_poses: int, *, board=None, errors=None, candidates=None, home=None,
+                  span=None, seed: int = 0, criterion: str = "D", noise_px: float | None = None,
+                  margin_px: float | None = None, max_angle_deg: float | None = None,
+                  distance_m=None) -> ImageDesign:
+    """What `gecgen design --cameras` does: n_poses poses at which every camera sees every board corner
+    (a camera on the tool) or every marker (fixed cameras), chosen to inform the pixel fit most.
+    robot: a Robot or its file; cameras: the camera file (or its cameras by name); board: the board
+    file (or Board) a camera on the tool sees; rig: the rig file, where the cameras (and the board)
+    are (`model.cameras.read_rig`); errors: the error model (default: the robot file's beside it).
+    candidates: how many poses to draw uniformly in home +- span (rad or m; home defaults to the
+    middle of each joint's range, span to `camera_design.SPAN`, one value or one per joint), or the
+    joints (K, n) to choose from. The view: margin_px inside the image, max_angle_deg between the line
+    of sight and the board's face (for markers, their tool's z axis; unchecked unless given), depths
+    distance_m (near, far) m; defaults in `plan.camera_design`. noise_px scales the predicted figures."""
+    from gecgen.model.cameras import Board, read_board, read_cameras, read_rig
+    from gecgen.plan import camera_design as CD
+
+    robot = _robot(robot)
+    cams = cameras if isinstance(cameras, dict) else read_cameras(cameras)
+    tool = next(iter(cams.values())).mount == "tool"
+    require(not tool or board is not None, "the camera is on the tool: give the board it sees (--board)")
+    require(tool or board is None, "--board goes with a camera on the tool (mount: tool); these cameras are fixed")
+    board = board if board is None or isinstance(board, Board) else read_board(board)
+    require(not (robot.branches and tool), f"{robot.source}: a tree; a camera on the tool is supported on serial "
+                                           f"chains only: see the tree's markers with fixed cameras (mount: world)")
+    require(tool or not robot.estimated, f"{robot.source}: targets {', '.join(robot.estimated)} are left to estimate; "
+                                         f"a design needs every marker's place on the tool: give it in the robot file")
+    poses, board_pose = rig if isinstance(rig, tuple) else read_rig(rig, cams, board)
+    near, far = CD.DISTANCE_M if distance_m is None else tuple(float(d) for d in distance_m)
+    require(0 <= near < far, f"--distance-m {near:g},{far:g}: give the nearest and farthest depth, 0 <= near < far (m)")
+    setup = CD.Rig(cams, poses, board, board_pose, CD.MARGIN_PX if margin_px is None else float(margin_px),
+                   max_angle_deg if max_angle_deg is not None or not tool else CD.MAX_ANGLE_DEG, (near, far))
+    model = error_model(errors, robot)
+    lo, hi = (np.array(v) for v in robot.sampling_box())
+    if candidates is None or np.isscalar(candidates):
+        n = CD.SAMPLED if candidates is None else int(candidates)
+        centre = (lo + hi) / 2 if home is None else _floats(home, "home", f"{robot.n} joint values (rad or m)")
+        half = np.array([CD.SPAN] if span is None else _floats(span, "span", "one value or one per joint"))
+        require(len(centre) == robot.n and len(half) in (1, robot.n),
+                f"--home, --span: give {robot.n} home values and one span or {robot.n} (rad or m)")
+        a, b = np.maximum(lo, centre - half), np.minimum(hi, centre + half)
+        require((a <= b).all(), f"--home: {excerpt(home)} is outside the joint limits; give joints within them")
+        q = np.random.default_rng(seed).uniform(a, b, (n, robot.n))
+    else:
+        q = np.asarray(candidates, float)
+        require(q.ndim == 2 and q.shape[1] == robot.n, f"candidates: give the joints (K, {robot.n}) to choose from")
+    ok = CD.in_view(robot, setup, q)
+    inside = q[ok]
+    if len(inside) > CD.MAX_CANDIDATES:  # a seeded sample: the Jacobian of every one would cost minutes
+        inside = inside[np.sort(np.random.default_rng([seed, 3]).choice(len(inside), CD.MAX_CANDIDATES, False))]
+    d = CD.design_images(robot, model, setup, inside, n_poses, seed, CD.NOISE_PX if noise_px is None else noise_px,
+                         criterion)
+    return ImageDesign(inside[d.chosen], d, len(q), int(ok.sum()), setup, inside)

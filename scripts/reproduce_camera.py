@@ -85,6 +85,30 @@ def registered_mm(p: np.ndarray, y: np.ndarray, scaled: bool = False) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum((pc - s * yc @ R.T) ** 2, axis=1))))
 
 
+def camera_centres(robot, truth, model, rig, fit, held: np.ndarray):
+    """Eye-in-hand: the carried camera's optical centre at the held-out joints (N, n) as the fit places it
+    and the truth's, in the fit's world (the board's fitted pose against its true one), (N, 3) m each;
+    and the fitted and true tool poses (N, 4, 4), and W the rotation from the true world to the fit's."""
+    (R, t), (Rb, tb) = next(iter(rig.poses.values())), rig.board_pose
+    Rbf, tbf = fit.board
+    Rf, tf = fit.tool_camera()
+    T_true = true_tools(robot, truth, held)
+    c_true = np.einsum("nij,j->ni", T_true[:, :3, :3], -R.T @ t) + T_true[:, :3, 3]
+    W = Rbf @ Rb.T  # true world -> the fit's world (the board's)
+    c_true = (c_true - tb) @ W.T + tbf
+    T_fit = fitted_tools(robot, model, fit.c, held)
+    return np.einsum("nij,j->ni", T_fit[:, :3, :3], tf) + T_fit[:, :3, 3], c_true, T_fit, T_true, W
+
+
+def tool_origins(robot, truth, model, rig, fit, held: np.ndarray):
+    """Eye-to-hand: the tool origin at the held-out joints (N, n) as the fit places it and the truth's, in
+    the fit's world (the first camera's fitted pose against its true one), (N, 3) m each."""
+    first = next(iter(rig.poses))
+    (Rt, tt), (Rf, tf) = rig.poses[first], fit.poses[first]
+    p_true = true_tools(robot, truth, held)[:, :3, 3]
+    return fitted_tools(robot, model, fit.c, held)[:, :3, 3], (p_true @ Rt.T + tt - tf) @ Rf
+
+
 def hand(robot, truth, model, seed: int, noise: float, significance: bool = True) -> dict:
     rng = np.random.default_rng(seed)
     cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
@@ -98,14 +122,8 @@ def hand(robot, truth, model, seed: int, noise: float, significance: bool = True
     out = {}
     for name, fixed in (("fit", None), ("oracle", np.array([*rotvec_t(R, t), *rotvec_t(Rb, tb)]))):
         fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed, significance=significance)
-        Rbf, tbf = fit.board
         Rf, tf = fit.tool_camera()  # X_tool = Rf X_cam + tf
-        T_true = true_tools(robot, truth, held)
-        c_true = np.einsum("nij,j->ni", T_true[:, :3, :3], -R.T @ t) + T_true[:, :3, 3]
-        W = Rbf @ Rb.T  # true world -> the fit's world (the board's)
-        c_true = (c_true - tb) @ W.T + tbf
-        T_fit = fitted_tools(robot, model, fit.c, held)
-        c_fit = np.einsum("nij,j->ni", T_fit[:, :3, :3], tf) + T_fit[:, :3, 3]
+        c_fit, c_true, T_fit, T_true, W = camera_centres(robot, truth, model, rig, fit, held)
         out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((c_fit - c_true) ** 2, axis=1))))
         out[name + "_registered"] = registered_mm(c_fit, c_true)
         if name == "fit":
@@ -146,10 +164,7 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, sign
     out = {}
     for name, given in (("fit", None), ("oracle", fixed)):
         fit = fit_pixels(robot, model, data, {c.name: c for c in cams}, fixed_poses=given, significance=significance)
-        (Rt, tt), (Rf, tf) = rig.poses["cam1"], fit.poses["cam1"]
-        p_true = true_tools(robot, truth, held)[:, :3, 3]
-        p_true = (p_true @ Rt.T + tt - tf) @ Rf  # into the fit's world (the first camera's)
-        p_fit = fitted_tools(robot, model, fit.c, held)[:, :3, 3]
+        p_fit, p_true = tool_origins(robot, truth, model, rig, fit, held)
         out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((p_fit - p_true) ** 2, axis=1))))
         out[name + "_registered"] = registered_mm(p_fit, p_true)
         out[name + "_scaled"] = registered_mm(p_fit, p_true, scaled=True)

@@ -10,6 +10,10 @@ With `--fixtures FILE.csv` (sockets and planes, `model/fixture_file.py`) the con
 for calibration without a tracker instead (`gecgen/plan/fixture_design.py`): POSES.csv is then a
 measurement file's rows, `point` or `plane` named and `x y z` empty, to be recorded with the joints
 read once the ball is seated or the probe touches.
+
+With `--cameras FILE` (and `--board`, `--rig`) the poses are chosen for images instead
+(`gecgen/plan/camera_design.py`, through the API's `design_images`): every board corner or marker in
+view, informative for the pixel fit; POSES.csv is `pose, q1..qn`, the joints to take the images at.
 """
 from __future__ import annotations
 
@@ -18,13 +22,14 @@ import warnings
 
 import numpy as np
 
-from gecgen.cli.common import (MAX_POSES, MAX_SEED, ROBOT_HELP, number, progress_status, robot_and_model, say,
-                               whole)
+from gecgen.cli.common import (MAX_POSES, MAX_SEED, ROBOT_HELP, number, numbers, progress_status, robot_and_model,
+                               say, whole)
 from gecgen.model import load_robot
 from gecgen.model.measurements import read_measurements, write_csv
 from gecgen.model.robot import WRENCH
 from gecgen.model.table import read_table
 from gecgen.model.validation import ModelError, require
+from gecgen.plan import camera_design as CD
 from gecgen.plan import design as D
 from gecgen.plan import fixture_design as FD
 
@@ -41,7 +46,8 @@ def add_parser(command):
     p.add_argument("-o", "--output", required=True, help="CSV of the chosen poses (pose, q1..qn[, fx..mz, payload_kg])")
     p.add_argument("--candidates", type=whole(1, MAX_POSES),
                    help=f"uniform samples within the joint limits to choose from (default {DEFAULT_CANDIDATES}); with "
-                        f"--fixtures, configurations tried per fixture (default {FD.CANDIDATES})")
+                        f"--fixtures, configurations tried per fixture (default {FD.CANDIDATES}); with --cameras, poses "
+                        f"drawn in --home +- --span, of which those in view are kept (default {CD.SAMPLED})")
     p.add_argument("--from", dest="from_csv", help="CSV of the allowed configurations (q1..qn, optional fx..mz and "
                                                     "aux columns) instead of uniform samples")
     p.add_argument("--seed", type=whole(0, MAX_SEED), default=0,
@@ -72,6 +78,27 @@ def add_parser(command):
     p.add_argument("--patch-mm", type=number(0, 10_000, above=True),
                    help=f"with --fixtures: half-width of the square of each plane the touches are planned in (mm, "
                         f"default {1e3 * FD.PATCH_M:g})")
+    g = p.add_argument_group("with a camera (docs/reference.md, \"Designing the images\"): poses at which the "
+                             "cameras see the board or the markers, for the pixel fit")
+    g.add_argument("--cameras", metavar="FILE", help="camera file: each camera's intrinsics and mount (world or tool)")
+    g.add_argument("--board", metavar="FILE", help="a camera on the tool: the board it sees, fixed in the world")
+    g.add_argument("--rig", metavar="FILE", help="where the cameras (and the board) are: per camera its rotation and "
+                                                 "translation, as simulate --rig-out writes them")
+    g.add_argument("--home", type=numbers(), metavar="Q1,..,QN",
+                   help="the candidates are drawn in home +- span (rad or m; default the middle of each joint's range)")
+    g.add_argument("--span", type=numbers(0), metavar="S",
+                   help=f"half-span of the candidates about --home, rad or m (one value or one per joint, default "
+                        f"{CD.SPAN:g})")
+    g.add_argument("--margin-px", type=number(0, 10_000),
+                   help=f"every point at least this far inside the image (px, default {CD.MARGIN_PX:g})")
+    g.add_argument("--max-angle-deg", type=number(0, 180, above=True),
+                   help=f"largest angle between the line of sight and the board's face (deg, default "
+                        f"{CD.MAX_ANGLE_DEG:g}); markers: their tool's z axis, unchecked unless given")
+    g.add_argument("--distance-m", type=numbers(0), metavar="NEAR,FAR",
+                   help=f"every point's depth along the optical axis within these (m, default "
+                        f"{CD.DISTANCE_M[0]:g},{CD.DISTANCE_M[1]:g})")
+    g.add_argument("--noise-px", type=number(0, 100, above=True),
+                   help=f"the corners' noise per coordinate for the predicted figures (px, default {CD.NOISE_PX:g})")
 
 
 def _numbers(text: str, option: str, count: int | None, unit: str) -> list[float]:
@@ -120,6 +147,11 @@ def _designed(args, status) -> dict:
 
     require(1 <= args.poses <= MAX_POSES,
             f"--poses {args.poses}: give at least 1 pose to design (at most {MAX_POSES:,})")
+    if args.cameras:
+        return _run_cameras(args, status)
+    for option in CAMERA_OPTIONS:
+        require(getattr(args, option) is None, f"--{option.replace('_', '-')} goes with --cameras (image points); "
+                                               f"give the camera file or drop it")
     if args.noise_mm is None:
         args.noise_mm = 1e3 * (FD.NOISE_M if args.fixtures else D.NOISE_M)
     require(math.isfinite(args.noise_mm) and args.noise_mm > 0,
@@ -223,12 +255,55 @@ def _run_fixtures(args, status) -> dict:
             **result.to_dict(fixtures), "target": names[target], "seed": args.seed}
 
 
+#: options of a design for images, refused without --cameras
+CAMERA_OPTIONS = ("board", "rig", "home", "span", "margin_px", "max_angle_deg", "distance_m", "noise_px")
+#: options of a tracker or fixture design that a design for images has no use for: refused, never ignored
+NOT_WITH_CAMERAS = {"targets": "--targets", "payload_kg": "--payload-kg", "gravity": "--gravity", "min_z": "--min-z",
+                    "tracker": "--tracker", "max_incidence_deg": "--max-incidence-deg", "given": "--given",
+                    "fixtures": "--fixtures", "target": "--target", "patch_mm": "--patch-mm", "noise_mm": "--noise-mm"}
+
+
+def _run_cameras(args, status) -> dict:
+    from gecgen.api import design_images
+
+    for option, flag in NOT_WITH_CAMERAS.items():
+        require(getattr(args, option) is None, f"{flag} does not apply to a design for images (--cameras); drop it"
+                                               + ("; the corners' noise is --noise-px" if option == "noise_mm" else ""))
+    require(args.rig, "--cameras: give --rig FILE, where the cameras (and the board) are: a design keeps what they "
+                      "see in view")
+    require(args.distance_m is None or len(args.distance_m) == 2,
+            f"--distance-m: give NEAR,FAR (m), not {len(args.distance_m or [])} values")
+    robot, model = robot_and_model(args.robot, args.errors)
+    if args.from_csv:
+        require(args.candidates is None, "--candidates: the candidates are the rows of --from; drop one of the two")
+        require(args.home is None and args.span is None, "--home and --span draw the candidates; with --from the "
+                                                         "candidates are its rows: drop one of them")
+        candidates = D.file_candidates(args.from_csv, robot, model.aux).q
+    else:
+        candidates = args.candidates
+    require(not model.aux, f"the error model uses auxiliary signals ({', '.join(model.aux)}) that a design for images "
+                           f"cannot plan; use a model without them")
+    say(status, f"choosing {args.poses} poses the cameras see the {'board' if args.board else 'markers'} from")
+    out = design_images(robot, args.cameras, args.rig, args.poses, board=args.board, errors=model,
+                        candidates=candidates, home=args.home, span=args.span, seed=args.seed,
+                        criterion=args.criterion, noise_px=args.noise_px, margin_px=args.margin_px,
+                        max_angle_deg=args.max_angle_deg, distance_m=args.distance_m)
+    header = ["pose", *(f"q{i + 1}" for i in range(robot.n))]
+    write_csv(args.output, header, [[p, *map(repr, q.tolist())] for p, q in enumerate(out.q)])
+    rig = out.rig
+    return {"robot": robot.name, "error_model": model.source, "output": str(args.output), **out.design.to_dict(),
+            "mount": "tool" if rig.tool else "world", "cameras": list(rig.cameras),
+            "view": {"margin_px": rig.margin_px, "max_angle_deg": rig.max_angle_deg,
+                     "distance_m": list(rig.distance_m)},
+            "n_sampled": out.n_sampled, "n_in_view": out.n_in_view, "seed": args.seed}
+
+
 #: the tracker design's comparison table: (JSON key, its figure for the random poses, label, what it means)
 COMPARED = (("log_det", "random_log_det", "log det of the information (D)", "higher is better"),
             ("mean_variance", "random_mean_variance", "mean prediction variance (I)",
              "per unit noise variance; lower is better"),
-            ("rms_mm", "random_rms_mm", "predicted position std, RMS (mm)", "at {noise} mm noise per coordinate, over "
-                                                                             "{n} candidate poses"),
+            ("rms_mm", "random_rms_mm", "predicted position std, RMS (mm)", "at {noise} noise per coordinate, over "
+                                                                             "{n}"),
             ("max_mm", "random_max_mm", "predicted position std, max (mm)", ""),
             ("O1", "random_O1", "O1: geometric mean singular value", "divided by sqrt(rows); higher is better"),
             ("O2", "random_O2", "O2: condition number", "lower is better"),
@@ -244,8 +319,10 @@ def human(result: dict):
     if "predicted_std" not in result:
         _fixtures_human(result)
         return
-    figures = {**{k: result[k] for k in ("log_det", "random_log_det", "mean_variance", "random_mean_variance")},
-               **result["observability"], **result["predicted_std"]}
+    if "mount" in result:
+        _cameras_human(result)
+        return
+    figures = _figures(result)
     constraints = ", ".join(f"{k} {v}" for k, v in result["constraints"].items()) or "none"
     print(f"robot: {result['robot']} (error model {result['error_model']})")
     print(f"output: {result['output']}")
@@ -257,10 +334,7 @@ def human(result: dict):
     chosen = {"D": "D-optimal (the largest log det of the information", "I": "I-optimal (the smallest mean "
               "variance of the predicted positions"}[result["criterion"]]
     print(f"criterion: {chosen} on the {result['n_identifiable']} identifiable coefficients)")
-    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many poses drawn from the same candidates)")
-    for key, random, label, means in COMPARED:
-        means = means.format(noise=scalar(figures["noise_mm"]), n=figures["n_validation_poses"])
-        print(f"  {label:<38}{scalar(figures[key]):>10}{scalar(figures[random]):>10}  {means}".rstrip())
+    _compared(figures, f"{scalar(figures['noise_mm'])} mm")
     _volume(result)
     print(f"not excited by any candidate: {', '.join(result['unexcitable']) or 'none'}")
     history = result["history"]
@@ -269,11 +343,57 @@ def human(result: dict):
           f"{scalar(history[0])} -> {scalar(history[-1])}){refreshed}")
 
 
-def _volume(result: dict):
+def _figures(result: dict) -> dict:
+    return {**{k: result[k] for k in ("log_det", "random_log_det", "mean_variance", "random_mean_variance")},
+            **result["observability"], **result["predicted_std"]}
+
+
+def _compared(figures: dict, noise: str, kind: str = "candidate"):
+    """The designed poses' figures beside the random ones' (COMPARED), the noise as `noise` says it, the
+    candidates named `kind` ("candidate", "in-view")."""
+    from gecgen.cli.human import scalar
+
+    same = "candidates" if kind == "candidate" else f"{kind} poses"
+    print(f"  {'':<38}{'designed':>10}{'random':>10}  (random: as many poses drawn from the same {same})")
+    for key, random, label, means in COMPARED:
+        means = means.format(noise=noise, n=f"{figures['n_validation_poses']} {kind} poses")
+        print(f"  {label:<38}{scalar(figures[key]):>10}{scalar(figures[random]):>10}  {means}".rstrip())
+
+
+def _cameras_human(result: dict):
+    """A design for images (`human`): the view it keeps, the comparison, what the images leave out."""
+    from gecgen.cli.human import scalar
+
+    view = result["view"]
+    angle = f"{view['max_angle_deg']:g} deg" if view["max_angle_deg"] is not None else "unchecked"
+    what = "board corner" if result["mount"] == "tool" else "marker"
+    print(f"robot: {result['robot']} (error model {result['error_model']})")
+    print(f"output: {result['output']}")
+    print(f"poses: {result['n_poses']}, chosen among {result['n_candidates']} of the {result['n_in_view']} candidate "
+          f"poses in view ({result['n_sampled']} sampled with seed {result['seed']})")
+    print(f"in view: every {what} for camera {', '.join(result['cameras'])}: {scalar(view['margin_px'])} px inside the "
+          f"image, {view['distance_m'][0]:g}-{view['distance_m'][1]:g} m deep, angle to its face {angle}")
+    chosen = {"D": "D-optimal (the largest log det of the information", "I": "I-optimal (the smallest mean "
+              "variance of the predicted image points"}[result["criterion"]]
+    print(f"criterion: {chosen})")
+    poses = "the camera's and the board's" if result["mount"] == "tool" else "the cameras'"
+    print(f"  over the {result['n_pose_unknowns']} unknowns of {poses} poses and the {result['n_identifiable']} "
+          f"coefficients the images determine")
+    print("  (the predicted std is the image points', across the ray at each point)")
+    _compared(_figures(result), f"{scalar(result['predicted_std']['noise_px'])} px", "in-view")
+    _volume(result, "the joint")
+    left = [e["param"] for e in result["eliminated"] if e["detail"].startswith(("camera pose", "scale"))]
+    print(f"left to the cameras' poses or the scale (pixels cannot give them): {', '.join(left) or 'none'}")
+    history = result["history"]
+    print(f"search: a greedy start, then {result['swaps']} exchanges in {result['passes']} passes (criterion "
+          f"{scalar(history[0])} -> {scalar(history[-1])})")
+
+
+def _volume(result: dict, unknowns: str = "the coefficients'"):
     """The designed poses' log det against the random ones', as what a person can picture."""
     if result["log_det"] is not None and result["random_log_det"] is not None:
         gain = result["log_det"] - result["random_log_det"]
-        print(f"  with the designed poses the coefficients' confidence region is {math.exp(abs(gain) / 2):.3g} times "
+        print(f"  with the designed poses {unknowns} confidence region is {math.exp(abs(gain) / 2):.3g} times "
               f"{'smaller' if gain >= 0 else 'larger'} in volume (e^(gain in log det / 2))")
 
 

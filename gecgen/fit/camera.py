@@ -407,22 +407,39 @@ def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list
 
 
 def _set_up(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
-            fixed_poses: np.ndarray | None, backend: str, intrinsics: bool = False):
+            fixed_poses: np.ndarray | None, backend: str, intrinsics: bool = False, start: np.ndarray | None = None):
     """The problem, the poses' first values, the coefficients the pixels determine (indices) and those
-    eliminated (structurally, and by `_analysis`), at the nominal model."""
+    eliminated (structurally, and by `_analysis`), at the nominal model. start: the poses to begin
+    from (fitted, not fixed) instead of OpenCV's first guess."""
     require(not (robot.branches and data.mount == "tool"), f"{robot.source}: a tree; a camera on the tool is "
                                                             f"supported on serial chains only: see the tree's "
                                                             f"markers with fixed cameras (mount: world)")
     cm = CompiledModel(frame_robot(robot), model, backend)
     problem = _Problem(cm, robot, data, cameras, board, intrinsics)
     c = np.zeros(cm.dims.nc)
-    g = _initial(problem, c) if fixed_poses is None else np.asarray(fixed_poses, float)
+    given = fixed_poses if fixed_poses is not None else start
+    g = _initial(problem, c) if given is None else np.asarray(given, float)
     if intrinsics:
         g = np.concatenate([g, problem.intrinsics_of()])
     struct = structural_analysis(cm, np.arange(4 * problem.n_branches))
     kept, eliminated = _analysis(problem, g, c, list(struct.kept), model.coefficient_names(robot),
                                  fixed_poses is not None)
     return problem, g, kept, tuple(sorted([*struct.eliminated, *eliminated], key=lambda e: e.index))
+
+
+def design_rows(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+                g: np.ndarray, sample: np.ndarray, block: int):
+    """What a pose design for pixels weighs: the fit's Jacobian at the nominal model and the poses g
+    (the fit's order: per camera its rotation vector and translation, then the board's), as its first
+    step sees it. The coefficients it is taken in are those the images of the poses `sample` (indices)
+    determine; it is computed `block` poses at a time. Returns J (2R, n_geom + k) over the poses and
+    those k coefficients (rows (u, v) of every image point in the data's order), the coefficients
+    (indices) and the ones eliminated (each with why)."""
+    problem, g, kept, eliminated = _set_up(robot, model, data.subset(sample), cameras, board, None, "auto", start=g)
+    c = np.zeros(problem.cm.dims.nc)
+    parts = (_Problem(problem.cm, robot, data.subset(np.arange(s, min(s + block, data.n_poses))), cameras, board)
+             for s in range(0, data.n_poses, block))
+    return np.vstack([part.jacobian(g, c, np.array(kept, int))[1] for part in parts]), kept, eliminated
 
 
 @one_blas_thread

@@ -177,3 +177,43 @@ def read_board(path: str | Path) -> Board:
                                               f"{ARUCO_DICTIONARIES[-1]}, OpenCV's names); give the one the board "
                                               f"was printed with, e.g. DICT_5X5_100")
     return Board(spec["columns"], spec["rows"], float(square), str(path), kind, float(marker), dictionary)
+
+
+def _pose(spec, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) of a rig file's entry {rotation: 3 x 3, translation: 3}; R a rotation to 1e-6."""
+    require(isinstance(spec, dict) and {"rotation", "translation"} <= set(spec),
+            f"{where}: give 'rotation' (3 x 3) and 'translation' (3, m)")
+    try:
+        R, t = np.array(spec["rotation"], float), np.array(spec["translation"], float)
+    except (TypeError, ValueError):
+        R, t = np.zeros(0), np.zeros(0)
+    require(R.shape == (3, 3) and t.shape == (3,) and np.isfinite(R).all() and np.isfinite(t).all(),
+            f"{where}: 'rotation' must be 3 rows of 3 numbers and 'translation' 3 numbers (m)")
+    require(np.abs(R @ R.T - np.eye(3)).max() < 1e-6 and np.linalg.det(R) > 0,
+            f"{where}, key 'rotation': not a rotation matrix (orthonormal, determinant +1) to 1e-6; fix it")
+    return R, t
+
+
+def read_rig(path: str | Path, cameras: dict[str, Camera], board: Board | None):
+    """Where the cameras (and the board) are, from a rig file (YAML, as `gecgen simulate --rig-out`
+    writes it): `cameras` maps every camera of the camera file to its `rotation` R and `translation` t,
+    X_cam = R X + t (X in the world for a fixed camera, in the tool frame for one on the tool); with a
+    camera on the tool, `board` its pose in the world, X_world = R x_board + t. Returns (poses by
+    camera, the board's (R, t) or None)."""
+    spec = _yaml(path, "rig file")
+    poses = spec.get("cameras")
+    require(isinstance(poses, dict), f"{path}: key 'cameras' must map each camera's name to its rotation and "
+                                     f"translation")
+    missing = [c for c in cameras if c not in poses]
+    require(not missing, f"{path}: camera '{missing[0] if missing else ''}' of the camera file has no pose; add it "
+                         f"under 'cameras'")
+    extra = [str(c) for c in poses if c not in cameras]
+    require(not extra, f"{path}: camera '{extra[0] if extra else ''}' is not in the camera file; remove it or add "
+                       f"it there")
+    out = {name: _pose(poses[name], f"{path}, camera '{name}'") for name in cameras}
+    if board is None:
+        require("board" not in spec, f"{path}: key 'board' goes with a camera on the tool; these cameras are fixed")
+        return out, None
+    require("board" in spec, f"{path}: missing key 'board': where the board is in the world (rotation, "
+                             f"translation; X_world = R x_board + t)")
+    return out, _pose(spec["board"], f"{path}, key 'board'")

@@ -558,13 +558,14 @@ def given_information(cm: CompiledModel, given: Measurements, basis: _Basis) -> 
 def predicted_std(M: np.ndarray, H: np.ndarray, noise_m: float, nt: int) -> np.ndarray:
     """Std (m) of each measured target's predicted position, (V, nt), at validation blocks H (V, r, k)
     for coefficients estimated with covariance noise^2 M^-1 (M in H's coordinates): the square root
-    of the trace of that covariance propagated to the target's 3 coordinates."""
+    of the trace of that covariance propagated to the target's r / nt coordinates (a point's 3; an
+    image point's 2, in px for a noise in px)."""
     try:
         L = np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
         return np.full((len(H), nt), np.inf)
     Z = np.linalg.solve(L, H.reshape(-1, H.shape[-1]).T)  # (k, V r)
-    var = (Z ** 2).sum(axis=0).reshape(len(H), nt, 3).sum(axis=2)
+    var = (Z ** 2).sum(axis=0).reshape(len(H), nt, -1).sum(axis=2)
     return noise_m * np.sqrt(var)
 
 
@@ -609,13 +610,12 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
         pool = np.arange(K)
     else:  # rank by the gain against what N average candidates would give (I each, whitened)
         pool = _top_gains(cm, cands, basis, M_start + n_poses * np.eye(k), pool_cap, [], crit)
-    search = _Search(_whitened(cm, cands, pool, basis), M_start, rng, crit)
-    search.greedy(n_poses)
-    swaps, passes, history = search.exchange(max_passes)
-    chosen = pool[search.chosen]
+    picked, swaps, passes, history, M = choose(_whitened(cm, cands, pool, basis), M_start, n_poses, rng, crit,
+                                              max_passes)
+    chosen = pool[picked]
     while K > pool_cap and rounds < MAX_ROUNDS:
         rounds += 1
-        new_pool = _top_gains(cm, cands, basis, search.M, pool_cap - n_poses, chosen, crit)
+        new_pool = _top_gains(cm, cands, basis, M, pool_cap - n_poses, chosen, crit)
         if np.isin(new_pool, pool).all():
             break  # no candidate outside the pool ranks among the best: nothing new to try
         pool = np.concatenate([chosen, new_pool])
@@ -623,7 +623,7 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
         search.start(range(n_poses))
         more, p, h = search.exchange(max_passes)
         swaps, passes, history = swaps + more, passes + p, history + h[1:]
-        chosen = pool[search.chosen]
+        chosen, M = pool[search.chosen], search.M
         if not more:
             break
 
@@ -635,17 +635,40 @@ def design_poses(cm: CompiledModel, cands: Candidates, n_poses: int, targets: np
         Hc = _whitened(cm, cands, idx, basis)
         M = M0 + np.einsum("pik,pil->kl", Hc, Hc)
         std = predicted_std(M, H_val, noise_m, len(targets))
-        out[name] = ({"D": basis.scaled_logdet(M), "I": trace_inverse(M)},
-                     observability(basis.scaled_information(M), m),
-                     {"rms_mm": _finite(1e3 * np.sqrt(np.mean(std ** 2))), "max_mm": _finite(1e3 * std.max())})
-    shift = basis.scaled_logdet(np.eye(k))  # whitened -> column-scaled log det
-    history = [v + shift for v in history] if crit is D_OPTIMAL else [float(np.exp(-v)) for v in history]
+        out[name] = (*scores(basis, M, m), {"rms_mm": _finite(1e3 * np.sqrt(np.mean(std ** 2))),
+                                            "max_mm": _finite(1e3 * std.max())})
+    history = reported_history(basis, history, crit)
     return PoseDesign(chosen=chosen, random=random_pick, criterion=criterion, values={n: o[0] for n, o in out.items()},
                       observability={n: o[1] for n, o in out.items()},
                       predicted_std_mm={n: o[2] for n, o in out.items()}, noise_mm=1e3 * noise_m,
                       n_validation=len(val), columns=basis.columns, scale=basis.scale, redundancy=red,
                       targets=np.asarray(targets), n_candidates=K, swaps=swaps, passes=passes, rounds=rounds,
                       history=history)
+
+
+def choose(H: np.ndarray, M0: np.ndarray, n_poses: int, rng: np.random.Generator, criterion: Criterion = D_OPTIMAL,
+           max_passes: int = MAX_PASSES) -> tuple[np.ndarray, int, int, list, np.ndarray]:
+    """n_poses of the whitened blocks H (P, r, k) by `criterion`: the greedy start and the exchange
+    passes from the information M0 (k, k) (what is given, and the ridge). Returns the chosen indices
+    (n_poses,) in the order chosen, the swaps and passes made, the objective after the start and
+    each pass, and the information (k, k) reached, M0 included."""
+    search = _Search(H, M0, rng, criterion)
+    search.greedy(n_poses)
+    swaps, passes, history = search.exchange(max_passes)
+    return np.array(search.chosen, int), swaps, passes, history, search.M
+
+
+def scores(basis: _Basis, M: np.ndarray, m: int) -> tuple[dict, dict]:
+    """What a design's whitened information M (k, k, no ridge) of m rows is worth: both criteria's
+    values ({"D": log det of the column-scaled information, "I": tr(M^-1)}) and its `observability`."""
+    return {"D": basis.scaled_logdet(M), "I": trace_inverse(M)}, observability(basis.scaled_information(M), m)
+
+
+def reported_history(basis: _Basis, history: list, criterion: Criterion) -> list:
+    """The search's objective after each pass as the criterion's value is reported: D's log det of the
+    column-scaled information, I's tr(M^-1)."""
+    shift = basis.scaled_logdet(np.eye(len(basis.columns)))  # whitened -> column-scaled log det
+    return [v + shift for v in history] if criterion is D_OPTIMAL else [float(np.exp(-v)) for v in history]
 
 
 def _finite(v: float) -> float | None:
