@@ -10,7 +10,7 @@ corner noise), in a folder under out/camera-rendered:
   gecgen import robots/industrial6r.yaml readings.csv --images images --board board.yaml
       --cameras cams.yaml -o pixels.csv                       (and the held-out images likewise)
   gecgen identify robots/industrial6r.yaml pixels.csv --cameras cams.yaml --board board.yaml
-      --errors robots/constant.errors.yaml -o calib.json
+      --errors robots/constant.errors.yaml -o calib.json      (and again with --keep-insignificant)
   gecgen evaluate calib.json val-pixels.csv --cameras cams.yaml --board board.yaml
 The camera (640 x 480 px, fx 700 px, OpenCV distortion) rides a few cm and degrees off the tool of
 the simulated industrial6r (robots/industrial6r.truth.yaml: constant errors, joint offsets, gravity
@@ -78,41 +78,53 @@ def corner_noise(robot, truth, rig: CameraRig, data) -> np.ndarray:
 
 
 def one(robot, truth, model, seed: int, quality: str) -> dict:
+    """The figures of one seed and image quality. Images an earlier run rendered (its folder under
+    out/camera-rendered, complete once the rig file simulate writes last is there) are not rendered
+    again: delete the folder to render anew."""
     folder = ROOT / "out" / "camera-rendered" / f"{quality}-{seed}"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "cams.yaml").write_text(CAMERAS)
-    (folder / "board.yaml").write_text(BOARD)
-    cams, board = read_cameras(folder / "cams.yaml"), read_board(folder / "board.yaml")
-    blur, grey = QUALITIES[quality]
     robot_file = ROOT / "robots" / "industrial6r.yaml"
     on = ["--board", folder / "board.yaml", "--cameras", folder / "cams.yaml"]
-    gecgen("simulate", robot_file, "--images", folder / "images", "--poses", TRAIN, "--val-out", folder / "val.csv",
-           "--val-poses", HELD, "--blur-px", blur, "--image-noise", grey, "--lighting", LIGHTING, "--home", HOME,
-           "--span", SPAN, "--rig-out", folder / "rig.yaml", "--seed", seed, "-o", folder / "readings.csv", *on)
-    found = gecgen("import", robot_file, folder / "readings.csv", "--images", folder / "images", *on,
-                   "-o", folder / "pixels.csv")
+    if not (folder / "rig.yaml").is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "cams.yaml").write_text(CAMERAS)
+        (folder / "board.yaml").write_text(BOARD)
+        blur, grey = QUALITIES[quality]
+        gecgen("simulate", robot_file, "--images", folder / "images", "--poses", TRAIN, "--val-out",
+               folder / "val.csv", "--val-poses", HELD, "--blur-px", blur, "--image-noise", grey, "--lighting",
+               LIGHTING, "--home", HOME, "--span", SPAN, "--rig-out", folder / "rig.yaml", "--seed", seed,
+               "-o", folder / "readings.csv", *on)
     gecgen("import", robot_file, folder / "val.csv", "--images", folder / "images" / "held-out", *on,
            "-o", folder / "val-pixels.csv")
-    fitted = gecgen("identify", robot_file, folder / "pixels.csv", "--errors", ROOT / "robots" / "constant.errors.yaml",
-                    "-o", folder / "calib.json", *on)
-    held_px = gecgen("evaluate", folder / "calib.json", folder / "val-pixels.csv", *on)["after"]["rms_px"]
+    found = gecgen("import", robot_file, folder / "readings.csv", "--images", folder / "images", *on,
+                   "-o", folder / "pixels.csv")
+    cams, board = read_cameras(folder / "cams.yaml"), read_board(folder / "board.yaml")
     spec = read_yaml(folder / "rig.yaml", "rig file")
     pose = lambda s: (np.array(s["rotation"]), np.array(s["translation"]))  # noqa: E731
     rig = CameraRig(cams, {"cam": pose(spec["cameras"]["cam"])}, board, pose(spec["board"]))
     held = np.loadtxt(folder / "val.csv", delimiter=",", skiprows=1, usecols=range(1, 7), ndmin=2)
     data = read_pixels(folder / "pixels.csv", robot, cams, board)
     noise = corner_noise(robot, truth, rig, data)
-    calib = load(folder / "calib.json")
-    report = calib.report
-    out = hand_figures(robot, truth, model, rig, held, calib.c, pose(report["cameras"]["cam"]), pose(report["board"]))
-    out["fit"], out["fit_registered"] = out.pop("mm"), out.pop("registered")
-    oracle = fit_pixels(robot, model, data, cams, board, fixed_poses=oracle_poses(rig))
-    o = hand_figures(robot, truth, model, rig, held, oracle.c, oracle.poses["cam"], oracle.board)
-    out |= {"oracle": o["mm"], "oracle_registered": o["registered"], "train_px": fitted["train"]["rms_px"],
-            "held_px": held_px, "images": found["images"], "not_found": len(found["not_found"]),
-            "corners": len(data.uv), "noise_px": float(np.sqrt(np.mean(noise ** 2))),
-            "noise_bias_px": np.abs(noise.mean(axis=0)).max().item(), "noise_max_px": float(np.abs(noise).max()),
-            "held": len(report["held"]), "converged": report["converged"]}
+    out = {"images": found["images"], "not_found": len(found["not_found"]), "corners": len(data.uv),
+           "noise_px": float(np.sqrt(np.mean(noise ** 2))), "noise_bias_px": np.abs(noise.mean(axis=0)).max().item(),
+           "noise_max_px": float(np.abs(noise).max())}
+    # with the significance gate (identify's default) and without it (--keep-insignificant), the oracle alike
+    for gate, key, calibration in ((True, "", "calib.json"), (False, "all_", "calib-all.json")):
+        fitted = gecgen("identify", robot_file, folder / "pixels.csv", "--errors",
+                        ROOT / "robots" / "constant.errors.yaml", "-o", folder / calibration, *on,
+                        *([] if gate else ["--keep-insignificant"]))
+        calib = load(folder / calibration)
+        report = calib.report
+        r = hand_figures(robot, truth, model, rig, held, calib.c, pose(report["cameras"]["cam"]),
+                         pose(report["board"]))
+        oracle = fit_pixels(robot, model, data, cams, board, fixed_poses=oracle_poses(rig), significance=gate)
+        o = hand_figures(robot, truth, model, rig, held, oracle.c, oracle.poses["cam"], oracle.board)
+        out |= {key + k: v for k, v in r.items() if k not in ("mm", "registered")}
+        out |= {key + "fit": r["mm"], key + "fit_registered": r["registered"], key + "oracle": o["mm"],
+                key + "oracle_registered": o["registered"], key + "train_px": fitted["train"]["rms_px"],
+                key + "held": len(report["held"]), key + "identified": fitted["n_identifiable"],
+                key + "converged": report["converged"]}
+        if gate:
+            out["held_px"] = gecgen("evaluate", folder / calibration, folder / "val-pixels.csv", *on)["after"]["rms_px"]
     return out
 
 
@@ -157,11 +169,14 @@ def write(rows: list):
              "poses. *corner noise*: the detected corners against where the truth projects them, per coordinate "
              "(RMS; the largest mean over the image's two axes, the bias; the largest). Held-out: as in the "
              "eye-in-hand table above (the camera's optical centre, mm); held-out px: `gecgen evaluate --cameras` on "
-             "the held-out images' corners. The camera on the tool: *direct* and *carried* as above.", "",
+             "the held-out images' corners. The camera on the tool: *direct* and *carried* as above. *without the "
+             "gate*: the same corners fitted with `--keep-insignificant` (the oracle likewise), which the significance "
+             "gate section below compares on simulated corners.", "",
              "| images | seed | corners found (images without the board) | corner noise px: RMS / bias / largest | "
              "train px | held-out px | held-out fit mm | oracle mm | ratio | registered fit / oracle mm | ratio | "
-             "direct mm / mrad | carried RMS mm / mrad | carried mean mm / mrad |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "direct mm / mrad | carried RMS mm / mrad | carried mean mm / mrad | without the gate: fit / oracle mm "
+             "| ratio | carried RMS mm / mrad |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for quality, seed, r in rows:
         blur, grey = QUALITIES[quality]
         lines.append(f"| blur {blur:g} px, noise {grey:g} | {seed} | {r['corners']} ({r['not_found']}) | "
@@ -169,8 +184,11 @@ def write(rows: list):
                      f"{r['train_px']:.3f} | {r['held_px']:.3f} | {r['fit']:.3f} | {r['oracle']:.3f} | "
                      f"{r['fit'] / r['oracle']:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
                      f"{r['fit_registered'] / r['oracle_registered']:.2f} | "
-                     f"{r['direct_mm']:.3f} / {r['direct_mrad']:.3f} | {r['carried_mm']:.3f} / {r['carried_mrad']:.3f} | "
-                     f"{r['mean_mm']:.3f} / {r['mean_mrad']:.3f} |")
+                     f"{r['direct_mm']:.3f} / {r['direct_mrad']:.3f} | "
+                     f"{r['carried_mm']:.3f} / {r['carried_mrad']:.3f} | "
+                     f"{r['mean_mm']:.3f} / {r['mean_mrad']:.3f} | {r['all_fit']:.3f} / {r['all_oracle']:.3f} | "
+                     f"{r['all_fit'] / r['all_oracle']:.2f} | "
+                     f"{r['all_carried_mm']:.3f} / {r['all_carried_mrad']:.3f} |")
     lines.append("")
     for quality in QUALITIES:
         rs = [r for q, _, r in rows if q == quality]
@@ -181,7 +199,8 @@ def write(rows: list):
         reg = np.array([r["fit_registered"] / r["oracle_registered"] for r in rs])
         noise = [r["noise_px"] for r in rs]
         lines.append(
-            f"- blur {blur:g} px, noise {grey:g} (corner noise {min(noise):.3f} to {max(noise):.3f} px per coordinate): "
+            f"- blur {blur:g} px, noise {grey:g} (corner noise {min(noise):.3f} to {max(noise):.3f} px per "
+            f"coordinate): "
             f"held-out fit / oracle median {np.median(ratio):.2f}, worst {ratio.max():.2f}, "
             f"{int((ratio <= RATIO).sum())} of {len(rs)} within {RATIO}; registered median {np.median(reg):.2f}, "
             f"worst {reg.max():.2f}; the camera on the tool within {MM} mm and {MRAD} mrad: carried RMS "
@@ -189,6 +208,12 @@ def write(rows: list):
             f"{max(r['carried_mrad'] for r in rs):.3f} mrad), carried mean {sum(within(r, 'mean') for r in rs)} of "
             f"{len(rs)} (worst {max(r['mean_mm'] for r in rs):.3f} mm, {max(r['mean_mrad'] for r in rs):.3f} mrad), "
             f"direct {sum(within(r, 'direct') for r in rs)} of {len(rs)}")
+        ratio = np.array([r["all_fit"] / r["all_oracle"] for r in rs])
+        lines.append(
+            f"- the same without the gate: held-out fit / oracle median {np.median(ratio):.2f}, worst "
+            f"{ratio.max():.2f}, {int((ratio <= RATIO).sum())} of {len(rs)} within {RATIO}; the camera on the tool "
+            f"within {MM} mm and {MRAD} mrad, carried RMS: {sum(within(r, 'all_carried') for r in rs)} of {len(rs)} "
+            f"(worst {max(r['all_carried_mm'] for r in rs):.3f} mm, {max(r['all_carried_mrad'] for r in rs):.3f} mrad)")
     write_section(HEADING, lines)
 
 

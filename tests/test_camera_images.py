@@ -12,7 +12,7 @@ from gecgen.model.pixels import read_pixels
 from gecgen.model.validation import read_yaml
 from gecgen.fit.camera import fit_pixels
 from gecgen.simulate import load_truth
-from gecgen.simulate.camera import camera_frame_points, eye_in_hand, render_board, true_tools
+from gecgen.simulate.camera import board_in_camera, camera_frame_points, eye_in_hand, render_board, true_tools
 
 from conftest import ROBOTS, ROOT, run_json
 from gecgen.cli import main
@@ -35,12 +35,9 @@ def _render(robot, truth, board: Board, n: int, images, name: str, rng) -> tuple
                          np.radians([8, 6, 6, 25, 20, 30]), n, rng)
     images.mkdir()
     T = true_tools(robot, truth, q)
-    R, t = rig.poses["cam"]
-    Rb, tb = rig.board_pose
     truth_px = []
     for k in range(len(q)):
-        Rt, pt = T[k, :3, :3], T[k, :3, 3]
-        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
+        image = render_board(CAMERA, *board_in_camera(rig, T[k]), board, rng)
         cv2.imwrite(str(images / name.format(k)), image)
         truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
     return q, truth_px

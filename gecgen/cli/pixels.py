@@ -261,7 +261,8 @@ def add_simulate_options(p):
                         "--val-out's into FOLDER/held-out) and write -o as the readings file `gecgen import "
                         "--images` takes, instead of a pixel file")
     g.add_argument("--blur-px", type=number(0, 20), default=None, metavar="PX",
-                   help=f"--images: the Gaussian blur of the rendered images, px (default {IMAGE_DEFAULTS['blur_px']:g})")
+                   help=f"--images: the Gaussian blur of the rendered images, px (default "
+                        f"{IMAGE_DEFAULTS['blur_px']:g})")
     g.add_argument("--image-noise", type=number(0, 100), default=None, metavar="GREY",
                    help=f"--images: the images' Gaussian noise, grey levels of 255 (default "
                         f"{IMAGE_DEFAULTS['image_noise']:g})")

@@ -5,6 +5,8 @@ on the tool at a true pose sees a board's corners at a true pose in the world. T
 (`truth.true_state`, every joint approached from below, no payload) places the tool; each point is
 projected with the camera's distortion (`Camera.project`) and gets Gaussian pixel noise. A point
 outside the image or behind the camera is not recorded, as a real camera records nothing there.
+Eye-in-hand, the board can also be rendered as the camera would photograph it (`render_images`), for
+the whole chain from images through OpenCV's corners to a calibration.
 """
 from __future__ import annotations
 
