@@ -229,7 +229,41 @@ def write(rows: list):
             f"{max(r['exact_carried_mm'] for r in rs):.3f} mm, {max(r['exact_carried_mrad'] for r in rs):.3f} mrad), "
             f"carried mean {sum(within(r, 'exact_mean') for r in rs)} of {len(rs)} (worst "
             f"{max(r['exact_mean_mm'] for r in rs):.3f} mm, {max(r['exact_mean_mrad'] for r in rs):.3f} mrad)")
+    lines += ["", *reading(rows)]
     write_section(HEADING, lines)
+
+
+def reading(rows: list) -> list[str]:
+    """How to read the figures of `rows`, with the numbers that say it."""
+    rs = [r for _, _, r in rows]
+    free = [r["all_fit"] / r["all_oracle"] for r in rs]
+    gated = [r["fit"] / r["oracle"] for r in rs]
+    equal = [r for r in rs if round(r["all_fit"] / r["all_oracle"], 2) == 1.0]
+    found = {q: np.mean([r["corners"] / r["images"] for p, _, r in rows if p == q]) for q in QUALITIES}
+    size = 9 * 6  # BOARD's inner corners
+    return [
+        "Reading these figures:", "",
+        f"- The corners OpenCV finds in these images are unbiased (at most {max(r['noise_bias_px'] for r in rs):.3f} "
+        "px of mean error along an image axis) and their noise follows the images' blur and grey-level noise. "
+        "Softer images also lose corners: the ChArUco detector names a corner only from the markers beside it and "
+        f"reads fewer of them ({', '.join(f'{found[q]:.0f}' for q in QUALITIES)} of {size} corners an image).",
+        f"- Held out, fit against oracle: without the significance gate, fit / oracle is {min(free):.2f} to "
+        f"{max(free):.2f} (equal to the digit in {len(equal)} of {len(rs)} seeds"
+        + ("; in the others the fit held a coefficient the images determine too weakly, `held`)" if all(
+            r["all_held"] for r in rs if r not in equal) else ")") + ". Eye-in-hand, "
+        "what the oracle is told (the camera's pose on "
+        "the tool, the board's in the world) is what the base's and the last frame's constant errors express, which "
+        "the fit holds for that reason, so knowing it adds nothing. With the gate (identify's default) the two hold "
+        f"different coefficients and the ratio scatters both ways ({min(gated):.2f} to {max(gated):.2f}).",
+        "- The camera on the tool: the same corners without their noise put it, carried, within "
+        f"{max(r['exact_carried_mm'] for r in rs):.3f} mm and {max(r['exact_carried_mrad'] for r in rs):.3f} mrad "
+        "(RMS over the held-out poses) on every seed, so what is beyond that comes from the corners' noise, not from "
+        "the rendering, the detection's bias or the model. At the larger noise, with fewer corners, 40 images of one "
+        "board 0.7 m away do not fix the camera to 0.2 mm; the simulated chessboard corners at 0.3 px above miss "
+        "alike. More images, or more corners an image, would narrow it; that is not measured here.",
+        "- *direct* is off by about 1 mm by design, as above: the truth's last-frame errors sit between the flange "
+        "and the camera."]
+
 
 
 if __name__ == "__main__":
