@@ -85,19 +85,26 @@ def registered_mm(p: np.ndarray, y: np.ndarray, scaled: bool = False) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum((pc - s * yc @ R.T) ** 2, axis=1))))
 
 
-def camera_centres(robot, truth, model, rig, fit, held: np.ndarray):
-    """Eye-in-hand: the carried camera's optical centre at the held-out joints (N, n) as the fit places it
-    and the truth's, in the fit's world (the board's fitted pose against its true one), (N, 3) m each;
-    and the fitted and true tool poses (N, 4, 4), and W the rotation from the true world to the fit's."""
+def centres(robot, truth, model, rig, held: np.ndarray, c: np.ndarray, camera, board):
+    """Eye-in-hand: the carried camera's optical centre at the held-out joints (N, n) as a calibration
+    places it (c its coefficients, camera its (R, t) of the camera on the tool, X_cam = R X_tool + t,
+    board its (R, t) of the board in the world) and the truth's, in the calibration's world (the board's
+    fitted pose against its true one), (N, 3) m each; and the fitted and true tool poses (N, 4, 4), and W
+    the rotation from the true world to the calibration's."""
     (R, t), (Rb, tb) = next(iter(rig.poses.values())), rig.board_pose
-    Rbf, tbf = fit.board
-    Rf, tf = fit.tool_camera()
+    Rbf, tbf = board
+    Rf, tf = camera[0].T, -camera[0].T @ camera[1]  # X_tool = Rf X_cam + tf
     T_true = true_tools(robot, truth, held)
     c_true = np.einsum("nij,j->ni", T_true[:, :3, :3], -R.T @ t) + T_true[:, :3, 3]
     W = Rbf @ Rb.T  # true world -> the fit's world (the board's)
     c_true = (c_true - tb) @ W.T + tbf
-    T_fit = fitted_tools(robot, model, fit.c, held)
+    T_fit = fitted_tools(robot, model, c, held)
     return np.einsum("nij,j->ni", T_fit[:, :3, :3], tf) + T_fit[:, :3, 3], c_true, T_fit, T_true, W
+
+
+def camera_centres(robot, truth, model, rig, fit, held: np.ndarray):
+    """`centres` of a pixel fit (fit_pixels' result) with its camera on the tool."""
+    return centres(robot, truth, model, rig, held, fit.c, next(iter(fit.poses.values())), fit.board)
 
 
 def tool_origins(robot, truth, model, rig, fit, held: np.ndarray):
@@ -109,6 +116,33 @@ def tool_origins(robot, truth, model, rig, fit, held: np.ndarray):
     return fitted_tools(robot, model, fit.c, held)[:, :3, 3], (p_true @ Rt.T + tt - tf) @ Rf
 
 
+def hand_figures(robot, truth, model, rig, held: np.ndarray, c: np.ndarray, camera, board) -> dict:
+    """How an eye-in-hand calibration does against the truth `rig` on the held-out joint readings (N, 6)
+    (arguments as `centres`). Held-out: the camera's optical centre where the model puts it against the
+    truth's, in the world the fitted board defines (`mm`) and registered rigidly (`registered`); the
+    camera on the tool: *direct* and *carried* (docs/camera.md); mm and mrad."""
+    R, t = rig.poses["cam"]
+    Rf, tf = camera[0].T, -camera[0].T @ camera[1]
+    c_fit, c_true, T_fit, T_true, W = centres(robot, truth, model, rig, held, c, camera, board)
+    out = {"mm": 1e3 * float(np.sqrt(np.mean(np.sum((c_fit - c_true) ** 2, axis=1)))),
+           "registered": registered_mm(c_fit, c_true)}
+    # the camera on the tool against the truth's: directly, and as the fitted model's tool frame
+    # carries it (the truth's last-frame errors, which pixels cannot tell from the camera's pose, included)
+    out["direct_mm"] = 1e3 * float(np.linalg.norm(tf - (-R.T @ t)))
+    out["direct_mrad"] = 1e3 * float(Rotation.from_matrix(Rf @ R).magnitude())
+    Tc_true = T_true.copy()
+    Tc_true[:, :3, :3] = W @ T_true[:, :3, :3] @ R.T
+    Tc_true[:, :3, 3] = c_true
+    rel = np.linalg.inv(T_fit) @ Tc_true  # the true camera in the fitted tool frame, per held-out pose
+    out["carried_mm"] = 1e3 * float(np.sqrt(np.mean(np.sum((rel[:, :3, 3] - tf) ** 2, axis=1))))
+    turn = Rotation.from_matrix(rel[:, :3, :3] @ Rf.T).as_rotvec()
+    out["carried_mrad"] = 1e3 * float(np.sqrt(np.mean(np.sum(turn ** 2, axis=1))))
+    # the transform itself: the mean over the poses (the rest is the model's misfit, pose by pose)
+    out["mean_mm"] = 1e3 * float(np.linalg.norm(rel[:, :3, 3].mean(axis=0) - tf))
+    out["mean_mrad"] = 1e3 * float(np.linalg.norm(turn.mean(axis=0)))
+    return out
+
+
 def hand(robot, truth, model, seed: int, noise: float, significance: bool = True) -> dict:
     rng = np.random.default_rng(seed)
     cam = Camera("cam", 1400.0, 1400.0, 640.0, 480.0, DIST, 1280, 960, "tool")
@@ -117,34 +151,23 @@ def hand(robot, truth, model, seed: int, noise: float, significance: bool = True
     rig, q = eye_in_hand(robot, truth, cam, board, q0, np.radians([8, 6, 6, 25, 20, 30]), 80, rng)
     train, held = q[:40], q[40:]
     data = simulate_pixels(robot, truth, rig, train, noise, rng)
-    R, t = rig.poses["cam"]
-    Rb, tb = rig.board_pose
     out = {}
-    for name, fixed in (("fit", None), ("oracle", np.array([*rotvec_t(R, t), *rotvec_t(Rb, tb)]))):
+    for name, fixed in (("fit", None), ("oracle", oracle_poses(rig))):
         fit = fit_pixels(robot, model, data, {"cam": cam}, board, fixed_poses=fixed, significance=significance)
-        Rf, tf = fit.tool_camera()  # X_tool = Rf X_cam + tf
-        c_fit, c_true, T_fit, T_true, W = camera_centres(robot, truth, model, rig, fit, held)
-        out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((c_fit - c_true) ** 2, axis=1))))
-        out[name + "_registered"] = registered_mm(c_fit, c_true)
+        figures = hand_figures(robot, truth, model, rig, held, fit.c, fit.poses["cam"], fit.board)
+        out[name], out[name + "_registered"] = figures.pop("mm"), figures.pop("registered")
         if name == "fit":
             out["train_px"] = fit.train["rms_px"]
             out["held"], out["converged"] = len(fit.held), fit.converged
-            # the camera on the tool against the truth's: directly, and as the fitted model's tool frame
-            # carries it (the truth's last-frame errors, which pixels cannot tell from the camera's pose, included)
-            out["direct_mm"] = 1e3 * float(np.linalg.norm(tf - (-R.T @ t)))
-            out["direct_mrad"] = 1e3 * float(Rotation.from_matrix(Rf @ R).magnitude())
-            Tc_true = T_true.copy()
-            Tc_true[:, :3, :3] = W @ T_true[:, :3, :3] @ R.T
-            Tc_true[:, :3, 3] = c_true
-            rel = np.linalg.inv(T_fit) @ Tc_true  # the true camera in the fitted tool frame, per held-out pose
-            out["carried_mm"] = 1e3 * float(np.sqrt(np.mean(np.sum((rel[:, :3, 3] - tf) ** 2, axis=1))))
-            turn = Rotation.from_matrix(rel[:, :3, :3] @ Rf.T).as_rotvec()
-            out["carried_mrad"] = 1e3 * float(np.sqrt(np.mean(np.sum(turn ** 2, axis=1))))
-            # the transform itself: the mean over the poses (the rest is the model's misfit, pose by pose)
-            out["mean_mm"] = 1e3 * float(np.linalg.norm(rel[:, :3, 3].mean(axis=0) - tf))
-            out["mean_mrad"] = 1e3 * float(np.linalg.norm(turn.mean(axis=0)))
+            out.update(figures)
             out["eliminated"] = fit.eliminated
     return out
+
+
+def oracle_poses(rig) -> np.ndarray:
+    """The true geometric unknowns of an eye-in-hand `rig` as `fit_pixels` takes them (fixed_poses): the
+    camera's pose on the tool, then the board's in the world, each a rotation vector and a translation."""
+    return np.array([*rotvec_t(*rig.poses["cam"]), *rotvec_t(*rig.board_pose)])
 
 
 def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, significance: bool = True) -> dict:

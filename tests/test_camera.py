@@ -495,7 +495,15 @@ def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(a
     for extra, message in ((["--cameras", tmp_path / "world.yaml"], "camera cam has no place; give --eye cam=X,Y,Z"),
                            (["--cameras", tmp_path / "world.yaml", "--eye", "cam2=1,2,3"], "no camera 'cam2'"),
                            (["--eye", "cam=1,2,3"], "--eye goes with --cameras"),
-                           (["--cameras", tmp_path / "hand.yaml"], "give the board it sees")):
+                           (["--cameras", tmp_path / "hand.yaml"], "give the board it sees"),
+                           (["--images", tmp_path / "images"], "--images goes with --cameras"),
+                           (["--cameras", tmp_path / "world.yaml", "--images", tmp_path / "images"],
+                            "--images renders the board a camera on the tool sees; these cameras are fixed"),
+                           (["--cameras", tmp_path / "hand.yaml", "--board", tmp_path / "board.yaml", "--lighting",
+                             "0.5"], "--lighting goes with --images"),
+                           (["--cameras", tmp_path / "hand.yaml", "--board", tmp_path / "board.yaml", "--images",
+                             tmp_path / "images", "--noise-px", "0.1"], "with --images the corners are found in "
+                                                                       "the rendered images")):
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             assert main(["simulate", str(ROBOTS / "industrial6r.yaml"), *map(str, extra), "-o",

@@ -12,7 +12,7 @@ from gecgen.model.pixels import read_pixels
 from gecgen.model.validation import read_yaml
 from gecgen.fit.camera import fit_pixels
 from gecgen.simulate import load_truth
-from gecgen.simulate.camera import camera_frame_points, eye_in_hand, render_board, true_tools
+from gecgen.simulate.camera import board_in_camera, camera_frame_points, eye_in_hand, render_board, true_tools
 
 from conftest import ROBOTS, ROOT, run_json
 from gecgen.cli import main
@@ -35,12 +35,9 @@ def _render(robot, truth, board: Board, n: int, images, name: str, rng) -> tuple
                          np.radians([8, 6, 6, 25, 20, 30]), n, rng)
     images.mkdir()
     T = true_tools(robot, truth, q)
-    R, t = rig.poses["cam"]
-    Rb, tb = rig.board_pose
     truth_px = []
     for k in range(len(q)):
-        Rt, pt = T[k, :3, :3], T[k, :3, 3]
-        image = render_board(CAMERA, R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t, board, rng)
+        image = render_board(CAMERA, *board_in_camera(rig, T[k]), board, rng)
         cv2.imwrite(str(images / name.format(k)), image)
         truth_px.append(CAMERA.project(camera_frame_points(robot, rig, T[k:k + 1], "cam")[1][0]))
     return q, truth_px
@@ -179,3 +176,46 @@ def test_real_images_match_the_sources_calibration(tmp_path):
     # the JPEG decoder and OpenCV version); a corner named wrongly would be a square (~25 px) off
     assert (rms <= their_rms + 0.07).all(), np.column_stack([rms, their_rms])
     assert (worst < np.where(their_rms < 0.5, 1.0, 2.0)).all(), worst
+
+
+def test_rendered_images_recover_a_known_truth(tmp_path):
+    """`simulate --images` -> `import --images` -> `identify --cameras` on six rendered ChArUco images of
+    the nominal robot: the camera's pose on the tool (a few cm and degrees off the tool frame) and the
+    board's in the world come out where the simulator put them, and so does the camera on poses no image
+    saw."""
+    from scipy.spatial.transform import Rotation
+
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import fitted_tools
+
+    robot_file = ROBOTS / "industrial6r.yaml"
+    (tmp_path / "truth.yaml").write_text("description: the nominal robot, exactly as its file describes it\n")
+    (tmp_path / "cams.yaml").write_text(camera_yaml(CAMERA))
+    (tmp_path / "board.yaml").write_text("type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\n"
+                                         "dictionary: DICT_5X5_100\n")
+    on = ["--board", tmp_path / "board.yaml", "--cameras", tmp_path / "cams.yaml"]
+    home, span = np.radians([0, -90, -90, 0, 60, 0]), np.radians([8, 6, 6, 25, 20, 30])
+    run_json("simulate", robot_file, "--truth", tmp_path / "truth.yaml", "--images", tmp_path / "images", "--poses", 6,
+             "--home", ",".join(map(repr, home.tolist())), "--span", ",".join(map(repr, span.tolist())),
+             "--rig-out", tmp_path / "rig.yaml", "--seed", 3, "-o", tmp_path / "readings.csv", *on)
+    found = run_json("import", robot_file, tmp_path / "readings.csv", "--images", tmp_path / "images", *on,
+                     "-o", tmp_path / "px.csv")
+    assert found["images"] == 6 and found["not_found"] == []
+    run_json("identify", robot_file, tmp_path / "px.csv", "--errors", ROBOTS / "constant.errors.yaml",
+             "-o", tmp_path / "calib.json", *on)
+    robot = load_robot(robot_file)
+    rig, calib = read_yaml(tmp_path / "rig.yaml", "rig"), load(tmp_path / "calib.json")
+    pose = lambda s: (np.array(s["rotation"]), np.array(s["translation"]))  # noqa: E731
+    (R, t), (Rf, tf) = pose(rig["cameras"]["cam"]), pose(calib.report["cameras"]["cam"])
+    (Rb, tb), (Rbf, tbf) = pose(rig["board"]), pose(calib.report["board"])
+    assert np.linalg.norm(R.T @ t) > 0.03  # the camera sits well off the tool frame: there is something to find
+    # m, rad: measured 0.05 mm and 0.11 mrad (the camera), 0.04 mm and 0.59 mrad (the board, 0.7 m away), 0.05 mm
+    # (the camera's centre on new poses)
+    assert np.linalg.norm(R.T @ t - Rf.T @ tf) < 0.2e-3 and Rotation.from_matrix(Rf @ R.T).magnitude() < 0.5e-3
+    assert np.linalg.norm(tb - tbf) < 1e-3 and Rotation.from_matrix(Rbf @ Rb.T).magnitude() < 1e-3
+    q = home + np.random.default_rng(4).uniform(-1, 1, (10, 6)) * span  # poses no image saw
+    T = true_tools(robot, load_truth({}, robot), q)
+    true = np.einsum("nij,j->ni", T[:, :3, :3], -R.T @ t) + T[:, :3, 3]
+    T = fitted_tools(robot, calib.model, calib.c, q)
+    fitted = np.einsum("nij,j->ni", T[:, :3, :3], -Rf.T @ tf) + T[:, :3, 3]
+    assert np.linalg.norm(fitted - true, axis=1).max() < 0.2e-3

@@ -57,7 +57,7 @@ OUTPUTS = {
     "export": {"c": ("generated code", True), "urdf": ("URDF", False)},
     "diagnose": {"output": ("error model", False), "generated": ("generated code", True), "report": ("report", True)},
     "simulate": {"output": ("measurements", False), "val_out": ("validation measurements", False),
-                 "truth_out": ("truth file", False)},
+                 "truth_out": ("truth file", False), "rig_out": ("rig file", False), "images": ("images", True)},
     "import": {"output": ("measurements", False)},
     "gravity": {"output": ("table", False)},
     "design": {"output": ("poses", False)},

@@ -251,6 +251,8 @@ def calibrated(args, out, build, status) -> dict:
 PIXEL_POSES = 40
 #: rad (m for a prismatic joint): the default half-span of the simulated poses about --home
 SPAN = 0.2
+#: the rendered images' blur (px), noise (grey levels) and change of light when --images is given without them
+IMAGE_DEFAULTS = {"blur_px": 0.7, "image_noise": 2.0, "lighting": 0.2}
 
 
 def add_simulate_options(p):
@@ -269,6 +271,20 @@ def add_simulate_options(p):
     g.add_argument("--distance", type=number(0, 100, above=True), default=None,
                    help="a camera on the tool: the board's distance in front of it at --home, m (default 0.7)")
     g.add_argument("--rig-out", metavar="FILE", help="write the true cameras' (and board's) poses, YAML")
+    g.add_argument("--images", metavar="FOLDER",
+                   help="a camera on the tool: render an image of the board at every pose into FOLDER (PNG; "
+                        "--val-out's into FOLDER/held-out) and write -o as the readings file `gecgen import "
+                        "--images` takes, instead of a pixel file")
+    g.add_argument("--blur-px", type=number(0, 20), default=None, metavar="PX",
+                   help=f"--images: the Gaussian blur of the rendered images, px (default "
+                        f"{IMAGE_DEFAULTS['blur_px']:g})")
+    g.add_argument("--image-noise", type=number(0, 100), default=None, metavar="GREY",
+                   help=f"--images: the images' Gaussian noise, grey levels of 255 (default "
+                        f"{IMAGE_DEFAULTS['image_noise']:g})")
+    g.add_argument("--lighting", type=number(0, 1), default=None,
+                   help=f"--images: how much the light changes from image to image, 0 to 1: the brightness scaled by "
+                        f"up to this and ramped across the image by up to +-half of it (default "
+                        f"{IMAGE_DEFAULTS['lighting']:g})")
 
 
 def simulated(args, robot, truth, rng) -> dict:
@@ -290,6 +306,14 @@ def simulated(args, robot, truth, rng) -> dict:
     require(not tool or args.board, f"{args.cameras}: the camera is on the tool: give the board it sees (--board)")
     require(tool or not args.board, "--board goes with a camera on the tool (mount: tool); these cameras are fixed")
     require(tool or args.distance is None, "--distance goes with a camera on the tool; give --eye for fixed cameras")
+    require(tool or not args.images, "--images renders the board a camera on the tool sees; these cameras are fixed "
+                                     "(mount: world): leave it out for their pixel file")
+    given = [f"--{k.replace('_', '-')}" for k in IMAGE_DEFAULTS if getattr(args, k) is not None]
+    require(args.images or not given, f"{given[0] if given else ''} goes with --images (rendered images); drop it, "
+                                      f"or add --images FOLDER")
+    require(not (args.images and args.noise_px is not None),
+            "--noise-px is the noise of simulated corners; with --images the corners are found in the rendered "
+            "images (their noise follows --blur-px, --image-noise, --lighting): leave it out")
     require(not tool or (not args.eye and args.look_at is None),
             "--eye and --look-at place fixed cameras; a camera on the tool is placed near the tool (--distance)")
     lo, hi = robot.sampling_box()
@@ -327,13 +351,20 @@ def simulated(args, robot, truth, rng) -> dict:
         raise
     except ValueError as exc:  # the simulator's: too few poses keep every point in view
         raise ModelError(f"{args.cameras}: {exc} (--span, --home, --eye, --look-at or --distance)") from None
-    noise = 0.2 if args.noise_px is None else args.noise_px
-    data = simulate_pixels(robot, truth, rig, q[:n], noise, rng)
-    write_pixels(args.output, robot, data)
-    files = {"data": args.output}
-    if args.val_out:
-        write_pixels(args.val_out, robot, simulate_pixels(robot, truth, rig, q[n:], noise, rng))
-        files["val"] = args.val_out
+    if args.images:
+        files = {"readings": args.output, "images": args.images}
+        rendered = _rendered(args, robot, truth, rig, q[:n], args.output, Path(args.images), rng)
+        if args.val_out:
+            files |= {"val": args.val_out, "val_images": str(Path(args.images) / "held-out")}
+            _rendered(args, robot, truth, rig, q[n:], args.val_out, Path(args.images) / "held-out", rng)
+    else:
+        noise = 0.2 if args.noise_px is None else args.noise_px
+        data = simulate_pixels(robot, truth, rig, q[:n], noise, rng)
+        write_pixels(args.output, robot, data)
+        files = {"data": args.output}
+        if args.val_out:
+            write_pixels(args.val_out, robot, simulate_pixels(robot, truth, rig, q[n:], noise, rng))
+            files["val"] = args.val_out
     if args.truth_out:
         write_atomically(args.truth_out, yaml.safe_dump(truth.spec, sort_keys=False))
         files["truth"] = args.truth_out
@@ -343,8 +374,35 @@ def simulated(args, robot, truth, rng) -> dict:
     if args.rig_out:
         write_atomically(args.rig_out, yaml.safe_dump(rig_spec, sort_keys=False))
         files["rig"] = args.rig_out
-    return {"robot": robot.name, "design": "cameras", "mount": data.mount, "poses": data.n_poses,
-            "rows": len(data.uv), "noise_px": noise, **rig_spec, "files": files}
+    made = ({"images": rendered, **{k: getattr(args, k) if getattr(args, k) is not None else v
+                                    for k, v in IMAGE_DEFAULTS.items()}} if args.images else
+            {"rows": len(data.uv), "noise_px": noise})
+    return {"robot": robot.name, "design": "cameras", "mount": "tool" if tool else "world",
+            "poses": rendered if args.images else data.n_poses, **made, **rig_spec, "files": files}
+
+
+def _rendered(args, robot: Robot, truth, rig, q: np.ndarray, readings: str, folder: Path, rng) -> int:
+    """Render the board at the joint readings q (N, n) into `folder` (img000.png, ...) and write their
+    readings file (image, q1..qn); the number of images. The images are written as they are rendered,
+    the readings file last: a readings file names only images that exist."""
+    from gecgen.cli.common import progress_status, say
+    from gecgen.model.files import write_atomically
+    from gecgen.model.images import _cv2
+    from gecgen.simulate.camera import render_images
+
+    cv2 = _cv2()  # one line, not a traceback, without OpenCV
+    options = {k: getattr(args, k) if getattr(args, k) is not None else v for k, v in IMAGE_DEFAULTS.items()}
+    folder.mkdir(parents=True, exist_ok=True)
+    names = [f"img{k:03d}.png" for k in range(len(q))]
+    images = render_images(robot, truth, rig, q, rng, options["blur_px"], options["image_noise"], options["lighting"])
+    with progress_status(not args.json) as status:
+        for k, (name, image) in enumerate(zip(names, images)):
+            say(status, f"rendering image {k + 1} of {len(q)} into {folder}")
+            write_atomically(folder / name, cv2.imencode(".png", image)[1].tobytes())
+    header = ",".join(["image", *(f"q{i + 1}" for i in range(robot.n))])
+    write_atomically(readings, "\n".join([header, *(",".join([name, *map(repr, row.tolist())])
+                                                    for name, row in zip(names, q))]) + "\n")
+    return len(q)
 
 
 def compensate_next(robot: Robot, calibration) -> str:

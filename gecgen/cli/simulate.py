@@ -127,7 +127,8 @@ def run(args) -> dict:
     truth = load_truth(spec or {}, robot, str(truth_path) if spec else "<geometric truth>")
     rng = np.random.default_rng(args.seed)
     camera_options = [f"--{k.replace('_', '-')}" for k in ("board", "noise_px", "eye", "look_at", "distance",
-                                                           "rig_out") if getattr(args, k) not in (None, [])]
+                                                           "rig_out", "images", *pixels.IMAGE_DEFAULTS)
+                      if getattr(args, k) not in (None, [])]
     if args.cameras:
         require(not (args.plates or args.planes), "--cameras simulates image points; --plates and --planes sockets "
                                                   "and planes: give one of them")

@@ -5,6 +5,8 @@ on the tool at a true pose sees a board's corners at a true pose in the world. T
 (`truth.true_state`, every joint approached from below, no payload) places the tool; each point is
 projected with the camera's distortion (`Camera.project`) and gets Gaussian pixel noise. A point
 outside the image or behind the camera is not recorded, as a real camera records nothing there.
+Eye-in-hand, the board can also be rendered as the camera would photograph it (`render_images`), for
+the whole chain from images through OpenCV's corners to a calibration.
 """
 from __future__ import annotations
 
@@ -165,12 +167,12 @@ TEXTURE_PX = 120
 
 
 def render_board(camera: Camera, R: np.ndarray, t: np.ndarray, board: Board, rng: np.random.Generator,
-                 blur_px: float = 0.7, noise: float = 2.0, supersample: int = 2) -> np.ndarray:
+                 blur_px: float = 0.7, noise: float = 2.0, supersample: int = 2, lighting: float = 0.0) -> np.ndarray:
     """A grayscale image (height, width) uint8 of the chessboard as `camera` sees it with the board at
     (R, t) in the camera frame (X_cam = R x_b + t): every pixel's ray, with the lens distortion undone
     (OpenCV's undistortPoints), meets the board's plane, whose squares are black and white with a white
-    margin of one square; averaged over supersample^2 rays a pixel, blurred (Gaussian, blur_px) and
-    with Gaussian noise (grey levels)."""
+    margin of one square; averaged over supersample^2 rays a pixel, lit (`lighting`, see `_lit`),
+    blurred (Gaussian, blur_px) and with Gaussian noise (grey levels)."""
     import cv2
     from scipy.ndimage import map_coordinates
 
@@ -207,7 +209,36 @@ def render_board(camera: Camera, R: np.ndarray, t: np.ndarray, board: Board, rng
     else:
         white = np.where(inside, (cell[:, 0] + cell[:, 1]) % 2 == 1, True)
     image = np.where(white, 230.0, 25.0).reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
+    if lighting > 0:
+        image = _lit(image, lighting, rng)
     if blur_px > 0:
         image = cv2.GaussianBlur(image, (0, 0), blur_px)
     image = image + rng.normal(0.0, noise, image.shape)
     return np.clip(np.round(image), 0, 255).astype(np.uint8)
+
+
+def _lit(image: np.ndarray, lighting: float, rng: np.random.Generator) -> np.ndarray:
+    """The image (H, W) under another light: its brightness scaled by a random gain in [1 - lighting, 1]
+    and by a random linear ramp across the image that changes it by up to +-lighting / 2 at the image's
+    edges, as a lamp to one side or a cloud would (lighting 0 to 1)."""
+    h, w = image.shape
+    gain = rng.uniform(1.0 - lighting, 1.0)
+    a, b = rng.uniform(-1.0, 1.0, 2) * lighting / 2
+    return image * gain * (1.0 + a * np.linspace(-1, 1, w)[None, :] + b * np.linspace(-1, 1, h)[:, None])
+
+
+def board_in_camera(rig: CameraRig, tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The board's (R, t) in the carried camera's frame (X_cam = R x_b + t) with the tool at `tool` (4, 4)."""
+    R, t = next(iter(rig.poses.values()))
+    Rb, tb = rig.board_pose
+    Rt, pt = tool[:3, :3], tool[:3, 3]
+    return R @ Rt.T @ Rb, R @ (Rt.T @ (tb - pt)) + t
+
+
+def render_images(robot: Robot, truth: Truth, rig: CameraRig, q: np.ndarray, rng: np.random.Generator,
+                  blur_px: float = 0.7, noise: float = 2.0, lighting: float = 0.0):
+    """One image (`render_board`) per joint reading of q (N, n) of the board the carried camera of `rig`
+    sees on the truth robot, as a generator (it takes about a second an image)."""
+    camera = next(iter(rig.cameras.values()))
+    for tool in true_tools(robot, truth, q):
+        yield render_board(camera, *board_in_camera(rig, tool), rig.board, rng, blur_px, noise, lighting=lighting)

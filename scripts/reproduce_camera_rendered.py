@@ -1,0 +1,270 @@
+"""Eye-in-hand from rendered images, end to end, as a user runs it; writes its section of docs/camera.md.
+
+    python scripts/reproduce_camera_rendered.py [--seeds 5]
+
+For each seed and image quality (two: blur and grey-level noise giving about 0.1 px and about 0.2 px of
+corner noise), in a folder under out/camera-rendered:
+  gecgen simulate robots/industrial6r.yaml --cameras cams.yaml --board board.yaml --images images
+      --poses 40 --val-out val.csv --val-poses 20 --blur-px B --image-noise G --lighting 0.3
+      --rig-out rig.yaml --seed S -o readings.csv
+  gecgen import robots/industrial6r.yaml readings.csv --images images --board board.yaml
+      --cameras cams.yaml -o pixels.csv                       (and the held-out images likewise)
+  gecgen identify robots/industrial6r.yaml pixels.csv --cameras cams.yaml --board board.yaml
+      --errors robots/constant.errors.yaml -o calib.json      (and again with --keep-insignificant)
+  gecgen evaluate calib.json val-pixels.csv --cameras cams.yaml --board board.yaml
+The camera (640 x 480 px, fx 700 px, OpenCV distortion) rides a few cm and degrees off the tool of
+the simulated industrial6r (robots/industrial6r.truth.yaml: constant errors, joint offsets, gravity
+compliance) and sees a 10 x 7 square ChArUco board (9 x 6 inner corners, 40 mm squares, 30 mm
+markers, DICT_5X5_100) about 0.7 m away. The images are rendered with the board drawn by OpenCV,
+the lens distortion, blur, grey-level noise and a change of light per image; the corners are what
+OpenCV's ChArUco detector finds in them. The oracle fits the same detected corners with the true
+intrinsics and the true camera and board poses. The figures (held-out tool error, the camera on
+the tool *direct* and *carried*) are those of scripts/reproduce_camera.py's eye-in-hand table.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from reproduce_camera import ROOT, hand_figures, oracle_poses, write_section  # noqa: E402
+
+from gecgen.fit.calibration import load  # noqa: E402
+from gecgen.fit.camera import fit_pixels  # noqa: E402
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.model.cameras import read_board, read_cameras  # noqa: E402
+from gecgen.model.pixels import read_pixels  # noqa: E402
+from gecgen.model.validation import read_yaml  # noqa: E402
+from gecgen.simulate import load_truth  # noqa: E402
+from gecgen.simulate.camera import CameraRig, camera_frame_points, true_tools  # noqa: E402
+from gecgen.symbolic.terms import load_error_model  # noqa: E402
+
+HEADING = "## Eye-in-hand from rendered ChArUco images"
+CAMERAS = ("cameras:\n  cam: {mount: tool, fx: 700.0, fy: 700.0, cx: 320.0, cy: 240.0, "
+           "distortion: [-0.12, 0.08, 0.0008, -0.0005, 0.0], width: 640, height: 480}\n")
+BOARD = "type: charuco\ncolumns: 9\nrows: 6\nsquare: 0.04\nmarker: 0.03\ndictionary: DICT_5X5_100\n"
+HOME = "0,-1.5708,-1.5708,0,1.0472,0"  # rad: the poses of scripts/reproduce_camera.py's eye-in-hand table
+SPAN = ",".join(f"{np.radians(d):.4f}" for d in (8, 6, 6, 25, 20, 30))
+#: image quality: (blur px, grey-level noise), chosen for about 0.1 and 0.2 px of corner noise
+QUALITIES = {"sharper": (1.0, 6.0), "softer": (1.3, 12.0)}
+LIGHTING = 0.3
+TRAIN, HELD = 40, 20
+#: the acceptance bounds: fit / oracle held-out, the camera on the tool (mm, mrad)
+RATIO, MM, MRAD = 1.2, 0.2, 0.5
+
+
+def gecgen(*args) -> dict:
+    """`gecgen ARGS --json` as a user runs it; its JSON."""
+    run = subprocess.run([sys.executable, "-m", "gecgen.cli", *map(str, args), "--json"], capture_output=True,
+                         text=True)
+    if run.returncode:
+        raise SystemExit(run.stderr)
+    return json.loads(run.stdout)
+
+
+def corner_noise(robot, truth, rig: CameraRig, data) -> np.ndarray:
+    """(R, 2) the detected corners of `data` less where the truth projects them, px."""
+    camera = rig.cameras["cam"]
+    _, X = camera_frame_points(robot, rig, true_tools(robot, truth, data.q), "cam")
+    true = camera.project(X.reshape(-1, 3)).reshape(*X.shape[:2], 2)
+    return data.uv - true[data.pose, data.point]
+
+
+def one(robot, truth, model, seed: int, quality: str) -> dict:
+    """The figures of one seed and image quality. Images an earlier run rendered (its folder under
+    out/camera-rendered, complete once the rig file simulate writes last is there) are not rendered
+    again: delete the folder to render anew."""
+    folder = ROOT / "out" / "camera-rendered" / f"{quality}-{seed}"
+    robot_file = ROOT / "robots" / "industrial6r.yaml"
+    on = ["--board", folder / "board.yaml", "--cameras", folder / "cams.yaml"]
+    if not (folder / "rig.yaml").is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "cams.yaml").write_text(CAMERAS)
+        (folder / "board.yaml").write_text(BOARD)
+        blur, grey = QUALITIES[quality]
+        gecgen("simulate", robot_file, "--images", folder / "images", "--poses", TRAIN, "--val-out",
+               folder / "val.csv", "--val-poses", HELD, "--blur-px", blur, "--image-noise", grey, "--lighting",
+               LIGHTING, "--home", HOME, "--span", SPAN, "--rig-out", folder / "rig.yaml", "--seed", seed,
+               "-o", folder / "readings.csv", *on)
+    gecgen("import", robot_file, folder / "val.csv", "--images", folder / "images" / "held-out", *on,
+           "-o", folder / "val-pixels.csv")
+    found = gecgen("import", robot_file, folder / "readings.csv", "--images", folder / "images", *on,
+                   "-o", folder / "pixels.csv")
+    cams, board = read_cameras(folder / "cams.yaml"), read_board(folder / "board.yaml")
+    spec = read_yaml(folder / "rig.yaml", "rig file")
+    pose = lambda s: (np.array(s["rotation"]), np.array(s["translation"]))  # noqa: E731
+    rig = CameraRig(cams, {"cam": pose(spec["cameras"]["cam"])}, board, pose(spec["board"]))
+    held = np.loadtxt(folder / "val.csv", delimiter=",", skiprows=1, usecols=range(1, 7), ndmin=2)
+    data = read_pixels(folder / "pixels.csv", robot, cams, board)
+    noise = corner_noise(robot, truth, rig, data)
+    out = {"images": found["images"], "not_found": len(found["not_found"]), "corners": len(data.uv),
+           "noise_px": float(np.sqrt(np.mean(noise ** 2))), "noise_bias_px": np.abs(noise.mean(axis=0)).max().item(),
+           "noise_max_px": float(np.abs(noise).max())}
+    # with the significance gate (identify's default) and without it (--keep-insignificant), the oracle alike
+    for gate, key, calibration in ((True, "", "calib.json"), (False, "all_", "calib-all.json")):
+        fitted = gecgen("identify", robot_file, folder / "pixels.csv", "--errors",
+                        ROOT / "robots" / "constant.errors.yaml", "-o", folder / calibration, *on,
+                        *([] if gate else ["--keep-insignificant"]))
+        calib = load(folder / calibration)
+        report = calib.report
+        r = hand_figures(robot, truth, model, rig, held, calib.c, pose(report["cameras"]["cam"]),
+                         pose(report["board"]))
+        oracle = fit_pixels(robot, model, data, cams, board, fixed_poses=oracle_poses(rig), significance=gate)
+        o = hand_figures(robot, truth, model, rig, held, oracle.c, oracle.poses["cam"], oracle.board)
+        out |= {key + k: v for k, v in r.items() if k not in ("mm", "registered")}
+        out |= {key + "fit": r["mm"], key + "fit_registered": r["registered"], key + "oracle": o["mm"],
+                key + "oracle_registered": o["registered"], key + "train_px": fitted["train"]["rms_px"],
+                key + "held": len(report["held"]), key + "identified": fitted["n_identifiable"],
+                key + "converged": report["converged"]}
+        if gate:
+            out["held_px"] = gecgen("evaluate", folder / calibration, folder / "val-pixels.csv", *on)["after"]["rms_px"]
+    # the same corners where the truth projects them: what is left without corner noise is the model's misfit
+    exact = fit_pixels(robot, model, replace(data, uv=data.uv - noise), cams, board)
+    e = hand_figures(robot, truth, model, rig, held, exact.c, exact.poses["cam"], exact.board)
+    out |= {"exact_" + k: e[k] for k in ("carried_mm", "carried_mrad", "mean_mm", "mean_mrad")}
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--quality", choices=QUALITIES, action="append",
+                        help="only these image qualities (default both; two runs at once, one each, share the work)")
+    parser.add_argument("--write-only", action="store_true", help="write docs/camera.md from the last runs' figures")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    saved = {q: ROOT / "out" / "camera-rendered" / f"results-{q}.json" for q in QUALITIES}
+    if args.write_only:
+        write([row for q in QUALITIES if saved[q].is_file() for row in json.loads(saved[q].read_text())])
+        return
+    robot = load_robot(ROOT / "robots" / "industrial6r.yaml")
+    truth = load_truth(read_yaml(ROOT / "robots" / "industrial6r.truth.yaml", "truth file"), robot)
+    model = load_error_model(ROOT / "robots" / "constant.errors.yaml", robot)
+    for quality in args.quality or QUALITIES:
+        rows = []
+        for seed in range(args.seeds):
+            r = one(robot, truth, model, seed, quality)
+            rows.append((quality, seed, r))
+            print(quality, seed, r, flush=True)
+            saved[quality].write_text(json.dumps(rows))  # a run stopped early keeps what it measured
+    write([row for q in QUALITIES if saved[q].is_file() for row in json.loads(saved[q].read_text())])
+
+
+def within(r: dict, kind: str) -> bool:
+    return r[f"{kind}_mm"] <= MM and r[f"{kind}_mrad"] <= MRAD
+
+
+def write(rows: list):
+    lines = [HEADING, "",
+             "Written by `scripts/reproduce_camera_rendered.py` (its docstring gives the commands). The whole chain "
+             "as a user runs it: `gecgen simulate --cameras --images` renders a ChArUco board (9 x 6 inner corners, "
+             "40 mm squares) seen by a camera on the tool of the simulated industrial6r (640 x 480 px, fx 700 px, "
+             "lens distortion) at 40 training and 20 held-out poses, with blur, grey-level noise and a change of "
+             f"light per image (`--lighting {LIGHTING}`); `gecgen import --images` finds the corners with OpenCV; "
+             "`gecgen identify --cameras` fits the constant error model and the camera's and board's poses. "
+             "*oracle*: the same detected corners fitted with the true intrinsics and the true camera and board "
+             "poses. *corner noise*: the detected corners against where the truth projects them, per coordinate "
+             "(RMS; the largest mean over the image's two axes, the bias; the largest). Held-out: as in the "
+             "eye-in-hand table above (the camera's optical centre, mm); held-out px: `gecgen evaluate --cameras` on "
+             "the held-out images' corners. The camera on the tool: *direct* and *carried* as above. *without the "
+             "gate*: the same corners fitted with `--keep-insignificant` (the oracle likewise), which the significance "
+             "gate section below compares on simulated corners. *without corner noise*: the same corners placed where the "
+             "truth projects them and fitted (with the gate): what the camera on the tool keeps of the model's misfit "
+             "(the constant model lacks the truth's gravity compliance) once the noise is gone.", "",
+             "| images | seed | corners found (images without the board) | corner noise px: RMS / bias / largest | "
+             "train px | held-out px | held-out fit mm | oracle mm | ratio | registered fit / oracle mm | ratio | "
+             "direct mm / mrad | carried RMS mm / mrad | carried mean mm / mrad | without the gate: fit / oracle mm "
+             "| ratio | carried RMS mm / mrad | without corner noise: carried RMS / mean mm / mrad |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for quality, seed, r in rows:
+        blur, grey = QUALITIES[quality]
+        lines.append(f"| blur {blur:g} px, noise {grey:g} | {seed} | {r['corners']} ({r['not_found']}) | "
+                     f"{r['noise_px']:.3f} / {r['noise_bias_px']:.3f} / {r['noise_max_px']:.2f} | "
+                     f"{r['train_px']:.3f} | {r['held_px']:.3f} | {r['fit']:.3f} | {r['oracle']:.3f} | "
+                     f"{r['fit'] / r['oracle']:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
+                     f"{r['fit_registered'] / r['oracle_registered']:.2f} | "
+                     f"{r['direct_mm']:.3f} / {r['direct_mrad']:.3f} | "
+                     f"{r['carried_mm']:.3f} / {r['carried_mrad']:.3f} | "
+                     f"{r['mean_mm']:.3f} / {r['mean_mrad']:.3f} | {r['all_fit']:.3f} / {r['all_oracle']:.3f} | "
+                     f"{r['all_fit'] / r['all_oracle']:.2f} | "
+                     f"{r['all_carried_mm']:.3f} / {r['all_carried_mrad']:.3f} | "
+                     f"{r['exact_carried_mm']:.3f} / {r['exact_carried_mrad']:.3f}, "
+                     f"{r['exact_mean_mm']:.3f} / {r['exact_mean_mrad']:.3f} |")
+    lines.append("")
+    for quality in QUALITIES:
+        rs = [r for q, _, r in rows if q == quality]
+        if not rs:
+            continue
+        blur, grey = QUALITIES[quality]
+        ratio = np.array([r["fit"] / r["oracle"] for r in rs])
+        reg = np.array([r["fit_registered"] / r["oracle_registered"] for r in rs])
+        noise = [r["noise_px"] for r in rs]
+        lines.append(
+            f"- blur {blur:g} px, noise {grey:g} (corner noise {min(noise):.3f} to {max(noise):.3f} px per "
+            f"coordinate): "
+            f"held-out fit / oracle median {np.median(ratio):.2f}, worst {ratio.max():.2f}, "
+            f"{int((ratio <= RATIO).sum())} of {len(rs)} within {RATIO}; registered median {np.median(reg):.2f}, "
+            f"worst {reg.max():.2f}; the camera on the tool within {MM} mm and {MRAD} mrad: carried RMS "
+            f"{sum(within(r, 'carried') for r in rs)} of {len(rs)} (worst {max(r['carried_mm'] for r in rs):.3f} mm, "
+            f"{max(r['carried_mrad'] for r in rs):.3f} mrad), carried mean {sum(within(r, 'mean') for r in rs)} of "
+            f"{len(rs)} (worst {max(r['mean_mm'] for r in rs):.3f} mm, {max(r['mean_mrad'] for r in rs):.3f} mrad), "
+            f"direct {sum(within(r, 'direct') for r in rs)} of {len(rs)}")
+        ratio = np.array([r["all_fit"] / r["all_oracle"] for r in rs])
+        lines.append(
+            f"- the same without the gate: held-out fit / oracle median {np.median(ratio):.2f}, worst "
+            f"{ratio.max():.2f}, {int((ratio <= RATIO).sum())} of {len(rs)} within {RATIO}; the camera on the tool "
+            f"within {MM} mm and {MRAD} mrad, carried RMS: {sum(within(r, 'all_carried') for r in rs)} of {len(rs)} "
+            f"(worst {max(r['all_carried_mm'] for r in rs):.3f} mm, {max(r['all_carried_mrad'] for r in rs):.3f} mrad)")
+        lines.append(
+            f"- the same corners without their noise: the camera on the tool within {MM} mm and {MRAD} mrad, carried "
+            f"RMS {sum(within(r, 'exact_carried') for r in rs)} of {len(rs)} (worst "
+            f"{max(r['exact_carried_mm'] for r in rs):.3f} mm, {max(r['exact_carried_mrad'] for r in rs):.3f} mrad), "
+            f"carried mean {sum(within(r, 'exact_mean') for r in rs)} of {len(rs)} (worst "
+            f"{max(r['exact_mean_mm'] for r in rs):.3f} mm, {max(r['exact_mean_mrad'] for r in rs):.3f} mrad)")
+    lines += ["", *reading(rows)]
+    write_section(HEADING, lines)
+
+
+def reading(rows: list) -> list[str]:
+    """How to read the figures of `rows`, with the numbers that say it."""
+    rs = [r for _, _, r in rows]
+    free = [r["all_fit"] / r["all_oracle"] for r in rs]
+    gated = [r["fit"] / r["oracle"] for r in rs]
+    equal = [r for r in rs if round(r["all_fit"] / r["all_oracle"], 2) == 1.0]
+    found = {q: np.mean([r["corners"] / r["images"] for p, _, r in rows if p == q]) for q in QUALITIES}
+    size = 9 * 6  # BOARD's inner corners
+    return [
+        "Reading these figures:", "",
+        f"- The corners OpenCV finds in these images are unbiased (at most {max(r['noise_bias_px'] for r in rs):.3f} "
+        "px of mean error along an image axis) and their noise follows the images' blur and grey-level noise. "
+        "Softer images also lose corners: the ChArUco detector names a corner only from the markers beside it and "
+        f"reads fewer of them ({', '.join(f'{found[q]:.0f}' for q in QUALITIES)} of {size} corners an image).",
+        f"- Held out, fit against oracle: without the significance gate, fit / oracle is {min(free):.2f} to "
+        f"{max(free):.2f} (equal to the digit in {len(equal)} of {len(rs)} seeds"
+        + ("; in the others the fit held a coefficient the images determine too weakly, `held`)" if all(
+            r["all_held"] for r in rs if r not in equal) else ")") + ". Eye-in-hand, "
+        "what the oracle is told (the camera's pose on "
+        "the tool, the board's in the world) is what the base's and the last frame's constant errors express, which "
+        "the fit holds for that reason, so knowing it adds nothing. With the gate (identify's default) the two hold "
+        f"different coefficients and the ratio scatters both ways ({min(gated):.2f} to {max(gated):.2f}).",
+        "- The camera on the tool: the same corners without their noise put it, carried, within "
+        f"{max(r['exact_carried_mm'] for r in rs):.3f} mm and {max(r['exact_carried_mrad'] for r in rs):.3f} mrad "
+        "(RMS over the held-out poses) on every seed, so what is beyond that comes from the corners' noise, not from "
+        "the rendering, the detection's bias or the model. At the larger noise, with fewer corners, 40 images of one "
+        "board 0.7 m away do not fix the camera to 0.2 mm; the simulated chessboard corners at 0.3 px above miss "
+        "alike. More images, or more corners an image, would narrow it; that is not measured here.",
+        "- *direct* is off by about 1 mm by design, as above: the truth's last-frame errors sit between the flange "
+        "and the camera."]
+
+
+
+if __name__ == "__main__":
+    main()
