@@ -371,7 +371,12 @@ def images_reading(rows: list, spreads: list) -> list[str]:
                + ", ".join(f"{np.sqrt(b / a):.2f}" for a, b in zip(counts, list(counts)[1:])) + ")")
             + f". Within {MM} mm and {MRAD} mrad, carried RMS and mean: "
             + "; ".join(f"{n} images {sum(within(r, 'carried') for r in rs)} and {sum(within(r, 'mean') for r in rs)} "
-                        f"of {len(rs)} seeds" for n, rs in counts.items()) + ".")
+                        f"of {len(rs)} seeds" for n, rs in counts.items()) + "."
+            # the count at which the fit states half the bound, so that a seed at twice the statement stays in it
+            + f" By the root law from {max(counts)} images, the fit would state {MM / 2:g} mm at "
+            + ("about " if len(counts) < 2 or stated[min(counts)] / stated[max(counts)] >= np.sqrt(
+                max(counts) / min(counts)) else "no fewer than ")
+            + f"{max(counts) * (stated[max(counts)] / (MM / 2)) ** 2:.0f} images.")
     return lines
 
 
