@@ -365,9 +365,9 @@ def images_reading(rows: list, spreads: list) -> list[str]:
         said = "; ".join(f"{n} images {stated[n]:.3f} mm" for n in counts)
         lines.append(
             f"- blur {blur:g} px, noise {grey:g}: the fit states carried RMS (median over the seeds) {said}"
-            + ("" if len(counts) < 2 else ", " + ", ".join(f"{stated[a] / stated[b]:.2f}" for a, b in
+            + ("" if len(counts) < 2 else ", falling by a factor " + ", ".join(f"{stated[a] / stated[b]:.2f}" for a, b in
                                                          zip(counts, list(counts)[1:]))
-               + " times as much from one count to the next (the root of the images' number foretells "
+               + " from one count to the next (the root of the images' number foretells "
                + ", ".join(f"{np.sqrt(b / a):.2f}" for a, b in zip(counts, list(counts)[1:])) + ")")
             + f". Within {MM} mm and {MRAD} mrad, carried RMS and mean: "
             + "; ".join(f"{n} images {sum(within(r, 'carried') for r in rs)} and {sum(within(r, 'mean') for r in rs)} "
