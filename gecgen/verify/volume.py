@@ -462,14 +462,15 @@ NO_NOISE = ("no measurement noise stated (--noise-mm): the whole residual is cou
 def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
           tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
           blocks: list[str], doubts: list[str], notes: list[str], held: Measured | None = None,
-          unstated: str = NO_NOISE) -> Statement:
+          unstated: str = NO_NOISE, unrefuted: str | None = None) -> Statement:
     """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
     maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated noise per coordinate (None: unknown).
     blocks: what undermines the model's figures (the verdict is then "cannot tell", whatever they
     say); doubts: what keeps the bound from being signed ("cannot tell" unless the coefficients'
     uncertainty alone fails the tolerance, when they are left out as moot); notes: what the reader
     must know; held: the distribution-free statement from held-out poses inside the volume, which
-    "meets" needs beside the bound."""
+    "meets" needs beside the bound; unrefuted: why the coefficients' draws cannot refute the tolerance
+    (None: they can, and "does not meet" is said when their low quantile passes it)."""
     worst, worst_param, norms = worst_over_draws(G, cov, U, draws, rng)
     # the bound takes the unmodelled error pessimistically, so its low quantile is no evidence of failure:
     # "does not meet" needs the coefficients' own uncertainty to push the worst past the tolerance
@@ -484,9 +485,10 @@ def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, nois
     elif blocks:
         verdict, reasons = "cannot tell", blocks + doubts + notes
     elif lower > tolerance_mm:
-        verdict = "does not meet"
-        reasons = [f"the coefficients' uncertainty alone puts the worst error above the tolerance in all but "
-                   f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)", *notes]
+        said = (f"the coefficients' uncertainty alone puts the worst error above the tolerance in all but "
+                f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)")
+        verdict = "does not meet" if unrefuted is None else "cannot tell"
+        reasons = [said if unrefuted is None else f"{said}, but {unrefuted}", *notes]
     else:
         short, said = _measured_reasons(held, tolerance_mm) if held is not None else ([], [])
         over = ([f"the bound, {bound:.3g} mm at {confidence:.0%}, is above the tolerance"]
@@ -701,11 +703,12 @@ def _require_draws(draws: int, confidence: float):
 def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: np.ndarray, unmod: Unmodelled,
            held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, tolerance_mm: float | None,
            confidence: float, draws: int, rng: np.random.Generator, share: float,
-           notes: list[str], unstated: str = NO_NOISE) -> tuple[Samples, Statement, CompiledModel]:
+           notes: list[str], unstated: str = NO_NOISE,
+           unrefuted: str | None = None) -> tuple[Samples, Statement, CompiledModel]:
     """`accuracy`'s statement from what it read off the data: the training poses (`Poses`: their count
     and the forces they carried), the covariance cov of c[columns], the unmodelled error, the held-out
     (data, world points) when given, and notes of how they were read (said after the statement's own);
-    unstated: what it says of the noise when none is stated (noise_m None)."""
+    unstated: what it says of the noise when none is stated (noise_m None); unrefuted: `state`'s."""
     _require_draws(draws, confidence)
     samples = sample(calib.robot, volume, rng)
     require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
@@ -728,7 +731,7 @@ def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: n
         own.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
                    "poses): a tilt's growth with the lever arm to the tool box is not in it")
     statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, blocks, doubts, own, held, unstated)
+                      confidence, draws, rng, blocks, doubts, own, held, unstated, unrefuted)
     return samples, statement, cm
 
 
