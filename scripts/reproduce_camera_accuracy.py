@@ -1,7 +1,7 @@
 """Does `gecgen accuracy --cameras` overclaim? Its statement against the compensated error of simulated
 truths; writes the section "Does the statement from images hold?" of docs/camera.md.
 
-    python scripts/reproduce_camera_accuracy.py [--seeds 4]
+    python scripts/reproduce_camera_accuracy.py [--seeds 5]
 
 For two arms (robots/industrial6r.truth.yaml with the constant error model, which misses its gravity
 compliance; robots/fanuc.truth.yaml with its own error model, which has its J2/J3 coupling), both
@@ -58,6 +58,9 @@ WIDER = 3.0
 ARMS = {
     "industrial6r": ("industrial6r.yaml", "industrial6r.truth.yaml", "constant.errors.yaml",
                      [0, -70, -40, 0, 50, 0], [8, 6, 8, 30, 15, 40]),
+    # the elbow through stretched: compensation fails at some samples, and the statement must say at how many
+    "industrial6r, elbow through stretched": ("industrial6r.yaml", "industrial6r.truth.yaml", "constant.errors.yaml",
+                                              [0, -80, -100, 0, 30, 0], [8, 6, 12, 30, 15, 40]),
     "fanuc": ("fanuc.yaml", "fanuc.truth.yaml", "fanuc.errors.yaml",
               [0, 10, -20, 0, -50, 0], [8, 6, 8, 30, 15, 40]),
 }
@@ -66,7 +69,7 @@ ARMS = {
 def volume_file(robot, name: str, mount: str, centre, half) -> Path:
     """The volume (YAML) of centre +- half (deg) over the robot's joints, at every target of the robot."""
     ranges = ", ".join(f"{j.name}: [{c - h:g}, {c + h:g}]" for j, c, h in zip(robot.joints, centre, half))
-    path = OUT / f"{name}.{mount}.volume.yaml"
+    path = OUT / f"{name.split(',')[0]}.{mount}.volume.yaml"
     path.write_text(f"angle_unit: deg\ntargets: [{', '.join(robot.targets)}]\njoints: {{{ranges}}}\n"
                     f"samples: {SAMPLES}\n")
     return path
@@ -118,10 +121,11 @@ def one(arm: str, mount: str, seed: int) -> dict:
                                                  max(TOLERANCES), CONFIDENCE, DRAWS, np.random.default_rng(seed))
     true, status = compensated_on_truth(cal.robot, truth, cm, cal.c, samples, volume)
     err = 1e3 * np.linalg.norm(into_fit(rig, fit)(true) - samples.world, axis=1)
+    base = 1e3 * np.linalg.norm(true - samples.world, axis=1)  # in the truth's own base frame, for comparison
     ok = ~np.isin(status, FAILED)
     return {"arm": arm, "mount": mount, "seed": seed, "samples": len(err), "failed": int((~ok).sum()),
             "said_failed": any(f"does not converge at {int((~ok).sum())} of" in r for r in st.reasons),
-            "true_worst": float(err[ok].max()), "true_median": float(np.median(err[ok])),
+            "true_worst": float(err[ok].max()), "base_worst": float(base[ok].max()), "true_median": float(np.median(err[ok])),
             "per_point_covers": float(np.mean(err[ok] <= st.per_point_mm[ok])), "bound": st.bound_mm,
             "lower": st.lower_mm, "parametric": st.parametric_mm, "sigma_u": st.unmodelled_mm,
             "verdict": st.verdict, "reasons": list(st.reasons), "points": info.points, "std_mm": list(info.std_mm),
@@ -149,6 +153,8 @@ def write(results: list[dict]):
                 f"| {arm}, {label} | {len(r)} | {sum(x['failed'] for x in r)} of {sum(x['samples'] for x in r)} "
                 f"({sum(x['said_failed'] or not x['failed'] for x in r)} of {len(r)} said) | "
                 f"{int((worst <= bound).sum())} of {len(r)} | {np.median(worst):.3f} ({worst.max():.3f}) | "
+                f"{sum(x['base_worst'] <= x['bound'] for x in r)} of {len(r)}; "
+                f"{np.median([x['base_worst'] for x in r]):.2f} | "
                 f"{np.median(bound):.2f} ({bound.min():.2f} - {bound.max():.2f}) | "
                 f"{np.median(bound / worst):.1f} ({(bound / worst).min():.1f} - {(bound / worst).max():.1f}) | "
                 f"{np.median([x['parametric'] for x in r]):.2f} | {np.median([x['sigma_u'] for x in r]):.3f} | "
@@ -167,20 +173,67 @@ def write(results: list[dict]):
         "(scripts/reproduce_volume.py, `verdict_at`); wrong: signed while the true worst passes the tolerance.",
         "",
         "| arm, set-up | seeds | samples not compensated (statements that say so) | true worst within the bound | "
-        "true worst, median (largest), mm | bound, median (range), mm | bound / true worst, median (range) | "
+        "true worst, median (largest), mm | in the robot's own base frame: within the bound; true worst, median, "
+        "mm | bound, median (range), mm | bound / true worst, median (range) | "
         "from the coefficients alone, median, mm | unmodelled sigma, median, mm | held-out point 1 sigma, median, "
         "mm | measured 95 % error, median mm; truths where 95 % of the samples lie within it | "
-        + " | ".join(f"at {t} mm: *meets* (wrong) / *does not meet* (wrong)" for t in TOLERANCES) + " |",
-        "|---|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(TOLERANCES),
+        + " | ".join(f"at {t} mm: *meets* (wrong) / *does not meet* by the draws alone (wrong)"
+                     for t in TOLERANCES) + " |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(TOLERANCES),
         *rows, "",
+        *findings(results),
     ]
     write_section(HEADING, lines)
     print("\n".join(lines))
 
 
+def findings(results: list[dict]) -> list[str]:
+    """What the table shows, in figures read from it."""
+    def of(mount, singular=False):
+        return [x for x in results if x["mount"] == mount and ("stretched" in x["arm"]) == singular]
+
+    def ratio(r):
+        return np.median([x["bound"] / x["true_worst"] for x in r])
+
+    clean = of("world") + of("tool")
+    through = of("world", True) + of("tool", True)
+    covered = sum(x["true_worst"] <= x["bound"] for x in results)
+    meets = sum(verdict_at(x, t) == "meets" for x in results for t in TOLERANCES)
+    refuted = [(x, t) for x in of("world") + of("tool") for t in TOLERANCES if verdict_at(x, t) == "does not meet"]
+    base = [x for x in of("tool") + of("tool", True) if x["base_worst"] > x["bound"]]
+    return [
+        f"- **Coverage**: against the cameras (the board), the true worst of the samples compensated lies within the "
+        f"bound in {covered} of {len(results)} statements; the measured statement (95 % of the volume within the "
+        f"k-th largest held-out error) held for the truth's samples in "
+        f"{sum(x['true_share'] is not None and x['true_share'] >= 0.95 for x in results)} of {len(results)}. "
+        f"*meets* is signed in {meets} of the {len(results) * len(TOLERANCES)} readings at "
+        f"{', '.join(map(str, TOLERANCES))} mm (so never wrongly): the bound is above every tolerance.",
+        f"- **How conservative**: the bound is {ratio(of('world')):.0f} times the true worst in the median with two "
+        f"fixed cameras and {ratio(of('tool')):.1f} times with a camera on the tool (volumes away from singular "
+        f"postures). Almost all of it is the coefficients' draws (their column): their covariance is taken with the "
+        f"cameras' (the board's) poses free, so it holds where the robot's base sits against them, which moves the "
+        f"stated points in the robot's frame but not against the cameras the error is measured with. In the "
+        f"robot's own base frame the true worst is {np.median([x['base_worst'] for x in of('world')]):.2f} mm in "
+        f"the median with fixed cameras, against "
+        f"{np.median([x['true_worst'] for x in of('world')]):.2f} mm against them.",
+        f"- **does not meet from the draws alone** (the rule of tracker statements: the draws' low quantile above "
+        f"the tolerance) would have been said in {len(refuted)} readings of the volumes away from singular "
+        f"postures, wrongly in {sum(x['true_worst'] <= t for x, t in refuted)}: from images the draws alone now "
+        f"give *cannot tell*, with that reason.",
+        f"- **The frame**: a carried camera's statement is about positions against the board; in the robot's own "
+        f"base frame the truth's worst passes the bound in {len(base)} of {len(of('tool') + of('tool', True))} "
+        f"statements (`meaning` in the JSON says so).",
+        f"- **Singular postures**: where the volume takes the elbow through stretched, compensation fails at "
+        f"{sum(x['failed'] for x in through)} of {sum(x['samples'] for x in through)} samples; every one of those "
+        f"{len(through)} statements says at how many of its samples (and so says *cannot tell*); the volumes away "
+        f"from it fail at {sum(x['failed'] for x in clean)} of {sum(x['samples'] for x in clean)}.",
+        "",
+    ]
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--arms", nargs="*", default=list(ARMS))
     parser.add_argument("--render", action="store_true", help="write the doc from the last run's results")
     args = parser.parse_args()
