@@ -105,6 +105,9 @@ def into_fit(rig, fit):
 
 
 def one(arm: str, mount: str, seed: int) -> dict:
+    """One truth of `arm` seen from `mount` ("world": two fixed cameras; "tool": a carried camera): the statement
+    at the largest tolerance, and the truth's compensated error over its samples (mm) against the cameras (the
+    board) and in the truth's own base frame."""
     robot_file, truth_file, model_file, centre, half = ARMS[arm]
     robot = load_robot(ROOT / "robots" / robot_file)
     spec = read_yaml(ROOT / "robots" / truth_file, "truth file")
@@ -125,7 +128,8 @@ def one(arm: str, mount: str, seed: int) -> dict:
     ok = ~np.isin(status, FAILED)
     return {"arm": arm, "mount": mount, "seed": seed, "samples": len(err), "failed": int((~ok).sum()),
             "said_failed": any(f"does not converge at {int((~ok).sum())} of" in r for r in st.reasons),
-            "true_worst": float(err[ok].max()), "base_worst": float(base[ok].max()), "true_median": float(np.median(err[ok])),
+            "true_worst": float(err[ok].max()), "base_worst": float(base[ok].max()),
+            "true_median": float(np.median(err[ok])),
             "per_point_covers": float(np.mean(err[ok] <= st.per_point_mm[ok])), "bound": st.bound_mm,
             "lower": st.lower_mm, "parametric": st.parametric_mm, "sigma_u": st.unmodelled_mm,
             "verdict": st.verdict, "reasons": list(st.reasons), "points": info.points, "std_mm": list(info.std_mm),

@@ -120,7 +120,8 @@ def one_truth(robot, spec, seed: int, cases: dict, volume, noise: tuple[float, f
                                    noise[0] if stated else None,
                                    noise[1] if stated else 0.0, TOLERANCE_MM, CONFIDENCE, DRAWS,
                                    np.random.default_rng(seed))
-        true, _ = compensated_on_truth(robot, truth, cm, calib.c, samples, volume)  # where it fails, the statement says so
+        # where compensation fails, the statement says so
+        true, _ = compensated_on_truth(robot, truth, cm, calib.c, samples, volume)
         err = 1e3 * np.linalg.norm(true - samples.world, axis=1)
         out[label] = {"bound": st.bound_mm, "lower": st.lower_mm, "parametric": st.parametric_mm,
                       "sigma_u": st.unmodelled_mm, "verdict": st.verdict, "true_worst": float(err.max()),
