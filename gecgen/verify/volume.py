@@ -462,15 +462,14 @@ NO_NOISE = ("no measurement noise stated (--noise-mm): the whole residual is cou
 def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, noise_m: float | None,
           tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
           blocks: list[str], doubts: list[str], notes: list[str], held: Measured | None = None,
-          unstated: str = NO_NOISE, unrefuted: str | None = None) -> Statement:
+          unstated: str = NO_NOISE) -> Statement:
     """The statement for rows G (N, 3, k), coefficient covariance cov (k, k) and unmodelled error
     maps U (N, 3, d) (`Unmodelled.maps`); noise_m the stated noise per coordinate (None: unknown).
     blocks: what undermines the model's figures (the verdict is then "cannot tell", whatever they
     say); doubts: what keeps the bound from being signed ("cannot tell" unless the coefficients'
     uncertainty alone fails the tolerance, when they are left out as moot); notes: what the reader
     must know; held: the distribution-free statement from held-out poses inside the volume, which
-    "meets" needs beside the bound; unrefuted: why the coefficients' draws cannot refute the tolerance
-    (None: they can, and "does not meet" is said when their low quantile passes it)."""
+    "meets" needs beside the bound."""
     worst, worst_param, norms = worst_over_draws(G, cov, U, draws, rng)
     # the bound takes the unmodelled error pessimistically, so its low quantile is no evidence of failure:
     # "does not meet" needs the coefficients' own uncertainty to push the worst past the tolerance
@@ -485,10 +484,9 @@ def state(G: np.ndarray, cov: np.ndarray, U: np.ndarray, unmod: Unmodelled, nois
     elif blocks:
         verdict, reasons = "cannot tell", blocks + doubts + notes
     elif lower > tolerance_mm:
-        said = (f"the coefficients' uncertainty alone puts the worst error above the tolerance in all but "
-                f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)")
-        verdict = "does not meet" if unrefuted is None else "cannot tell"
-        reasons = [said if unrefuted is None else f"{said}, but {unrefuted}", *notes]
+        verdict = "does not meet"
+        reasons = [f"the coefficients' uncertainty alone puts the worst error above the tolerance in all but "
+                   f"{1 - confidence:.0%} of the draws ({lower:.3g} mm, against {tolerance_mm:.3g} mm)", *notes]
     else:
         short, said = _measured_reasons(held, tolerance_mm) if held is not None else ([], [])
         over = ([f"the bound, {bound:.3g} mm at {confidence:.0%}, is above the tolerance"]
@@ -704,11 +702,14 @@ def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: n
            held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, tolerance_mm: float | None,
            confidence: float, draws: int, rng: np.random.Generator, share: float,
            notes: list[str], unstated: str = NO_NOISE,
-           unrefuted: str | None = None) -> tuple[Samples, Statement, CompiledModel]:
+           frame_rows=None) -> tuple[Samples, Statement, CompiledModel]:
     """`accuracy`'s statement from what it read off the data: the training poses (`Poses`: their count
     and the forces they carried), the covariance cov of c[columns], the unmodelled error, the held-out
     (data, world points) when given, and notes of how they were read (said after the statement's own);
-    unstated: what it says of the noise when none is stated (noise_m None); unrefuted: `state`'s."""
+    unstated: what it says of the noise when none is stated (noise_m None); frame_rows: with a reference
+    frame fitted with the coefficients (fixed cameras, a board), a function of the stated points (N, 3), m,
+    giving how they move against it with its m parameters (N, 3, m), cov then being over those parameters
+    and c[columns] together (in that order): the error is bounded against that frame."""
     _require_draws(draws, confidence)
     samples = sample(calib.robot, volume, rng)
     require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
@@ -730,8 +731,11 @@ def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: n
     if unmod.twist_cov is None and volume.tool_box is not None:
         own.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
                    "poses): a tilt's growth with the lever arm to the tool box is not in it")
-    statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, blocks, doubts, own, held, unstated, unrefuted)
+    G = point_rows(cm, samples, calib.c, columns)
+    if frame_rows is not None:
+        G = np.concatenate([frame_rows(samples.world), G], axis=2)
+    statement = state(G, cov, U, unmod, noise_m, tolerance_mm, confidence, draws, rng, blocks, doubts, own, held,
+                      unstated)
     return samples, statement, cm
 
 
