@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "camera_accuracy"
 HEADING = "## Does the statement from images hold?"
 NOISE_PX = 0.2
-TOLERANCES = (0.5, 1.0, 2.0)
+TOLERANCES = (0.5, 1.0, 1.5, 2.0, 2.5)
 CONFIDENCE, DRAWS, SAMPLES = 0.95, 2000, 200
 TRAIN, HELD = 60, 60
 #: deg: the training region is the volume widened by this on every joint (compensation moves the joints a little)
@@ -181,7 +181,7 @@ def write(results: list[dict]):
         "mm | bound, median (range), mm | bound / true worst, median (range) | "
         "from the coefficients alone, median, mm | unmodelled sigma, median, mm | held-out point 1 sigma, median, "
         "mm | measured 95 % error, median mm; truths where 95 % of the samples lie within it | "
-        + " | ".join(f"at {t} mm: *meets* (wrong) / *does not meet* by the draws alone (wrong)"
+        + " | ".join(f"at {t} mm: *meets* (wrong) / *does not meet* (wrong)"
                      for t in TOLERANCES) + " |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(TOLERANCES),
         *rows, "",
@@ -202,31 +202,29 @@ def findings(results: list[dict]) -> list[str]:
     clean = of("world") + of("tool")
     through = of("world", True) + of("tool", True)
     covered = sum(x["true_worst"] <= x["bound"] for x in results)
-    meets = sum(verdict_at(x, t) == "meets" for x in results for t in TOLERANCES)
+    meets = [(x, t) for x in results for t in TOLERANCES if verdict_at(x, t) == "meets"]
     refuted = [(x, t) for x in of("world") + of("tool") for t in TOLERANCES if verdict_at(x, t) == "does not meet"]
-    base = [x for x in of("tool") + of("tool", True) if x["base_worst"] > x["bound"]]
+    base = [x for x in results if x["base_worst"] > x["bound"]]
     return [
         f"- **Coverage**: against the cameras (the board), the true worst of the samples compensated lies within the "
         f"bound in {covered} of {len(results)} statements; the measured statement (95 % of the volume within the "
         f"k-th largest held-out error) held for the truth's samples in "
         f"{sum(x['true_share'] is not None and x['true_share'] >= 0.95 for x in results)} of {len(results)}. "
-        f"*meets* is signed in {meets} of the {len(results) * len(TOLERANCES)} readings at "
-        f"{', '.join(map(str, TOLERANCES))} mm (so never wrongly): the bound is above every tolerance.",
-        f"- **How conservative**: the bound is {ratio(of('world')):.0f} times the true worst in the median with two "
+        f"*meets* is signed in {len(meets)} of the {len(results) * len(TOLERANCES)} readings at "
+        f"{', '.join(map(str, TOLERANCES))} mm, wrongly in {sum(x['true_worst'] > t for x, t in meets)}; it needs "
+        f"the bound within the tolerance, which happens from about 2 mm here.",
+        f"- **How conservative**: the bound is {ratio(of('world')):.1f} times the true worst in the median with two "
         f"fixed cameras and {ratio(of('tool')):.1f} times with a camera on the tool (volumes away from singular "
-        f"postures). Almost all of it is the coefficients' draws (their column): their covariance is taken with the "
-        f"cameras' (the board's) poses free, so it holds where the robot's base sits against them, which moves the "
-        f"stated points in the robot's frame but not against the cameras the error is measured with. In the "
-        f"robot's own base frame the true worst is {np.median([x['base_worst'] for x in of('world')]):.2f} mm in "
-        f"the median with fixed cameras, against "
-        f"{np.median([x['true_worst'] for x in of('world')]):.2f} mm against them.",
-        f"- **does not meet from the draws alone** (the rule of tracker statements: the draws' low quantile above "
-        f"the tolerance) would have been said in {len(refuted)} readings of the volumes away from singular "
-        f"postures, wrongly in {sum(x['true_worst'] <= t for x, t in refuted)}: from images the draws alone now "
-        f"give *cannot tell*, with that reason.",
-        f"- **The frame**: a carried camera's statement is about positions against the board; in the robot's own "
-        f"base frame the truth's worst passes the bound in {len(base)} of {len(of('tool') + of('tool', True))} "
-        f"statements (`meaning` in the JSON says so).",
+        f"postures). The coefficients' draws are taken with the first camera's (the board's) fitted pose and "
+        f"bounded against it (`verify.images.against_reference`), where the images measure the robot and where "
+        f"the truth's error is read here; bounded in the robot's own frame instead, they held where the base sits "
+        f"against the cameras as well, which no image sees, and made the bound many times larger.",
+        f"- **does not meet from the draws alone** (their low quantile above the tolerance) is said in "
+        f"{len(refuted)} readings of the volumes away from singular postures, wrongly in "
+        f"{sum(x['true_worst'] <= t for x, t in refuted)}.",
+        f"- **The frame**: the statement is about positions against the first camera (the board); in the robot's "
+        f"own base frame, which the images do not fix, the truth's worst passes the bound in {len(base)} of "
+        f"{len(results)} statements (`meaning` in the JSON says what the mm are against).",
         f"- **Singular postures**: where the volume takes the elbow through stretched, compensation fails at "
         f"{sum(x['failed'] for x in through)} of {sum(x['samples'] for x in through)} samples; every one of those "
         f"{len(through)} statements says at how many of its samples (and so says *cannot tell*); the volumes away "
