@@ -172,7 +172,8 @@ def write(results: list[dict]):
         f"{TRAIN} training and {HELD} held-out images, the held-out ones drawn at random inside the volume, "
         f"{SAMPLES} volume samples, {CONFIDENCE:.0%} confidence, {DRAWS} draws. The truth is commanded to the "
         "compensated joints of every sample and its error taken against the nominal target in the calibration's "
-        "world. Samples where compensation fails are counted (the statement must say how many) and left out of "
+        "world, reached from the truth's through the first camera's (the board's) true and fitted poses: the "
+        "error against the cameras (the board), as the statement means it. Samples where compensation fails are counted (the statement must say how many) and left out of "
         "the true worst. *meets* at each tolerance is the verdict's rule read from the same statement "
         "(scripts/reproduce_volume.py, `verdict_at`); wrong: signed while the true worst passes the tolerance.",
         "",
