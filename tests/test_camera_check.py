@@ -208,7 +208,8 @@ def test_accuracy_from_images_counts_samples_not_compensated_and_bounds_against_
 
     from test_camera import world_rig
 
-    robot, truth, rig, q, _, _, rng = world
+    robot, truth, rig, q, _, _ = world
+    rng = np.random.default_rng(0)
     train = world_rig(arm, n=60)[3]  # the fixture's images, all 60: twice as many poses as coefficients
     cal = calibration_of(robot, arm[2], fit_pixels(robot, arm[2], train, rig.cameras), rig.cameras, None)
     val = simulate_pixels(robot, truth, rig, q, 0.2, rng)
