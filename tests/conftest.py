@@ -4,16 +4,21 @@ import io
 import json
 import os
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import settings
 
-from gecgen.cli import main
-from gecgen.model import load_robot
+# The suite starts many gecgen processes. Where the environment asks Python not to write bytecode
+# (PYTHONDONTWRITEBYTECODE), every one of them would compile gecgen's sources anew, and every worker
+# rewrite the tests' assertions anew: the suite writes both once, before it imports them.
+sys.dont_write_bytecode = False
 
-from gecgen.symbolic.terms import load_error_model
+from gecgen.cli import main  # noqa: E402 (after the line above, which speeds up its import)
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.symbolic.terms import load_error_model  # noqa: E402
 
 # the tests run the compiled C: "auto" would run a model new to the cache in numpy and leave a build
 # of its C running in the background. Every command a test starts inherits it; the tests of that
