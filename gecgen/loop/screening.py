@@ -95,7 +95,7 @@ def basis(B: np.ndarray, R_blocks: list[np.ndarray]) -> Basis:
     return Basis(B, R)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)  # not frozen: there are hundreds of thousands a round, and a frozen one takes 4x to make
 class Hit:
     """A (candidate, error) pair that explains part of the residual: the drop in the residual sum
     of squares (m^2) and log of its chi-square p-value. `parts` hold what its fitted effect is made
@@ -186,10 +186,13 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
             G = XtX - np.einsum("kni,knj->nij", Q, Q)  # Gram matrices of the projected columns
             scale = np.sqrt(np.maximum(np.diagonal(XtX, axis1=1, axis2=2), 1e-300))  # (n, dof)
             Gs = G / (scale[:, :, None] * scale[:, None, :])
-            new = np.linalg.eigvalsh(Gs).min(axis=1) >= MIN_INDEPENDENCE  # else inside the current model
+            # one column (most candidates): its 1 x 1 Gram matrix is its own eigenvalue, and LAPACK's solve
+            # divides by it, to the bit; the library's per-matrix calls cost more than the arithmetic
+            eigen = Gs[:, :, 0] if dof == 1 else np.linalg.eigvalsh(Gs)
+            new = eigen.min(axis=1) >= MIN_INDEPENDENCE  # else inside the current model
             group_of, cols, scale = group_of[new], cols[new], scale[new]
             b = rX[cols] / scale
-            beta = np.linalg.solve(Gs[new], b[:, :, None])[:, :, 0]
+            beta = b / eigen[new] if dof == 1 else np.linalg.solve(Gs[new], b[:, :, None])[:, :, 0]
             drop = np.einsum("ni,ni->n", b, beta)
             kept = np.flatnonzero(drop > max(9, 3 * dof) * sigma2)  # cheap pre-filter; the real test follows
             ours += zip(drop[kept].tolist(), [int(dof)] * len(kept), group_of[kept].tolist(), [e] * len(kept),
