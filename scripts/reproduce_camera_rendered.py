@@ -291,7 +291,7 @@ def write_images(rows: list):
         return
     lines = [IMAGES_HEADING, "",
              "Written by `scripts/reproduce_camera_rendered.py --images N` (repeat for several N). The images, the "
-             "board and the fit of the section above, with N training images (the poses drawn the same way, more of "
+             "board and the fit of \"Eye-in-hand from rendered ChArUco images\", with N training images (the poses drawn the same way, more of "
              "them) and the fit as `gecgen identify --cameras` makes it (with the significance gate). The camera on "
              "the tool, *carried* RMS and mean, against the truth and *stated*: what the fit expects those errors to "
              "be from its own covariance (its least squares at the solution, scaled by the residual; the camera's "
@@ -393,7 +393,7 @@ def images_reading(rows: list, spreads: list) -> list[str]:
         + ", ".join(f"{v:.2f} at {n} images" for n, v in pooled.items())
         + ". With independent normal noise of the same size the fits spread "
         + f"{min(checked):.2f} to {max(checked):.2f} times what they state (the check lines), and without "
-        "their noise the same corners put the camera within 0.04 mm (the section above), so "
+        "their noise the same corners put the camera within 0.04 mm (\"Eye-in-hand from rendered ChArUco images\"), so "
         + ("part of the detected corners' error is not independent noise and the fit does not know it"
            if max(checked) < min(pooled.values()) else "the gap is not told apart from the fit's own linearisation "
            "here") + ". Carried RMS against the truth, RMS "

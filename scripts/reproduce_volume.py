@@ -86,6 +86,18 @@ def in_volume(robot, truth, volume, seed: int):
                     rng)
 
 
+def compensated_on_truth(robot, truth, cm, c: np.ndarray, samples, volume) -> tuple[np.ndarray, np.ndarray]:
+    """Where the truth robot puts each sample's stated point (N, 3), m, in its own world, when commanded to
+    the joints the calibration (compiled model cm, coefficients c) compensates the sample's nominal
+    joints to, and compensate's status per sample (N,). The controller reads the sensor: compensation
+    is done again with what it reads where the robot went."""
+    w = samples.w
+    for _ in range(2):
+        q_c, status = cm.compensate(samples.q, w, None, c)
+        true, w = true_tool_points(robot, truth, q_c, samples.payload_kg, volume.payload_at, samples.point)
+    return true, status
+
+
 def one_truth(robot, spec, seed: int, cases: dict, volume, noise: tuple[float, float]) -> dict:
     """Every case (label -> (truth spec change, error model, noise stated, roll and pitch swept in the
     training design, residual from: None the training data, "paper" the paper's validation half,
@@ -108,10 +120,8 @@ def one_truth(robot, spec, seed: int, cases: dict, volume, noise: tuple[float, f
                                    noise[0] if stated else None,
                                    noise[1] if stated else 0.0, TOLERANCE_MM, CONFIDENCE, DRAWS,
                                    np.random.default_rng(seed))
-        w = samples.w  # the controller reads the sensor: compensate with what it reads where the robot goes
-        for _ in range(2):
-            q_c, _ = cm.compensate(samples.q, w, None, calib.c)  # where it fails, the statement says so
-            true, w = true_tool_points(robot, truth, q_c, samples.payload_kg, volume.payload_at, samples.point)
+        # where compensation fails, the statement says so
+        true, _ = compensated_on_truth(robot, truth, cm, calib.c, samples, volume)
         err = 1e3 * np.linalg.norm(true - samples.world, axis=1)
         out[label] = {"bound": st.bound_mm, "lower": st.lower_mm, "parametric": st.parametric_mm,
                       "sigma_u": st.unmodelled_mm, "verdict": st.verdict, "true_worst": float(err.max()),

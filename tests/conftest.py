@@ -1,17 +1,24 @@
 import contextlib
+import functools
 import io
 import json
 import os
+import re
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import settings
 
-from gecgen.cli import main
-from gecgen.model import load_robot
+# The suite starts many gecgen processes. Where the environment asks Python not to write bytecode
+# (PYTHONDONTWRITEBYTECODE), every one of them would compile gecgen's sources anew, and every worker
+# rewrite the tests' assertions anew: the suite writes both once, before it imports them.
+sys.dont_write_bytecode = False
 
-from gecgen.symbolic.terms import load_error_model
+from gecgen.cli import main  # noqa: E402 (after the line above, which speeds up its import)
+from gecgen.model import load_robot  # noqa: E402
+from gecgen.symbolic.terms import load_error_model  # noqa: E402
 
 # the tests run the compiled C: "auto" would run a model new to the cache in numpy and leave a build
 # of its C running in the background. Every command a test starts inherits it; the tests of that
@@ -42,6 +49,32 @@ FRAME_LOADS = {"default": ["1"], "frames": {
     4: {"es": ["1", "gravity_load(torso_4_joint, my)"]},
     2: {"ep": ["1", "gravity(torso_2_joint, mx)"], "er": ["q1*wrench_load(2, mz)"]},
     5: {"ep": ["1", "sign(gravity(arm_left_1_joint, mx, 1))"]}}}
+
+
+@functools.cache
+def _builds_a_fixture_once(module: str) -> bool:
+    """Whether a test module (its path from the checkout's root) defines a fixture built once for
+    the module or the run: a simulated data set and its calibrations, rendered images, sanitized builds."""
+    return re.search(r'@pytest\.fixture\([^)]*scope="(module|session)"', (ROOT / module).read_text()) is not None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """With -n, the tests of a module that builds a fixture once run on one worker, which builds it
+    once: handed out one by one (xdist's default), they reached both workers, and each built it
+    again. The other tests are handed out one by one after those modules, and even out the
+    workers' ends. (xdist's own `--dist loadgroup` groups nothing under pytest 9.2: it renames a
+    test through an attribute pytest no longer reads.)"""
+    if config.getvalue("dist") != "load":  # another distribution asked for by name
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ByModuleFixtures(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::")[0]
+            return module if _builds_a_fixture_once(module) else nodeid
+
+    return ByModuleFixtures(config, log)
 
 
 def random_q(robot, rng, n=None):

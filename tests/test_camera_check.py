@@ -192,3 +192,44 @@ def test_image_positions_of_the_calibrations_own_model_are_where_it_puts_the_tar
     points = np.array(list(cal.robot.targets.values()), float)[data.target]
     model = np.einsum("rij,rj->ri", T[:, :3, :3], points) + T[:, :3, 3]
     assert info.points == len(y) > 0 and np.abs(y - model).max() < 1e-7
+
+
+def test_accuracy_from_images_counts_samples_not_compensated_and_bounds_against_the_cameras(arm, world, tmp_path):
+    """A statement from images: over a volume through the stretched elbow it says at how many samples
+    compensation fails; over one away from it, the coefficients' draws taken with the first camera's pose
+    (the error against the cameras, where the images measure it) are well below the same draws in the
+    robot's own frame, which hold where the base sits against the cameras (docs/camera.md measures both
+    against truths); a wrong sign of the camera's rows would add to them instead."""
+    from gecgen.fit.camera import image_covariance, recorded_problem
+    from gecgen.model.volume import load_volume
+    from gecgen.runtime.compiled import FAILED
+    from gecgen.verify.images import accuracy_from_images
+    from gecgen.verify.volume import held_columns, point_rows, worst_over_draws
+
+    from test_camera import world_rig
+
+    robot, truth, rig, q, _, _ = world
+    rng = np.random.default_rng(0)
+    train = world_rig(arm, n=60)[3]  # the fixture's images, all 60: twice as many poses as coefficients
+    cal = calibration_of(robot, arm[2], fit_pixels(robot, arm[2], train, rig.cameras), rig.cameras, None)
+    val = simulate_pixels(robot, truth, rig, q, 0.2, rng)
+    said = {}
+    for name, a3 in (("away", "[-110, -100]"), ("through", "[-95, -85]")):
+        (tmp_path / f"{name}.yaml").write_text(f"angle_unit: deg\ntargets: [m1, m2, m3, m4]\njoints: {{a1: [-8, 8], "
+                                               f"a2: [-88, -72], a3: {a3}, a4: [-40, 40], a5: [30, 60], "
+                                               f"a6: [-60, 60]}}\nsamples: 40\n")
+        volume = load_volume(tmp_path / f"{name}.yaml", cal.robot)
+        samples, st, cm, _ = accuracy_from_images(cal, "cal", volume, train, val, rig.cameras, None, 1.0, 0.95, 400,
+                                                  np.random.default_rng(0))
+        failed = int(np.isin(cm.compensate(samples.q, samples.w, None, cal.c)[1], FAILED).sum())
+        said[name] = (failed, samples, st, cm)
+    failed, samples, st, _ = said["through"]
+    n = len(samples.q)
+    assert failed > 0 and any(f"does not converge at {failed} of {n} samples" in r for r in st.reasons), st.reasons
+    failed, samples, st, cm = said["away"]
+    columns = held_columns(cal)
+    problem, g = recorded_problem(cal, "cal", train, rig.cameras, None)
+    cov = image_covariance(problem, g, cal.c, np.array(columns), cal.report.get("loss", "cauchy"))
+    G = point_rows(cm, samples, cal.c, columns)
+    robot_frame = 1e3 * np.quantile(worst_over_draws(G, cov, np.zeros((n, 3, 1)), 400, rng)[1], 0.95)
+    assert failed == 0 and 0 < st.parametric_mm < 0.5 * robot_frame, (st.parametric_mm, robot_frame)

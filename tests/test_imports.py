@@ -114,3 +114,21 @@ def test_a_new_robot_is_fitted_in_numpy_while_its_c_is_built_in_the_background(t
     assert len(list((tmp_path / "cache").glob("arm3-*.so"))) == 1
     assert first["n_params"] == second["n_params"] > 0
     assert abs(first["train"]["rms_mm"] - second["train"]["rms_mm"]) < 1e-9
+
+
+def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(tmp_path, monkeypatch):
+    """`export --c` (what calibrate writes into its folder) renders the printed code the cache kept and
+    the calibration's header and example: jinja2 and the emitter, but no computer algebra."""
+    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.symbolic.terms import load_error_model
+
+    robot = _arm3(tmp_path)
+    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
+    CompiledModel(robot, load_error_model(None, robot))
+    runs = [["identify", "arm3.yaml", "data.csv", "-o", "c.json"], ["export", "c.json", "--c", "gen"]]
+    code = WRAPPER.replace("('sympy', 'jinja2', 'gecgen.emit')", "('sympy',)")
+    done = subprocess.run([sys.executable, "-c", code, json.dumps(runs)], capture_output=True, text=True,
+                          cwd=tmp_path, env=os.environ, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr
+    assert (tmp_path / "gen" / "arm3_calibration.h").is_file() and (tmp_path / "gen" / "arm3.c").is_file()

@@ -138,13 +138,20 @@ def test_exact_numbers_are_sympys_to_the_last_bit():
     assert exact_norm((0, 0, Fraction("-9.80665"))) == float(sp.sqrt(sp.Rational("9.80665") ** 2))
 
 
-@pytest.mark.parametrize("items", [
-    ["1", "q1", "q1**2", "fx", "mz"], [1, " q2 ** 3 ", "shoulder", "shoulder**2", "q1**16"], [],
-    ["q1", "shoulder"], ["q1**1"], ["q1**0"], ["q1**17"], ["pi"], ["q1*q2"], ["sin(q1)"], ["unknown"], [True], ["2"],
-    ["lambda"], ["q1**2.0"], ["1", "1"]])
-def test_constants_variables_and_powers_are_read_without_sympy_as_the_parser_reads_them(items):
+SIMPLE_LISTS = [["1", "q1", "q1**2", "fx", "mz"], [1, " q2 ** 3 ", "shoulder", "shoulder**2", "q1**16"], [],
+                ["q1*q2", "q3 * q2**2", "shoulder*q6", "mz*q1", "q2*fx*fy**3", "q6**16*q5"],
+                ["sin(q1)", "cos(shoulder)", " sin( q2 ) ", "cos(q6)", "sin(fz)"]]
+
+
+@pytest.mark.parametrize("items", SIMPLE_LISTS + [
+    ["q1", "shoulder"], ["q1**1"], ["q1**0"], ["q1**17"], ["pi"], ["unknown"], [True], ["2"], ["lambda"], ["q1**2.0"],
+    ["1", "1"], ["q1*q1"], ["q1*q2", "q2*q1"], ["q1**17*q2"], ["q1**1*q2"], ["2*q1"], ["q1*pi"], ["sin(q1)*q2"],
+    ["sin(2*q1)"], ["sin(q1 + q2)"], ["sin(pi)"], ["tan(q1)"], ["sin(q1, q2)"], ["sin(x=q1)"], ["sin(q1)", "sin(shoulder)"],
+    ["q1*unknown"], ["q1*q2**-1"], ["q1*q2**True"]])
+def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as_the_parser_reads_them(items):
     """`simple_terms` gives the parser's terms (text, label, variables) or leaves the list to it
-    (NeedsParser), on a robot whose joints have names (aliases of q1..q6)."""
+    (NeedsParser), on a robot whose joints have names (aliases of q1..q6): products of variables in
+    sympy's order of their names, sin and cos of one variable."""
     from gecgen.model.error_file import NeedsParser, simple_terms
     from gecgen.model.errors import variable_names
     from gecgen.symbolic.parse import terms_of
@@ -161,5 +168,4 @@ def test_constants_variables_and_powers_are_read_without_sympy_as_the_parser_rea
     except ModelError:
         theirs = None
     assert ours == theirs or ours is None, (ours, theirs)
-    simple = items in (["1", "q1", "q1**2", "fx", "mz"], [1, " q2 ** 3 ", "shoulder", "shoulder**2", "q1**16"], [])
-    assert (ours is not None) == simple
+    assert (ours is not None) == (items in SIMPLE_LISTS)

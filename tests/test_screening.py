@@ -146,3 +146,24 @@ def test_the_noise_tests_tails_are_scipy_stats():
     ratio, dof, noise_dof = np.geomspace(0.05, 20, 200), np.arange(1, 201), 37
     assert np.array_equal(special.chdtrc(dof, ratio * dof), stats.chi2.sf(ratio * dof, dof))
     assert np.array_equal(special.fdtrc(dof, noise_dof, ratio), stats.f.sf(ratio, dof, noise_dof))
+
+
+
+def test_one_column_candidates_as_least_squares_and_their_gram_shortcut_to_the_bit(system):
+    """screen() takes a one-column candidate's 1 x 1 Gram matrix as its own eigenvalue and divides by
+    it, where numpy's eigvalsh and solve would be called: the same numbers to the bit (so the screen's
+    figures did not move), and the drops those of least squares on the explicit columns."""
+    rng = np.random.default_rng(7)
+    G, b = rng.uniform(1e-6, 10.0, (20000, 1, 1)), rng.normal(size=(20000, 1))
+    assert np.array_equal(np.linalg.eigvalsh(G), G[:, :, 0])
+    assert np.array_equal(np.linalg.solve(G, b[:, :, None])[:, :, 0], b / G[:, :, 0])
+    rows_pose, H, J, Q, r, _, _ = system
+    ones = [Candidate("polynomial", ("q1",), (f"t{k}",), rng.normal(size=(rows_pose.max() + 1, 1)))
+            for k in range(6)]
+    hits = screen(J, rows_pose, r, basis(H, [np.linalg.qr(H, mode="r")]), 1e-12, ones, [0, 1, 2, 3])
+    assert len(hits) == 6 * 4  # every pair passes the pre-filter at this tiny variance
+    for h in hits:
+        X = _projected(Q, columns(J, ones[h.candidate], h.error, rows_pose))
+        beta = np.linalg.lstsq(X, r, rcond=None)[0]
+        assert h.drop == pytest.approx(float(np.sum((X @ beta) ** 2)), rel=1e-9)
+        assert np.allclose(h.fitted, X @ beta, rtol=0, atol=1e-12)

@@ -23,6 +23,7 @@ from gecgen.cli.human import print_human, warning_lines
 from gecgen.model.files import check_output_dir, check_output_file, reading, same_file
 from gecgen.model import ModelError
 from gecgen.model.validation import nearest, read_yaml
+from gecgen.runtime.threads import command_threads
 
 #: command -> (its module in this package, its line in `gecgen --help`), in the order of the work, as
 #: listed there: plan the measurement, bring it in, fit, verify, deliver to the controller
@@ -213,6 +214,7 @@ def _sigterm_interrupts():
 
 
 def main(argv: list[str] | None = None) -> int:
+    command_threads()
     argv = bare_register(sys.argv[1:] if argv is None else list(argv))
     args = build_parser(argv).parse_args(argv)
     # warnings become one line each after the result, and none when the command fails: the

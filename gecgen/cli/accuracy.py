@@ -135,13 +135,17 @@ def _stated(args, caught: list, status) -> dict:
 
 #: what the statement from images is about, said with its figures: fixed cameras, a camera on the tool
 MEANING = {"world": "the compensated position error of the markers (the robot file's targets) in mm, over the "
-                    "volume, read from held-out markers triangulated by two fixed cameras or more; not the tool's "
+                    "volume, read from held-out markers triangulated by two fixed cameras or more, and bounded "
+                    "against the first camera (as the fit placed it: where the robot's base sits against the "
+                    "cameras, which the images fix only as well as the fit does, is not in it); not the tool's "
                     "orientation, and not what one camera alone sees (a pixel fixes a marker across its ray, not "
                     "along it)",
            "tool": "the compensated position error of the robot file's targets in mm, over the volume, read from "
                    "the tool poses the carried camera measures from the board at held-out poses (its pose from the "
-                   "board's corners, carried through the board's and the camera's poses the calibration fitted): "
-                   "an error the calibration shares with the camera's fitted pose on the tool is not seen"}
+                   "board's corners, carried through the board's and the camera's poses the calibration fitted), "
+                   "bounded against the board (as the fit placed it: where the robot's base sits against the board, "
+                   "which the images fix only as well as the fit does, is not in it); an error the calibration "
+                   "shares with the camera's fitted pose on the tool is not seen"}
 
 
 def _without_aux(calib, where: str):

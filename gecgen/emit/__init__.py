@@ -1,7 +1,9 @@
 """Emit: print the symbolic functions of a robot and error model through each language's templates.
 
 One folder per output language (`c/`, `casadi/`), each holding only its printer and templates;
-the symbolic functions are built once and shared by all of them.
+the symbolic functions are built once and shared by all of them. Rendering printed code that the
+code cache kept (`runtime.compiled`), and a calibration's header and example, need no sympy: the
+symbolic layer and the printers are imported by the functions that print.
 """
 from __future__ import annotations
 
@@ -9,21 +11,18 @@ import hashlib
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jinja2
 
 from gecgen.version import __version__
-from gecgen.emit.c.printer import CPrinter
-from gecgen.emit.c.printer import element as c_element
-from gecgen.emit.casadi.printer import CasadiPrinter
-from gecgen.emit.casadi.printer import element as casadi_element
-from gecgen.emit.printing import straight_line
 from gecgen.model.files import write_atomically
 from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog
 from gecgen.model.robot import Robot
-from gecgen.symbolic.functions import chain_functions, model_functions
-from gecgen.symbolic.program import Function
+
+if TYPE_CHECKING:
+    from gecgen.symbolic.program import Function
 
 HERE = Path(__file__).parent
 
@@ -108,6 +107,8 @@ def frame_names(robot: Robot) -> list[str]:
 
 
 def _printed(fn: Function, printer, element, signature: bool) -> dict:
+    from gecgen.emit.printing import straight_line
+
     temps, outs = straight_line(fn, printer, element)
     sig = ", ".join([f"const double *{k}" for k in fn.inputs] + [f"double *{k}" for k in fn.outputs])
     return dict(name=fn.name, doc=fn.doc, inputs=list(fn.inputs), temps=temps, outs=outs,
@@ -115,6 +116,11 @@ def _printed(fn: Function, printer, element, signature: bool) -> dict:
 
 
 def _printed_all(functions) -> dict[str, list[dict]]:
+    from gecgen.emit.c.printer import CPrinter
+    from gecgen.emit.c.printer import element as c_element
+    from gecgen.emit.casadi.printer import CasadiPrinter
+    from gecgen.emit.casadi.printer import element as casadi_element
+
     return {"c": [_printed(f, CPrinter(), c_element, True) for f in functions],
             "casadi": [_printed(f, CasadiPrinter(), casadi_element, False) for f in functions]}
 
@@ -122,6 +128,8 @@ def _printed_all(functions) -> dict[str, list[dict]]:
 def printed_chain(robot: Robot) -> dict[str, list[dict]]:
     """`printed` of the robot's own functions (`symbolic.functions.chain_functions`), which no error
     model changes: nearly all of the symbolic work."""
+    from gecgen.symbolic.functions import chain_functions
+
     robot.require_placed()
     return _printed_all(chain_functions(robot))
 
@@ -131,6 +139,8 @@ def printed(robot: Robot, model: ErrorModel, chain: dict[str, list[dict]] | None
     "casadi": [...]}, plain lists and strings): the symbolic build and its printing, the slow part of
     `render`, which depends on the robot's and the model's content alone (runtime.compiled keeps it
     in the code cache). `chain`: `printed_chain(robot)`, when already at hand."""
+    from gecgen.symbolic.functions import model_functions
+
     robot.require_placed()
     chain = chain or printed_chain(robot)
     own = _printed_all(model_functions(robot, model))

@@ -1067,11 +1067,13 @@ def fitted_tools(robot: Robot, model: ErrorModel, c: np.ndarray, q: np.ndarray, 
     return T
 
 
-def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, loss: str) -> np.ndarray:
+def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, loss: str,
+                     with_poses: bool = False) -> np.ndarray:
     """The covariance (k, k) of c[cols] fitted with the poses g to the problem's image points, taken image
     by image (the sandwich A^-1 (sum_p a_p a_p^T) A^-1, a_p the gradient of image p's rows, scaled by
     P / (P - n) for P images and n unknowns), as `verify.volume.pose_covariance` takes a tracker's: the
-    points of one image share the robot's misfit at its pose and are not independent."""
+    points of one image share the robot's misfit at its pose and are not independent. with_poses: the
+    covariance (len(g) + k, len(g) + k) of g and c[cols] together, in that order."""
     e = np.linalg.norm(problem.residual(g, c), axis=1)
     A, b, scale = _system(problem, g, c, cols, robust.weights(e, _limit(e, loss), loss), True)
     P, n = problem.data.n_poses, A.shape[1]
@@ -1079,4 +1081,4 @@ def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.n
     np.add.at(grad, np.repeat(problem.data.pose, 2), A * b[:, None])
     A_inv = np.linalg.pinv(A.T @ A)
     full = P / max(P - n, 1) * A_inv @ (grad.T @ grad) @ A_inv / np.outer(scale, scale)
-    return full[n - len(cols):, n - len(cols):]
+    return full if with_poses else full[n - len(cols):, n - len(cols):]

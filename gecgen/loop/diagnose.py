@@ -24,7 +24,7 @@ Each round:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -192,6 +192,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         raise RuntimeError(f"the declared model's fit is not trustworthy: {first.fit.failures[0]}")
     effects: list[Effect] = []
     history, tested, correlates = [], 0, []
+    loads: dict = {}  # the load candidates, the same every round (`dictionary.load_candidates`)
     for round_no in range(1, max_rounds + 1):
         if progress:
             progress(round_no, measure.train_rms_mm(rnd))
@@ -200,7 +201,7 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         base = fs.basis()
         m, k = rows_dof.sum(), H.shape[1]
         sigma2 = float(r @ r) / (m - k)
-        cands = candidates(rnd.cm, data, rng)
+        cands = candidates(rnd.cm, data, rng, loads)
         errors = [e for e in range(robot.n_errors) if np.any(J[:, e])]
         base_cv = fs.cv_rms()
         present = [{t.text for t in ts} for ts in rnd.model.terms]
@@ -208,10 +209,9 @@ def diagnose(robot: Robot, model: ErrorModel, data: Measurements, val: Measureme
         # a missing constant error first (few candidates, so a mild multiplicity correction), then the rest
         for tier in (lambda c: c.family == "geometric", lambda c: c.family != "geometric"):
             indices = [k for k, c in enumerate(cands) if tier(c)]
-            found = screen(J, rows_pose, r, base, sigma2, [cands[k] for k in indices], errors)
+            found = screen(J, rows_pose, r, base, sigma2, [cands[k] for k in indices], errors, indices)
             # a term the error already has (kept or eliminated) is never new, however its column moved
-            found = [replace(h, candidate=indices[h.candidate]) for h in found
-                     if not set(cands[indices[h.candidate]].terms) & present[h.error]]
+            found = [h for h in found if present[h.error].isdisjoint(cands[h.candidate].terms)]
             results += found
             n_tests = max(1, sum(len(errors) if cands[k].errors is None else len(cands[k].errors) for k in indices))
             tested += n_tests

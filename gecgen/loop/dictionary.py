@@ -215,13 +215,19 @@ def loads_by_joint(names: list[str], values: np.ndarray) -> dict[int, dict[str, 
     return by_joint
 
 
-def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
+def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator,
+                    memo: dict | None = None) -> list[Candidate]:
     """Joint compliance, link bending and free play (see the module docstring) for every joint
-    whose own error exists and whose loads vary over the data."""
+    whose own error exists and whose loads vary over the data. memo: a dict kept by the caller
+    across calls with the same robot and data (diagnose's rounds), where the list is kept by the
+    joints' own errors: the loads depend on nothing else, and take most of the dictionary's time."""
+    by_frame = frame_own_errors(cm.robot, rng)
+    key = tuple(by_frame.items())
+    if memo is not None and key in memo:
+        return memo[key]
     names, values = cm.load_signals(data.q, data.w)
     by_joint = loads_by_joint(names, values)
     out: list[Candidate] = []
-    by_frame = frame_own_errors(cm.robot, rng)
     for i, e in ((i, by_frame[cm.robot.frame_of(i)]) for i in range(cm.robot.n) if cm.robot.frame_of(i) in by_frame):
         # a reading that turns several frames (couplings) feels their loads summed by virtual work,
         # which acts on no one frame's errors: each frame's own loads are offered below instead
@@ -237,7 +243,10 @@ def load_candidates(cm: CompiledModel, data: Measurements, rng: np.random.Genera
             out.append(Candidate("link bending", joint, terms, v, others))
         for k in loads.get("gravity_torque") or loads.get("gravity", []):
             out.append(Candidate("free play", joint, (f"sign({names[k]})",), np.sign(values[:, [k]]), (e,)))
-    return out + frame_load_candidates(cm, data, names, values, set(by_frame.values()), out)
+    out += frame_load_candidates(cm, data, names, values, set(by_frame.values()), out)
+    if memo is not None:
+        memo[key] = out
+    return out
 
 
 
@@ -305,6 +314,7 @@ def frame_load_candidates(cm: CompiledModel, data: Measurements, names: list[str
     return out
 
 
-def candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator) -> list[Candidate]:
-    """The whole dictionary for the current model on this data."""
-    return kinematic_candidates(cm.robot, cm.model, data, rng) + load_candidates(cm, data, rng)
+def candidates(cm: CompiledModel, data: Measurements, rng: np.random.Generator,
+               memo: dict | None = None) -> list[Candidate]:
+    """The whole dictionary for the current model on this data (memo: as for `load_candidates`)."""
+    return kinematic_candidates(cm.robot, cm.model, data, rng) + load_candidates(cm, data, rng, memo)

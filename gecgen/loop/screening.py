@@ -95,7 +95,7 @@ def basis(B: np.ndarray, R_blocks: list[np.ndarray]) -> Basis:
     return Basis(B, R)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)  # not frozen: there are hundreds of thousands a round, and a frozen one takes 4x to make
 class Hit:
     """A (candidate, error) pair that explains part of the residual: the drop in the residual sum
     of squares (m^2) and log of its chi-square p-value. `parts` hold what its fitted effect is made
@@ -105,13 +105,16 @@ class Hit:
     log_p: float
     candidate: int
     error: int
-    parts: tuple = field(repr=False, compare=False)  # (J_e column (3R,), F v (G,), group (3R,), Basis, Q^T X v)
+    # (J_e (3R, ne), F (G, columns), the candidate's columns of F (a, b), v (dof,), group (3R,), Basis,
+    # Q^T X of the error (k, its columns), the candidate's among them (dof,)): the products are formed
+    # when asked for, most hits never are
+    parts: tuple = field(repr=False, compare=False)
 
     @property
     def fitted(self) -> np.ndarray:
         """The fitted effect projected off the current model (3R,): J_e (F v) - Q (Q^T X v), R x (c + k)."""
-        j, Fv, group, base, qv = self.parts
-        return j * Fv[group] - base.span(qv)
+        J, F, (a, b), v, group, base, QtX, cols = self.parts
+        return J[:, self.error] * (F[:, a:b] @ v)[group] - base.span(QtX[:, cols] @ v)
 
 
 def _pose_sums(rows_pose: np.ndarray) -> tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
@@ -127,8 +130,9 @@ def _pose_sums(rows_pose: np.ndarray) -> tuple[sparse.csr_matrix, np.ndarray, np
 
 
 def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis, sigma2: float,
-           cands: list[Candidate], errors: list[int]) -> list[Hit]:
-    """Every (candidate, error) pair that explains more than noise would, most significant first.
+           cands: list[Candidate], errors: list[int], ids: list[int] | None = None) -> list[Hit]:
+    """Every (candidate, error) pair that explains more than noise would, most significant first;
+    a hit's candidate is its index in cands, or ids[index] when ids is given.
 
     J (3R, ne) is J_e at the current fit for the measured rows; rows_pose (3R,) the pose of each
     row, a pose's rows adjacent; resid (3R,) is orthogonal to the current model's columns, whose
@@ -143,7 +147,11 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     bounds = np.cumsum([0] + [c.values.shape[1] for c in cands])
     dofs = np.array([c.dof for c in cands])
     free = np.array([c.errors is None for c in cands])
-    only = {e: [ci for ci, c in enumerate(cands) if c.errors is not None and e in c.errors] for e in errors}
+    only: dict[int, list[int]] = {e: [] for e in errors}
+    for ci, c in enumerate(cands):
+        for e in dict.fromkeys(c.errors or ()):
+            if e in only:
+                only[e].append(ci)
     # each error's products run over the columns offered to it alone: the candidates offered to every
     # error, then its own (a load acts on one frame's errors; thousands of them would otherwise be
     # multiplied for every error). start: where each offered candidate's columns begin among them
@@ -152,7 +160,7 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
     shared = np.concatenate([columns[ci] for ci in everyone]) if len(everyone) else np.zeros(0, int)
     start = np.zeros(len(cands), int)
     start[everyone] = np.cumsum(dofs[everyone]) - dofs[everyone]
-    found = []  # (drop, dof, candidate, error, v, QtX v)
+    found = []  # (drop, dof, candidate, error, v, QtX, the candidate's columns in QtX)
     for e in errors:
         offered = free.copy()
         offered[only[e]] = True
@@ -178,22 +186,25 @@ def screen(J: np.ndarray, rows_pose: np.ndarray, resid: np.ndarray, base: Basis,
             G = XtX - np.einsum("kni,knj->nij", Q, Q)  # Gram matrices of the projected columns
             scale = np.sqrt(np.maximum(np.diagonal(XtX, axis1=1, axis2=2), 1e-300))  # (n, dof)
             Gs = G / (scale[:, :, None] * scale[:, None, :])
-            new = np.linalg.eigvalsh(Gs).min(axis=1) >= MIN_INDEPENDENCE  # else inside the current model
+            # one column (most candidates): its 1 x 1 Gram matrix is its own eigenvalue, and LAPACK's solve
+            # divides by it, to the bit; the library's per-matrix calls cost more than the arithmetic
+            eigen = Gs[:, :, 0] if dof == 1 else np.linalg.eigvalsh(Gs)
+            new = eigen.min(axis=1) >= MIN_INDEPENDENCE  # else inside the current model
             group_of, cols, scale = group_of[new], cols[new], scale[new]
             b = rX[cols] / scale
-            beta = np.linalg.solve(Gs[new], b[:, :, None])[:, :, 0]
+            beta = b / eigen[new] if dof == 1 else np.linalg.solve(Gs[new], b[:, :, None])[:, :, 0]
             drop = np.einsum("ni,ni->n", b, beta)
-            for i in np.flatnonzero(drop > max(9, 3 * dof) * sigma2):  # cheap pre-filter; the real test follows
-                v = beta[i] / scale[i]
-                ours.append((float(drop[i]), int(dof), int(group_of[i]), e, v, QtX[:, cols[i]] @ v))
+            kept = np.flatnonzero(drop > max(9, 3 * dof) * sigma2)  # cheap pre-filter; the real test follows
+            ours += zip(drop[kept].tolist(), [int(dof)] * len(kept), group_of[kept].tolist(), [e] * len(kept),
+                        beta[kept] / scale[kept], [QtX] * len(kept), cols[kept])
         found += sorted(ours, key=lambda h: h[2])
     if not found:
         return []
     drops, dofs = np.array([h[0] for h in found]), np.array([h[1] for h in found])
     log_p = chi2_logsf(drops / max(sigma2, 1e-300), dofs)
-    # the fitted effect, projected off the model: J_e (F v) - Q (Q^T X v), R x (c + k)
-    hits = [Hit(drop, float(lp), ci, e, (J[:, e], F[:, bounds[ci]:bounds[ci + 1]] @ v, group, base, qv))
-            for (drop, _, ci, e, v, qv), lp in zip(found, log_p)]
+    ids = range(len(cands)) if ids is None else ids
+    hits = [Hit(drop, lp, ids[ci], e, (J, F, (bounds[ci], bounds[ci + 1]), v, group, base, QtX, cols))
+            for (drop, _, ci, e, v, QtX, cols), lp in zip(found, log_p.tolist())]
     hits.sort(key=significance_order)
     return hits
 

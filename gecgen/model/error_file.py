@@ -3,11 +3,13 @@
 Its keys, frame numbers, error names and aux columns are checked here, the coupling ratios added, and
 each list of terms handed to a reader: `symbolic.parse.terms_of` reads the term language (it needs
 sympy: a term's identity is sympy's canonical text); `simple_terms` reads constants, variables and
-their whole powers without it (the shipped default models), so a first run with such a model loads
+their whole powers (the shipped default models), products of those, and the sine and cosine of one
+variable without it, writing sympy's canonical text itself, so a first run with such a model loads
 no computer algebra.
 """
 from __future__ import annotations
 
+import ast
 import keyword
 import re
 from collections.abc import Callable
@@ -29,26 +31,70 @@ class NeedsParser(Exception):
 SIMPLE = re.compile(r"\s*([A-Za-z_]\w*)\s*(?:\*\*\s*(\d+)\s*)?")
 
 
+#: the functions `simple_terms` reads, of one variable each
+TRIGONOMETRIC = ("sin", "cos")
+
+
 def simple_terms(items: list, where: str, robot: Robot, names: dict) -> tuple[Term, ...]:
     """The terms of a list of constants "1" (or 1), variables and their whole powers 2..MAX_EXPONENT,
-    as the term parser reads them (`symbolic.parse.terms_of`: text, label and variables); any other
-    list, and one the parser would refuse, raises NeedsParser."""
+    products of different such variables ("q2*q3**2", "fx*q2"), and sin or cos of one variable, as
+    the term parser reads them (`symbolic.parse.terms_of`: text, label and variables; sympy's text
+    puts a product's factors in the order of their variables' names); any other list, and one the
+    parser would refuse, raises NeedsParser."""
     out: dict[str, Term] = {}
     for item in items:
         if type(item) is int and item == 1 or item == "1":
             term = Term("1", "1", ())
+        elif type(item) is not str or len(item) > MAX_TERM_LENGTH:
+            raise NeedsParser(where)
+        elif found := SIMPLE.fullmatch(item):
+            variable, power = _factor(found.group(1), found.group(2), names, where)
+            term = Term(variable + (f"**{power}" if power > 1 else ""), item.strip(), (variable,))
         else:
-            found = SIMPLE.fullmatch(item) if type(item) is str and len(item) <= MAX_TERM_LENGTH else None
-            name, power = found.groups() if found else (None, None)
-            if name not in names or name == "pi" or not name.isascii() or keyword.iskeyword(name) \
-                    or power and not 2 <= int(power) <= MAX_EXPONENT:
-                raise NeedsParser(where)
-            variable = names[name]
-            term = Term(variable + (f"**{int(power)}" if power else ""), item.strip(), (variable,))
+            term = _product_or_trigonometric(item, names, where)
         if term.text in out:
             raise NeedsParser(where)  # the parser says which term repeats
         out[term.text] = term
     return tuple(out.values())
+
+
+def _factor(name: str, power: str | None, names: dict, where: str) -> tuple[str, int]:
+    """(the variable, its power) of a variable `name` to `power` (text, None for 1); NeedsParser for a
+    name that is no variable or a power the parser refuses."""
+    if name not in names or name == "pi" or not name.isascii() or keyword.iskeyword(name) \
+            or power and not 2 <= int(power) <= MAX_EXPONENT:
+        raise NeedsParser(where)
+    return names[name], int(power) if power else 1
+
+
+def _product_or_trigonometric(item: str, names: dict, where: str) -> Term:
+    """The term of a product of different variables, each to a whole power, or of sin or cos of one
+    variable (`simple_terms`); NeedsParser for anything else."""
+    try:
+        tree = ast.parse(item.strip(), mode="eval").body
+    except (SyntaxError, ValueError):
+        raise NeedsParser(where) from None
+    if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in TRIGONOMETRIC \
+            and len(tree.args) == 1 and not tree.keywords and isinstance(tree.args[0], ast.Name):
+        variable, _ = _factor(tree.args[0].id, None, names, where)
+        return Term(f"{tree.func.id}({variable})", item.strip(), (variable,))
+    factors, stack = [], [tree]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult):
+            stack += [node.right, node.left]
+        elif isinstance(node, ast.Name):
+            factors.append(_factor(node.id, None, names, where))
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow) and isinstance(node.left, ast.Name) \
+                and isinstance(node.right, ast.Constant) and type(node.right.value) is int:
+            factors.append(_factor(node.left.id, str(node.right.value), names, where))
+        else:
+            raise NeedsParser(where)
+    variables = sorted(v for v, _ in factors)
+    if len(factors) < 2 or len(set(variables)) < len(variables):
+        raise NeedsParser(where)  # one variable twice: the parser multiplies the powers out
+    text = "*".join(v + (f"**{k}" if k > 1 else "") for v, k in sorted(factors))
+    return Term(text, item.strip(), tuple(variables))
 
 
 def read_model(spec, robot: Robot, where: str, aux_columns: tuple[str, ...], read_terms: TermReader

@@ -119,7 +119,7 @@ def visible_share(robot: Robot, truth: Truth, rig: CameraRig, q: np.ndarray) -> 
     return share
 
 
-def _in_view(robot: Robot, truth: Truth, rig: CameraRig, q0: np.ndarray, span: np.ndarray, n: int,
+def in_view(robot: Robot, truth: Truth, rig: CameraRig, q0: np.ndarray, span: np.ndarray, n: int,
              rng: np.random.Generator) -> np.ndarray:
     """n joint readings (n, 6) drawn uniformly in q0 +- span (rad) at which every camera sees every point."""
     lo = np.array([j.lower for j in robot.joints])
@@ -148,7 +148,7 @@ def eye_in_hand(robot: Robot, truth: Truth, camera: Camera, board: Board, q0: np
     Rb = R_wc  # the board's rows and columns along the image's: its r0c0 at the image's top-left
     size = np.array([(board.columns - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0])
     rig = CameraRig({camera.name: camera}, {camera.name: (R, t)}, board, (Rb, centre - Rb @ size))
-    return rig, _in_view(robot, truth, rig, q0, span, n_poses, rng)
+    return rig, in_view(robot, truth, rig, q0, span, n_poses, rng)
 
 
 def eye_to_hand(robot: Robot, truth: Truth, cameras: list[Camera], eyes: np.ndarray, at: np.ndarray,
@@ -157,7 +157,7 @@ def eye_to_hand(robot: Robot, truth: Truth, cameras: list[Camera], eyes: np.ndar
     """Fixed cameras at `eyes` (k, 3) looking at `at` (3,) (world, m); and n_poses joint readings in
     q0 +- span (rad) at which every camera sees every target of the robot."""
     rig = CameraRig({c.name: c for c in cameras}, {c.name: look_at(e, at) for c, e in zip(cameras, eyes)})
-    return rig, _in_view(robot, truth, rig, q0, span, n_poses, rng)
+    return rig, in_view(robot, truth, rig, q0, span, n_poses, rng)
 
 
 #: px between the pixels whose rays `render_board` computes exactly

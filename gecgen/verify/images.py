@@ -10,8 +10,9 @@ board of known size, which fixes the camera's whole pose (OpenCV's PnP) and so, 
 pose and the camera's pose on the tool the calibration fitted, where every target of the tool is.
 These points are then what a tracker would have measured, and the statement is read from them as
 from a tracker's held-out data, their own noise counted as model error (safe: it only widens the
-bound). The
-coefficients' covariance is the pixel fit's, taken image by image (`fit.camera.image_covariance`).
+bound). The coefficients' covariance is the pixel fit's, taken image by image
+(`fit.camera.image_covariance`) with the cameras' (the board's) poses, and the error is bounded against
+the first camera (the board), where the images measure it (`against_reference`).
 """
 from __future__ import annotations
 
@@ -103,7 +104,7 @@ def triangulate(calibration, where: str, val, cameras: dict, board, sigma_px: fl
 
 #: board corners an image needs for its camera's pose (OpenCV's iterative PnP takes six or more)
 MIN_CORNERS = 6
-#: step of the PnP pose's central differences (rad, m)
+#: step of the central differences of a PnP pose and of the reference pose (rad, m)
 STEP = 1e-7
 
 
@@ -158,6 +159,37 @@ def from_carried_camera(calibration, where: str, val, cameras: dict, board, sigm
     return data, y, info
 
 
+def against_reference(problem, g: np.ndarray, mount: str):
+    """How stated points move against the set-up's reference when its fitted pose in g moves: the first
+    camera for fixed cameras, the board for a camera on the tool. Returns a function of points (N, 3), m,
+    in the calibration's world giving (N, 3, len(g)) (central differences; zero but for the reference's
+    six entries). The coefficients' covariance is taken with those poses free, so it holds where the
+    robot's base sits against them; the images measure the robot against them, and a truth's compensated
+    error is read there too: with these rows the draws bound the error against the reference (on simulated
+    truths the robot-frame draws made the bound 5 to 50 times the true worst: docs/camera.md)."""
+    poses, board, _ = problem.unpack(g)
+    R0, t0 = poses[0] if mount == "world" else board
+    first = 0 if mount == "world" else 6 * len(poses)
+
+    def mapped(gg, p):
+        ps, b, _ = problem.unpack(gg)
+        if mount == "world":  # into the camera as gg places it, out of it as g does
+            R, t = ps[0]
+            return (p @ R.T + t - t0) @ R0
+        R, t = b  # into the board as gg places it, out of it as g does
+        return (p - t) @ R @ R0.T + t0
+
+    def rows(p: np.ndarray) -> np.ndarray:
+        D = np.zeros((len(p), 3, len(g)))
+        for j in range(first, first + 6):
+            e = np.zeros(len(g))
+            e[j] = STEP
+            D[:, :, j] = (mapped(g + e, p) - mapped(g - e, p)) / (2 * STEP)
+        return D
+
+    return rows
+
+
 def accuracy_from_images(calibration, where: str, volume, train, val, cameras: dict, board,
                          tolerance_mm: float | None, confidence: float, draws: int, rng: np.random.Generator,
                          share: float = 0.95):
@@ -174,7 +206,7 @@ def accuracy_from_images(calibration, where: str, volume, train, val, cameras: d
             f"{train.source}: not the images the calibration was fitted to (their RMS residual is {rms:.4g} px, the "
             f"fit's {fit_rms} px); give the training images, and held-out images as --val")
     columns = held_columns(calibration)
-    cov = image_covariance(problem, g, calibration.c, np.array(columns, int), report.get("loss", "cauchy"))
+    cov = image_covariance(problem, g, calibration.c, np.array(columns, int), report.get("loss", "cauchy"), True)
     measure = triangulate if train.mount == "world" else from_carried_camera
     data, y, info = measure(calibration, where, val, cameras, board, float(report["sigma_px"]))
     fitted = CompiledModel(calibration.robot, calibration.model)
@@ -194,5 +226,6 @@ def accuracy_from_images(calibration, where: str, volume, train, val, cameras: d
              f"1 sigma {info.std_mm[0]:.3g} mm median, {info.std_mm[1]:.3g} mm at most, along the worst direction): "
              f"their noise is counted as error the model does not describe, so the bound is pessimistic")
     samples, statement, cm = stated(calibration, volume, train, columns, cov, unmod, (data, y), None, tolerance_mm,
-                                    confidence, draws, rng, share, notes, noise)
+                                    confidence, draws, rng, share, notes, noise,
+                                    against_reference(problem, g, train.mount))
     return samples, statement, cm, info

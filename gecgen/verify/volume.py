@@ -701,11 +701,15 @@ def _require_draws(draws: int, confidence: float):
 def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: np.ndarray, unmod: Unmodelled,
            held_out: tuple[Measurements, np.ndarray] | None, noise_m: float | None, tolerance_mm: float | None,
            confidence: float, draws: int, rng: np.random.Generator, share: float,
-           notes: list[str], unstated: str = NO_NOISE) -> tuple[Samples, Statement, CompiledModel]:
+           notes: list[str], unstated: str = NO_NOISE,
+           frame_rows=None) -> tuple[Samples, Statement, CompiledModel]:
     """`accuracy`'s statement from what it read off the data: the training poses (`Poses`: their count
     and the forces they carried), the covariance cov of c[columns], the unmodelled error, the held-out
     (data, world points) when given, and notes of how they were read (said after the statement's own);
-    unstated: what it says of the noise when none is stated (noise_m None)."""
+    unstated: what it says of the noise when none is stated (noise_m None); frame_rows: with a reference
+    frame fitted with the coefficients (fixed cameras, a board), a function of the stated points (N, 3), m,
+    giving how they move against it with its m parameters (N, 3, m), cov then being over those parameters
+    and c[columns] together (in that order): the error is bounded against that frame."""
     _require_draws(draws, confidence)
     samples = sample(calib.robot, volume, rng)
     require(len(samples.q), f"{volume.source}: no sample can be placed within the joint limits; check place_at, "
@@ -727,8 +731,11 @@ def stated(calib: Calibration, volume: Volume, poses, columns: list[int], cov: n
     if unmod.twist_cov is None and volume.tool_box is not None:
         own.append("the unmodelled error is read point by point (fewer than three targets a pose, or too few such "
                    "poses): a tilt's growth with the lever arm to the tool box is not in it")
-    statement = state(point_rows(cm, samples, calib.c, columns), cov, U, unmod, noise_m, tolerance_mm,
-                      confidence, draws, rng, blocks, doubts, own, held, unstated)
+    G = point_rows(cm, samples, calib.c, columns)
+    if frame_rows is not None:
+        G = np.concatenate([frame_rows(samples.world), G], axis=2)
+    statement = state(G, cov, U, unmod, noise_m, tolerance_mm, confidence, draws, rng, blocks, doubts, own, held,
+                      unstated)
     return samples, statement, cm
 
 
