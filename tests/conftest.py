@@ -24,6 +24,10 @@ from gecgen.symbolic.terms import load_error_model  # noqa: E402
 # of its C running in the background. Every command a test starts inherits it; the tests of that
 # first run set GECGEN_BACKEND themselves.
 os.environ.setdefault("GECGEN_BACKEND", "c")
+# The suite already runs a test per core (-n 2): a command forking a process per core besides only
+# adds forks (test_calibrate.py and test_interrupt.py set it themselves to test those processes,
+# whose results test_calibrate.py checks are the same as one process's).
+os.environ.setdefault("GECGEN_WORKERS", "1")
 
 # The property tests draw the same examples on every run, so a red run is the change's, not a new
 # draw's; GECGEN_HYPOTHESIS=explore draws new ones (what finds new bugs: run it now and then).
