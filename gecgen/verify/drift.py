@@ -100,23 +100,31 @@ def at_check_joints(cm: CompiledModel, data: Measurements, c: np.ndarray, points
     return points + cm.model_targets(data.q, data.w, aux, c)[at] - cm.model_targets(q_base, data.w, aux, c)[at]
 
 
-def _joint(cm: CompiledModel, data: Measurements, aux: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
-    """The joint whose reading offset best explains the residual e (R, 3), or "unexplained"."""
-    n = cm.robot.n
-    r = e.ravel()
+def _best_offset(column, n: int, r: np.ndarray) -> tuple[int, float, float] | None:
+    """The one joint whose reading offset best explains the residual r (R,): (its index, the share of r's
+    sum of squares the offset takes out, the offset in the joint's unit), or None when no joint moves
+    anything; column(step) is the derivative of the model's measurements (R,) along a reading step (n,)
+    of STEP on that joint."""
     best = None
     for j in range(n):
-        step = np.zeros(n)
-        step[j] = STEP
-        up = cm.model_targets(data.q + step, data.w, aux, c)[data.pose, data.target]
-        down = cm.model_targets(data.q - step, data.w, aux, c)[data.pose, data.target]
-        g = ((up - down) / (2 * STEP)).ravel()
+        g = column(STEP * np.eye(n)[j])
         gg = float(g @ g)
         if gg <= 0:
             continue
         share = float((g @ r) ** 2 / (gg * max(float(r @ r), 1e-300)))
         if best is None or share > best[1]:
             best = (j, share, float(g @ r) / gg)
+    return best
+
+
+def _joint(cm: CompiledModel, data: Measurements, aux: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
+    """The joint whose reading offset best explains the residual e (R, 3), or "unexplained"."""
+    def column(step: np.ndarray) -> np.ndarray:
+        up = cm.model_targets(data.q + step, data.w, aux, c)[data.pose, data.target]
+        down = cm.model_targets(data.q - step, data.w, aux, c)[data.pose, data.target]
+        return ((up - down) / (2 * STEP)).ravel()
+
+    best = _best_offset(column, cm.robot.n, e.ravel())
     if best is None or best[1] < EXPLAINS:
         return {"kind": "unexplained", "best_joint_share": None if best is None else best[1]}
     j, share, offset = best
@@ -237,20 +245,11 @@ def _pixel_looks(problem, g: np.ndarray, c: np.ndarray, e: np.ndarray, sigma: fl
              slice(None)] = p["_after"]
     # every moved pose refitted, the images are within the noise
     camera = bool(moved) and _p_value(left, sigma, left.size - 6 * len(moved), ref_dof) >= ALPHA
-    n = problem.robot.n
     r = e.ravel()
-    best = None
-    for j in range(n):
-        step = np.zeros(n)
-        step[j] = STEP
-        J = ((_at_readings(problem, step).residual(g, c) - _at_readings(problem, -step).residual(g, c))
-             / (2 * STEP)).ravel()
-        jj = float(J @ J)
-        if jj <= 0:
-            continue
-        share = float((J @ r) ** 2 / (jj * max(float(r @ r), 1e-300)))
-        if best is None or share > best[1]:
-            best = (j, share, -float(J @ r) / jj)
+    # a reading offset moves the model's image points, and the residual (measured - model) the other way
+    best = _best_offset(lambda step: ((_at_readings(problem, -step).residual(g, c)
+                                       - _at_readings(problem, step).residual(g, c)) / (2 * STEP)).ravel(),
+                        problem.robot.n, r)
     joint = None
     if best is not None:
         j, share, offset = best
