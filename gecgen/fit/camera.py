@@ -38,7 +38,7 @@ from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust, weak
 from gecgen.fit.identify import HOLD_P, RSS_TOL, WIDEN, structural_analysis
 from gecgen.fit.redundancy import Eliminated
-from gecgen.fit.significance import judge
+from gecgen.fit.significance import clustered_covariance, judge
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.runtime.threads import one_blas_thread
 
@@ -1071,14 +1071,12 @@ def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.n
                      with_poses: bool = False) -> np.ndarray:
     """The covariance (k, k) of c[cols] fitted with the poses g to the problem's image points, taken image
     by image (the sandwich A^-1 (sum_p a_p a_p^T) A^-1, a_p the gradient of image p's rows, scaled by
-    P / (P - n) for P images and n unknowns), as `verify.volume.pose_covariance` takes a tracker's: the
-    points of one image share the robot's misfit at its pose and are not independent. with_poses: the
-    covariance (len(g) + k, len(g) + k) of g and c[cols] together, in that order."""
+    P / (P - n) for P images and n unknowns: `fit.significance.clustered_covariance`, as
+    `verify.volume.pose_covariance` takes a tracker's: the points of one image share the robot's misfit at
+    its pose and are not independent. with_poses: the covariance (len(g) + k, len(g) + k) of g and c[cols]
+    together, in that order."""
     e = np.linalg.norm(problem.residual(g, c), axis=1)
     A, b, scale = _system(problem, g, c, cols, robust.weights(e, _limit(e, loss), loss), True)
-    P, n = problem.data.n_poses, A.shape[1]
-    grad = np.zeros((P, n))
-    np.add.at(grad, np.repeat(problem.data.pose, 2), A * b[:, None])
-    A_inv = np.linalg.pinv(A.T @ A)
-    full = P / max(P - n, 1) * A_inv @ (grad.T @ grad) @ A_inv / np.outer(scale, scale)
+    n = A.shape[1]
+    full = clustered_covariance(A, b, np.repeat(problem.data.pose, 2), problem.data.n_poses) / np.outer(scale, scale)
     return full if with_poses else full[n - len(cols):, n - len(cols):]

@@ -141,6 +141,18 @@ def determined(cm, data, fit, keep: bool = False, noise_m: float | None = None, 
 DRAWS, SEED = 2000, 0
 
 
+def clustered_covariance(A: np.ndarray, r: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """The covariance (k, k) of least-squares coefficients from rows A (R, k) with residuals r (R,), when
+    rows are independent only between groups (groups (R,), 0..n_groups-1: a pose's points share the
+    robot's repeatability and any error the model lacks; an image's points likewise): the sandwich
+    (A^T A)^-1 (sum_g a_g a_g^T) (A^T A)^-1, a_g = A_g^T r_g, scaled by G / (G - k) for G groups. Taking
+    the rows as independent, as sigma^2 (A^T A)^-1 does, makes a bound built on it too tight."""
+    a = np.zeros((n_groups, A.shape[1]))
+    np.add.at(a, groups, A * r[:, None])
+    A_inv = np.linalg.pinv(A.T @ A)
+    return n_groups / max(n_groups - A.shape[1], 1) * A_inv @ (a.T @ a) @ A_inv
+
+
 def rms_interval(errors: np.ndarray, pose: np.ndarray, level: float = 0.95) -> tuple[float, float]:
     """The `level` confidence interval of an RMS error over poses drawn like these: errors (G,) per
     measured row, pose (G,) the pose of each row. Poses, not rows, are resampled (the bootstrap

@@ -43,6 +43,7 @@ from gecgen.model.robot import Robot
 from gecgen.model.validation import require
 from gecgen.model.volume import Volume
 from gecgen.fit.calibration import Calibration, extrapolation
+from gecgen.fit.significance import clustered_covariance
 from gecgen.runtime.compiled import FAILED, OUTSIDE_LIMITS, CompiledModel
 
 #: place_at: a sample is solved when the point is this close to its place (m) within the limits
@@ -232,18 +233,12 @@ def _factor(cov: np.ndarray) -> np.ndarray:
 
 def pose_covariance(cm: CompiledModel, data: Measurements, y: np.ndarray, c: np.ndarray, kept) -> np.ndarray:
     """The coefficients' covariance (k, k) over `kept`, robust to what the fit's own assumes away: the
-    sandwich A^-1 (sum_p g_p g_p^T) A^-1 with A = H^T H and g_p = H_p^T r_p summed over the rows of
-    pose p, scaled by P / (P - k) for P poses. The rows of one pose share the robot's repeatability
-    (every target moves alike) and any error the model lacks, so they are not independent; taking
-    them as independent, as sigma^2 (H^T H)^-1 does, makes the bound too tight."""
+    points of a pose are independent only of other poses' (`fit.significance.clustered_covariance`)."""
     q, w, aux = data.q, data.w, data.aux_columns(cm.model.aux)
     p, H = cm.model_targets(q, w, aux, c, with_H=True)
     H = H.reshape(len(H), cm.dims.nt, 3, cm.dims.nc)[data.pose, data.target][..., list(kept)]  # (R, 3, k)
     r = y - p[data.pose, data.target]
-    g = np.zeros((data.n_poses, H.shape[-1]))
-    np.add.at(g, data.pose, np.einsum("rik,ri->rk", H, r))
-    A_inv = np.linalg.pinv(np.einsum("rik,ril->kl", H, H))
-    return data.n_poses / max(data.n_poses - H.shape[-1], 1) * A_inv @ (g.T @ g) @ A_inv
+    return clustered_covariance(H.reshape(-1, H.shape[-1]), r.ravel(), np.repeat(data.pose, 3), data.n_poses)
 
 
 @dataclass(frozen=True)
