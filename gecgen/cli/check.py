@@ -55,13 +55,12 @@ def add_parser(command):
 def run(args) -> dict:
     if args.cameras or args.board:
         return _pixels(args)
+    from gecgen.api import load_calibration
+    from gecgen.model.measurements import read_measurements
     from gecgen.model.validation import require
 
     require(not args.val, "--val gives held-out images: it goes with --cameras; for tracker data compare against "
                           "a --baseline")
-    from gecgen.api import load_calibration
-    from gecgen.model.measurements import read_measurements
-    from gecgen.model.validation import require
     from gecgen.verify.drift import at_check_joints, check
     from gecgen.fit.identify import to_world
     from gecgen.fit.inputs import checked
@@ -116,7 +115,10 @@ def _pixels(args) -> dict:
     from gecgen.fit.camera import refuse_another_rig
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
+    from shlex import quote
+
     from gecgen.model.validation import require
+    from gecgen.report.verdict import pixel_check_next_step
     from gecgen.verify.drift import check_pixels, pixel_reference
 
     require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
@@ -152,45 +154,9 @@ def _pixels(args) -> dict:
                               **({"val_sigma_px": reference[0]} if reference else {})},
               "judged_against": against,
               **verdict.to_dict()}
-    result["next_step"] = pixel_next_step(result, args)
-    return _recorded(args, result)
-
-
-def pixel_next_step(result: dict, args) -> str:
-    """What to do after a check from images, in one sentence."""
-    from shlex import quote
-
-    looks = result["looks_like"]
-    kind = looks["kind"]
     rig = f"--cameras {quote(args.cameras)}" + (f" --board {quote(args.board)}" if args.board else "")
-    if kind == "as calibrated":
-        return (f"the images are within the calibration's noise ({result['rms_px']:.3g} px rms against its "
-                f"{result['reference_sigma_px']:.3g} px per coordinate): nothing to do")
-    if kind in ("camera moved", "board moved"):
-        what = ", ".join(looks["moved"])
-        return (f"{what} moved ({'; '.join(_moves(result, looks['moved']))}) and the robot is as calibrated at these "
-                f"poses: put it back, or identify again with images taken where it is now "
-                f"(gecgen identify ROBOT TRAIN.csv {rig})")
-    if kind == "moved or joint":
-        j = looks["joint"]
-        return (f"{looks['why']}: check that {', '.join(looks['moved'])} stayed where it was (a mark, a second "
-                f"camera) before recalibrating; if it did, {j['joint']} ({j['name']}) is off by {j['offset']:.3g} "
-                f"{j['unit']}: recalibrate (gecgen identify ROBOT TRAIN.csv {rig})")
-    if kind == "joint":
-        return (f"the robot changed: a reading offset of {looks['joint']} ({looks['name']}) of {looks['offset']:.3g} "
-                f"{looks['unit']} explains {looks['explained']:.0%} of it; recalibrate (gecgen identify ROBOT "
-                f"TRAIN.csv {rig}) or look at that joint's zero")
-    if result["judged_against"].startswith("the calibration's training residual"):
-        return ("the images differ from the calibration beyond its training residual, and no moved camera nor a "
-                "single joint's offset explains it: new poses exceed that residual by the model's own misfit too; "
-                f"check again against images held out from the calibration (--val HELD_OUT.csv) before recalibrating")
-    return ("the images differ from the calibration beyond its noise, and no moved camera nor a single joint's "
-            f"offset explains it: recalibrate (gecgen identify ROBOT TRAIN.csv {rig}) and look at what changed")
-
-
-def _moves(result: dict, names: list[str]) -> list[str]:
-    return [f"{p['name']} {p['rotation_deg']:.3g} deg, {p['translation_mm']:.3g} mm" for p in result["poses_refitted"]
-            if p["name"] in names]
+    result["next_step"] = pixel_check_next_step(result, rig)
+    return _recorded(args, result)
 
 
 def _baseline(path: str, calib, data):

@@ -361,3 +361,38 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
             steps.append(f"record images with the points near the corners of camera `{name}`'s image")
     text = "; then ".join(steps[:2])
     return Assessment(verdict, statement, limits, text[0].upper() + text[1:] + ".")
+
+
+def pixel_check_next_step(result: dict, rig: str) -> str:
+    """What to do after `gecgen check --cameras` (its result: looks_like, rms_px, reference_sigma_px,
+    poses_refitted, judged_against), in one sentence; rig: its --cameras (and --board) options."""
+    looks = result["looks_like"]
+    kind = looks["kind"]
+    if kind == "as calibrated":
+        return (f"the images are within the calibration's noise ({result['rms_px']:.3g} px rms against its "
+                f"{result['reference_sigma_px']:.3g} px per coordinate): nothing to do")
+    if kind in ("camera moved", "board moved"):
+        what = ", ".join(looks["moved"])
+        return (f"{what} moved ({'; '.join(_moves(result, looks['moved']))}) and the robot is as calibrated at these "
+                f"poses: put it back, or identify again with images taken where it is now "
+                f"(gecgen identify ROBOT TRAIN.csv {rig})")
+    if kind == "moved or joint":
+        j = looks["joint"]
+        return (f"{looks['why']}: check that {', '.join(looks['moved'])} stayed where it was (a mark, a second "
+                f"camera) before recalibrating; if it did, {j['joint']} ({j['name']}) is off by {j['offset']:.3g} "
+                f"{j['unit']}: recalibrate (gecgen identify ROBOT TRAIN.csv {rig})")
+    if kind == "joint":
+        return (f"the robot changed: a reading offset of {looks['joint']} ({looks['name']}) of {looks['offset']:.3g} "
+                f"{looks['unit']} explains {looks['explained']:.0%} of it; recalibrate (gecgen identify ROBOT "
+                f"TRAIN.csv {rig}) or look at that joint's zero")
+    if result["judged_against"].startswith("the calibration's training residual"):
+        return ("the images differ from the calibration beyond its training residual, and no moved camera nor a "
+                "single joint's offset explains it: new poses exceed that residual by the model's own misfit too; "
+                f"check again against images held out from the calibration (--val HELD_OUT.csv) before recalibrating")
+    return ("the images differ from the calibration beyond its noise, and no moved camera nor a single joint's "
+            f"offset explains it: recalibrate (gecgen identify ROBOT TRAIN.csv {rig}) and look at what changed")
+
+
+def _moves(result: dict, names: list[str]) -> list[str]:
+    return [f"{p['name']} {p['rotation_deg']:.3g} deg, {p['translation_mm']:.3g} mm" for p in result["poses_refitted"]
+            if p["name"] in names]
