@@ -160,25 +160,19 @@ def _from_images(args, status):
     statement, `verify.images.Positions`)."""
     import numpy as np
 
-    from gecgen.fit.calibration import load
-    from gecgen.fit.camera import refuse_another_rig
-    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.cli.pixels import recorded_rig
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
     from gecgen.model.volume import load_volume
     from gecgen.verify.images import accuracy_from_images
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
     given = [o for o, v in (("--noise-mm", args.noise_mm is not None), ("--repeatability-mm", args.repeatability_mm))
              if v]
     require(not given, f"{given[0] if given else ''} is not supported with --cameras: the triangulated points' noise "
                        f"is counted as model error (safe); leave it out")
     require(args.val, "--cameras: the statement in mm is read from held-out images (markers triangulated by two "
                       "cameras or more): give them as --val PIXELS.csv")
-    calibration = load(args.calibration)
-    cameras = read_cameras(args.cameras)
-    board = read_board(args.board) if args.board else None
-    refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+    calibration, cameras, board = recorded_rig(args)
     _without_aux(calibration, args.calibration)
     volume = load_volume(args.volume, calibration.robot)
     train, val = (read_pixels(f, calibration.robot, cameras, board) for f in (args.data, args.val))

@@ -111,9 +111,7 @@ def _history_is_csv(args):
 def _pixels(args) -> dict:
     """`check CALIB PIXELS.csv --cameras FILE [--board FILE]`: new images of the calibrated robot judged
     with the cameras (and board) as the calibration recorded them (`verify.drift.check_pixels`)."""
-    from gecgen.fit.calibration import load
-    from gecgen.fit.camera import refuse_another_rig
-    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.cli.pixels import recorded_rig
     from gecgen.model.pixels import read_pixels
     from shlex import quote
 
@@ -121,15 +119,11 @@ def _pixels(args) -> dict:
     from gecgen.report.verdict import pixel_check_next_step
     from gecgen.verify.drift import check_pixels, pixel_reference
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
     require(not (args.baseline or args.noise_mm is not None),
             f"{'--baseline' if args.baseline else '--noise-mm'} is not supported with --cameras: new images are "
             f"judged against the calibration's own residual (px); leave it out")
     _history_is_csv(args)
-    calibration = load(args.calibration)
-    cameras = read_cameras(args.cameras)
-    board = read_board(args.board) if args.board else None
-    refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+    calibration, cameras, board = recorded_rig(args)
     data = read_pixels(args.data, calibration.robot, cameras, board)
     report = calibration.report
     require(report.get("sigma_px", 0) > 0, f"{args.calibration}: its fit left no residual (sigma 0 px): noise "

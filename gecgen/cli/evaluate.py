@@ -37,22 +37,17 @@ def run(args) -> dict:
 
 def _pixels(args) -> dict:
     """Held-out image points before and after a pixel calibration (`fit.camera.score_pixels`)."""
-    from gecgen.fit.calibration import load
-    from gecgen.fit.camera import refuse_another_rig, score_pixels
-    from gecgen.model.cameras import read_board, read_cameras
+    from gecgen.cli.pixels import recorded_rig
+    from gecgen.fit.camera import score_pixels
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
     for option, default in (("register", "never"), ("tolerance_mm", None), ("report", None),
                             ("orientation_length", None)):
         require(getattr(args, option) == default, f"--{option.replace('_', '-')} is not supported with --cameras "
                                                   f"yet; leave it out")
     with warned() as caught:
-        calibration = load(args.calibration)
-        cameras = read_cameras(args.cameras)
-        board = read_board(args.board) if args.board else None
-        refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+        calibration, cameras, board = recorded_rig(args)
         data = read_pixels(args.data, calibration.robot, cameras, board)
         scores = score_pixels(calibration, args.calibration, data, cameras, board)
     return {"robot": calibration.robot.name, "data": str(args.data), "measurement": "pixels",

@@ -88,6 +88,23 @@ def identified(args) -> dict:
     return result
 
 
+def recorded_rig(args):
+    """For a command that reads a pixel calibration with new images (evaluate, check, accuracy --cameras):
+    the calibration (CALIB) and its cameras and board files, read, after refusing in one line --board
+    without --cameras and files other than those the calibration recorded: (Calibration, cameras, board or
+    None)."""
+    from gecgen.fit.calibration import load
+    from gecgen.fit.camera import refuse_another_rig
+    from gecgen.model.cameras import read_board, read_cameras
+
+    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
+    calibration = load(args.calibration)
+    cameras = read_cameras(args.cameras)
+    board = read_board(args.board) if args.board else None
+    refuse_another_rig(calibration, args.calibration, cameras, args.cameras, board)
+    return calibration, cameras, board
+
+
 def _cameras_given(args):
     """Refuse --board or --refine-intrinsics without --cameras, in one line."""
     what = ("--board names the board a carried camera sees" if args.board else
