@@ -233,3 +233,18 @@ def test_accuracy_from_images_counts_samples_not_compensated_and_bounds_against_
     G = point_rows(cm, samples, cal.c, columns)
     robot_frame = 1e3 * np.quantile(worst_over_draws(G, cov, np.zeros((n, 3, 1)), 400, rng)[1], 0.95)
     assert failed == 0 and 0 < st.parametric_mm < 0.5 * robot_frame, (st.parametric_mm, robot_frame)
+
+
+@pytest.mark.parametrize("command", [["evaluate", "cal.json", "new.csv"],
+                                     ["check", "cal.json", "new.csv", "--noise-mm", "0.1"],
+                                     ["accuracy", "cal.json", "volume.yaml", "new.csv", "--noise-mm", "0.1"]])
+def test_a_board_without_cameras_is_refused_before_anything_else(command, tmp_path, capsys):
+    """--board alone, with an option the image path would refuse too and files that do not exist: the one
+    line names the missing --cameras, not the option nor the files."""
+    from gecgen.cli import main
+
+    (tmp_path / "board.yaml").write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.04\n")
+    argv = [command[0], *(str(tmp_path / a) if "." in a and not a[0].isdigit() else a for a in command[1:])]
+    assert main([*argv, "--board", str(tmp_path / "board.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"gecgen {command[0]}: --board names the board a carried camera sees: give --cameras too"], err

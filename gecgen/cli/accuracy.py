@@ -160,12 +160,13 @@ def _from_images(args, status):
     statement, `verify.images.Positions`)."""
     import numpy as np
 
-    from gecgen.cli.pixels import recorded_rig
+    from gecgen.cli.pixels import cameras_given, recorded_rig
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
     from gecgen.model.volume import load_volume
     from gecgen.verify.images import accuracy_from_images
 
+    cameras_given(args)
     given = [o for o, v in (("--noise-mm", args.noise_mm is not None), ("--repeatability-mm", args.repeatability_mm))
              if v]
     require(not given, f"{given[0] if given else ''} is not supported with --cameras: the triangulated points' noise "

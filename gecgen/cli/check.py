@@ -111,7 +111,7 @@ def _history_is_csv(args):
 def _pixels(args) -> dict:
     """`check CALIB PIXELS.csv --cameras FILE [--board FILE]`: new images of the calibrated robot judged
     with the cameras (and board) as the calibration recorded them (`verify.drift.check_pixels`)."""
-    from gecgen.cli.pixels import recorded_rig
+    from gecgen.cli.pixels import cameras_given, recorded_rig
     from gecgen.model.pixels import read_pixels
     from shlex import quote
 
@@ -119,6 +119,7 @@ def _pixels(args) -> dict:
     from gecgen.report.verdict import pixel_check_next_step
     from gecgen.verify.drift import check_pixels, pixel_reference
 
+    cameras_given(args)
     require(not (args.baseline or args.noise_mm is not None),
             f"{'--baseline' if args.baseline else '--noise-mm'} is not supported with --cameras: new images are "
             f"judged against the calibration's own residual (px); leave it out")

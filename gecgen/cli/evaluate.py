@@ -37,11 +37,12 @@ def run(args) -> dict:
 
 def _pixels(args) -> dict:
     """Held-out image points before and after a pixel calibration (`fit.camera.score_pixels`)."""
-    from gecgen.cli.pixels import recorded_rig
+    from gecgen.cli.pixels import cameras_given, recorded_rig
     from gecgen.fit.camera import score_pixels
     from gecgen.model.pixels import read_pixels
     from gecgen.model.validation import require
 
+    cameras_given(args)
     for option, default in (("register", "never"), ("tolerance_mm", None), ("report", None),
                             ("orientation_length", None)):
         require(getattr(args, option) == default, f"--{option.replace('_', '-')} is not supported with --cameras "

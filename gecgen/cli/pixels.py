@@ -35,7 +35,7 @@ def identified(args) -> dict:
     from gecgen.fit.calibration import save
     from gecgen.fit.camera import calibration_of, fit_pixels, refuse_untrustworthy
 
-    _cameras_given(args)
+    cameras_given(args)
     for option in ("ridge", "rank_tol", "noise_mm"):
         value = getattr(args, option, None)
         require(value in (None, "0", False), f"--{option.replace('_', '-')} is not supported with --cameras yet; "
@@ -90,14 +90,13 @@ def identified(args) -> dict:
 
 def recorded_rig(args):
     """For a command that reads a pixel calibration with new images (evaluate, check, accuracy --cameras):
-    the calibration (CALIB) and its cameras and board files, read, after refusing in one line --board
-    without --cameras and files other than those the calibration recorded: (Calibration, cameras, board or
-    None)."""
+    the calibration (CALIB) and its cameras and board files, read, after refusing in one line files other
+    than those the calibration recorded (the command refuses --board alone first: `cameras_given`):
+    (Calibration, cameras, board or None)."""
     from gecgen.fit.calibration import load
     from gecgen.fit.camera import refuse_another_rig
     from gecgen.model.cameras import read_board, read_cameras
 
-    require(args.cameras, "--board names the board a carried camera sees: give --cameras too")
     calibration = load(args.calibration)
     cameras = read_cameras(args.cameras)
     board = read_board(args.board) if args.board else None
@@ -105,8 +104,9 @@ def recorded_rig(args):
     return calibration, cameras, board
 
 
-def _cameras_given(args):
-    """Refuse --board or --refine-intrinsics without --cameras, in one line."""
+def cameras_given(args):
+    """Refuse --board or --refine-intrinsics without --cameras, in one line, before any other refusal (the
+    options those would name mean nothing without cameras)."""
     what = ("--board names the board a carried camera sees" if args.board else
             "--refine-intrinsics refines the intrinsics of the cameras of image points")
     require(args.cameras, f"{what}: give --cameras too")
@@ -117,7 +117,7 @@ def _loop_cameras(args):
     options that mean nothing for image points: (cameras, board or None)."""
     from gecgen.model.cameras import read_board, read_cameras
 
-    _cameras_given(args)
+    cameras_given(args)
     given = [o for o, v in (("--register", args.register not in ("auto", "never")), ("--noise-mm", args.noise_mm),
                             ("--orientation-length", args.orientation_length)) if v]
     require(not given, f"{given[0] if given else ''} is not supported with --cameras (the cameras' poses are fitted "
