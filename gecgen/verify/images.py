@@ -92,14 +92,18 @@ def triangulate(calibration, where: str, val, cameras: dict, board, sigma_px: fl
                  f"its ray, not along it, so no position in mm can be stated from these images; see the markers "
                  f"with two cameras or more, or score the images with gecgen evaluate --cameras (px, and mm across "
                  f"the ray)")
+    return _measured(val, pose, target, xyz, row, stds, "triangulation from the calibration's cameras",
+                     {"single_camera_points": single, "ray_angle_deg_min": float(np.min(angles)),
+                      "ray_angle_deg_median": float(np.median(angles))})
+
+
+def _measured(val, pose: list, target: list, xyz: list, row: list, stds: list, method: str, extra: dict):
+    """The positions measured from the held-out images val as tracker-like data: (Measurements, world points
+    (R, 3) m, `Positions`), pose/target/row the data's indices of each point and stds its 1-sigma (mm)."""
     y = np.array(xyz)
     data = Measurements(val.q, val.w, val.aux, val.aux_names, val.pose_ids, np.array(pose), np.array(target), y,
                         val.source, np.array(row))
-    info = Positions("triangulation from the calibration's cameras", len(y),
-                     (float(np.median(stds)), float(np.max(stds))),
-                     {"single_camera_points": single, "ray_angle_deg_min": float(np.min(angles)),
-                      "ray_angle_deg_median": float(np.median(angles))})
-    return data, y, info
+    return data, y, Positions(method, len(y), (float(np.median(stds)), float(np.max(stds))), extra)
 
 
 #: board corners an image needs for its camera's pose (OpenCV's iterative PnP takes six or more)
@@ -150,13 +154,9 @@ def from_carried_camera(calibration, where: str, val, cameras: dict, board, sigm
             pose.append(p), target.append(k), xyz.append(X), row.append(int(val.row[rows[0]]))
     require(xyz, f"{val.source}: no image shows {MIN_CORNERS} board corners or more: the camera's pose, and so a "
                  f"position in mm, cannot be had from these images; take images that show the board")
-    y = np.array(xyz)
-    data = Measurements(val.q, val.w, val.aux, val.aux_names, val.pose_ids, np.array(pose), np.array(target), y,
-                        val.source, np.array(row))
-    info = Positions("the carried camera's pose from the board (PnP), carried to the targets through the camera's "
-                     "pose on the tool the calibration fitted", len(y), (float(np.median(stds)), float(np.max(stds))),
-                     {"images_left_out": left})
-    return data, y, info
+    return _measured(val, pose, target, xyz, row, stds,
+                     "the carried camera's pose from the board (PnP), carried to the targets through the camera's "
+                     "pose on the tool the calibration fitted", {"images_left_out": left})
 
 
 def against_reference(problem, g: np.ndarray, mount: str):
