@@ -132,7 +132,11 @@ arm before filtering its programs.
   Agrees.
 - **ABB cf1, cf4, cf6** (the quadrant of axes 1, 4 and 6: 0 from 0 to 90 deg, 1 from 90 to 180, -1
   from 0 to -90): ABB's RAPID Reference Manual, "confdata" (the copy on yumpu.com, "Basic
-  Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees.
+  Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees. Checked on taught targets:
+  the five robtargets of a public module taught on an IRB 2600-12/1.65 (`rapid/rapid_scripts_demos/` in
+  the test data, MIT) are each reached by the arm's nominal model (ROS-Industrial's IRB 2600 URDF) in
+  the confdata they carry, cf1, cf4 and cf6 from -1 to 0 (their cfx is 0: axis 5 positive, no bit of
+  cfx is exercised).
 - **ABB cfx** (4 when the wrist centre is behind axis 1, + 2 when it is behind the lower arm, + 1
   when axis 5 is negative): no ABB page with the table for six-axis arms could be reached here; ABB's
   RobotStudio API reference ("ConfigurationData") and ROS-Industrial's abb_rapid_msgs RobTarget say

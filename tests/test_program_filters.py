@@ -808,6 +808,37 @@ def test_public_tp_programs_with_taught_positions_round_trip_and_are_corrected(f
     assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes if c.after is not None)
 
 
+def test_irb2600_robot_file_is_the_urdf_chain_to_tool0(rng):
+    """tests/data/programs/robots/irb2600.yaml against the chain of ROS-Industrial's IRB 2600-12/1.65
+    URDF built here joint by joint (origins, axes, and tool0 turned 90 deg about the flange's y)."""
+    arm = arm_of(load_robot(DATA / "robots" / "irb2600.yaml"), np.eye(4))
+    origins = [(0, 0, 0.445), (0.15, 0, 0), (0, 0, 0.7), (0, 0, 0.115), (0.795, 0, 0), (0.085, 0, 0)]
+    axes = [(0, 0, 1), (0, 1, 0), (0, 1, 0), (1, 0, 0), (0, 1, 0), (1, 0, 0)]
+    for q in rng.uniform(-2.5, 2.5, (6, 6)):
+        T = np.eye(4)
+        for origin, axis, angle in zip(origins, axes, q):
+            step = np.eye(4)
+            step[:3, :3], step[:3, 3] = Rotation.from_rotvec(angle * np.array(axis)).as_matrix(), origin
+            T = T @ step
+        T[:3, :3] = T[:3, :3] @ _ry(np.pi / 2)
+        assert np.allclose(arm.fk(q[None])[0], T, atol=1e-12)
+
+
+def test_public_rapid_module_with_taught_robtargets_round_trips_and_is_corrected(tmp_path):
+    """A RAPID module with five robtargets taught with tool0 in wobj0 on an IRB 2600-12/1.65 (a TCP
+    calibration's approach points as the controller keeps them: ten-digit quaternions, cf1 cf4 cf6 cfx
+    each its own), moved to in syncRS and read by name at run time. gecgen's confdata rules find every
+    one reachable on the arm's nominal model in the configuration it names; a zero calibration leaves
+    every byte, a real one rewrites only the five targets' numbers (by 0.01 to 20 mm), every confdata
+    kept."""
+    source = DATA / "rapid" / "rapid_scripts_demos" / "ToolCenterCalculations.mod"
+    cal = _calibrated(DATA / "robots" / "irb2600.yaml", DATA / "robots" / "irb2600.truth.yaml",
+                      str(ROOT / "robots" / "constant.errors.yaml"))
+    outcome = _round_trips(abb.FORMAT, cal[0], source, tmp_path / source.name)
+    assert outcome.corrected == 5 == len(outcome.changes)
+    assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes)
+
+
 def test_krl_points_the_program_sets_while_it_runs_are_listed_not_corrected(tmp_path):
     """A .dat point the .src assigns (whole, or a component) goes where the running program puts it:
     its motions are listed with the line that sets it and its declared value is not a target; a point
