@@ -179,10 +179,12 @@ arm before filtering its programs.
     exactly +180 deg, which neither source settles.
   - **The letters are read from the joints as the controller turns them.** On those postures FANUC's
     J3 is the forearm's angle to the horizontal, positive up, and J4, J5 and J6 turn against the z axes
-    of the usual DH rows (`robots/crx10ia.yaml` says so with couplings). `robots/fanuc.yaml`, the
+    of the usual DH rows (`robots/crx10ia.yaml` says so with couplings). ROS-Industrial's LR Mate
+    200iD URDF (ros-industrial/fanuc, BSD, its joint_3 being J2 + J3) turns J1 to J5 the same way: its
+    orientation equals the CRX file's at any readings once J6 is reversed. `robots/fanuc.yaml`, the
     FANUC-sized arm of the simulations here, does not turn that way (if an R-2000iC turns its joints
-    as the CRX does): its readings give the recorded orientation on 3 of the 83 postures (with J3 as -(J2 + J3) on its chain and J4, J5, J6 reversed,
-    on all 83 within 0.05 deg). Its programs here are its own, so its flags are consistent; a robot
+    as the CRX does): its readings give the recorded orientation on 3 of the 83 postures (with J3 as
+    -(J2 + J3) on its chain and J4, J5, J6 reversed, on all 83 within 0.05 deg). Its programs here are its own, so its flags are consistent; a robot
     file for a real FANUC must turn its joints as the controller's readings do, or its flip letter
     (and every joint target) is read the other way.
 
