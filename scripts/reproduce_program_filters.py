@@ -184,9 +184,9 @@ arm before filtering its programs.
     orientation equals the CRX file's at any readings once J6 is reversed. `robots/fanuc.yaml`, the
     FANUC-sized arm of the simulations here, does not turn that way (if an R-2000iC turns its joints
     as the CRX does): its readings give the recorded orientation on 3 of the 83 postures (with J3 as
-    -(J2 + J3) on its chain and J4, J5, J6 reversed, on all 83 within 0.05 deg). Its programs here are its own, so its flags are consistent; a robot
-    file for a real FANUC must turn its joints as the controller's readings do, or its flip letter
-    (and every joint target) is read the other way.
+    -(J2 + J3) on its chain and J4, J5, J6 reversed, on all 83 within 0.05 deg). Its programs here are
+    its own, so its flags are consistent; a robot file for a real FANUC must turn its joints as the
+    controller's readings do, or its flip letter (and every joint target) is read the other way.
 
 ### Checking a configuration rule on your own arm
 
