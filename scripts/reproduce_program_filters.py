@@ -132,7 +132,11 @@ arm before filtering its programs.
   Agrees.
 - **ABB cf1, cf4, cf6** (the quadrant of axes 1, 4 and 6: 0 from 0 to 90 deg, 1 from 90 to 180, -1
   from 0 to -90): ABB's RAPID Reference Manual, "confdata" (the copy on yumpu.com, "Basic
-  Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees.
+  Characteristics RAPID", p. 165). gecgen's floor(angle / 90 deg) agrees. Checked on taught targets:
+  the five robtargets of a public module taught on an IRB 2600-12/1.65 (`rapid/rapid_scripts_demos/` in
+  the test data, MIT) are each reached by the arm's nominal model (ROS-Industrial's IRB 2600 URDF) in
+  the confdata they carry, cf1, cf4 and cf6 from -1 to 0 (their cfx is 0: axis 5 positive, no bit of
+  cfx is exercised).
 - **ABB cfx** (4 when the wrist centre is behind axis 1, + 2 when it is behind the lower arm, + 1
   when axis 5 is negative): no ABB page with the table for six-axis arms could be reached here; ABB's
   RobotStudio API reference ("ConfigurationData") and ROS-Industrial's abb_rapid_msgs RobTarget say
@@ -144,15 +148,45 @@ arm before filtering its programs.
   the angle that puts the wrist centre on the line through axes 2 and 3 (-80.1 deg on the IRB
   6700-sized arm here: the A3-A4 offset moves it). Postures within those few degrees are the only
   ones where the two differ; the test suite checks the two agree elsewhere.
-- **FANUC CONFIG** (flip, up, top, and the turns of J1, J4, J6): onerobotics.com, "The Perils of
-  Six-Axis Robots" (2013), explains the string, but no FANUC document could be reached here. On the
-  flip, the two statements found give the opposite of gecgen's "F when J5 > 0": a reply in
-  robot-forum.com thread 31037 (2019: "if J5 angle is positive then is Non-flip") and a knowledge-base
-  page of industrialmonitordirect.com ("If J5 >= 0, No-Flip"), another page of which calls F
-  "Front/Back". Neither is FANUC's, so gecgen's rule is unchanged and not confirmed; the sign also
-  depends on the robot file's J5 turning the way the controller's does. The turn numbers (0 in
-  (-180, 180] deg) rest on the robot file's geometry alone. Check it on your arm as below before
-  filtering Cartesian FANUC positions.
+- **FANUC CONFIG** (`'F U T, t1, t4, t6'`: wrist flipped or not, elbow up or down, the wrist
+  centre at the top, in front of axis 1, or at the bottom, behind it; then the turn numbers of J1, J4,
+  J6). No FANUC manual could be reached here; the evidence is postures FANUC's own software gave
+  letters to, and an offline programming tool that writes programs for FANUC controllers:
+  - **83 postures of a CRX-10iA with their joints, poses and letters** (`tp/crx10ia/` in the test
+    data: FANUC RoboGuide's solutions and the tables of M. Abbes and G. Poisson, "Geometric Approach
+    for Inverse Kinematics of the FANUC CRX Collaborative Robot", Robotics 13(6):91, 2024, as
+    collected in the Apache-2.0 repository frfournier/robodk_crx_kinematics). A robot file with the
+    CRX's nominal lengths and the controller's joint senses (`robots/crx10ia.yaml` there) puts the
+    faceplate at 81 of the 83 recorded poses within 0.022 mm and 0.009 deg (the two others are a
+    recorded Z of 625 mm where the same joints give the home target's 380 mm). gecgen's rules give
+    the recorded letters on 80 of the 83; the three others are a posture with the wrist centre exactly
+    on axis 1 (stretched straight up: FANUC writes B, gecgen T: a boundary no Cartesian target can
+    sit on safely), a row whose elbow and front letters are written in each other's column, and one
+    row whose flip letter goes against J5's sign while every other row's follows it.
+  - **The flip letter is F when J5 > 0 and N when J5 <= 0**, in the controller's own J5 reading: 82 of
+    the 83 postures (the home posture J5 = -90 deg is N; the 14 postures at J5 = 0 are N). RoboDK's
+    FANUC post processor says the same (`Fanuc_R30iA.py` of ros-industrial-attic/robodk_postprocessors,
+    Apache-2.0, at commit d7e6c1c07758d67d2906cfd638049bdff88cca72: "F means axis 5 >= 0, N means
+    axis 5 < 0"). The two statements found earlier (robot-forum.com thread 31037, a knowledge-base
+    page of industrialmonitordirect.com: "J5 >= 0 is N") give the recorded letter on 15 of the 83
+    only, the 14 at J5 = 0 and the one odd row: gecgen's rule stands.
+  - **U/D**: U when the chain's joint 3 is at or above the angle that stretches the arm (the forearm
+    in line with the upper arm counts as U, at the top and at the bottom of the reach alike). **T/B**:
+    T when the wrist centre is in front of axis 1. RoboDK's post writes D for its lower-arm flag and B
+    for its rear flag: the same meanings.
+  - **The turn numbers** (0 in (-180, 180] deg, 1 in (180, 540], -1 in (-540, -180]) are not in those
+    postures. RoboDK's post counts 0 in (-180, 180) and gives +180 deg turn 1: the two agree except at
+    exactly +180 deg, which neither source settles.
+  - **The letters are read from the joints as the controller turns them.** On those postures FANUC's
+    J3 is the forearm's angle to the horizontal, positive up, and J4, J5 and J6 turn against the z axes
+    of the usual DH rows (`robots/crx10ia.yaml` says so with couplings). ROS-Industrial's LR Mate
+    200iD URDF (ros-industrial/fanuc, BSD, its joint_3 being J2 + J3) turns J1 to J5 the same way: its
+    orientation equals the CRX file's at any readings once J6 is reversed. `robots/fanuc.yaml`, the
+    FANUC-sized arm of the simulations here, does not turn that way (if an R-2000iC turns its joints
+    as the CRX does): its readings give the recorded orientation on 3 of the 83 postures (with J3 as
+    -(J2 + J3) on its chain and J4, J5, J6 reversed, on all 83 within 0.05 deg). Its programs here are
+    its own, so its flags are consistent; a robot file for a real FANUC must turn its joints as the
+    controller's readings do, or its flip letter (and every joint target) is read the other way.
 
 ### Checking a configuration rule on your own arm
 

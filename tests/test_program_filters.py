@@ -6,6 +6,7 @@ is unchanged after a real correction; and the corrected program, executed on the
 robot through the controller's nominal model, lands nearer the intended targets than the original.
 """
 import contextlib
+import csv
 import io
 import json
 import shutil
@@ -24,7 +25,7 @@ from gecgen.api import Calibrator, load_robot
 from gecgen.cli import main
 from gecgen.deliver.programs import abb, fanuc, filter_program, kuka, program_format, trial, ur
 from gecgen.deliver.programs.core import correct, read_frames
-from gecgen.deliver.programs.kinematics import arm_of
+from gecgen.deliver.programs.kinematics import arm_of, pose_error
 from gecgen.model import ModelError
 from gecgen.simulate import load_truth, random_design, simulate
 
@@ -494,6 +495,30 @@ def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal
     assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
 
 
+def test_fanuc_config_letters_are_the_controllers_on_recorded_postures():
+    """83 postures of a FANUC CRX-10iA, each with its joints, its pose and the CONFIG letters FANUC gives
+    it (FANUC RoboGuide and Abbes & Poisson 2024: tests/data/programs/README.md). The robot file in the
+    controller's joint senses puts the faceplate at every recorded pose but two, and gecgen's rules (F
+    when J5 > 0; U when the chain's joint 3 is at or above the stretched arm; T when the wrist centre is
+    in front of axis 1) give FANUC's letters on all but three, each named. "N when J5 >= 0", as two
+    statements not from FANUC have it, gives the recorded flip letter on 15 of the 83 only."""
+    rows = list(csv.DictReader((DATA / "tp" / "crx10ia" / "CRX10iA-solutions.csv").open(encoding="utf-8-sig")))
+    name = [f"{r['TEST CASE']}.{r['SOLUTION ID']}" for r in rows]
+    arm = arm_of(load_robot(DATA / "robots" / "crx10ia.yaml"), np.eye(4))
+    q = np.radians([[float(r[f"J{k}"]) for k in range(1, 7)] for r in rows])
+    err = pose_error(np.array([fanuc.pose([float(r[k]) for k in "XYZWPR"]) for r in rows]), arm.fk(q))
+    # the recorded numbers carry 0.01 mm and 0.001 deg: 0.05 mm and 0.02 deg hold their rounding
+    off = {n for n, e in zip(name, err) if np.linalg.norm(e[:3]) > 5e-5 or np.linalg.norm(e[3:]) > np.radians(0.02)}
+    assert off == {"1.2", "1.3"}  # Z 625 recorded for the home target their joints put at Z 380, as 1.1 does
+    ours = ["NF"[f] + "DU"[u] + "BT"[t] for f, u, t in fanuc.config(arm)(q)[:, :3]]
+    recorded = [r["FB"] + r["UD"] + r["TB"] for r in rows]
+    assert {n: (r, o) for n, r, o in zip(name, recorded, ours) if r != o} == {
+        "6.1": ("NUB", "NUT"),  # the wrist centre on axis 1 (stretched straight up): FANUC says B, gecgen T
+        "14.5": ("NUT", "FUB"),  # the one flip letter against J5's sign; wrist centre 581 mm behind axis 1
+        "15.4": ("NBD", "NDB")}  # the elbow and front letters written in each other's column
+    assert sum((q5 >= 0) != (r[0] == "N") for q5, r in zip(q[:, 4], recorded)) == 68
+
+
 def test_tp_indirect_motions_are_listed_not_refused(tmp_path):
     """`L P[R[1]]` and `J PR[R[2]]` (the register picks the position while the program runs) are valid
     TP: listed with why, where the whole program was refused as a motion to an undefined P[R]."""
@@ -781,6 +806,37 @@ def test_public_tp_programs_with_taught_positions_round_trip_and_are_corrected(f
         assert [line for line in out.read_text().splitlines() if "1512.343" in line or "-150.909" in line] == \
             [line for line in source.read_text().splitlines() if "1512.343" in line or "-150.909" in line] != []
     assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes if c.after is not None)
+
+
+def test_irb2600_robot_file_is_the_urdf_chain_to_tool0(rng):
+    """tests/data/programs/robots/irb2600.yaml against the chain of ROS-Industrial's IRB 2600-12/1.65
+    URDF built here joint by joint (origins, axes, and tool0 turned 90 deg about the flange's y)."""
+    arm = arm_of(load_robot(DATA / "robots" / "irb2600.yaml"), np.eye(4))
+    origins = [(0, 0, 0.445), (0.15, 0, 0), (0, 0, 0.7), (0, 0, 0.115), (0.795, 0, 0), (0.085, 0, 0)]
+    axes = [(0, 0, 1), (0, 1, 0), (0, 1, 0), (1, 0, 0), (0, 1, 0), (1, 0, 0)]
+    for q in rng.uniform(-2.5, 2.5, (6, 6)):
+        T = np.eye(4)
+        for origin, axis, angle in zip(origins, axes, q):
+            step = np.eye(4)
+            step[:3, :3], step[:3, 3] = Rotation.from_rotvec(angle * np.array(axis)).as_matrix(), origin
+            T = T @ step
+        T[:3, :3] = T[:3, :3] @ _ry(np.pi / 2)
+        assert np.allclose(arm.fk(q[None])[0], T, atol=1e-12)
+
+
+def test_public_rapid_module_with_taught_robtargets_round_trips_and_is_corrected(tmp_path):
+    """A RAPID module with five robtargets taught with tool0 in wobj0 on an IRB 2600-12/1.65 (a TCP
+    calibration's approach points as the controller keeps them: ten-digit quaternions, cf1 cf4 cf6 cfx
+    each its own), moved to in syncRS and read by name at run time. gecgen's confdata rules find every
+    one reachable on the arm's nominal model in the configuration it names; a zero calibration leaves
+    every byte, a real one rewrites only the five targets' numbers (by 0.01 to 20 mm), every confdata
+    kept."""
+    source = DATA / "rapid" / "rapid_scripts_demos" / "ToolCenterCalculations.mod"
+    cal = _calibrated(DATA / "robots" / "irb2600.yaml", DATA / "robots" / "irb2600.truth.yaml",
+                      str(ROOT / "robots" / "constant.errors.yaml"))
+    outcome = _round_trips(abb.FORMAT, cal[0], source, tmp_path / source.name)
+    assert outcome.corrected == 5 == len(outcome.changes)
+    assert all(0.01 < c.position_mm < 20.0 for c in outcome.changes)
 
 
 def test_krl_points_the_program_sets_while_it_runs_are_listed_not_corrected(tmp_path):

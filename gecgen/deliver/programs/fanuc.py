@@ -42,7 +42,8 @@ def turns(q: np.ndarray) -> np.ndarray:
 
 def config(arm: Arm):
     """(flip, up, front, t1, t4, t6) as numbers: flip 1 when J5 > 0 ('F'), up 1 when the elbow is at or
-    above the stretched arm ('U'), front 1 when the wrist centre is in front of J1 ('T')."""
+    above the stretched arm ('U'), front 1 when the wrist centre is in front of J1 ('T'). The letters
+    FANUC gives recorded postures (tests/data/programs/tp/crx10ia), J5 = 0 included."""
     def of(q: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(q)
         return np.column_stack([(q[:, 4] > 0).astype(int), elbow_up(arm, q), front(arm, q),
