@@ -495,6 +495,25 @@ def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal
     assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
 
 
+def test_a_cartesian_target_of_an_arm_whose_wrist_axes_do_not_meet_is_kept_and_listed(tmp_path):
+    """The CRX-10iA's wrist is offset (its axes 4, 5 and 6 pass 75 mm from one point): a pose and its
+    CONFIG letters leave more than one posture, and which one the controller takes is its own rule, so
+    the Cartesian target is kept as written, with why; the same posture taught as joints is corrected."""
+    truth = tmp_path / "crx.truth.yaml"
+    truth.write_text("seed: 3\nconstant: {translation_std: 0.0005, rotation_std: 0.0003}\n")
+    cal, robot, _ = _calibrated(DATA / "robots" / "crx10ia.yaml", truth, str(ROOT / "robots" / "constant.errors.yaml"),
+                                n=40)
+    arm = arm_of(robot, np.eye(4))
+    assert abs(arm.wrist_miss - 0.075) < 1e-9
+    source = tmp_path / "twice.ls"
+    source.write_text(_taught_twice(arm, np.array([25.0, 15.0, -20.0, 35.0, -55.0, 40.0]), 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the robot file names no controller
+        joint, cartesian = filter_program(cal, source, None)[0].changes
+    assert joint.after is not None
+    assert cartesian.after is None and "axes 4, 5 and 6 pass 75 mm from one point" in cartesian.reason
+
+
 def test_fanuc_config_letters_are_the_controllers_on_recorded_postures():
     """83 postures of a FANUC CRX-10iA, each with its joints, its pose and the CONFIG letters FANUC gives
     it (FANUC RoboGuide and Abbes & Poisson 2024: tests/data/programs/README.md). The robot file in the

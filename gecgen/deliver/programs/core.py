@@ -36,6 +36,9 @@ UNCHANGED = "no correction needed"
 #: the written pose must bring the controller back to the corrected joints within this (rad): further off,
 #: its inverse kinematics took another branch (a configuration flip); rounding moves them far less
 ROUND_TRIP = 1e-3
+#: a wrist whose axes pass within this (m) of one point is spherical for the configuration flags: those flags
+#: tell the eight postures of such an arm apart, not the further ones of an offset wrist (a cobot's)
+WRIST_MEETS = 1e-3
 
 
 @dataclass(frozen=True)
@@ -316,6 +319,12 @@ def correct(fmt: Format, program: Program, cal, frames: Frames, max_iter: int = 
             if config is not None and t.config is None:
                 nominal.append(None)
                 reasons.append("names no configuration: the controller's solution depends on where the robot stands")
+                continue
+            if config is not None and arm.wrist_miss > WRIST_MEETS:
+                nominal.append(None)
+                reasons.append(f"the wrist's axes 4, 5 and 6 pass {1e3 * arm.wrist_miss:.0f} mm from one point, so the "
+                               f"configuration does not single out the posture the controller will take: teach the "
+                               f"target as joints")
                 continue
             if config is None and previous is None:
                 nominal.append(None)

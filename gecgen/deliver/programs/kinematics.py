@@ -7,7 +7,7 @@ The flange is frame n of the robot file (after its last joint), turned by the fr
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -28,6 +28,7 @@ class Arm:
     robot: Robot
     flange: np.ndarray
     stretch: float  # the chain's joint-3 angle (rad) at which the arm is stretched (elbow neither up nor down)
+    wrist_miss: float  # how far (m) axes 4, 5 and 6 pass from one common point: 0 for a spherical wrist
     links: tuple
 
     def frames(self, q) -> list[np.ndarray]:
@@ -38,6 +39,18 @@ class Arm:
         for i, (joint, (pre, post)) in enumerate(zip(self.robot.chain, self.links[1:])):
             out.append(out[-1] @ pre @ joint_motion(joint.axis, joint.kind, v[:, i]) @ post)
         return out
+
+    def axes(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Every joint's axis at readings q (N, n): a point on it (N, m, 3), m, and its unit direction
+        (N, m, 3), in the world frame."""
+        v = joint_values(self.robot, np.atleast_2d(np.asarray(q, float)))
+        at, points, directions = np.broadcast_to(self.links[0], (len(v), 4, 4)), [], []
+        for i, (joint, (pre, post)) in enumerate(zip(self.robot.chain, self.links[1:])):
+            moving = at @ pre
+            points.append(moving[:, :3, 3])
+            directions.append(moving[:, :3, :3] @ np.asarray(joint.axis, float))
+            at = moving @ joint_motion(joint.axis, joint.kind, v[:, i]) @ post
+        return np.stack(points, axis=1), np.stack(directions, axis=1)
 
     def fk(self, q) -> np.ndarray:
         """Flange poses (N, 4, 4) at readings q (N, n)."""
@@ -82,7 +95,20 @@ def arm_of(robot: Robot, flange: np.ndarray) -> Arm:
     F = frames(robot, grid)
     reach = np.linalg.norm(F[5][:, :3, 3] - F[1][:, :3, 3], axis=1)
     links = (constant(robot.base),) + tuple((constant(j.pre), constant(j.post)) for j in robot.chain)
-    return Arm(robot, np.asarray(flange, float), float(joint_values(robot, grid)[np.argmax(reach), 2]), links)
+    arm = Arm(robot, np.asarray(flange, float), float(joint_values(robot, grid)[np.argmax(reach), 2]), 0.0, links)
+    return replace(arm, wrist_miss=_wrist_miss(arm))
+
+
+def _wrist_miss(arm: Arm) -> float:
+    """The largest distance (m) of axes 4, 5 and 6 from their nearest common point over a few postures
+    (axis 5 bent, so that 4 and 6 are not one line): the controllers' configuration flags single out one
+    posture per pose only when the wrist's axes meet, as on the arms they are defined for."""
+    q = np.radians([[0, 0, 0, 0, 40, 0], [30, -20, 15, 60, -70, 20], [-50, 25, -30, -120, 110, 90]])
+    points, directions = arm.axes(q)
+    p, d = points[:, 3:6], directions[:, 3:6]
+    across = np.eye(3) - d[..., :, None] * d[..., None, :]  # (N, 3, 3, 3): each axis's perpendicular projector
+    common = np.linalg.solve(across.sum(axis=1), np.einsum("nkij,nkj->ni", across, p)[..., None])[..., 0]
+    return float(np.max(np.linalg.norm(np.einsum("nkij,nkj->nki", across, common[:, None] - p), axis=-1)))
 
 
 def wrapped(angle: np.ndarray) -> np.ndarray:
