@@ -157,3 +157,14 @@ def test_no_background_build_into_a_cache_that_lasts_one_run(tmp_path, monkeypat
     robot = load_robot(ROBOTS / "industrial6r.yaml")
     with pytest.warns(UserWarning, match="cannot be written"):
         assert not build_in_background(robot, load_error_model(None, robot), "key")
+
+
+def test_numpy_compensation_uses_the_generated_c_s_constants():
+    """NONLINEAR_SHARE, NEAR_SINGULAR and STALL_STEPS are the values the C templates define."""
+    from gecgen.runtime import numeric
+
+    templates = ROOT / "gecgen" / "emit" / "c" / "templates"
+    header, source = (templates / "header.h.j2").read_text(), (templates / "source.c.j2").read_text()
+    assert f"#define GECGEN_NONLINEAR_SHARE {numeric.NONLINEAR_SHARE}\n" in header
+    assert f"#define GECGEN_NEAR_SINGULAR {numeric.NEAR_SINGULAR}\n" in header
+    assert f"#define STALL_STEPS {numeric.STALL_STEPS}\n" in source

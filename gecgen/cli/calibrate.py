@@ -119,7 +119,7 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, register_val,
                                                     assessment), build)
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in written.items()})
-    if cm.backend == "numpy":  # not built yet: the delivered model's C for the next command that compensates
+    if cm.c_pending:  # the delivered model's C, for the next command that compensates, beside any other build
         build_in_background(cm.robot, cm.model, cm.key, alongside=True)
     return result
 

@@ -335,12 +335,15 @@ class CompiledModel:
             if backend not in BACKENDS:
                 raise ModelError(f"{BACKEND_VARIABLE}={excerpt(backend)} is not a backend; set it to "
                                  f"{', '.join(BACKENDS)}, or unset it")
+        #: the C is not built and is left to a background build (`build_in_background`)
+        self.c_pending = False
         if backend == "auto":
             backend = "casadi" if not compiler() else "c" if _intact(library_path(robot, self.key)) else "numpy"
             if backend == "casadi":
                 warnings.warn("no C compiler found (set CC): using the CasADi form of the generated code, "
                               "which is slower", stacklevel=2)
             if backend == "numpy":
+                self.c_pending = True
                 build_in_background(robot, model, self.key)
         self.backend = backend
         if backend == "c":
