@@ -91,7 +91,9 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     # example command chosen on the calibration's own targets (the fit's model of pose data has the
     # measured frames' vertices as targets, which the emitted code does not)
     calib = cal.calibration_
-    cm = CompiledModel(calib.robot, calib.model)
+    # its C, when not built, is built after the files are written: a background build started now would
+    # hold the printed code's lock while it imports and prints, and the C source below would wait for it
+    cm = CompiledModel(calib.robot, calib.model, build=False)
     code, _ = export.c_files(calib, cm, str(out / "calibration.json"))
     for name, text in code.items():
         write_atomically(build / "generated" / name, text)

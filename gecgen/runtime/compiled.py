@@ -320,12 +320,14 @@ class CompiledModel:
     are (N, nt, 3); Jacobians (N, 3 nt, ne) and (N, 3 nt, nc).
 
     backend: "c" the compiled generated C (built first on a cache miss), "casadi" its CasADi form,
-    "numpy" the numpy evaluation (`runtime.numeric`; compensation loads the C, built first if it must
-    be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
-    numpy while a background process builds it when not, CasADi without a C compiler.
+    "numpy" the numpy evaluation (`runtime.numeric`; compensation too for up to NUMPY_COMMANDS
+    commands while the C is not built, else it loads the C, built first if it must be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
+    numpy while a background process builds it when not, CasADi without a C compiler. build False:
+    that background build is left to the caller (`c_pending` says it is wanted), e.g. until it has
+    printed the model's code itself rather than wait for a fresh process to print it.
     """
 
-    def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
+    def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto", build: bool = True):
         robot.require_placed()
         self.robot, self.model = robot, model
         self.key = model_key(robot, model)
@@ -344,7 +346,8 @@ class CompiledModel:
                               "which is slower", stacklevel=2)
             if backend == "numpy":
                 self.c_pending = True
-                build_in_background(robot, model, self.key)
+                if build:
+                    build_in_background(robot, model, self.key)
         self.backend = backend
         if backend == "c":
             self._lib = ctypes.CDLL(str(shared_library(robot, model, self.key)))
