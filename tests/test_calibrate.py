@@ -3,12 +3,15 @@
 Simulated industrial6r (robots/industrial6r.truth.yaml: gravity bending, gear eccentricity,
 compliance) with a payload measured by the wrench sensor: 0 or 150 kg on alternate poses."""
 import json
+import re
+import shutil
 
 import numpy as np
 import pytest
 from conftest import ROBOTS
 
 from gecgen.cli import main
+from gecgen.fit import calibration
 from gecgen.model import load_robot
 from gecgen.model.measurements import hold_out, read_measurements
 
@@ -184,3 +187,64 @@ def test_bad_options_are_refused_in_one_line(payload_data, capsys, args, message
     assert main(["calibrate", str(ROBOT), str(d / "train.csv"), *args, "-o", str(d / "bad"), "--json"]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def _same_numbers(a, b, path="result"):
+    """a and b alike: the same keys, lists and text, numbers equal to 1e-9 (mm in the figures)."""
+    assert type(a) is type(b) or {type(a), type(b)} <= {int, float}, path
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _same_numbers(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for k, (x, y) in enumerate(zip(a, b)):
+            _same_numbers(x, y, f"{path}[{k}]")
+    elif isinstance(a, float):
+        assert b == pytest.approx(a, rel=1e-9, abs=1e-9), path
+    else:
+        assert a == b, path
+
+
+def test_a_robot_never_compiled_is_calibrated_without_the_compiler_and_as_with_it(payload_data, capsys,
+                                                                                   monkeypatch, tmp_path):
+    """An empty code cache: calibrate fits, scores and compensates (the example program's command) in
+    numpy, never waiting for the C compiler, asks for the delivered model's C for the next run, and
+    writes what the compiled path writes: its generated code byte for byte, its numbers to 1e-9 mm."""
+    from gecgen.runtime import compiled
+
+    from gecgen.model.files import cache_dir
+
+    d = payload_data
+    args = ["calibrate", ROBOT, d / "val.csv", "--holdout", "0.25", "--models", "geometric"]
+    monkeypatch.setenv("GECGEN_BACKEND", "c")
+    with_c = run(capsys, *args, "-o", tmp_path / "c")
+    monkeypatch.delenv("GECGEN_BACKEND")
+    # a cache with the robot's printed code (its symbolic build is not what is tested) and no library
+    cold = tmp_path / "cache"
+    cold.mkdir()
+    for f in cache_dir().glob(f"{ROBOT.stem}-*.json*"):
+        shutil.copy(f, cold)
+    monkeypatch.setenv("GECGEN_CACHE", str(cold))
+
+    def compiler(*args):
+        raise AssertionError("calibrate waited for the C compiler")
+
+    asked = []
+    monkeypatch.setattr(compiled, "shared_library", compiler)
+    monkeypatch.setattr(compiled, "build_in_background", lambda robot, model, key, alongside=False: asked.append(key))
+    without = run(capsys, *args, "-o", tmp_path / "numpy")
+    calib = calibration.load(tmp_path / "numpy" / "calibration.json")
+    assert compiled.model_key(calib.robot, calib.model) in asked
+    text = json.dumps(without).replace(str(tmp_path / "numpy"), str(tmp_path / "c"))
+    _same_numbers(with_c, json.loads(text))
+    header = "industrial6r_calibration.h"
+    files = {f.name for f in (tmp_path / "c" / "generated").iterdir()}
+    assert files == {f.name for f in (tmp_path / "numpy" / "generated").iterdir()} and header in files
+    for name in files - {header}:  # the C, its header, the CasADi form, the example program: byte for byte
+        assert (tmp_path / "c" / "generated" / name).read_bytes() == (tmp_path / "numpy" / "generated" / name).read_bytes()
+    # the coefficients, printed to 17 digits, differ by rounding only: 1e-12 m (1e-9 mm) or 1e-12 rad
+    lines = [re.findall(r"^    (-?[\d.e-]+), /\* \d+ ", (tmp_path / k / "generated" / header).read_text(), re.M)
+             for k in ("c", "numpy")]
+    assert len(lines[0]) == len(lines[1]) == with_c["n_params"]
+    np.testing.assert_allclose(np.array(lines[1], float), np.array(lines[0], float), rtol=0, atol=1e-12)

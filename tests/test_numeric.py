@@ -9,7 +9,7 @@ import pytest
 from conftest import FRAME_LOADS, JOINT_LOADS, ROBOTS, ROOT, random_q, run_json
 
 from gecgen.model import ModelError, load_robot
-from gecgen.runtime.compiled import CompiledModel
+from gecgen.runtime.compiled import BOUNDED, OK, OUTSIDE_LIMITS, CompiledModel
 from gecgen.runtime.numeric import NumericModel
 from gecgen.symbolic.terms import error_model_from_dict, load_error_model
 
@@ -26,12 +26,17 @@ CASES = {  # robot -> its error model: the models other tests compile too, so th
 }
 
 
-@pytest.mark.parametrize("name", CASES)
-def test_numpy_evaluation_agrees_with_the_compiled_c(name, rng):
+def _case(name: str):
+    """The robot and error model of CASES[name]."""
     robot = load_robot(ROBOTS / f"{name}.yaml")
     spec = CASES[name]
-    model = error_model_from_dict(spec, robot, "<loads>") if isinstance(spec, dict) else \
+    return robot, error_model_from_dict(spec, robot, "<loads>") if isinstance(spec, dict) else \
         load_error_model(spec and ROBOTS / spec, robot)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_numpy_evaluation_agrees_with_the_compiled_c(name, rng):
+    robot, model = _case(name)
     c, numeric = CompiledModel(robot, model, "c"), NumericModel(robot, model)
     N = 5
     q, w = random_q(robot, rng, N), rng.normal(0, 30, (N, 6))
@@ -55,6 +60,39 @@ def test_numpy_evaluation_agrees_with_the_compiled_c(name, rng):
         np.testing.assert_allclose(got, want, rtol=0, atol=TOL)
     np.testing.assert_allclose(numeric.nominal_targets(q), c.nominal_targets(q), rtol=0, atol=TOL)
     assert np.abs(p - c.nominal_targets(q)).max() > 1e-4  # the errors move the targets
+
+
+def _same_compensation(c: CompiledModel, numeric: NumericModel, *args, **options) -> np.ndarray:
+    """The status codes of c.correct(*args, **options), asserted to be numeric's, and where the tool was
+    placed (OK, OUTSIDE_LIMITS), the same joints and residuals to 1e-12 (1e-9 mm)."""
+    want, got = c.correct(*args, **options), numeric.correct(*args, **options)
+    np.testing.assert_array_equal(got[1], want[1])
+    placed = np.isin(want[1], (OK, OUTSIDE_LIMITS))
+    for k in (0, 2):
+        np.testing.assert_allclose(got[k][placed], want[k][placed], rtol=0, atol=TOL)
+    return want[1]
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_numpy_compensation_is_the_compiled_c_s(name, rng):
+    """`NumericModel.correct` against the generated C's compensate_bounded_batch, on every branch of the
+    tree (arms of fewer than six joints: the whole pose, else the position), with loads held at the
+    command's and near singular postures (the damping ladder)."""
+    robot, model = _case(name)
+    c, numeric = CompiledModel(robot, model, "c"), NumericModel(robot, model)
+    N = 2  # a tree's arm runs the damping ladder twice (whole pose, then position): 0.3 s a command
+    q, w = random_q(robot, rng, N), rng.normal(0, 30, (N, 6))
+    aux = rng.normal(0, 20, (N, len(model.aux))) if model.aux else None
+    coef = rng.normal(0, 1e-4, c.dims.nc)
+    statuses = [_same_compensation(c, numeric, q, w, aux, coef, branch=b) for b in range(len(robot.tips()))]
+    assert np.isin(np.concatenate(statuses), (OK, OUTSIDE_LIMITS)).any()  # placed answers were compared
+
+
+def test_numpy_compensation_with_a_bound_is_the_compiled_c_s(rng):
+    robot, model = _case("industrial6r")
+    c, numeric = CompiledModel(robot, model, "c"), NumericModel(robot, model)
+    q, coef = random_q(robot, rng, 2), rng.normal(0, 2e-3, c.dims.nc)
+    assert BOUNDED in _same_compensation(c, numeric, q, None, None, coef, bound=1e-3)
 
 
 def test_numpy_jacobian_is_the_derivative_of_the_chain(rng):
@@ -119,3 +157,14 @@ def test_no_background_build_into_a_cache_that_lasts_one_run(tmp_path, monkeypat
     robot = load_robot(ROBOTS / "industrial6r.yaml")
     with pytest.warns(UserWarning, match="cannot be written"):
         assert not build_in_background(robot, load_error_model(None, robot), "key")
+
+
+def test_numpy_compensation_uses_the_generated_c_s_constants():
+    """NONLINEAR_SHARE, NEAR_SINGULAR and STALL_STEPS are the values the C templates define."""
+    from gecgen.runtime import numeric
+
+    templates = ROOT / "gecgen" / "emit" / "c" / "templates"
+    header, source = (templates / "header.h.j2").read_text(), (templates / "source.c.j2").read_text()
+    assert f"#define GECGEN_NONLINEAR_SHARE {numeric.NONLINEAR_SHARE}\n" in header
+    assert f"#define GECGEN_NEAR_SINGULAR {numeric.NEAR_SINGULAR}\n" in header
+    assert f"#define STALL_STEPS {numeric.STALL_STEPS}\n" in source

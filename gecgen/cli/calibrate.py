@@ -71,7 +71,7 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     from gecgen.model.files import write_atomically
     from gecgen.loop.diagnose import write_error_model
     from gecgen.deliver import export
-    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.compiled import CompiledModel, build_in_background
 
     names = model_names(tuple(n.strip() for n in args.models.split(",")), "--models")
     register_val = args.register == "val"
@@ -91,7 +91,10 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     # example command chosen on the calibration's own targets (the fit's model of pose data has the
     # measured frames' vertices as targets, which the emitted code does not)
     calib = cal.calibration_
-    code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
+    # its C, when not built, is built after the files are written: a background build started now would
+    # hold the printed code's lock while it imports and prints, and the C source below would wait for it
+    cm = CompiledModel(calib.robot, calib.model, build=False)
+    code, _ = export.c_files(calib, cm, str(out / "calibration.json"))
     for name, text in code.items():
         write_atomically(build / "generated" / name, text)
     result = {"robot": cal.robot_.name, "train_data": str(args.train), "output": str(out), **sel.counts,
@@ -118,6 +121,8 @@ def _calibrate(args, out: Path, build: Path, status, caught: list) -> dict:
     written = report.write(report.content.calibrate(result, choice, calib, sel.data, sel.val_data, register_val,
                                                     assessment), build)
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in written.items()})
+    if cm.c_pending:  # the delivered model's C, for the next command that compensates, beside any other build
+        build_in_background(cm.robot, cm.model, cm.key, alongside=True)
     return result
 
 

@@ -22,11 +22,12 @@ FUNCTIONS = {"sin": np.sin, "cos": np.cos, "sign": np.sign, "abs": np.abs, "sqrt
 OPERATORS = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
 
 
-def basis_values(robot: Robot, model: ErrorModel, q: np.ndarray, w: np.ndarray, aux: np.ndarray | None
-                 ) -> np.ndarray:
+def basis_values(robot: Robot, model: ErrorModel, q: np.ndarray, w: np.ndarray, aux: np.ndarray | None,
+                 signals: np.ndarray | None = None) -> np.ndarray:
     """The distinct basis terms f (N, nf) (`model.unique_terms()` order) at joints q (N, n) (m or
     rad), wrenches w (N, 6) (N, N m) and auxiliary signals aux (N, len(model.aux)) (None when the
-    model uses none)."""
+    model uses none). signals: the load signals `model.load_signals(robot)` (N, L) given instead of
+    computed from q and w (the generated basis_at_loads: compensation holds them at the command's)."""
     q = np.atleast_2d(np.asarray(q, float))
     N = len(q)
     values = {f"q{i + 1}": q[:, i] for i in range(robot.n)}
@@ -39,7 +40,7 @@ def basis_values(robot: Robot, model: ErrorModel, q: np.ndarray, w: np.ndarray, 
     # a load signal's name is a call (the catalog, whose rank tests take a while, only when one is used)
     used = model.load_signals(robot) if any("(" in v for v in model.variables()) else []
     if used:
-        values.update(zip(used, signal_values(robot, q, w, used).T))
+        values.update(zip(used, (signal_values(robot, q, w, used) if signals is None else np.asarray(signals, float)).T))
     where = model.source or "<error model>"
 
     def fail(text, why):

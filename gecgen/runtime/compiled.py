@@ -41,7 +41,7 @@ from gecgen.model.errors import ErrorModel
 from gecgen.model.loads import catalog, signal_values
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, excerpt
-from gecgen.runtime.numeric import NumericModel
+from gecgen.runtime.numeric import BOUNDED, NONFINITE, NOT_CONVERGED, OK, OUTSIDE_LIMITS, SINGULAR, NumericModel
 
 #: how every translation unit of the generated C is compiled
 COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-Wall", "-Wextra", "-Werror"]
@@ -52,8 +52,9 @@ CFLAGS = [*COMPILE_FLAGS, "-shared"]
 BACKEND_VARIABLE = "GECGEN_BACKEND"
 BACKENDS = ("auto", "c", "numpy", "casadi")
 
-#: status codes of `CompiledModel.compensate`: the generated C's GECGEN_ codes
-OK, NOT_CONVERGED, SINGULAR, OUTSIDE_LIMITS, NONFINITE, BOUNDED = range(6)
+#: how many commands at most `CompiledModel.correct` corrects in numpy when the model's C is not built
+#: yet (an example program's few: numpy takes milliseconds a command, the compiler seconds); more wait for the C
+NUMPY_COMMANDS = 64
 #: each code's name in files and messages (the generated header's GECGEN_ codes, in lower case)
 STATUS_NAMES = ("ok", "not_converged", "singular", "outside_limits", "nonfinite", "bounded")
 #: the codes whose tool is not placed within the tolerance (OUTSIDE_LIMITS is placed, but leaves the
@@ -272,17 +273,19 @@ def library_path(robot: Robot, key: str) -> Path:
     return cache_dir() / f"{robot.name}-{key}.so"
 
 
-#: the background build this process started last (`build_in_background`)
+#: the background build this process started last (`build_in_background`), and the keys of every one it started
 _background: list[subprocess.Popen] = []
+_started: set[str] = set()
 
 
-def build_in_background(robot: Robot, model: ErrorModel, key: str) -> bool:
+def build_in_background(robot: Robot, model: ErrorModel, key: str, alongside: bool = False) -> bool:
     """Start building the shared library of a robot and model in a detached process of this Python
     (`runtime.background`, at low priority; it outlives this one), unless this process's last one
     is still running (one at a time: the candidate models of diagnose and calibrate do not start a
-    compiler each) or the cache is this run's temporary folder (no next run would find the C). The
-    cache's locks keep it from colliding with any other build of the entry. Whether one was started."""
-    if not cache_kept() or _background and _background[-1].poll() is None:
+    compiler each; `alongside`: start it all the same, for the model a command delivers) or the cache
+    is this run's temporary folder (no next run would find the C). The cache's locks keep it from
+    colliding with any other build of the entry. Whether one was started."""
+    if not cache_kept() or key in _started or not alongside and _background and _background[-1].poll() is None:
         return False
     try:
         proc = subprocess.Popen([sys.executable, "-m", "gecgen.runtime.background"], stdin=subprocess.PIPE,
@@ -293,6 +296,7 @@ def build_in_background(robot: Robot, model: ErrorModel, key: str) -> bool:
     except OSError:  # no process to be had, or it ended at once: this run needs none, the next builds
         return False
     _background[:] = [proc]
+    _started.add(key)
     return True
 
 
@@ -316,12 +320,14 @@ class CompiledModel:
     are (N, nt, 3); Jacobians (N, 3 nt, ne) and (N, 3 nt, nc).
 
     backend: "c" the compiled generated C (built first on a cache miss), "casadi" its CasADi form,
-    "numpy" the numpy evaluation (`runtime.numeric`; compensation loads the C, built first if it must
-    be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
-    numpy while a background process builds it when not, CasADi without a C compiler.
+    "numpy" the numpy evaluation (`runtime.numeric`; compensation too for up to NUMPY_COMMANDS
+    commands while the C is not built, else it loads the C, built first if it must be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
+    numpy while a background process builds it when not, CasADi without a C compiler. build False:
+    that background build is left to the caller (`c_pending` says it is wanted), e.g. until it has
+    printed the model's code itself rather than wait for a fresh process to print it.
     """
 
-    def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto"):
+    def __init__(self, robot: Robot, model: ErrorModel, backend: str = "auto", build: bool = True):
         robot.require_placed()
         self.robot, self.model = robot, model
         self.key = model_key(robot, model)
@@ -331,13 +337,17 @@ class CompiledModel:
             if backend not in BACKENDS:
                 raise ModelError(f"{BACKEND_VARIABLE}={excerpt(backend)} is not a backend; set it to "
                                  f"{', '.join(BACKENDS)}, or unset it")
+        #: the C is not built and is left to a background build (`build_in_background`)
+        self.c_pending = False
         if backend == "auto":
             backend = "casadi" if not compiler() else "c" if _intact(library_path(robot, self.key)) else "numpy"
             if backend == "casadi":
                 warnings.warn("no C compiler found (set CC): using the CasADi form of the generated code, "
                               "which is slower", stacklevel=2)
             if backend == "numpy":
-                build_in_background(robot, model, self.key)
+                self.c_pending = True
+                if build:
+                    build_in_background(robot, model, self.key)
         self.backend = backend
         if backend == "c":
             self._lib = ctypes.CDLL(str(shared_library(robot, model, self.key)))
@@ -472,12 +482,16 @@ class CompiledModel:
         correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
         as 1 m; a branch with fewer than six joints of its own places its tool's whole pose where they can,
         otherwise its position alone, and the residual is then that position's error, `emit.task_rows`).
-        On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held. With the numpy backend the C is loaded here,
-        built first unless a background build has finished it (waiting for one under way)."""
+        On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held. With the numpy backend
+        up to NUMPY_COMMANDS commands are corrected in numpy (`NumericModel.correct`, the C's numbers to
+        rounding) while the C is not built; otherwise the C is loaded here, built first unless a
+        background build has finished it (waiting for one under way)."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
         c = np.ascontiguousarray(c, float)
         if self.backend == "casadi":
             raise RuntimeError("compensation runs in the generated C; install a C compiler (or set CC)")
+        if self._lib is None and N <= NUMPY_COMMANDS and not _intact(library_path(self.robot, self.key)):
+            return self._numeric.correct(q, w, aux, c, max_iter, tol, branch, bound)
         if self._lib is None:
             self._lib = ctypes.CDLL(str(shared_library(self.robot, self.model, self.key)))
         out, status, residual = np.empty_like(q), np.empty(N, dtype=np.intc), np.empty(N)
