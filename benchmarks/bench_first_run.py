@@ -40,8 +40,8 @@ def builds_running(cache: Path) -> bool:
 
 
 def run(args: list[str], cache: Path, backend: str | None = None) -> tuple[float, float, float]:
-    """(wall time, CPU time of the process and the children it waits for: the compiler's in the
-    foreground; wall time until its background builds ended), s."""
+    """(wall time, CPU time of the process and the children it waits for (a compiler it runs in the
+    foreground, under GECGEN_BACKEND=c); wall time until its background builds ended), s."""
     env = {k: v for k, v in os.environ.items() if k != "GECGEN_BACKEND"} | {"GECGEN_CACHE": str(cache)}
     if backend:
         env["GECGEN_BACKEND"] = backend
@@ -92,9 +92,9 @@ def main():
              "CPU time is not in the figures (\"C built after\": from the start of the run until that build "
              "ended). Cold, C first: GECGEN_BACKEND=c, the run waits for its C to be generated, printed and "
              "compiled. Warm: the first cold run's cache after one more run (calibrate compiles, one at a time, the "
-             "models of its candidates that its first run left in numpy). calibrate writes the C of the model it "
-             "chooses and compensates with it, so it prints and compiles that model in the foreground either way; "
-             "on two loaded cores the background build also competes with the run it serves, which shows in the "
+             "models of its candidates that its first run left in numpy). calibrate prints the C of the model it "
+             "chooses (its deliverable), checks its example command in numpy and leaves that model's compile to "
+             "the background too; on two loaded cores the background build also competes with the run it serves, which shows in the "
              "cold wall times. "
              "Best of 3 cold and 5 warm for identify, 2 each for calibrate. TIAGo: the files imported as "
              "docs/real-data-tiago.md does. Wall times depend on the machine's load; the CPU time (the process "

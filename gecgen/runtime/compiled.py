@@ -321,8 +321,9 @@ class CompiledModel:
 
     backend: "c" the compiled generated C (built first on a cache miss), "casadi" its CasADi form,
     "numpy" the numpy evaluation (`runtime.numeric`; compensation too for up to NUMPY_COMMANDS
-    commands while the C is not built, else it loads the C, built first if it must be), "auto" the value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache,
-    numpy while a background process builds it when not, CasADi without a C compiler. build False:
+    commands while the C is not built, else it loads the C, built first if it must be), "auto" the
+    value of `$GECGEN_BACKEND` when set, else the C when its library is in the cache, numpy while a
+    background process builds it when not, CasADi without a C compiler. build False:
     that background build is left to the caller (`c_pending` says it is wanted), e.g. until it has
     printed the model's code itself rather than wait for a fresh process to print it.
     """
@@ -482,8 +483,8 @@ class CompiledModel:
         correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
         as 1 m; a branch with fewer than six joints of its own places its tool's whole pose where they can,
         otherwise its position alone, and the residual is then that position's error, `emit.task_rows`).
-        On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held. With the numpy backend
-        up to NUMPY_COMMANDS commands are corrected in numpy (`NumericModel.correct`, the C's numbers to
+        On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held.
+        With the numpy backend up to NUMPY_COMMANDS commands are corrected in numpy (`NumericModel.correct`, the C's numbers to
         rounding) while the C is not built; otherwise the C is loaded here, built first unless a
         background build has finished it (waiting for one under way)."""
         q, w, aux, N = self._poses(q_cmd, w, aux)
