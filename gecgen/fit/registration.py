@@ -13,7 +13,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.validation import ModelError
 from gecgen.fit import robust
@@ -193,6 +192,10 @@ def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior
     lam, U = np.linalg.eigh(J.T @ J)
     with np.errstate(divide="ignore"):
         std = np.where(lam > 0, sigma / np.sqrt(np.maximum(lam, 0)), np.inf)
+    # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and most frames
+    # leave more than FITS_M and return above
+    from scipy.spatial.transform import Rotation
+
     rotvec = Rotation.from_matrix(R).as_rotvec()
     move = np.r_[L * rotvec, R @ pc + t - pc]  # the fitted frame against the world frame, workspace units
     along = U.T @ move
