@@ -175,3 +175,28 @@ def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeyp
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr
     assert (tmp_path / "q.csv").is_file()
+
+
+def test_an_error_model_of_load_functions_is_read_without_sympy(warm, tmp_path):
+    """A model whose terms are load signals (the gravity shorthand expanded, a product with a signal) is
+    read, its terms not cached yet, without sympy, into the terms the term parser reads."""
+    from gecgen.model import load_robot
+    from gecgen.symbolic.parse import parse_model
+    from gecgen.model.validation import read_yaml
+
+    model = tmp_path / "loads.errors.yaml"
+    model.write_text('default: ["1"]\nframes:\n  2: {er: ["1", "gravity(q2)", "wrench_torque(q2)"]}\n'
+                     '  3: ["1", "q3*wrench_torque(q3)", "wrench_load(2, mx)"]\n')
+    code = ("import json, sys\nfrom gecgen.model import load_robot\nfrom gecgen.symbolic.terms import load_error_model\n"
+            "m = load_error_model(sys.argv[1], load_robot(sys.argv[2]))\n"
+            "print(json.dumps([[[t.text, t.label, list(t.variables)] for t in ts] for ts in m.terms]))\n"
+            "print('sympy' in sys.modules)")
+    env = {**os.environ, "GECGEN_CACHE": str(tmp_path / "cache")}  # empty: the terms are read, not recalled
+    done = subprocess.run([sys.executable, "-c", code, str(model), str(warm / "arm3.yaml")], capture_output=True,
+                          text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    terms, loaded = done.stdout.strip().splitlines()
+    assert loaded == "False"
+    parsed, _ = parse_model(read_yaml(model, "error-model"), load_robot(warm / "arm3.yaml"), str(model))
+    assert json.loads(terms) == [[[t.text, t.label, list(t.variables)] for t in ts] for ts in parsed]
+    assert sum(t.text.startswith("gravity(q2,") for t in parsed[6 * 2 + 4]) >= 2  # the shorthand expanded

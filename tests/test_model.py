@@ -1,4 +1,6 @@
 """Robot and error-model files: contract values, pinned kinematics, and refusal of bad input."""
+import functools
+
 import numpy as np
 import pytest
 from conftest import ROBOTS
@@ -169,3 +171,48 @@ def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as
         theirs = None
     assert ours == theirs or ours is None, (ours, theirs)
     assert (ours is not None) == (items in SIMPLE_LISTS)
+
+
+#: term lists of load functions read without sympy, on industrial6r (no masses: wrench and regressor
+#: signals) and panda (URDF masses: gravity torques and frame loads)
+LOAD_LISTS = [("industrial6r", ["1", "gravity(q2)", "gravity(q3, 2)", "wrench_torque(q2)", " wrench_torque( q6 ) "]),
+              ("industrial6r", ["gravity(4, mx)", "wrench_load(4, fz)", "wrench_load(shoulder, mz)", "gravity(2, mx, 2)"]),
+              ("industrial6r", ["q2*wrench_torque(q2)", "fx*gravity(q3, 1)", "wrench_torque(q3)*q1**2*mz",
+                                "gravity(q2,10)*q1*gravity(q2,2)", "wrench_torque(q2)*wrench_torque(q3)"]),
+              ("panda", ["1", "gravity_torque(q2)", "gravity_torque(panda_joint6)", "gravity_torque(q4)*q4",
+                         "gravity_load(3, mx)", "gravity_load(q4, fz)*fx"])]
+
+
+@pytest.mark.parametrize("name, items", LOAD_LISTS + [
+    ("industrial6r", ["gravity_torque(q6)"]), ("industrial6r", ["gravity_load(3, mx)"]), ("industrial6r", ["gravity(shoulder)"]),
+    ("industrial6r", ["gravity(q2)*q2"]), ("industrial6r", ["sign(wrench_torque(q2))"]), ("industrial6r", ["wrench_torque(q2)**2"]),
+    ("industrial6r", ["wrench_torque(q2)*wrench_torque(q2)"]), ("industrial6r", ["wrench_torque(q7)"]),
+    ("industrial6r", ["gravity(q2, 99)"]), ("industrial6r", ["gravity(q2, 1)", "gravity(q2)"]), ("industrial6r", ["gravity(4, mx)", "gravity(4, mx, 1)"]),
+    ("industrial6r", ["wrench_torque(x=q2)"]), ("industrial6r", ["wrench_torque(fx)"]), ("industrial6r", ["wrench_load(4, q1)"]),
+    ("industrial6r", ["sin(wrench_torque(q2))"]), ("panda", ["gravity_torque(q2)", "gravity_torque(panda_joint2)"])])
+def test_load_functions_are_read_without_sympy_as_the_parser_reads_them(name, items):
+    """`simple_terms` reads load signals standing alone, the gravity shorthands (one term per column) and
+    products with signals as the term parser does (text, label, variables), or leaves the list to it."""
+    from gecgen.model.error_file import NeedsParser, simple_terms
+    from gecgen.model.errors import variable_names
+    from gecgen.symbolic.parse import terms_of
+
+    robot = _robot(name)
+    names = variable_names(robot, ())
+    if name == "industrial6r":
+        names["shoulder"] = names.pop(robot.joints[0].name)
+    try:
+        ours = simple_terms(items, "m", robot, names)
+    except NeedsParser:
+        ours = None
+    try:
+        theirs = terms_of(items, "m", robot, names)
+    except ModelError:
+        theirs = None
+    assert ours == theirs or ours is None, (ours, theirs)
+    assert (ours is not None) == ((name, items) in LOAD_LISTS)
+
+
+@functools.cache
+def _robot(name: str):
+    return load_robot(ROBOTS / f"{name}.yaml")
