@@ -154,13 +154,23 @@ def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as
     """`simple_terms` gives the parser's terms (text, label, variables) or leaves the list to it
     (NeedsParser), on a robot whose joints have names (aliases of q1..q6): products of variables in
     sympy's order of their names, sin and cos of one variable."""
+    ours, theirs = _read_both("industrial6r", items)
+    assert ours == theirs or ours is None, (ours, theirs)
+    assert (ours is not None) == (items in SIMPLE_LISTS)
+
+
+def _read_both(name: str, items: list):
+    """(`simple_terms`' terms or None when it leaves the list to the parser, the parser's terms or None
+    when it refuses the list) of items on robots/NAME.yaml; on industrial6r joint 1 is named
+    `shoulder`, a joint name that reads as one."""
     from gecgen.model.error_file import NeedsParser, simple_terms
     from gecgen.model.errors import variable_names
     from gecgen.symbolic.parse import terms_of
 
-    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    robot = _robot(name)
     names = variable_names(robot, ())
-    names["shoulder"] = names.pop(robot.joints[0].name)  # a joint name that reads as one
+    if name == "industrial6r":
+        names["shoulder"] = names.pop(robot.joints[0].name)
     try:
         ours = simple_terms(items, "m", robot, names)
     except NeedsParser:
@@ -169,8 +179,12 @@ def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as
         theirs = terms_of(items, "m", robot, names)
     except ModelError:
         theirs = None
-    assert ours == theirs or ours is None, (ours, theirs)
-    assert (ours is not None) == (items in SIMPLE_LISTS)
+    return ours, theirs
+
+
+@functools.cache
+def _robot(name: str):
+    return load_robot(ROBOTS / f"{name}.yaml")
 
 
 #: term lists of load functions read without sympy, on industrial6r (no masses: wrench and regressor
@@ -193,26 +207,6 @@ LOAD_LISTS = [("industrial6r", ["1", "gravity(q2)", "gravity(q3, 2)", "wrench_to
 def test_load_functions_are_read_without_sympy_as_the_parser_reads_them(name, items):
     """`simple_terms` reads load signals standing alone, the gravity shorthands (one term per column) and
     products with signals as the term parser does (text, label, variables), or leaves the list to it."""
-    from gecgen.model.error_file import NeedsParser, simple_terms
-    from gecgen.model.errors import variable_names
-    from gecgen.symbolic.parse import terms_of
-
-    robot = _robot(name)
-    names = variable_names(robot, ())
-    if name == "industrial6r":
-        names["shoulder"] = names.pop(robot.joints[0].name)
-    try:
-        ours = simple_terms(items, "m", robot, names)
-    except NeedsParser:
-        ours = None
-    try:
-        theirs = terms_of(items, "m", robot, names)
-    except ModelError:
-        theirs = None
+    ours, theirs = _read_both(name, items)
     assert ours == theirs or ours is None, (ours, theirs)
     assert (ours is not None) == ((name, items) in LOAD_LISTS)
-
-
-@functools.cache
-def _robot(name: str):
-    return load_robot(ROBOTS / f"{name}.yaml")
