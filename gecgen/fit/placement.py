@@ -38,7 +38,6 @@ from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit import robust
 from gecgen.fit.registration import FITS_M, HOLD_M, kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
@@ -112,10 +111,13 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     """The targets the data measures, placed on the tool (see the module docstring); every
     stationing of the data gets its own tracker frame. Raises ModelError when the poses do not
     turn the tool enough to place them."""
-    # here, not at the top: scipy.optimize and scipy's rotations cost two tenths of a second of
-    # start-up, and a command that reads a calibration imports this module for `with_targets` alone
+    # here, not at the top: scipy.optimize, scipy's rotations and fit.robust's scipy.special cost
+    # several tenths of a second of start-up, and a command that reads a calibration imports this
+    # module for `with_targets` alone
     from scipy.optimize import least_squares
     from scipy.spatial.transform import Rotation
+
+    from gecgen.fit import robust
 
     robust.check_loss(loss)
     tools = np.stack(tool_poses(robot, data.q))  # (branches, N, 4, 4)

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.validation import ModelError
-from gecgen.fit import robust
 
 #: beyond these the measurement frame counts as "far" and is registered before the fit
 FAR_ANGLE_RAD = np.radians(1.0)
@@ -99,6 +98,10 @@ ROBUST_PASSES = 20
 def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str, prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`kabsch` iterated with robust point weights (`fit.robust`) times the prior weights (N,)
     (default 1; the vertices of a measured frame have 1/4); plain weighted Kabsch for l2."""
+    # here, not at the top: fit.robust loads scipy.special (a quarter of a second of start-up), and a
+    # command that only reads a calibration's frames (compensate) registers nothing
+    from gecgen.fit import robust
+
     prior = np.ones(len(p)) if prior is None else prior
     R, t = kabsch(p, y, prior)
     if loss == "l2":
