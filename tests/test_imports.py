@@ -191,7 +191,8 @@ def test_an_error_model_of_load_functions_is_read_without_sympy(warm, tmp_path):
     model = tmp_path / "loads.errors.yaml"
     model.write_text('default: ["1"]\nframes:\n  2: {er: ["1", "gravity(q2)", "wrench_torque(q2)"]}\n'
                      '  3: ["1", "q3*wrench_torque(q3)", "wrench_load(2, mx)"]\n')
-    code = ("import json, sys\nfrom gecgen.model import load_robot\nfrom gecgen.symbolic.terms import load_error_model\n"
+    code = ("import json, sys\nfrom gecgen.model import load_robot\n"
+            "from gecgen.symbolic.terms import load_error_model\n"
             "m = load_error_model(sys.argv[1], load_robot(sys.argv[2]))\n"
             "print(json.dumps([[[t.text, t.label, list(t.variables)] for t in ts] for ts in m.terms]))\n"
             "print('sympy' in sys.modules)")
