@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from gecgen.fit import calibration as _calibration
-from gecgen.fit import significance
 from gecgen.fit.inputs import checked, error_model, measured_counts, on_points, placed
 from gecgen.model import ModelError, Robot
 from gecgen.model import load_robot as _load_robot
@@ -265,6 +264,9 @@ class Calibrator:
         Measurements. progress(iteration, rms_mm) is called after each Gauss-Newton step. Raises
         RuntimeError when the fit cannot be trusted (the Calibrator is left as it was). Returns
         self."""
+        # here, as the fit's other modules, not at the top: they load scipy, which compensating with a
+        # calibration does not need (start-up time)
+        from gecgen.fit import significance
         from gecgen.fit.identify import RANK_TOL_GRID, RIDGE_GRID, choose, identify
 
         loss, register = _choice(self.loss, "loss", LOSSES), _choice(self.register, "register", REGISTER)
@@ -513,6 +515,7 @@ def _ratio_loads(cm, fit, data) -> list[dict]:
 def _summary(cm, data, y, c, interval: bool = False) -> dict:
     """`fit.identify.summary` of data at coefficients c; with interval, the RMS's 95 %
     confidence interval by pose (mm) too."""
+    from gecgen.fit import significance
     from gecgen.fit.identify import fixture_measures, row_errors, summary
 
     position, rotation, _ = row_errors(cm, data, y, c)
@@ -663,6 +666,7 @@ def calibrate(robot, data, val=None, *, holdout: float | None = None, errors=Non
     per candidate, stage(text) with what it does once they are scored (the final fits, the
     significance test, the scoring of val). keep_insignificant, noise_mm, register (the training
     data's registration: "auto", "always" or "never"): as for Calibrator."""
+    from gecgen.fit import significance
     from gecgen.loop import NAMES
     from gecgen.loop.calibrate import choose
 

@@ -3,12 +3,15 @@ data, and fits, evaluates or compensates, without sympy, jinja2 or the emitter (
 second of every run; speed itself is measured in benchmarks/bench_startup.py)."""
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 #: runs each command line given (a JSON list of argument lists) in one process, exit code 0 or 1
 #: each, then prints the heavy modules the runs loaded
@@ -44,14 +47,32 @@ def _arm3(folder):
     return robot
 
 
-def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory):
+    """A folder with arm3.yaml, its data.csv and commands cmd.csv, and `cache`, a code cache holding
+    the default model's compiled code (the first run's work), shared by this module's tests."""
     from gecgen.runtime.compiled import CompiledModel
     from gecgen.symbolic.terms import load_error_model
 
-    robot = _arm3(tmp_path)
-    (tmp_path / "cmd.csv").write_text("q1,q2,q3\n0.1,0.2,0.3\n-0.4,0.5,0.6\n")
-    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
-    CompiledModel(robot, load_error_model(None, robot))  # the first run's work: the code of the default model
+    folder = tmp_path_factory.mktemp("warm")
+    robot = _arm3(folder)
+    (folder / "cmd.csv").write_text("q1,q2,q3\n0.1,0.2,0.3\n-0.4,0.5,0.6\n")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("GECGEN_CACHE", str(folder / "cache"))
+        CompiledModel(robot, load_error_model(None, robot))
+    return folder
+
+
+def _warmed(warm, tmp_path, monkeypatch):
+    """The robot, data and commands of `warm` copied into tmp_path (each test's outputs apart), and
+    its code cache in use."""
+    for name in ("arm3.yaml", "data.csv", "cmd.csv"):
+        shutil.copy(warm / name, tmp_path / name)
+    monkeypatch.setenv("GECGEN_CACHE", str(warm / "cache"))
+
+
+def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(warm, tmp_path, monkeypatch):
+    _warmed(warm, tmp_path, monkeypatch)
     # identify, and then on its calibration evaluate and compensate (which a three-joint arm cannot
     # do whole: it corrects what it can and exits 1)
     runs = [["identify", "arm3.yaml", "data.csv", "-o", "c.json", "--json"], ["evaluate", "c.json", "data.csv"],
@@ -63,12 +84,20 @@ def test_a_command_whose_code_is_cached_loads_no_sympy_jinja2_or_emitter(tmp_pat
     assert json.loads(done.stdout.splitlines()[0])["n_params"] > 0 and (tmp_path / "q.csv").is_file()
 
 
+#: the commands whose parser is built without numpy (the others' modules compute with it at the top)
+LIGHT = ("identify", "calibrate", "diagnose", "evaluate", "compensate", "check", "accuracy", "filter")
+
+
 def test_building_any_commands_parser_loads_no_sympy():
     """The parser is built for the command run only (`build_parser(argv)`), and building it, for any
-    command, loads no computer algebra and no emitter: `gecgen X --help` answers at once."""
-    code = ("import sys\nfrom gecgen.cli import COMMANDS, build_parser\nfor name in COMMANDS:\n"
+    command, loads no computer algebra, no emitter and neither scipy.optimize nor scipy's rotations,
+    and for those in LIGHT not even numpy: `gecgen X --help` answers at once."""
+    code = ("import sys\nfrom gecgen.cli import COMMANDS, build_parser\n"
+            f"for name in sorted(COMMANDS, key=lambda c: c not in {LIGHT!r}):\n"
             "    assert len(build_parser([name])._subparsers._group_actions[0].choices[name]._actions) > 2\n"
-            "print(sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules))")
+            f"    assert name not in {LIGHT!r} or 'numpy' not in sys.modules, name\n"
+            "print(sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit', 'scipy.optimize', 'scipy.spatial') "
+            "if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
 
@@ -116,15 +145,10 @@ def test_a_new_robot_is_fitted_in_numpy_while_its_c_is_built_in_the_background(t
     assert abs(first["train"]["rms_mm"] - second["train"]["rms_mm"]) < 1e-9
 
 
-def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(tmp_path, monkeypatch):
+def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(warm, tmp_path, monkeypatch):
     """`export --c` (what calibrate writes into its folder) renders the printed code the cache kept and
     the calibration's header and example: jinja2 and the emitter, but no computer algebra."""
-    from gecgen.runtime.compiled import CompiledModel
-    from gecgen.symbolic.terms import load_error_model
-
-    robot = _arm3(tmp_path)
-    monkeypatch.setenv("GECGEN_CACHE", str(tmp_path / "cache"))
-    CompiledModel(robot, load_error_model(None, robot))
+    _warmed(warm, tmp_path, monkeypatch)
     runs = [["identify", "arm3.yaml", "data.csv", "-o", "c.json"], ["export", "c.json", "--c", "gen"]]
     code = WRAPPER.replace("('sympy', 'jinja2', 'gecgen.emit')", "('sympy',)")
     done = subprocess.run([sys.executable, "-c", code, json.dumps(runs)], capture_output=True, text=True,
@@ -132,3 +156,52 @@ def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(tm
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr
     assert (tmp_path / "gen" / "arm3_calibration.h").is_file() and (tmp_path / "gen" / "arm3.c").is_file()
+
+
+def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeypatch):
+    """Compensating with a calibration (warm cache) loads no scipy at all, and scoring one neither
+    scipy.optimize nor scipy's rotations (only a placement's least squares and a fit that holds a weak
+    direction use them): each is a tenth of a second or more of every start-up."""
+    from gecgen.api import Calibrator
+
+    _warmed(warm, tmp_path, monkeypatch)
+    with warnings.catch_warnings():  # the coefficients 40 poses leave undetermined are said, not tested, here
+        warnings.simplefilter("ignore")
+        Calibrator().fit(tmp_path / "arm3.yaml", tmp_path / "data.csv").save(tmp_path / "c.json")
+    code = ("import sys\nfrom gecgen.cli import main\n"
+            "assert main(['compensate', 'c.json', 'cmd.csv', '-o', 'q.csv']) in (0, 1)\n"
+            "print('loaded', sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'sympy')))\n"
+            "assert main(['evaluate', 'c.json', 'data.csv']) == 0\n"
+            "print('loaded', sorted(m for m in ('scipy.optimize', 'scipy.spatial', 'sympy') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=os.environ,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert [line for line in done.stdout.splitlines() if line.startswith("loaded")] == ["loaded []"] * 2, \
+        done.stdout + done.stderr
+    assert (tmp_path / "q.csv").is_file()
+
+
+def test_an_error_model_of_load_functions_is_read_without_sympy(warm, tmp_path):
+    """A model whose terms are load signals (the gravity shorthand expanded, a product with a signal) is
+    read, its terms not cached yet, without sympy, into the terms the term parser reads."""
+    from gecgen.model import load_robot
+    from gecgen.symbolic.parse import parse_model
+    from gecgen.model.validation import read_yaml
+
+    model = tmp_path / "loads.errors.yaml"
+    model.write_text('default: ["1"]\nframes:\n  2: {er: ["1", "gravity(q2)", "wrench_torque(q2)"]}\n'
+                     '  3: ["1", "q3*wrench_torque(q3)", "wrench_load(2, mx)"]\n')
+    code = ("import json, sys\nfrom gecgen.model import load_robot\n"
+            "from gecgen.symbolic.terms import load_error_model\n"
+            "m = load_error_model(sys.argv[1], load_robot(sys.argv[2]))\n"
+            "print(json.dumps([[[t.text, t.label, list(t.variables)] for t in ts] for ts in m.terms]))\n"
+            "print('sympy' in sys.modules)")
+    env = {**os.environ, "GECGEN_CACHE": str(tmp_path / "cache")}  # empty: the terms are read, not recalled
+    done = subprocess.run([sys.executable, "-c", code, str(model), str(warm / "arm3.yaml")], capture_output=True,
+                          text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    terms, loaded = done.stdout.strip().splitlines()
+    assert loaded == "False"
+    parsed, _ = parse_model(read_yaml(model, "error-model"), load_robot(warm / "arm3.yaml"), str(model))
+    assert json.loads(terms) == [[[t.text, t.label, list(t.variables)] for t in ts] for ts in parsed]
+    assert sum(t.text.startswith("gravity(q2,") for t in parsed[6 * 2 + 4]) >= 2  # the shorthand expanded

@@ -1,4 +1,6 @@
 """Robot and error-model files: contract values, pinned kinematics, and refusal of bad input."""
+import functools
+
 import numpy as np
 import pytest
 from conftest import ROBOTS
@@ -152,13 +154,23 @@ def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as
     """`simple_terms` gives the parser's terms (text, label, variables) or leaves the list to it
     (NeedsParser), on a robot whose joints have names (aliases of q1..q6): products of variables in
     sympy's order of their names, sin and cos of one variable."""
+    ours, theirs = _read_both("industrial6r", items)
+    assert ours == theirs or ours is None, (ours, theirs)
+    assert (ours is not None) == (items in SIMPLE_LISTS)
+
+
+def _read_both(name: str, items: list):
+    """(`simple_terms`' terms or None when it leaves the list to the parser, the parser's terms or None
+    when it refuses the list) of items on robots/NAME.yaml; on industrial6r joint 1 is named
+    `shoulder`, a joint name that reads as one."""
     from gecgen.model.error_file import NeedsParser, simple_terms
     from gecgen.model.errors import variable_names
     from gecgen.symbolic.parse import terms_of
 
-    robot = load_robot(ROBOTS / "industrial6r.yaml")
+    robot = _robot(name)
     names = variable_names(robot, ())
-    names["shoulder"] = names.pop(robot.joints[0].name)  # a joint name that reads as one
+    if name == "industrial6r":
+        names["shoulder"] = names.pop(robot.joints[0].name)
     try:
         ours = simple_terms(items, "m", robot, names)
     except NeedsParser:
@@ -167,5 +179,38 @@ def test_constants_variables_powers_products_and_sines_are_read_without_sympy_as
         theirs = terms_of(items, "m", robot, names)
     except ModelError:
         theirs = None
+    return ours, theirs
+
+
+@functools.cache
+def _robot(name: str):
+    return load_robot(ROBOTS / f"{name}.yaml")
+
+
+#: term lists of load functions read without sympy, on industrial6r (no masses: wrench and regressor
+#: signals) and panda (URDF masses: gravity torques and frame loads)
+LOAD_LISTS = [("industrial6r", ["1", "gravity(q2)", "gravity(q3, 2)", "wrench_torque(q2)", " wrench_torque( q6 ) "]),
+              ("industrial6r", ["gravity(4, mx)", "wrench_load(4, fz)", "wrench_load(shoulder, mz)",
+                                "gravity(2, mx, 2)"]),
+              ("industrial6r", ["q2*wrench_torque(q2)", "fx*gravity(q3, 1)", "wrench_torque(q3)*q1**2*mz",
+                                "gravity(q2,10)*q1*gravity(q2,2)", "wrench_torque(q2)*wrench_torque(q3)"]),
+              ("panda", ["1", "gravity_torque(q2)", "gravity_torque(panda_joint6)", "gravity_torque(q4)*q4",
+                         "gravity_load(3, mx)", "gravity_load(q4, fz)*fx"])]
+
+
+#: lists the parser refuses or that only it reads (a function of a signal, a signal twice, a power of one)
+LOAD_REFUSED = [["gravity_torque(q6)"], ["gravity_load(3, mx)"], ["gravity(shoulder)"], ["gravity(q2)*q2"],
+                ["sign(wrench_torque(q2))"], ["wrench_torque(q2)**2"], ["wrench_torque(q2)*wrench_torque(q2)"],
+                ["wrench_torque(q7)"], ["gravity(q2, 99)"], ["gravity(q2, 1)", "gravity(q2)"],
+                ["gravity(4, mx)", "gravity(4, mx, 1)"], ["wrench_torque(x=q2)"], ["wrench_torque(fx)"],
+                ["wrench_load(4, q1)"], ["sin(wrench_torque(q2))"]]
+
+
+@pytest.mark.parametrize("name, items", LOAD_LISTS + [("industrial6r", items) for items in LOAD_REFUSED]
+                         + [("panda", ["gravity_torque(q2)", "gravity_torque(panda_joint2)"])])
+def test_load_functions_are_read_without_sympy_as_the_parser_reads_them(name, items):
+    """`simple_terms` reads load signals standing alone, the gravity shorthands (one term per column) and
+    products with signals as the term parser does (text, label, variables), or leaves the list to it."""
+    ours, theirs = _read_both(name, items)
     assert ours == theirs or ours is None, (ours, theirs)
-    assert (ours is not None) == (items in SIMPLE_LISTS)
+    assert (ours is not None) == ((name, items) in LOAD_LISTS)

@@ -7,8 +7,6 @@ import sys
 import warnings
 from contextlib import contextmanager
 
-from gecgen.model import load_robot
-
 
 #: the positionals most commands share
 ROBOT_HELP = "robot file (robots/NAME.yaml: DH rows or a URDF, targets; docs/reference.md, \"Files\")"
@@ -20,6 +18,8 @@ CALIBRATION_HELP = "calibration JSON written by gecgen identify or calibrate"
 def robot_and_model(robot_path: str, errors: str | None, aux_columns: tuple[str, ...] = ()):
     """The robot, and its error model: --errors, else robots/NAME.errors.yaml beside the robot file."""
     from gecgen.fit.inputs import error_model
+    # here, not at the top: the robot file's reader loads numpy, which a command's --help does not need
+    from gecgen.model import load_robot
 
     robot = load_robot(robot_path)
     return robot, error_model(errors, robot, aux_columns)
@@ -104,7 +104,7 @@ def numbers(low: float = -math.inf):
 def add_orientation_length(p, calibration_first: bool = False):
     """The option that weighs measured orientations against positions (docs/reference.md, "Pose measurements");
     `calibration_first`: unset, it is the length the calibration was fitted with."""
-    from gecgen.model.pose_targets import LENGTH_M
+    from gecgen.model.robot import LENGTH_M
 
     default = f"the calibration's, else {LENGTH_M:g}" if calibration_first else f"{LENGTH_M:g}"
     p.add_argument("--orientation-length", type=number(0, above=True), metavar="L",

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from gecgen.cli.common import number, numbers
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
@@ -306,6 +304,9 @@ def add_simulate_options(p):
 
 def simulated(args, robot, truth, rng) -> dict:
     """The pixel files of `gecgen simulate --cameras` and its JSON result."""
+    # numpy here, not at the top: identify's, diagnose's and calibrate's --help build their options
+    # from this module and need no numerical library (start-up time)
+    import numpy as np
     import yaml
 
     from gecgen.model.cameras import read_board, read_cameras

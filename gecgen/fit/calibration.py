@@ -15,6 +15,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,9 +26,11 @@ from gecgen.symbolic.terms import error_model_from_dict
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.robot_file import load_robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit.identify import Fit
 from gecgen.fit.placement import with_targets
 from gecgen.fit.registration import Registration
+
+if TYPE_CHECKING:  # an annotation only: the fit's module loads scipy, which reading a calibration does not need
+    from gecgen.fit.identify import Fit
 
 
 def model_hash(robot: Robot, model: ErrorModel) -> str:

@@ -33,14 +33,11 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit import robust
 from gecgen.fit.registration import FITS_M, HOLD_M, kabsch
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
@@ -114,6 +111,14 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     """The targets the data measures, placed on the tool (see the module docstring); every
     stationing of the data gets its own tracker frame. Raises ModelError when the poses do not
     turn the tool enough to place them."""
+    # here, not at the top: scipy.optimize, scipy's rotations and fit.robust's scipy.special cost
+    # several tenths of a second of start-up, and a command that reads a calibration imports this
+    # module for `with_targets` alone
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    from gecgen.fit import robust
+
     robust.check_loss(loss)
     tools = np.stack(tool_poses(robot, data.q))  # (branches, N, 4, 4)
     T = tools[[robot.branch_of(n) for n in robot.target_names]][data.target, data.pose]  # each row's tool
@@ -205,6 +210,8 @@ def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> di
     rotation): X_k is the rotation nearest to sum R_i^T R_s^T R (SVD), as a rotation vector (rad)."""
     if data.orientation is None:
         return {}
+    from scipy.spatial.transform import Rotation  # here: only pose data needs it (start-up time)
+
     out = {}
     oriented = ~np.isnan(data.orientation[:, 0, 0])
     Rs = np.stack(rotations)[sidx]

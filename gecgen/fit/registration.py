@@ -13,10 +13,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.validation import ModelError
-from gecgen.fit import robust
 
 #: beyond these the measurement frame counts as "far" and is registered before the fit
 FAR_ANGLE_RAD = np.radians(1.0)
@@ -100,6 +98,10 @@ ROBUST_PASSES = 20
 def robust_kabsch(p: np.ndarray, y: np.ndarray, loss: str, prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`kabsch` iterated with robust point weights (`fit.robust`) times the prior weights (N,)
     (default 1; the vertices of a measured frame have 1/4); plain weighted Kabsch for l2."""
+    # here, not at the top: fit.robust loads scipy.special (a quarter of a second of start-up), and a
+    # command that only reads a calibration's frames (compensate) registers nothing
+    from gecgen.fit import robust
+
     prior = np.ones(len(p)) if prior is None else prior
     R, t = kabsch(p, y, prior)
     if loss == "l2":
@@ -193,6 +195,10 @@ def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior
     lam, U = np.linalg.eigh(J.T @ J)
     with np.errstate(divide="ignore"):
         std = np.where(lam > 0, sigma / np.sqrt(np.maximum(lam, 0)), np.inf)
+    # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and most frames
+    # leave more than FITS_M and return above
+    from scipy.spatial.transform import Rotation
+
     rotvec = Rotation.from_matrix(R).as_rotvec()
     move = np.r_[L * rotvec, R @ pc + t - pc]  # the fitted frame against the world frame, workspace units
     along = U.T @ move

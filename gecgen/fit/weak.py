@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.kinematics import tool_poses
 
@@ -176,6 +175,10 @@ def hold(cm, data, kept, R: np.ndarray, scale: np.ndarray, dof: float, noise: fl
 def tool_turn(robot, q: np.ndarray) -> float:
     """The largest angle (rad) between the nominal tool orientation at a pose of q (P, n) and
     its mean over them (on a tree: over every branch's tool, the largest)."""
+    # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and only a fit
+    # that holds weak directions says why
+    from scipy.spatial.transform import Rotation
+
     out = 0.0
     for T in tool_poses(robot, q):
         rot = Rotation.from_matrix(T[:, :3, :3])

@@ -3,9 +3,10 @@
 Its keys, frame numbers, error names and aux columns are checked here, the coupling ratios added, and
 each list of terms handed to a reader: `symbolic.parse.terms_of` reads the term language (it needs
 sympy: a term's identity is sympy's canonical text); `simple_terms` reads constants, variables and
-their whole powers (the shipped default models), products of those, and the sine and cosine of one
-variable without it, writing sympy's canonical text itself, so a first run with such a model loads
-no computer algebra.
+their whole powers (the shipped default models), products of those, the sine and cosine of one
+variable, and the load functions (`model.loads`: a load signal standing as a term, or as a factor
+of a product) without it, writing sympy's canonical text itself, so a first run with such a model
+loads no computer algebra.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import re
 from collections.abc import Callable
 
 from gecgen.model.errors import MAX_EXPONENT, MAX_TERM_LENGTH, Term, is_aux_name, variable_names
+from gecgen.model.loads import LOAD_FUNCTIONS, LoadTerms
 from gecgen.model.robot import ERROR_NAMES, Robot
 from gecgen.model.validation import excerpt, is_name, require, require_keys
 
@@ -37,24 +39,28 @@ TRIGONOMETRIC = ("sin", "cos")
 
 def simple_terms(items: list, where: str, robot: Robot, names: dict) -> tuple[Term, ...]:
     """The terms of a list of constants "1" (or 1), variables and their whole powers 2..MAX_EXPONENT,
-    products of different such variables ("q2*q3**2", "fx*q2"), and sin or cos of one variable, as
-    the term parser reads them (`symbolic.parse.terms_of`: text, label and variables; sympy's text
-    puts a product's factors in the order of their variables' names); any other list, and one the
-    parser would refuse, raises NeedsParser."""
+    load signals ("gravity_torque(q6)", "gravity(q2)" expanding into its columns), products of
+    different such variables and signals ("q2*q3**2", "fx*q2", "q2*wrench_torque(q2)"), and sin or
+    cos of one variable, as the term parser reads them (`symbolic.parse.terms_of`: text, label and
+    variables; sympy's text puts a product's factors in the order of their variables' names, a
+    signal's name its canonical spelling); any other list, and one the parser would refuse, raises
+    NeedsParser."""
+    loads = LoadTerms(robot, names)
     out: dict[str, Term] = {}
     for item in items:
         if type(item) is int and item == 1 or item == "1":
-            term = Term("1", "1", ())
+            terms = [Term("1", "1", ())]
         elif type(item) is not str or len(item) > MAX_TERM_LENGTH:
             raise NeedsParser(where)
         elif found := SIMPLE.fullmatch(item):
             variable, power = _factor(found.group(1), found.group(2), names, where)
-            term = Term(variable + (f"**{power}" if power > 1 else ""), item.strip(), (variable,))
+            terms = [Term(variable + (f"**{power}" if power > 1 else ""), item.strip(), (variable,))]
         else:
-            term = _product_or_trigonometric(item, names, where)
-        if term.text in out:
-            raise NeedsParser(where)  # the parser says which term repeats
-        out[term.text] = term
+            terms = _composite(item, names, loads, where)
+        for term in terms:
+            if term.text in out:
+                raise NeedsParser(where)  # the parser says which term repeats
+            out[term.text] = term
     return tuple(out.values())
 
 
@@ -67,13 +73,36 @@ def _factor(name: str, power: str | None, names: dict, where: str) -> tuple[str,
     return names[name], int(power) if power else 1
 
 
-def _product_or_trigonometric(item: str, names: dict, where: str) -> Term:
-    """The term of a product of different variables, each to a whole power, or of sin or cos of one
-    variable (`simple_terms`); NeedsParser for anything else."""
+def _refused(where: str):
+    """The load functions' `fail(text, why)`: the parser says why (`simple_terms`)."""
+    def fail(text, why):
+        raise NeedsParser(where)
+    return fail
+
+
+def _composite(item: str, names: dict, loads: LoadTerms, where: str) -> list[Term]:
+    """The terms of a load signal, of the gravity shorthands (one per column, labelled as the parser
+    labels them), of a product of different variables and signals, each to a whole power, or of sin
+    or cos of one variable (`simple_terms`); NeedsParser for anything else."""
     try:
         tree = ast.parse(item.strip(), mode="eval").body
     except (SyntaxError, ValueError):
         raise NeedsParser(where) from None
+    if loads.is_shorthand(tree):
+        return [Term(name, label, (name,)) for name, label in loads.expand(item, tree, _refused(where))]
+    return [_product_or_trigonometric(item, tree, names, loads, where)]
+
+
+def _load_call(node) -> bool:
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in LOAD_FUNCTIONS
+
+
+def _product_or_trigonometric(item: str, tree, names: dict, loads: LoadTerms, where: str) -> Term:
+    """The term of `tree`, the parsed item: a load signal, a product of different variables and
+    signals, each to a whole power, or sin or cos of one variable; NeedsParser for anything else."""
+    if _load_call(tree):
+        name = loads.name(item, tree, _refused(where))
+        return Term(name, item.strip(), (name,))
     if isinstance(tree, ast.Call) and isinstance(tree.func, ast.Name) and tree.func.id in TRIGONOMETRIC \
             and len(tree.args) == 1 and not tree.keywords and isinstance(tree.args[0], ast.Name):
         variable, _ = _factor(tree.args[0].id, None, names, where)
@@ -85,6 +114,8 @@ def _product_or_trigonometric(item: str, names: dict, where: str) -> Term:
             stack += [node.right, node.left]
         elif isinstance(node, ast.Name):
             factors.append(_factor(node.id, None, names, where))
+        elif _load_call(node) and not loads.is_shorthand(node):
+            factors.append((loads.name(item, node, _refused(where)), 1))
         elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow) and isinstance(node.left, ast.Name) \
                 and isinstance(node.right, ast.Constant) and type(node.right.value) is int:
             factors.append(_factor(node.left.id, str(node.right.value), names, where))

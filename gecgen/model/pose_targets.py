@@ -28,13 +28,9 @@ from dataclasses import replace
 import numpy as np
 
 from gecgen.model.measurements import Measurements
-from gecgen.model.robot import Robot
+from gecgen.model.robot import LENGTH_M, Robot
 from gecgen.model.rows import VERTICES, Vertices, vertex_radius
 from gecgen.model.validation import require
-
-#: the default length scale L (m): an orientation error of 1 mrad counts as 0.1 mm of position, about
-#: the ratio of a laser tracker's position noise to a 6-D probe's orientation noise
-LENGTH_M = 0.1
 
 
 def with_pose_targets(robot: Robot, length_m: float = LENGTH_M) -> Robot:

@@ -42,6 +42,10 @@ ERROR_NAMES = ("ex", "ey", "ez", "es", "er", "ep")
 #: the wrench component that acts on each generalized error of a frame, in ERROR_NAMES order: a
 #: translation with the force along it, a rotation with the moment about its axis (es turns about y)
 MATCHING = ("fx", "fy", "fz", "my", "mz", "mx")
+#: the default length scale L (m) of pose measurements (`Robot.pose_length`, `model.pose_targets`): an
+#: orientation error of 1 mrad counts as 0.1 mm of position, about the ratio of a laser tracker's
+#: position noise to a 6-D probe's orientation noise
+LENGTH_M = 0.1
 #: standard gravity, m/s^2, in the robot file's world frame unless the file's `gravity` says otherwise
 GRAVITY = (0, 0, -9.80665)
 #: the controllers a robot file may name (`controller`), by the programs `gecgen filter` corrects:

@@ -16,7 +16,6 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
 from xml.parsers import expat
-from xml.sax.saxutils import quoteattr
 from pathlib import Path
 from typing import NamedTuple
 
@@ -423,6 +422,10 @@ def folded_copy(path: str | Path, base_link: str, tip_links: list[str], errors: 
     origins change, byte for byte, and the tool links are added; `note` becomes a comment after the
     root's start tag. Returns (text, the tip link of each branch, {point name: its link}, the names
     of the joints added or changed)."""
+    # here, not at the top: xml.sax.saxutils imports urllib.request (and http, email, ssl), 30 ms of
+    # start-up for every command that reads a robot file; only writing a URDF needs it
+    from xml.sax.saxutils import quoteattr
+
     where = str(path)
     text = read_text(Path(path), "URDF file")
     links, above = _tree(_parse(path), where)

@@ -34,7 +34,6 @@ from gecgen.model.kinematics import tool_poses
 from gecgen.model.pixels import Pixels
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit.camera import design_rows
 from gecgen.plan.design import CRITERIA, MAX_PASSES, N_VALIDATION, RIDGE, _Basis, _finite, choose, predicted_std, \
     reported_history, scores
 from gecgen.runtime.threads import one_blas_thread
@@ -240,6 +239,10 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     """Choose n_poses of the candidate joints q (K, n) (all in view: `in_view`) for the pixel fit of
     `model`, by `criterion` (the tracker design's, `design.CRITERIA`). The random comparison and the
     validation poses are drawn (seeded) from the same candidates."""
+    # here, not at the top: the pixel fit's module loads scipy's rotations, which the tracker design
+    # and every `design --help` (they read this module's defaults) do not need (start-up time)
+    from gecgen.fit.camera import design_rows
+
     require(criterion in CRITERIA, f"--criterion {criterion}: expected one of {', '.join(CRITERIA)}")
     crit = CRITERIA[criterion]
     K = len(q)

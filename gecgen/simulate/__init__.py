@@ -11,7 +11,6 @@ at every measured target, with the truth's orientation noise.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gecgen.model.kinematics import sensor_wrench, target_positions, tool_pose, tool_poses
 from gecgen.model.measurements import Measurements
@@ -42,6 +41,10 @@ def simulate(robot: Robot, truth: Truth, design: Design, rng: np.random.Generato
     pose = np.repeat(np.arange(N), len(targets))
     measured = None
     if orientation:
+        # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and only pose
+        # data needs them (`design` imports this package for its candidates)
+        from scipy.spatial.transform import Rotation
+
         tools = np.stack(tool_poses(robot, q_true, eps))  # (branches, N, 4, 4): each row's target's tool
         R = tools[[robot.branch_of(names[t]) for t in np.tile(targets, N)], pose, :3, :3]
         measured = Rotation.from_rotvec(rng.normal(0.0, truth.orientation, (len(pose), 3))).as_matrix() @ R

@@ -1,7 +1,8 @@
 """Error-model files read into `model.errors.ErrorModel`s, through the cache.
 
 Reading a model's terms needs sympy (`symbolic.parse`: a term's identity is sympy's canonical text),
-except those of constants, variables and their whole powers (`model.error_file.simple_terms`); a
+except those of constants, variables, their powers and products, sin and cos of one variable and the
+load signals (`model.error_file.simple_terms`); a
 model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
 the content of the mapping, the robot and the parser), so a command whose code is compiled loads no
 sympy at all: this module imports the parser only on a miss.
@@ -58,8 +59,8 @@ def error_model_from_dict(spec, robot: Robot, where: str, aux_columns: tuple[str
 
 
 def _parsed(spec, robot: Robot, where: str, aux_columns: tuple[str, ...] = ()):
-    """(terms per error, aux) of a model mapping: of constants, variables and their whole powers without
-    sympy, any other with it."""
+    """(terms per error, aux) of a model mapping: of the terms `simple_terms` reads without sympy, any
+    other with it."""
     try:
         return read_model(spec, robot, where, aux_columns, simple_terms)
     except NeedsParser:
