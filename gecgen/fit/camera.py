@@ -1080,3 +1080,46 @@ def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.n
     n = A.shape[1]
     full = clustered_covariance(A, b, np.repeat(problem.data.pose, 2), problem.data.n_poses) / np.outer(scale, scale)
     return full if with_poses else full[n - len(cols):, n - len(cols):]
+
+
+def pose_uncertainty(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+                     fit: PixelFit) -> dict:
+    """How well the images fix the cameras' poses, 1 sigma, from the covariance of the fit taken image by image
+    (`image_covariance`: the points of one image share its pose's misfit, and taking them for independent
+    understates the spread): a camera on the tool, its pose in the tool frame (the camera-to-flange
+    transform); fixed cameras, each after the first, its pose in the first camera's frame (their poses against
+    the robot's base carry what the images leave of the base's errors). Per camera: `relative_to`, the
+    translation's and rotation's RMS length (`translation_mm`, `rotation_mrad`: the square root of the
+    covariance's trace, what the distance and angle off the truth are expected to be) and per axis of that
+    frame (`axes_mm`, `axes_mrad`), linearised at the fit (central differences in the poses)."""
+    problem = _Problem(CompiledModel(frame_robot(robot), model), robot, data, cameras, board, fit.cameras is not None)
+    cov = image_covariance(problem, fit.g, fit.c, np.array(fit.kept, int), fit.loss, with_poses=True)
+    cov = cov[:len(fit.g), :len(fit.g)]
+    names = list(data.cameras)
+
+    def placed(g: np.ndarray, k: int) -> np.ndarray:
+        """Camera k's orientation (3, 3) and centre (3,) in its reference: the tool frame or the first camera's."""
+        (R, t), (R1, t1) = (problem.unpack(g)[0][i] for i in (k, 0))
+        if problem.tool:
+            return np.column_stack([R.T, -R.T @ t])
+        return np.column_stack([R1 @ R.T, t1 - R1 @ R.T @ t])
+
+    out = {}
+    for k in range(len(names)) if problem.tool else range(1, len(names)):
+        P0 = placed(fit.g, k)
+        J = np.zeros((6, len(fit.g)))
+        for j in range(len(fit.g)):
+            step = np.zeros(len(fit.g))
+            step[j] = STEP
+            dP = (placed(fit.g + step, k) - placed(fit.g - step, k)) / (2 * STEP)
+            # the turn in the reference frame (dR R^T is skew) and the centre's move
+            W = dP[:, :3] @ P0[:, :3].T
+            J[:3, j] = [W[2, 1], W[0, 2], W[1, 0]]
+            J[3:, j] = dP[:, 3]
+        spread = J @ cov @ J.T
+        axes = np.sqrt(np.abs(np.diag(spread)))
+        out[names[k]] = {"relative_to": "tool" if problem.tool else names[0],
+                         "translation_mm": 1e3 * float(np.sqrt(abs(np.trace(spread[3:, 3:])))),
+                         "rotation_mrad": 1e3 * float(np.sqrt(abs(np.trace(spread[:3, :3])))),
+                         "axes_mm": (1e3 * axes[3:]).tolist(), "axes_mrad": (1e3 * axes[:3]).tolist()}
+    return {"covariance": "image by image", "cameras": out}
