@@ -69,8 +69,9 @@ HOME = "0,-1.5708,-1.5708,0,1.0472,0"  # rad: the poses of scripts/reproduce_cam
 @dataclass(frozen=True)
 class SetUp:
     """Where the board is and how the poses spread: the board's inner corners (columns, rows) and square
-    (m; markers 3/4 of it), its distance in front of the camera at HOME (m) and the joints' span about
-    HOME (deg, one per joint)."""
+    (m; markers 3/4 of it), its distance in front of the camera at HOME (m; simulate --distance: the poses
+    that keep every corner in view then set the distances the images see) and the joints' span about HOME
+    (deg, one per joint)."""
 
     columns: int
     rows: int
@@ -89,11 +90,12 @@ class SetUp:
 
 #: --setup: the first is the sections' above; the others a closer, a larger board, wider views
 SETUPS = {
-    "a3-far": SetUp(9, 6, 0.04, 0.7, (8, 6, 6, 25, 20, 30), "A3 board (10 x 7 squares of 40 mm) 0.7 m away"),
-    "a3-near": SetUp(9, 6, 0.04, 0.45, (8, 6, 6, 25, 20, 30), "the same A3 board 0.45 m away"),
-    "a2": SetUp(13, 9, 0.04, 0.55, (8, 6, 6, 25, 20, 30), "A2 board (14 x 10 squares of 40 mm) 0.55 m away"),
+    "a3-far": SetUp(9, 6, 0.04, 0.7, (8, 6, 6, 25, 20, 30), "A3 board (10 x 7 squares of 40 mm) 0.7 m in front of the camera at home"),
+    "a3-near": SetUp(9, 6, 0.04, 0.45, (8, 6, 6, 25, 20, 30), "the same A3 board 0.45 m in front of it"),
+    "a2": SetUp(13, 9, 0.04, 0.55, (8, 6, 6, 25, 20, 30), "A2 board (14 x 10 squares of 40 mm) 0.55 m in front of it"),
     "a2-wide": SetUp(13, 9, 0.04, 0.55, (5, 4, 4, 30, 25, 40),
-                     "the A2 board 0.55 m away, the wrist turning further (the camera tilted more about the board)"),
+                     "the A2 board 0.55 m in front of it, the wrist turning further and the arm less (the camera "
+                     "tilted more about the board)"),
 }
 DEFAULT = "a3-far"
 BOARD = SETUPS[DEFAULT].board()
