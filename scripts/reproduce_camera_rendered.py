@@ -786,7 +786,8 @@ def reading(rows: list) -> list[str]:
         "(RMS over the held-out poses) on every seed, so what is beyond that comes from the corners' noise, not from "
         "the rendering, the detection's bias or the model. At the larger noise, with fewer corners, 40 images of one "
         "board 0.7 m away do not fix the camera to 0.2 mm; the simulated chessboard corners at 0.3 px above miss "
-        "alike. \"Eye-in-hand from rendered ChArUco images: how many images\" below measures how many images do.",
+        "alike. \"Eye-in-hand from rendered ChArUco images: how many images\" below measures how many images do, and "
+        "\"Eye-in-hand from rendered ChArUco images: the set-up\" a closer or larger board.",
         "- *direct* is off by about 1 mm by design, as above: the truth's last-frame errors sit between the flange "
         "and the camera."]
 
