@@ -90,7 +90,8 @@ class SetUp:
 
 #: --setup: the first is the sections' above; the others a closer, a larger board, wider views
 SETUPS = {
-    "a3-far": SetUp(9, 6, 0.04, 0.7, (8, 6, 6, 25, 20, 30), "A3 board (10 x 7 squares of 40 mm) 0.7 m in front of the camera at home"),
+    "a3-far": SetUp(9, 6, 0.04, 0.7, (8, 6, 6, 25, 20, 30), "A3 board (10 x 7 squares of 40 mm) 0.7 m in front of the camera at home (the sections' above, "
+                   "measured there)"),
     "a3-near": SetUp(9, 6, 0.04, 0.45, (8, 6, 6, 25, 20, 30), "the same A3 board 0.45 m in front of it"),
     "a2": SetUp(13, 9, 0.04, 0.55, (8, 6, 6, 25, 20, 30), "A2 board (14 x 10 squares of 40 mm) 0.55 m in front of it"),
     "a2-wide": SetUp(13, 9, 0.04, 0.55, (5, 4, 4, 30, 25, 40),
@@ -531,7 +532,10 @@ def setups_reading(groups: dict) -> list[str]:
             f"`{s}` blur {QUALITIES[q][0]:g} px {n} images {pooled[(s, q, n), 'mm']:.2f} and "
             f"{pooled[(s, q, n), 'mrad']:.2f}" for s, q, n in groups) + ". A single seed's error is one draw of "
         "a 3-D error, so a seed's ratio scatters (0.34 to 1.61 for an isotropic 3-D normal error, 90 % of draws); the "
-        "truth's also holds what the model's misfit leaves (*without corner noise*).",
+        "truth's also holds what the model's misfit leaves (*without corner noise*). The covariance taken image by "
+        "image is scaled by the images' number over that less the unknowns' (poses and kept coefficients), which "
+        "weighs most with few images: where fewer images give a pooled ratio well under 1, the statement is "
+        "cautious there.",
     ]
 
 IMAGES_HEADING = "## Eye-in-hand from rendered ChArUco images: how many images"
