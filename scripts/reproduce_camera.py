@@ -170,7 +170,10 @@ def oracle_poses(rig) -> np.ndarray:
     return np.array([*rotvec_t(*rig.poses["cam"]), *rotvec_t(*rig.board_pose)])
 
 
-def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, significance: bool = True) -> dict:
+def world_rig(robot, truth, seed: int, noise: float, plate: float = 0.3):
+    """The eye-to-hand set-up of the tables: two fixed cameras, four markers `plate` m apart on the tool;
+    (the robot with them, the cameras, the true rig, 60 training and 60 held-out joint readings, the
+    training pixels with `noise` px per coordinate)."""
     from dataclasses import replace
 
     rng = np.random.default_rng(seed)
@@ -182,7 +185,11 @@ def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, sign
     rig, q = eye_to_hand(robot, truth, cams, eyes, np.array([2.0, 0.0, 1.0]), q0,
                          np.radians([12, 10, 10, 60, 40, 90]), 120, rng)
     train, held = q[:60], q[60:]
-    data = simulate_pixels(robot, truth, rig, train, noise, rng)
+    return robot, cams, rig, train, held, simulate_pixels(robot, truth, rig, train, noise, rng)
+
+
+def world(robot, truth, model, seed: int, noise: float, plate: float = 0.3, significance: bool = True) -> dict:
+    robot, cams, rig, train, held, data = world_rig(robot, truth, seed, noise, plate)
     fixed = np.array([v for c in cams for v in rotvec_t(*rig.poses[c.name])])
     out = {}
     for name, given in (("fit", None), ("oracle", fixed)):

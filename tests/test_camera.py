@@ -15,7 +15,9 @@ from gecgen.symbolic.terms import load_error_model
 from gecgen.model.cameras import Board, Camera, read_board, read_cameras
 from gecgen.model.pixels import read_pixels, write_pixels
 from gecgen.model.validation import ModelError, read_yaml
-from gecgen.fit.camera import CAMERA_POSE, SCALE, _Problem, _smaller_images, fit_pixels, fitted_tools, frame_robot
+from gecgen.cli.human import print_human
+from gecgen.fit.camera import (CAMERA_POSE, SCALE, _Problem, _smaller_images, fit_pixels, fitted_tools,
+                               frame_robot, pose_uncertainty)
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_in_hand, eye_to_hand, simulate_pixels, true_tools
@@ -210,6 +212,19 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
     assert out["train"]["rms_px"] == pytest.approx(fit.train["rms_px"], rel=1e-9)
     assert any(e["detail"].startswith(CAMERA_POSE) for e in out["eliminated"])
     assert out["held"] == [h.to_dict() for h in fit.held]
+    # the camera on the tool's own uncertainty, recorded and printed in one line
+    again = pose_uncertainty(robot, model, read_pixels(tmp_path / "pixels.csv", robot, rig.cameras, rig.board),
+                             rig.cameras, rig.board, fit)["cameras"]["cam"]
+    said = out["camera_uncertainty"]["cameras"]["cam"]
+    assert said["relative_to"] == "tool" and all(said[k] == pytest.approx(again[k], rel=1e-6) for k in
+                                                 ("translation_mm", "rotation_mrad", "axes_mm", "axes_mrad"))
+    assert json.loads((tmp_path / "cal.json").read_text())["camera_uncertainty"] == out["camera_uncertainty"]
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        print_human(out)
+    stated = out["camera_uncertainty"]["cameras"]["cam"]
+    assert (f"camera poses, 1 sigma (image by image): cam in the tool frame {stated['translation_mm']:.3g} mm, "
+            f"{stated['rotation_mrad']:.3g} mrad\n") in printed.getvalue()
     # the residual in mm at the board: px times the depth over the focal length (here nearly one depth)
     train = out["train"]
     assert train["rms_mm_at_target"] == pytest.approx(train["rms_px"] * 1e3 * train["distance_m"] / cam.fx, rel=0.1)
@@ -438,6 +453,53 @@ def test_the_stated_scale_uncertainty_is_the_covariance_carried_through_a_simila
         U, S, Vt = np.linalg.svd(y.T @ (p - p.mean(axis=0)))
         scales.append(S.sum() / np.sum(y ** 2))
     assert np.std(scales) * 1e6 == pytest.approx(fit.scale["std_ppm"], rel=0.15)
+
+
+@pytest.mark.parametrize("mount", ["tool", "world"])
+def test_the_stated_camera_pose_uncertainty_is_the_error_against_the_truth_over_fits_of_fresh_noise(arm, mount):
+    """What identify states of the camera on the tool (its pose in the fitted tool frame, the mean over the
+    training poses, as the calibration carries it) and of a second fixed camera (its pose in the first's),
+    against the truth's, over fits of the same poses with fresh corner noise."""
+    robot, truth, model = arm
+    if mount == "tool":
+        rig, q, _, _ = hand_rig(arm, n=40)
+        board = rig.board
+    else:
+        robot, rig, q, _ = world_rig(arm, n=50)
+        board = None
+    exact = simulate_pixels(robot, truth, rig, q, 0.0, np.random.default_rng(0))
+    R, t = rig.poses["cam" if mount == "tool" else "cam1"]
+    if mount == "world":  # the second camera in the first's frame
+        R2, t2 = rig.poses["cam2"]
+        R_true, p_true = R @ R2.T, t - R @ R2.T @ t2
+    rng = np.random.default_rng(5)
+    off, stated = [], []
+    for _ in range(6):
+        drawn = replace(exact, uv=exact.uv + rng.normal(0, 0.2, exact.uv.shape))
+        fit = fit_pixels(robot, model, drawn, rig.cameras, board)
+        if mount == "tool":  # the true camera, in the fitted board's world, seen from the fitted tool frame
+            (Rb, tb), (Rbf, tbf) = rig.board_pose, fit.board
+            W = Rbf @ Rb.T
+            T = true_tools(robot, truth, drawn.q)
+            Tf = fitted_tools(robot, model, fit.c, drawn.q)
+            Rc = np.swapaxes(Tf[:, :3, :3], 1, 2) @ W @ T[:, :3, :3] @ R.T
+            pc = np.einsum("nji,nj->ni", Tf[:, :3, :3], (T[:, :3, :3] @ (-R.T @ t) + T[:, :3, 3] - tb) @ W.T + tbf
+                           - Tf[:, :3, 3])
+            Rf, pf = fit.tool_camera()
+            turn = Rotation.from_matrix(Rc @ Rf.T).as_rotvec().mean(axis=0)
+            off.append([1e3 * np.linalg.norm(pc.mean(axis=0) - pf), 1e3 * np.linalg.norm(turn)])
+        else:
+            (R1, t1), (R2, t2) = fit.poses["cam1"], fit.poses["cam2"]
+            off.append([1e3 * np.linalg.norm(t1 - R1 @ R2.T @ t2 - p_true),
+                        1e3 * Rotation.from_matrix(R1 @ R2.T @ R_true.T).magnitude()])
+        said = pose_uncertainty(robot, model, drawn, rig.cameras, board, fit)["cameras"]
+        assert list(said) == (["cam"] if mount == "tool" else ["cam2"])
+        stated.append([next(iter(said.values()))[k] for k in ("translation_mm", "rotation_mrad")])
+    # RMS over the fits: six draws of a 3-D error and a sandwich covariance of 40 or 50 images agree to a
+    # factor 1.6 (the sandwich's own spread at this many images); a convention error (the translation of
+    # X_cam = R X + t for the camera's centre, a frame's turn) is off by far more
+    ratio = np.sqrt(np.mean(np.square(off), axis=0) / np.mean(np.square(stated), axis=0))
+    assert np.all((ratio > 1 / 1.6) & (ratio < 1.6)), ratio
 
 
 def test_simulate_writes_pixels_identify_fits_and_refuses_what_it_cannot_place(arm, tmp_path):

@@ -3,6 +3,7 @@ traced from pixels, and the held-out images are then as well explained as by a f
 what the pixel path does not take is refused in one line."""
 import contextlib
 import io
+import json
 import re
 from pathlib import Path
 
@@ -90,6 +91,11 @@ def test_calibrate_with_cameras_chooses_the_diagnosed_model_and_delivers_it(rig,
     assert any(e["error"] == "2.er" for e in out["effects"])
     assert out["val"]["rms_mm_at_target"] < 1.2 * floor["rms_mm_at_target"] < out["val_before"]["rms_mm_at_target"]
     assert all(Path(f).exists() for f in out["files"].values())
+    # the second camera's pose against the first's, 1 sigma, as the calibration records it
+    stated = out["camera_uncertainty"]
+    assert list(stated["cameras"]) == ["cam2"] and stated["cameras"]["cam2"]["relative_to"] == "cam1"
+    assert 0 < stated["cameras"]["cam2"]["translation_mm"] < 10 and 0 < stated["cameras"]["cam2"]["rotation_mrad"] < 10
+    assert json.loads(Path(out["files"]["calibration"]).read_text())["camera_uncertainty"] == stated
     text = Path(out["files"]["report"]).read_text()
     assert "# gecgen calibrate: industrial6r from image points" in text and "Chosen: `diagnosed`." in text
     scored = run_json("evaluate", out["files"]["calibration"], d / "val.csv", "--cameras", d / "cams.yaml")

@@ -62,6 +62,11 @@ def print_human(result: dict):
             print(f"next step: {value['next_step']}")
         elif key == "table":
             print_error_table(value)
+        elif key == "camera_uncertainty":
+            print("camera poses, 1 sigma (" + value["covariance"] + "): " + ("; ".join(
+                f"{name} in the {'tool frame' if v['relative_to'] == 'tool' else v['relative_to'] + ' frame'} "
+                f"{v['translation_mm']:.3g} mm, {v['rotation_mrad']:.3g} mrad" for name, v in value["cameras"].items())
+                or "one fixed camera: nothing to place it against"))
         elif key == "fixtures" and value and "poses" in value[0]:
             print(f"fixtures: {len(value)} (configurations chosen, of the candidates that reach it)")
             for f in value:

@@ -31,7 +31,7 @@ def identified(args) -> dict:
     from gecgen.model.cameras import read_board, read_cameras
     from gecgen.model.pixels import read_pixels
     from gecgen.fit.calibration import save
-    from gecgen.fit.camera import calibration_of, fit_pixels, refuse_untrustworthy
+    from gecgen.fit.camera import calibration_of, fit_pixels, pose_uncertainty, refuse_untrustworthy
 
     cameras_given(args)
     for option in ("ridge", "rank_tol", "noise_mm"):
@@ -52,12 +52,13 @@ def identified(args) -> dict:
                          intrinsics=args.refine_intrinsics, significance=not args.keep_insignificant)
     refuse_untrustworthy(fit, str(args.data))
     calibration = calibration_of(robot, model, fit, cameras, board)
+    calibration.report["camera_uncertainty"] = pose_uncertainty(robot, model, data, cameras, board, fit)
     out = args.output or f"{robot.name}.calib.json"
     save(calibration, out)
     result = {"robot": robot.name, "data": str(args.data), "calibration": str(out), "measurement": "pixels",
             **{k: calibration.report[k] for k in ("n_params", "n_identifiable", "eliminated", "before", "train",
                                                   "sigma_px", "outliers", "converged", "iterations", "cameras",
-                                                  "held", "scale")},
+                                                  "held", "scale", "camera_uncertainty")},
             **({"board": calibration.report["board"]} if board is not None else {}),
             **({"intrinsics": calibration.report["intrinsics"]} if args.refine_intrinsics else {}),
             "warnings": warning_lines(caught),
@@ -190,7 +191,7 @@ def calibrated(args, out, build, status) -> dict:
     from gecgen.cli.human import warning_lines
     from gecgen.deliver import export
     from gecgen.fit.calibration import save
-    from gecgen.fit.camera import calibration_of, frame_robot, refuse_untrustworthy, summary_at
+    from gecgen.fit.camera import calibration_of, frame_robot, pose_uncertainty, refuse_untrustworthy, summary_at
     from gecgen.fit.inputs import error_model
     from gecgen.loop.calibrate import choose
     from gecgen.loop.diagnose import write_error_model
@@ -223,7 +224,9 @@ def calibrated(args, out, build, status) -> dict:
     refuse_untrustworthy(choice.fit, str(args.train))
     say(status, f"writing the calibration, its code and the report into {out}")
     calib = calibration_of(robot, choice.model, choice.fit, cameras, board)
-    calib.report.update({"model": choice.chosen.name, "candidates": choice.table})
+    calib.report.update({"model": choice.chosen.name, "candidates": choice.table,
+                         "camera_uncertainty": pose_uncertainty(robot, choice.model, data, cameras, board,
+                                                                choice.fit)})
     scored = {}
     if val is not None:
         cm = CompiledModel(frame_robot(robot), choice.model)
@@ -247,6 +250,7 @@ def calibrated(args, out, build, status) -> dict:
               "n_params": len(choice.model.coefficients), "n_identifiable": len(fit.kept), "before": fit.before,
               "train": fit.train, "outliers": [o.to_dict() for o in fit.outliers], "held": calib.report["held"],
               "effects": [e.to_dict() for e in effects], "cameras": calib.report["cameras"],
+              "camera_uncertainty": calib.report["camera_uncertainty"],
               **({"board": calib.report["board"]} if board is not None else {}),
               **({"intrinsics": calib.report["intrinsics"]} if args.refine_intrinsics else {}), **scored}
     files = {"calibration": out / "calibration.json", "errors": out / "errors.yaml", "generated": out / "generated",

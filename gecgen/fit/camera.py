@@ -1080,3 +1080,60 @@ def image_covariance(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.n
     n = A.shape[1]
     full = clustered_covariance(A, b, np.repeat(problem.data.pose, 2), problem.data.n_poses) / np.outer(scale, scale)
     return full if with_poses else full[n - len(cols):, n - len(cols):]
+
+
+def pose_uncertainty(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None,
+                     fit: PixelFit) -> dict:
+    """How well the images fix the cameras' poses, 1 sigma, from the covariance of the fit taken image by image
+    (`image_covariance`: the points of one image share its pose's misfit, and taking them for independent
+    understates the spread), linearised at the fit (central differences). A camera on the tool: its pose in the
+    tool frame as the calibration carries it, the mean over the training poses of where the calibrated model
+    and the fitted board put the camera, seen from the fitted tool frame (the camera's own pose unknowns trade
+    with the coefficients of the frames before it, which move the tool frame alike; what a user of the
+    camera-to-flange transform gets is the two together). Fixed cameras: each after the first, its pose in the
+    first camera's frame (their poses against the robot's base carry what the images leave of the base's
+    errors). Per camera: `relative_to` (`tool` or the first camera), the translation's and rotation's RMS
+    length (`translation_mm`, `rotation_mrad`: the root of the covariance's trace, the distance and angle the
+    pose is expected to be off by) and per axis of that frame (`axes_mm`, `axes_mrad`)."""
+    problem = _Problem(CompiledModel(frame_robot(robot), model), robot, data, cameras, board, fit.cameras is not None)
+    cols = np.array(fit.kept, int)
+    cov = image_covariance(problem, fit.g, fit.c, cols, fit.loss, with_poses=True)
+    names = list(data.cameras)
+    o0, R0, _ = problem.frames(fit.c)
+
+    def placed(g: np.ndarray, c: np.ndarray, k: int) -> np.ndarray:
+        """Camera k's orientation (P, 3, 3) and centre (P, 3, 1), per training pose, in its reference frame."""
+        (R, t), (R1, t1) = (problem.unpack(g)[0][i] for i in (k, 0))
+        if not problem.tool:
+            return np.concatenate([R1 @ R.T, (t1 - R1 @ R.T @ t)[:, None]], axis=1)[None]
+        o, Rt, _ = problem.frames(c)
+        (Rb, tb), (Rb0, tb0) = problem.unpack(g)[1], problem.unpack(fit.g)[1]
+        # the camera in the world of g's board, then in the fit's world and the fit's tool frame, pose by pose
+        Rw = Rb0 @ Rb.T @ Rt[:, 0] @ R.T
+        pw = (Rt[:, 0] @ (-R.T @ t) + o[:, 0] - tb) @ Rb @ Rb0.T + tb0
+        into = np.swapaxes(R0[:, 0], 1, 2)
+        return np.concatenate([into @ Rw, (into @ (pw - o0[:, 0])[..., None])], axis=2)
+
+    # the unknowns that move a camera: the poses (and the board's), and on a camera on the tool the coefficients
+    moving = list(range(6 * len(names) + 6)) if problem.tool else list(range(6 * len(names)))
+    out = {}
+    for k in range(len(names)) if problem.tool else range(1, len(names)):
+        P0 = placed(fit.g, fit.c, k)
+        J = np.zeros((6, len(cov)))
+        for j in [*moving, *(range(len(fit.g), len(cov)) if problem.tool else ())]:
+            dg, dc = np.zeros(len(fit.g)), np.zeros(len(fit.c))
+            if j < len(fit.g):
+                dg[j] = STEP
+            else:
+                dc[cols[j - len(fit.g)]] = STEP
+            dP = (placed(fit.g + dg, fit.c + dc, k) - placed(fit.g - dg, fit.c - dc, k)) / (2 * STEP)
+            W = np.mean(dP[..., :3] @ np.swapaxes(P0[..., :3], 1, 2), axis=0)  # skew: the turn in that frame
+            J[:3, j] = [W[2, 1], W[0, 2], W[1, 0]]
+            J[3:, j] = np.mean(dP[..., 3], axis=0)
+        spread = J @ cov @ J.T
+        axes = np.sqrt(np.abs(np.diag(spread)))
+        out[names[k]] = {"relative_to": "tool" if problem.tool else names[0],
+                         "translation_mm": 1e3 * float(np.sqrt(abs(np.trace(spread[3:, 3:])))),
+                         "rotation_mrad": 1e3 * float(np.sqrt(abs(np.trace(spread[:3, :3])))),
+                         "axes_mm": (1e3 * axes[3:]).tolist(), "axes_mrad": (1e3 * axes[:3]).tolist()}
+    return {"covariance": "image by image", "cameras": out}
