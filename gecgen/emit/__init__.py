@@ -76,7 +76,7 @@ def context(robot: Robot, model: ErrorModel) -> dict:
     return dict(model_hash=robot_model_hash(robot, model)[:C_HASH_DIGITS],
                 mimics=any(j.coupling for j in robot.chain) or bool(robot.branches),
                 frame_names=frame_names(robot), branch_suffixes=branch_suffixes(robot),
-                task_rows=dict(zip(branch_suffixes(robot), task_rows(robot))),
+                task_rows={suffix: robot.task_rows(k) for k, suffix in enumerate(branch_suffixes(robot))},
                 nl=len(used), loads=[(s.name, loads.describe(s, robot)) for s in used],
                 gravity=[repr(float(v)) for v in robot.gravity],
                 name=robot.name, NAME=robot.name.upper(), version=__version__, sources=sources,
@@ -90,14 +90,6 @@ def context(robot: Robot, model: ErrorModel) -> dict:
 def branch_suffixes(robot: Robot) -> list[str]:
     """The name suffix of each branch's fk, tool_jacobian and compensate: none on a serial chain."""
     return [f"_{b.name}" for b in robot.branches] or [""]
-
-
-def task_rows(robot: Robot) -> list[int]:
-    """Per branch (one on a chain), the rows of the tool's pose compensation settles for: 6, its position and
-    orientation, when at least six joints of its own move it; 3 when fewer do, whose compensation places
-    the whole pose where those joints can and otherwise the position alone (a five-joint arm cannot turn
-    its tool to every orientation, and held to it, its correction would never converge)."""
-    return [6 if len(robot.moved_joints(k)) >= 6 else 3 for k in range(len(robot.tips()))]
 
 
 def frame_names(robot: Robot) -> list[str]:

@@ -186,14 +186,26 @@ class Robot:
         k = [b.name for b in self.branches].index(branch)
         return [t for t in self.target_names if self.branch_of(t) == k]
 
+    def own_frames(self, branch: int) -> set[int]:
+        """The frames on branch `branch`'s (index) path that no other branch's path shares (0, the base,
+        only on a chain): the joints of these place its tool alone."""
+        tips = [tip for tip, _ in self.tips()]
+        shared = {f for k, tip in enumerate(tips) if k != branch for f in self.path(tip)}
+        return set(self.path(tips[branch])) - shared
+
     def moved_joints(self, branch: int) -> list[str]:
         """The names of the joints whose readings compensation moves to place branch `branch`'s (index)
         tool: those that turn a frame on its path alone (symbolic.chain.tool_jacobian_function)."""
-        tips = [tip for tip, _ in self.tips()]
-        shared = {f for k, tip in enumerate(tips) if k != branch for f in self.path(tip)}
         drives = self.drives()
-        readings = {k for i in set(self.path(tips[branch])) - shared - {0} for k, _ in drives[i - 1][0]}
+        readings = {k for i in self.own_frames(branch) - {0} for k, _ in drives[i - 1][0]}
         return [self.joint_names[k] for k in sorted(readings)]
+
+    def task_rows(self, branch: int) -> int:
+        """The rows of branch `branch`'s tool pose compensation settles for: 6, its position and
+        orientation, when at least six joints of its own move it; 3 when fewer do, whose compensation
+        places the whole pose where those joints can and otherwise the position alone (a five-joint arm
+        cannot turn its tool to every orientation, and held to it, its correction would never converge)."""
+        return 6 if len(self.moved_joints(branch)) >= 6 else 3
 
     def sensor_frame(self) -> int:
         """The frame the wrench sensor rides on: `wrench_frame`, or the tool's (the first branch's tip)."""

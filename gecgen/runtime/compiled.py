@@ -482,7 +482,7 @@ class CompiledModel:
         computation overflowed, and the row holds q_cmd unchanged (residual inf); BOUNDED (5) a joint's
         correction reached its bound and is held there. The residual is the tool error left (m, 1 rad
         as 1 m; a branch with fewer than six joints of its own places its tool's whole pose where they can,
-        otherwise its position alone, and the residual is then that position's error, `emit.task_rows`).
+        otherwise its position alone, and the residual is then that position's error, `Robot.task_rows`).
         On a tree, the tool of `branch` (index) is placed by its own joints, every other reading held.
         With the numpy backend up to NUMPY_COMMANDS commands are corrected in numpy (`NumericModel.correct`, the C's numbers to
         rounding) while the C is not built; otherwise the C is loaded here, built first unless a

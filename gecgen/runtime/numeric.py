@@ -82,14 +82,12 @@ class NumericModel:
     def correct(self, q_cmd, w, aux, c, max_iter: int = 50, tol: float = 1e-11, branch: int = 0, bound=None):
         """As `CompiledModel.correct`: corrected joint commands (N, nq), status codes (N,) and residuals
         (N,) (m, 1 rad as 1 m), the C's numbers to rounding."""
-        from gecgen.emit import task_rows  # the rule the generated C was printed with
-
         q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
         N = len(q_cmd)
         w = np.zeros((N, 6)) if w is None else np.broadcast_to(np.asarray(w, float), (N, 6))
         aux = None if aux is None else np.broadcast_to(np.asarray(aux, float), (N, len(self.model.aux)))
         bound = None if bound is None else np.broadcast_to(np.asarray(bound, float), (self.robot.n,))
-        rows = task_rows(self.robot)[branch]
+        rows = self.robot.task_rows(branch)  # the rule the generated C was printed with
         out, status, residual = np.empty_like(q_cmd), np.empty(N, dtype=np.intc), np.empty(N)
         for i in range(N):
             args = (q_cmd[i], w[i], None if aux is None else aux[i], np.asarray(c, float), max_iter, tol, bound, branch)
@@ -106,7 +104,7 @@ class NumericModel:
         _, post, tools = chain_frames(robot, q[None], eps)
         T = tools[branch][0]
         Jq = np.zeros((6, robot.n))
-        moving = self._moving(branch)
+        moving = self.robot.own_frames(branch)
         for i, (joint, (terms, _)) in enumerate(zip(robot.chain, robot.drives()), start=1):
             if i not in moving:
                 continue
@@ -128,12 +126,6 @@ class NumericModel:
             return position, r, Jq
         turn = np.hypot(np.hypot(r[3], r[4]), r[5])
         return np.hypot(position, 2.0 - turn if trace < 1.0 else turn), r, Jq
-
-    def _moving(self, branch: int) -> set[int]:
-        """The frames whose joints place branch `branch`'s tool (its path without the other branches')."""
-        tips = [tip for tip, _ in self.robot.tips()]
-        shared = {f for k, tip in enumerate(tips) if k != branch for f in self.robot.path(tip)}
-        return set(self.robot.path(tips[branch])) - shared
 
     def _solve(self, q_cmd, w, aux, L, c, Tn, rows, P, bound, max_iter, tol, branch):
         """The C's solve: (1 converged, 0 stopped short, -1 overflowed; q, r, Jq, norm, held, steps)."""
