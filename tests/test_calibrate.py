@@ -232,10 +232,10 @@ def test_a_robot_never_compiled_is_calibrated_without_the_compiler_and_as_with_i
 
     asked = []
     monkeypatch.setattr(compiled, "shared_library", compiler)
-    monkeypatch.setattr(compiled, "build_in_background", lambda robot, model, key, alongside=False: asked.append(key))
+    monkeypatch.setattr(compiled, "build_in_background", lambda robot, model, key, alongside=False: asked.append((key, alongside)))
     without = run(capsys, *args, "-o", tmp_path / "numpy")
     calib = calibration.load(tmp_path / "numpy" / "calibration.json")
-    assert compiled.model_key(calib.robot, calib.model) in asked
+    assert (compiled.model_key(calib.robot, calib.model), True) in asked  # the delivered model's, beside the others
     text = json.dumps(without).replace(str(tmp_path / "numpy"), str(tmp_path / "c"))
     _same_numbers(with_c, json.loads(text))
     header = "industrial6r_calibration.h"

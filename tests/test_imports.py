@@ -107,7 +107,7 @@ def test_building_any_commands_parser_loads_no_sympy():
 FIRST = ("import json, sys\nfrom gecgen.cli import main\nfrom gecgen.runtime import compiled\n"
          "assert main(json.loads(sys.argv[1])) == 0\n"
          "print(json.dumps({'loaded': sorted(m for m in ('sympy', 'jinja2', 'gecgen.emit') if m in sys.modules),"
-         " 'builds': [p.pid for p in compiled._background]}))")
+         " 'builds': [p.pid for p in compiled._background.values()]}))")
 
 
 def _running(pid: int) -> bool:

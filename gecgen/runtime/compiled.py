@@ -53,7 +53,8 @@ BACKEND_VARIABLE = "GECGEN_BACKEND"
 BACKENDS = ("auto", "c", "numpy", "casadi")
 
 #: how many commands at most `CompiledModel.correct` corrects in numpy when the model's C is not built
-#: yet (an example program's few: numpy takes milliseconds a command, the compiler seconds); more wait for the C
+#: yet (an example program's few: numpy takes milliseconds a command, up to 0.2 s near a singular posture,
+#: and the compiler seconds); more wait for the C
 NUMPY_COMMANDS = 64
 #: each code's name in files and messages (the generated header's GECGEN_ codes, in lower case)
 STATUS_NAMES = ("ok", "not_converged", "singular", "outside_limits", "nonfinite", "bounded")
@@ -273,19 +274,21 @@ def library_path(robot: Robot, key: str) -> Path:
     return cache_dir() / f"{robot.name}-{key}.so"
 
 
-#: the background build this process started last (`build_in_background`), and the keys of every one it started
-_background: list[subprocess.Popen] = []
-_started: set[str] = set()
+#: the background builds this process started (`build_in_background`), by the cache entry each builds
+_background: dict[Path, subprocess.Popen] = {}
 
 
 def build_in_background(robot: Robot, model: ErrorModel, key: str, alongside: bool = False) -> bool:
     """Start building the shared library of a robot and model in a detached process of this Python
-    (`runtime.background`, at low priority; it outlives this one), unless this process's last one
-    is still running (one at a time: the candidate models of diagnose and calibrate do not start a
-    compiler each; `alongside`: start it all the same, for the model a command delivers) or the cache
-    is this run's temporary folder (no next run would find the C). The cache's locks keep it from
-    colliding with any other build of the entry. Whether one was started."""
-    if not cache_kept() or key in _started or not alongside and _background and _background[-1].poll() is None:
+    (`runtime.background`, at low priority; it outlives this one), unless one this process started for
+    the same cache entry still runs, or any of its builds does (one at a time: the candidate models of
+    diagnose and calibrate do not start a compiler each; `alongside`: start it all the same, for the
+    model a command delivers), or the cache is this run's temporary folder (no next run would find the
+    C). The cache's locks keep it from colliding with any other build of the entry. Whether one was
+    started."""
+    entry = library_path(robot, key)
+    running = {e for e, p in _background.items() if p.poll() is None}
+    if not cache_kept() or entry in running or not alongside and running:
         return False
     try:
         proc = subprocess.Popen([sys.executable, "-m", "gecgen.runtime.background"], stdin=subprocess.PIPE,
@@ -295,8 +298,7 @@ def build_in_background(robot: Robot, model: ErrorModel, key: str, alongside: bo
             pickle.dump((robot, model, key), proc.stdin)
     except OSError:  # no process to be had, or it ended at once: this run needs none, the next builds
         return False
-    _background[:] = [proc]
-    _started.add(key)
+    _background[entry] = proc
     return True
 
 
