@@ -200,7 +200,7 @@ def calibrated(args, out, build, status) -> dict:
     from gecgen.model.files import write_atomically
     from gecgen.model.measurements import hold_out
     from gecgen.model.pixels import read_pixels
-    from gecgen.runtime.compiled import CompiledModel
+    from gecgen.runtime.compiled import CompiledModel, build_in_background
 
     cameras, board = _loop_cameras(args)
     robot = load_robot(args.robot)
@@ -241,7 +241,9 @@ def calibrated(args, out, build, status) -> dict:
     save(calib, build / "calibration.json")
     effects = choice.diagnosis.effects if choice.diagnosis else []
     write_error_model(robot, choice.model, effects, build / "errors.yaml")
-    code, _ = export.c_files(calib, CompiledModel(calib.robot, calib.model), str(out / "calibration.json"))
+    # as calibrate from tracker data: the C printed here first, its compile left to the background
+    delivered = CompiledModel(calib.robot, calib.model, build=False)
+    code, _ = export.c_files(calib, delivered, str(out / "calibration.json"))
     for name, text in code.items():
         write_atomically(build / "generated" / name, text)
     fit = choice.fit
@@ -263,6 +265,8 @@ def calibrated(args, out, build, status) -> dict:
     content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
                                     result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
+    if delivered.c_pending:
+        build_in_background(delivered.robot, delivered.model, delivered.key, alongside=True)
     return result
 
 
