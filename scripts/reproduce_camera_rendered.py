@@ -95,8 +95,7 @@ SETUPS = {
     "a3-near": SetUp(9, 6, 0.04, 0.45, (8, 6, 6, 25, 20, 30), "the same A3 board 0.45 m in front of it"),
     "a2": SetUp(13, 9, 0.04, 0.55, (8, 6, 6, 25, 20, 30), "A2 board (14 x 10 squares of 40 mm) 0.55 m in front of it"),
     "a2-wide": SetUp(13, 9, 0.04, 0.55, (5, 4, 4, 30, 25, 40),
-                     "the A2 board 0.55 m in front of it, the wrist turning further and the arm less (the camera "
-                     "tilted more about the board)"),
+                     "the A2 board 0.55 m in front of it, the wrist turning further and the arm less"),
 }
 DEFAULT = "a3-far"
 BOARD = SETUPS[DEFAULT].board()
@@ -383,6 +382,7 @@ def main():
         for seed in range(args.seeds):
             rows.append(fixed_stated(robot, truth, model, seed))
             print("fixed", seed, rows[-1], flush=True)
+        SETUPS_SAVED.parent.mkdir(parents=True, exist_ok=True)
         SETUPS_SAVED.with_name("fixed-stated.json").write_text(json.dumps(rows))
         write_setups(setups_rows())
         return

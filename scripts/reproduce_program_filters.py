@@ -165,9 +165,9 @@ arm before filtering its programs.
     row whose flip letter goes against J5's sign while every other row's follows it.
   - **The flip letter is F when J5 > 0 and N when J5 <= 0**, in the controller's own J5 reading: 82 of
     the 83 postures (the home posture J5 = -90 deg is N; the 14 postures at J5 = 0 are N). RoboDK's
-    FANUC post processor says the same (`Fanuc_R30iA.py` of ros-industrial-attic/robodk_postprocessors,
+    FANUC post processor agrees but at J5 = 0 (`Fanuc_R30iA.py` of ros-industrial-attic/robodk_postprocessors,
     Apache-2.0, at commit d7e6c1c07758d67d2906cfd638049bdff88cca72: "F means axis 5 >= 0, N means
-    axis 5 < 0"). The two statements found earlier (robot-forum.com thread 31037, a knowledge-base
+    axis 5 < 0": 68 of the 83, the 14 postures at J5 = 0 being N where it says F). The two statements found earlier (robot-forum.com thread 31037, a knowledge-base
     page of industrialmonitordirect.com: "J5 >= 0 is N") give the recorded letter on 15 of the 83
     only, the 14 at J5 = 0 and the one odd row: gecgen's rule stands.
   - **U/D**: U when the chain's joint 3 is at or above the angle that stretches the arm (the forearm
