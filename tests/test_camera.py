@@ -232,6 +232,8 @@ def test_identify_with_cameras_writes_a_calibration_compensate_uses(arm, tmp_pat
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Residuals in pixels" in text and f"{train['rms_px']:.3g} px rms" in text
     assert f"{train['rms_mm_at_target']:.3g} mm at target" in text and "## Coverage of the images" in text
+    assert (f"| `cam` | the tool frame | {stated['translation_mm']:.3g} | "
+            f"{', '.join(f'{x:.3g}' for x in stated['axes_mm'])} | {stated['rotation_mrad']:.3g} |") in text
     # the report opens with its verdict and next step, then the warnings the terminal printed
     assert text.index("## Verdict and next step") < text.index("## Warnings") < text.index("## Residuals in pixels")
     assert "**Verdict: noise not known.**" in text and "No held-out images" in text

@@ -451,11 +451,29 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
             "Where the points fall in each camera's image: the residuals speak for the lens only where points fall.",
             Bullets(coverage)]),
         Section("Outliers", [Bullets(outliers) if outliers else "No image point was flagged as an outlier."]),
+        *camera_pose_section(calib.report.get("camera_uncertainty")),
         *coefficient_section(robot, calib), glossary(robot)]
     return Report(f"gecgen {command}: {robot.name} from image points",
                   [f"{'The diagnosed model' if command == 'diagnose' else 'Calibration'} `{calib_path}` fitted on "
                    f"`{data.source}` ({data.n_poses} poses, {len(names)} "
                    f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). Training data only."], sections)
+
+
+def camera_pose_section(uncertainty: dict | None) -> tuple[Section, ...]:
+    """How well the images fix each camera's pose (the calibration's `camera_uncertainty`), when stated."""
+    if uncertainty is None:
+        return ()
+    rows = [(f"`{name}`", "the tool frame" if v["relative_to"] == "tool" else f"camera `{v['relative_to']}`",
+             f"{v['translation_mm']:.3g}", ", ".join(f"{x:.3g}" for x in v["axes_mm"]), f"{v['rotation_mrad']:.3g}",
+             ", ".join(f"{x:.3g}" for x in v["axes_mrad"])) for name, v in uncertainty["cameras"].items()]
+    return (Section("How well the images place the cameras", [
+        "One standard deviation of each camera's fitted pose, from the fit's covariance taken image by image: a "
+        "camera on the tool in the tool frame (the camera-to-flange transform as the calibration carries it), a "
+        "fixed camera against the first (where the robot's base sits against the cameras is what the images leave "
+        "least determined). The length is the square root of the covariance's trace: the distance and angle the "
+        "fitted pose is expected to be off.",
+        Table(("camera", "relative to", "position mm", "x, y, z mm", "rotation mrad", "about x, y, z mrad"), rows)
+        if rows else "One fixed camera: nothing to place it against."]),)
 
 
 def pixel_choice(result: dict) -> tuple[Section, ...]:
