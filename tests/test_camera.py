@@ -394,28 +394,29 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     assert not free.converged and free.failures
 
 
-def test_a_fit_given_the_coefficients_another_fit_kept_holds_exactly_the_rest(arm, tmp_path):
+def test_a_fit_told_what_another_fit_held_holds_exactly_that(arm, tmp_path):
     robot, truth, _ = arm
     (tmp_path / "linear.errors.yaml").write_text(
         "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
     model = load_error_model(tmp_path / "linear.errors.yaml", robot)
     robot, rig, q, data = world_rig(arm, n=20)
     fit = fit_pixels(robot, model, data, rig.cameras)
+    held = tuple(e.index for e in fit.eliminated if e.reason in ("held", "insignificant"))
     assert any(e.reason == "insignificant" for e in fit.eliminated)
-    # the same pixels and coefficients, neither held weak nor gated: the fit's own minimum again
-    again = fit_pixels(robot, model, data, rig.cameras, coefficients=fit.kept)
+    # the same pixels, holding what the fit held, neither held weak nor gated again: the fit's own minimum
+    again = fit_pixels(robot, model, data, rig.cameras, hold=held)
     assert again.kept == fit.kept and again.converged
     k = list(fit.kept)
     assert np.max(np.abs(again.c[k] - fit.c[k]) / fit.std[k]) < 0.01 and not np.any(np.delete(again.c, k))
-    # an oracle told the cameras' poses fits those coefficients too, however the gate would judge them with
-    # the poses known; what it holds is named as given
+    assert {e.index for e in again.eliminated if e.reason == "given"} == set(held)
+    # an oracle told the cameras' poses holds exactly those and fits every other coefficient it can
+    # determine, the ones that merge with the cameras' poses among them
     fixed = np.concatenate([[*Rotation.from_matrix(rig.poses[c][0]).as_rotvec(), *rig.poses[c][1]] for c in data.cameras])
-    oracle = fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, coefficients=fit.kept)
-    given = {e.index for e in oracle.eliminated if e.reason == "given"}
-    assert oracle.kept == fit.kept and np.all(oracle.c[list(given)] == 0)
+    free = fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, hold_weak=False, significance=False)
+    oracle = fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, hold=held)
+    assert oracle.kept == tuple(j for j in free.kept if j not in held) and not np.any(oracle.c[list(held)])
+    assert set(oracle.kept) > set(fit.kept)
     assert not any(e.reason in ("insignificant", "held") for e in oracle.eliminated)
-    assert given == set(fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, hold_weak=False,
-                                   significance=False).kept) - set(fit.kept)
 
 
 def test_with_the_noise_stated_a_value_beyond_a_plausible_size_is_held_as_for_a_tracker(arm, tmp_path):

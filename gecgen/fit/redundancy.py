@@ -50,7 +50,7 @@ class Eliminated:
     index: int
     # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes), (identify's
     # hold) "insignificant", (weakly determined against the noise, `fit.weak`) "held" or (held by the
-    # caller of a pixel fit, `fit_pixels(coefficients=...)`) "given"
+    # caller of a pixel fit, `fit_pixels(hold=...)`) "given"
     reason: str
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
