@@ -35,7 +35,7 @@ from gecgen.simulate import load_truth
 from gecgen.simulate.camera import eye_to_hand, simulate_pixels, true_tools
 from gecgen.symbolic.terms import load_error_model
 
-from reproduce_camera import DIST, held_by, registered_mm, rotvec_t, write_section
+from reproduce_camera import DIST, held_by, registered_mm, rotvec_t, similarity_scale, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## A two-armed tree"
@@ -79,6 +79,8 @@ def run(seed: int, noise: float, n: int = 60) -> dict:
         out[name] = 1e3 * float(np.sqrt(np.mean(np.sum((p_fit - p_true) ** 2, axis=1))))
         out[name + "_registered"] = registered_mm(p_fit, p_true)
         out[name + "_scaled"] = registered_mm(p_fit, p_true, scaled=True)
+        out[name + "_scale_ppm"] = 1e6 * (1 / similarity_scale(p_fit, p_true) - 1)
+        out[name + "_scale_std_ppm"] = fit.scale["std_ppm"]
         if name == "oracle":
             out.update(oracle_kept=len(fit.kept), held_differ=len(set(held_by(fit)) ^ set(hold)))
         if name == "fit":
@@ -103,8 +105,9 @@ def write(rows: list):
              "holds other coefficients: 'held apart' counts those held by one of the two only).", "",
              "| noise px | seed | train px | coefficients fitted | held-out fit mm | oracle mm | ratio | "
              "registered fit / oracle mm | ratio | scale taken out too, fit / oracle mm | ratio | held apart | "
-             "like for like: registered oracle mm | ratio | scaled oracle mm | ratio |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "like for like: registered oracle mm | ratio | scaled oracle mm | ratio | scale error fit / like for like "
+             "ppm | the fit's stated 1-sigma ppm |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     ratios = {"in the fit's world": [], "registered on the held-out points": [],
               "registered and scaled on the held-out points": [],
               "like for like, registered on the held-out points": [],
@@ -119,7 +122,8 @@ def write(rows: list):
                      f"{r['oracle']:.3f} | {ratio[0]:.2f} | {r['fit_registered']:.3f} / {r['oracle_registered']:.3f} | "
                      f"{ratio[1]:.2f} | {r['fit_scaled']:.3f} / {r['oracle_scaled']:.3f} | {ratio[2]:.2f} | "
                      f"{r['held_differ']} | {r['like_registered']:.3f} | {ratio[3]:.2f} | {r['like_scaled']:.3f} | "
-                     f"{ratio[4]:.2f} |")
+                     f"{ratio[4]:.2f} | {r['fit_scale_ppm']:.0f} / {r['like_scale_ppm']:.0f} | "
+                     f"{r['fit_scale_std_ppm']:.0f} |")
     lines.append("")
     for noise in sorted({n for n, _, _ in rows}):
         at = [i for i, (n, _, _) in enumerate(rows) if n == noise]
