@@ -210,6 +210,11 @@ def write(rows: dict):
                        f"{len(seens)} within 1.2; like for like median {np.median(seen_likes):.2f}, worst "
                        f"{max(seen_likes):.2f}, {sum(x <= 1.2 for x in seen_likes)} of {len(seen_likes)} within 1.2")
     lines += ["", *summary, "",
+              "Eye-in-hand, the *tool* columns carry the true camera by the fitted tool frame, whose last-frame "
+              "errors the images cannot tell from the camera's pose: a fit that finds the camera's pose leaves them "
+              "there, the oracle like for like, told the camera's pose, fits them in the tool frame, so its tool "
+              "ratio says how much of the tool frame the camera's pose carries, not how well the fit does; "
+              "*delivered* compares what each calibration places.", "",
               "The same truth and seeds with the shoulder and elbow spanning +-6 to 10 deg, as in the other figures "
               "above, so that the load on joint 2 varies less (pixels trace an elastic effect only from poses that "
               "vary its load):", "", *narrow, ""]
