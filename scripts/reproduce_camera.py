@@ -164,6 +164,13 @@ def hand(robot, truth, model, seed: int, noise: float, significance: bool = True
     return out
 
 
+def held_by(fit) -> tuple[int, ...]:
+    """The coefficients (indices) a pixel fit held at zero because the images determine them too weakly or
+    its significance gate judged them insignificant: what an oracle compared like for like holds too
+    (`fit_pixels(hold=...)`)."""
+    return tuple(e.index for e in fit.eliminated if e.reason in ("held", "insignificant"))
+
+
 def oracle_poses(rig) -> np.ndarray:
     """The true geometric unknowns of an eye-in-hand `rig` as `fit_pixels` takes them (fixed_poses): the
     camera's pose on the tool, then the board's in the world, each a rotation vector and a translation."""

@@ -46,7 +46,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reproduce_camera import ROOT, hand_figures, oracle_poses, world_rig, write_section  # noqa: E402
+from reproduce_camera import ROOT, hand_figures, held_by, oracle_poses, world_rig, write_section  # noqa: E402
 
 from gecgen.fit.calibration import load  # noqa: E402
 from gecgen.fit.camera import (_Problem, fit_pixels, fitted_tools, frame_robot, image_covariance,  # noqa: E402
@@ -235,6 +235,9 @@ def set_up(robot, truth, model, seed: int, quality: str, train: int, setup: str)
     r = hand_figures(robot, truth, model, rig, held, fit.c, fit.poses["cam"], fit.board)
     oracle = fit_pixels(robot, model, data, cams, board, fixed_poses=oracle_poses(rig))
     o = hand_figures(robot, truth, model, rig, held, oracle.c, oracle.poses["cam"], oracle.board)
+    # like for like: the oracle holding exactly what the fit held, so that only knowing the poses differs
+    like = fit_pixels(robot, model, data, cams, board, fixed_poses=oracle_poses(rig), hold=held_by(fit))
+    lk = hand_figures(robot, truth, model, rig, held, like.c, like.poses["cam"], like.board)
     # without the significance gate (--keep-insignificant), fit and oracle alike
     free = [hand_figures(robot, truth, model, rig, held, f.c, f.poses["cam"], f.board)["mm"] for f in (
         fit_pixels(robot, model, data, cams, board, significance=False),
@@ -247,7 +250,8 @@ def set_up(robot, truth, model, seed: int, quality: str, train: int, setup: str)
     said = pose_uncertainty(robot, model, data, cams, board, fit)["cameras"]["cam"]
     return {"images": found["images"], "not_found": len(found["not_found"]), "corners": len(data.uv),
             "noise_px": float(np.sqrt(np.mean(noise ** 2))), "sigma_px": fit.sigma_px, "fit": r["mm"],
-            "oracle": o["mm"], **{k: r[k] for k in ("carried_mm", "carried_mrad", "mean_mm", "mean_mrad")},
+            "oracle": o["mm"], "like": lk["mm"], "held_apart": len(set(held_by(fit)) ^ set(held_by(oracle))),
+            **{k: r[k] for k in ("carried_mm", "carried_mrad", "mean_mm", "mean_mrad")},
             "all_fit": free[0], "all_oracle": free[1],
             "exact_carried_mm": e["carried_mm"], "exact_carried_mrad": e["carried_mrad"],
             "train_mean_mm": t["mean_mm"], "train_mean_mrad": t["mean_mrad"],
@@ -362,6 +366,7 @@ def main():
             write(rows)
         write_images(images_rows())
         write_setups(setups_rows())
+        write_like(setups_rows())
         return
     robot = load_robot(ROOT / "robots" / "industrial6r.yaml")
     truth = load_truth(read_yaml(ROOT / "robots" / "industrial6r.truth.yaml", "truth file"), robot)
@@ -397,6 +402,7 @@ def main():
                         print(*rows[-1], flush=True)
                         SETUPS_SAVED.with_name(f"setup-{setup}-{quality}-{train}.json").write_text(json.dumps(rows))
         write_setups(setups_rows())
+        write_like(setups_rows())
         return
     for quality in args.quality or QUALITIES:
         for train in args.images or [None]:
@@ -548,6 +554,43 @@ def setups_reading(groups: dict) -> list[str]:
         "weighs most with few images: where fewer images give a pooled ratio well under 1, the statement is "
         "cautious there.",
     ]
+
+LIKE_HEADING = "## Eye-in-hand from rendered ChArUco images: the oracle like for like"
+
+
+def write_like(rows: list):
+    """The section LIKE_HEADING from the saved runs of `set_up` that measured the oracle like for like."""
+    rows = [row for row in rows if "like" in row[4]]
+    if not rows:
+        return
+    lines = [LIKE_HEADING, "",
+             "Written by `scripts/reproduce_camera_rendered.py --setup NAME --images N`, from the runs of the set-up "
+             "section above that measured it. Two oracles fit the same detected corners with the true camera and "
+             "board poses: *oracle* (the column of the sections above) applies its own significance gate, with the "
+             "poses known, and so holds other coefficients than the fit (*held apart*: how many are held by one of "
+             "the two only); *like for like* holds exactly the coefficients the fit held (too weakly determined, or "
+             "insignificant by the gate) and fits every other, so that it differs from the fit only in knowing the "
+             "camera and board poses. Held-out: the camera's optical centre on the held-out poses (mm), as above.",
+             "", "| set-up | image quality | training images | seed | corner noise px | held-out fit mm | oracle mm | "
+             "ratio | held apart | like for like mm | ratio |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    groups = {}
+    for setup, quality, train, seed, r in rows:
+        groups.setdefault((setup, quality, train), []).append(r)
+        blur, grey = QUALITIES[quality]
+        lines.append(f"| {setup} | blur {blur:g} px, noise {grey:g} | {train} | {seed} | {r['noise_px']:.3f} | "
+                     f"{r['fit']:.3f} | {r['oracle']:.3f} | {r['fit'] / r['oracle']:.2f} | {r['held_apart']} | "
+                     f"{r['like']:.3f} | {r['fit'] / r['like']:.2f} |")
+    lines.append("")
+    for (setup, quality, train), rs in groups.items():
+        ratio = {k: np.array([r["fit"] / r[k] for r in rs]) for k in ("oracle", "like")}
+        lines.append(f"- {setup}, blur {QUALITIES[quality][0]:g} px, {train} images: fit / oracle median "
+                     f"{np.median(ratio['oracle']):.2f} ({ratio['oracle'].min():.2f} to {ratio['oracle'].max():.2f}), "
+                     f"{int((ratio['oracle'] <= RATIO).sum())} of {len(rs)} within {RATIO}; like for like median "
+                     f"{np.median(ratio['like']):.2f} ({ratio['like'].min():.2f} to {ratio['like'].max():.2f}), "
+                     f"{int((ratio['like'] <= RATIO).sum())} of {len(rs)} within {RATIO}")
+    lines.append("")
+    write_section(LIKE_HEADING, lines)
+
 
 IMAGES_HEADING = "## Eye-in-hand from rendered ChArUco images: how many images"
 

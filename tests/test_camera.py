@@ -396,6 +396,31 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
     assert not free.converged and free.failures
 
 
+def test_a_fit_told_what_another_fit_held_holds_exactly_that(arm, tmp_path):
+    robot, truth, _ = arm
+    (tmp_path / "linear.errors.yaml").write_text(
+        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
+    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
+    robot, rig, q, data = world_rig(arm, n=20)
+    fit = fit_pixels(robot, model, data, rig.cameras)
+    held = tuple(e.index for e in fit.eliminated if e.reason in ("held", "insignificant"))
+    assert any(e.reason == "insignificant" for e in fit.eliminated)
+    # the same pixels, holding what the fit held, neither held weak nor gated again: the fit's own minimum
+    again = fit_pixels(robot, model, data, rig.cameras, hold=held)
+    assert again.kept == fit.kept and again.converged
+    k = list(fit.kept)
+    assert np.max(np.abs(again.c[k] - fit.c[k]) / fit.std[k]) < 0.01 and not np.any(np.delete(again.c, k))
+    assert {e.index for e in again.eliminated if e.reason == "given"} == set(held)
+    # an oracle told the cameras' poses holds exactly those and fits every other coefficient it can
+    # determine, the ones that merge with the cameras' poses among them
+    fixed = np.concatenate([[*Rotation.from_matrix(rig.poses[c][0]).as_rotvec(), *rig.poses[c][1]] for c in data.cameras])
+    free = fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, hold_weak=False, significance=False)
+    oracle = fit_pixels(robot, model, data, rig.cameras, fixed_poses=fixed, hold=held)
+    assert oracle.kept == tuple(j for j in free.kept if j not in held) and not np.any(oracle.c[list(held)])
+    assert set(oracle.kept) > set(fit.kept)
+    assert not any(e.reason in ("insignificant", "held") for e in oracle.eliminated)
+
+
 def test_with_the_noise_stated_a_value_beyond_a_plausible_size_is_held_as_for_a_tracker(arm, tmp_path):
     """A camera on the tool, every frame's errors linear in its joint: with the corners' noise stated, the fit
     that stands still gives a generalized error beyond a plausible size along directions the images determine

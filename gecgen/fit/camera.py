@@ -542,7 +542,8 @@ def _placed_along_rays(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: li
 def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
-               intrinsics: bool = False, significance: bool = True) -> PixelFit:
+               intrinsics: bool = False, significance: bool = True,
+               hold: tuple[int, ...] | None = None) -> PixelFit:
     """`_fit_pixels` (its docstring says what it does and what each option means), and then, as identify
     does for a tracker (`identify._plausible`), when the corners' noise is stated (noise_px) and the fit
     stands but gives a generalized error beyond a plausible size (`weak.largest`): the same images
@@ -551,9 +552,9 @@ def fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str,
     the fit with the fewest held that lowers the largest value most is returned, with a warning that
     says so, its held coefficients in `held` with why."""
     options = dict(loss=loss, max_iter=max_iter, fixed_poses=fixed_poses, backend=backend, hold_weak=hold_weak,
-                   intrinsics=intrinsics, significance=significance)
+                   intrinsics=intrinsics, significance=significance, hold=hold)
     fit, notes = _noted(robot, model, data, cameras, board, noise_px, options)
-    if hold_weak and noise_px is not None and not fit.failures:
+    if hold_weak and hold is None and noise_px is not None and not fit.failures:
         cm = CompiledModel(frame_robot(robot), model, backend)
         size, where = weak.largest(cm, data, fit.c)
         best, best_size, best_notes = fit, size, notes
@@ -606,7 +607,8 @@ def _costs_only_noise(full: PixelFit, held: PixelFit, noise_px: float, free_g: b
 def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,
                 loss: str = "cauchy", max_iter: int = 50, fixed_poses: np.ndarray | None = None,
                 backend: str = "auto", noise_px: float | None = None, hold_weak: bool = True,
-                intrinsics: bool = False, significance: bool = True) -> PixelFit:
+                intrinsics: bool = False, significance: bool = True,
+                hold: tuple[int, ...] | None = None) -> PixelFit:
     """Fit the coefficients of `model` and the cameras' (and board's) poses to image points (see the
     module docstring). fixed_poses: the geometric unknowns (rotation vectors and translations, in the
     order of the fit) held at these values instead of fitted (an oracle that knows the cameras).
@@ -619,9 +621,18 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
     distortion are refined in the same fit, from the camera file's values (`PixelFit.cameras`, with
     their std in `PixelFit.intrinsics_std`). significance (default): the coefficients the images do not
     determine (|value| / std below 2 after backward elimination, `significance.judge`) are held at zero
-    and the rest refitted, each in eliminated (reason "insignificant"), as identify does by default."""
+    and the rest refitted, each in eliminated (reason "insignificant"), as identify does by default.
+    hold: these coefficients (indices) are held at zero (in eliminated, reason "given") and every other
+    the images determine is fitted, neither held weak nor gated: a fit that holds what another fit held
+    (its `held` and its gate's), e.g. an oracle given the cameras' poses compared like for like with the
+    fit that found them (the coefficients that merge with the cameras' poses are the oracle's to fit)."""
     robust.check_loss(loss)
     problem, g, kept, eliminated = _set_up(robot, model, data, cameras, board, fixed_poses, backend, intrinsics)
+    if hold is not None:
+        names = model.coefficient_names(robot)
+        eliminated = tuple(sorted([*eliminated, *(Eliminated(names[j], j, "given", "held at zero by the caller")
+                                                  for j in kept if j in hold)], key=lambda x: x.index))
+        kept, hold_weak, significance = [j for j in kept if j not in hold], False, False
     c = np.zeros(problem.cm.dims.nc)
     free_g = fixed_poses is None
     e = np.linalg.norm(problem.residual(g, c), axis=1)

@@ -49,7 +49,8 @@ class Eliminated:
     param: str
     index: int
     # "structural", "unexcited", "weak", "relative" (invisible to sockets and planes), (identify's
-    # hold) "insignificant" or (weakly determined against the noise, `fit.weak`) "held"
+    # hold) "insignificant", (weakly determined against the noise, `fit.weak`) "held" or (held by the
+    # caller of a pixel fit, `fit_pixels(hold=...)`) "given"
     reason: str
     detail: str
     merged_into: tuple[tuple[str, float], ...] = ()
