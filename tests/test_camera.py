@@ -373,13 +373,19 @@ def test_a_pixel_calibration_exports(arm, tmp_path):
     assert (tmp_path / "c").is_dir() and out
 
 
-def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_path):
+def _linear_fit(arm, tmp_path):
+    """A model linear in each joint, 20 poses seen by the fixed cameras, and its pixel fit: (robot, model,
+    rig, data, fit)."""
     robot, truth, _ = arm
     (tmp_path / "linear.errors.yaml").write_text(
         "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
     model = load_error_model(tmp_path / "linear.errors.yaml", robot)
     robot, rig, q, data = world_rig(arm, n=20)
-    fit = fit_pixels(robot, model, data, rig.cameras)
+    return robot, model, rig, data, fit_pixels(robot, model, data, rig.cameras)
+
+
+def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_path):
+    robot, model, rig, data, fit = _linear_fit(arm, tmp_path)
     assert fit.converged and not fit.failures and fit.iterations < 10
     assert 0.2 < fit.train["rms_px"] < 0.35
     held = {e.param: e.detail for e in fit.eliminated if e.reason == "held"}
@@ -397,12 +403,7 @@ def test_a_richer_model_holds_what_the_images_leave_weak_and_converges(arm, tmp_
 
 
 def test_a_fit_told_what_another_fit_held_holds_exactly_that(arm, tmp_path):
-    robot, truth, _ = arm
-    (tmp_path / "linear.errors.yaml").write_text(
-        "default: ['1']\nframes:\n" + "".join(f"  {i}: ['1', 'q{i}']\n" for i in range(1, 7)))
-    model = load_error_model(tmp_path / "linear.errors.yaml", robot)
-    robot, rig, q, data = world_rig(arm, n=20)
-    fit = fit_pixels(robot, model, data, rig.cameras)
+    robot, model, rig, data, fit = _linear_fit(arm, tmp_path)
     held = tuple(e.index for e in fit.eliminated if e.reason in ("held", "insignificant"))
     assert any(e.reason == "insignificant" for e in fit.eliminated)
     # the same pixels, holding what the fit held, neither held weak nor gated again: the fit's own minimum
