@@ -495,6 +495,22 @@ def test_a_point_taught_as_joints_and_as_cartesian_gets_one_correction(fanuc_cal
     assert (apart < 0.01) if not flip_letter_wrong else (apart > 0.5)
 
 
+def test_the_fanuc_template_turns_its_joints_as_fanuc_s_recorded_postures():
+    """robots/r2000ic.yaml (an R-2000iC-sized arm in the controller's joint senses) orients its flange as
+    FANUC's 83 recorded CRX-10iA postures are oriented at their joints, within their 0.02 deg rounding: a
+    FANUC's six axes turn alike whatever its link lengths. robots/fanuc.yaml, the simulation arm, does on 3."""
+    rows = list(csv.DictReader((DATA / "tp" / "crx10ia" / "CRX10iA-solutions.csv").open(encoding="utf-8-sig")))
+    q = np.radians([[float(r[f"J{k}"]) for k in range(1, 7)] for r in rows])
+    recorded = np.array([fanuc.pose([0, 0, 0, *(float(r[k]) for k in "WPR")]) for r in rows])
+
+    def oriented(robot_file):
+        turn = pose_error(recorded, arm_of(load_robot(robot_file), np.eye(4)).fk(q))[:, 3:]
+        return int(np.sum(np.linalg.norm(turn, axis=1) < np.radians(0.02)))
+
+    assert oriented(ROOT / "robots" / "r2000ic.yaml") == len(rows) == 83
+    assert oriented(ROOT / "robots" / "fanuc.yaml") == 3
+
+
 def test_a_cartesian_target_of_an_arm_whose_wrist_axes_do_not_meet_is_kept_and_listed(tmp_path):
     """The CRX-10iA's wrist is offset (its axes 4, 5 and 6 pass 75 mm from one point): a pose and its
     CONFIG letters leave more than one posture, and which one the controller takes is its own rule, so
