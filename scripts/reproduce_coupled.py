@@ -61,8 +61,9 @@ def main():
     lines = [
         "# Coupled joints: a FANUC-like arm calibrated from its controller's readings",
         "",
-        "`robots/fanuc.yaml` declares `couplings: {J3: J2 + J3}` (the controller reads J3 as the forearm's",
-        "angle to the horizontal). Its truth, `robots/fanuc.truth.yaml`, has geometric errors (0.5 mm and",
+        "`robots/fanuc.yaml` declares `couplings: {J3: J2 + J3}` (its controller reads J3 against the forearm's",
+        "angle to the horizontal; a FANUC's own senses, J3 = -(J2 + J3) on these DH rows and J4-J6 reversed,",
+        "are those of `robots/r2000ic.yaml`, the file to start a real FANUC's from). Its truth, `robots/fanuc.truth.yaml`, has geometric errors (0.5 mm and",
         "0.3 mrad per frame, 0.3 mrad joint offsets) and the coupling 0.3% off: J3 = 1.003 J2 + J3 as built.",
         "Noise 30 um tracker and 30 um repeatability per coordinate: the noise floor is "
         f"{floor:.4f} mm RMS per point.",
