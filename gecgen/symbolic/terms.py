@@ -2,10 +2,9 @@
 
 Reading a model's terms needs sympy (`symbolic.parse`: a term's identity is sympy's canonical text),
 except those of constants, variables, their powers and products, sin and cos of one variable and the
-load signals (`model.error_file.simple_terms`); a
-model read before, for the same robot, is read back from the cache (`model.files.cache_dir`, by
-the content of the mapping, the robot and the parser), so a command whose code is compiled loads no
-sympy at all: this module imports the parser only on a miss.
+load signals (`model.error_file.simple_terms`); a model read before, for the same robot, is read back
+from the cache (`model.files.cache_dir`, by the content of the mapping, the robot and the parser), so
+a command whose code is compiled loads no sympy at all: this module imports the parser only on a miss.
 """
 from __future__ import annotations
 
