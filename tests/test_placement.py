@@ -165,3 +165,42 @@ def test_large_data_is_placed_from_rows_spread_through_every_stationing():
     assert len(spread_sample(three).xyz) <= PLACEMENT_ROWS + 3
     small = dataclasses.replace(data, station=None).subset(np.arange(100))
     assert spread_sample(small) is small
+
+
+
+def test_glitches_do_not_move_the_placement(long_tool):
+    """Five points moved by 2-5 cm (a reflector in the wrong nest) barely move the placed target
+    (0.28 mm against 3.6 mm for least squares, measured), under every loss as scipy's
+    least_squares places it from the same start."""
+    from scipy.optimize import least_squares
+
+    from gecgen.fit import placement, robust
+    from gecgen.fit.registration import rotation_matrix
+
+    d, truth_robot, user_robot = long_tool
+    robot = load_robot(user_robot)
+    data = read_measurements(d / "data.csv", robot)
+    xyz = data.xyz.copy()
+    xyz[[3, 17, 29, 41, 55]] += np.random.default_rng(5).uniform(2e-2, 5e-2, (5, 3))
+    glitched = dataclasses.replace(data, xyz=xyz)
+    clean = np.array(estimate_placement(robot, data).targets["smr"])
+    moved = {loss: np.linalg.norm(estimate_placement(robot, glitched, loss).targets["smr"] - clean)
+             for loss in ("cauchy", "huber", "l2")}
+    assert moved["cauchy"] < 0.1 * moved["l2"] and moved["huber"] < 0.5 * moved["l2"]
+    # the refinement itself against scipy's, on a rigid frame fitted to the glitched points
+    p = data.xyz
+    y = p @ rotation_matrix([0.02, -0.05, 0.03]).T + [0.01, 0.02, -0.03] + xyz - data.xyz
+    y += np.random.default_rng(6).normal(0, 1e-3, y.shape)
+
+    def residual(x):
+        return p @ rotation_matrix(x[:3]).T + x[3:] - y
+
+    def jacobian(x, h=1e-7):
+        return np.stack([(residual(x + h * e) - residual(x)).ravel() / h for e in np.eye(6)], 1)
+
+    x0 = np.zeros(6)
+    c = max(robust.scale(np.linalg.norm(residual(x0), axis=1)), robust.SCALE_FLOOR_M)
+    for loss, kind in (("cauchy", "cauchy"), ("huber", "huber"), ("l2", "linear")):
+        ours, _ = placement._robust_refine(residual, jacobian, x0, loss)
+        theirs = least_squares(lambda x: residual(x).ravel(), x0, loss=kind, f_scale=c, xtol=1e-14, ftol=1e-14).x
+        assert np.abs(ours - theirs).max() < 1e-7, loss

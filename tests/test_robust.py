@@ -21,7 +21,7 @@ from gecgen.model.validation import read_yaml
 from gecgen.runtime.compiled import CompiledModel
 from gecgen.fit import influence
 from gecgen.fit.identify import _fit_failures, identify, position_errors, redundancy
-from gecgen.fit.registration import Registration
+from gecgen.fit.registration import Registration, rotation_matrix, rotation_vector
 from gecgen.simulate import load_truth, random_design, simulate
 
 DATA = ROBOTS.parent / "tests" / "data"
@@ -276,3 +276,25 @@ def test_a_pose_that_stands_alone_is_a_suspect_and_misfit_is_not():
     crowd[[3, 11, 20]] = 30e-6
     assert len(influence.suspects(crowd, dof, rss=float(crowd.sum()), m=240, k=30)[0]) == 0
     assert len(influence.suspects(alone, dof, rss=1.0, m=240, k=30)[0]) == 0  # drowned in noise
+
+
+def test_the_robust_scale_uses_the_chi3_median():
+    """robust.MEDIAN_CHI3 (Newton's method on the closed-form law) is scipy's chi-square median."""
+    from scipy.stats import chi2
+
+    from gecgen.fit import robust
+    assert robust.MEDIAN_CHI3 == pytest.approx(np.sqrt(chi2.ppf(0.5, 3)), rel=1e-15)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-12, 1e-7, 1e-3, 0.5, 2.0, np.pi - 1e-6, np.pi])
+def test_rotation_vectors_and_matrices_agree_with_scipy(angle):
+    """rotation_matrix / rotation_vector against scipy's Rotation, near zero and near a half turn too."""
+    from scipy.spatial.transform import Rotation
+
+    axes = np.random.default_rng(1).normal(size=(50, 3))
+    for v in angle * axes / np.linalg.norm(axes, axis=1, keepdims=True):
+        R = Rotation.from_rotvec(v).as_matrix()
+        assert np.abs(rotation_matrix(v) - R).max() < 1e-15
+        back = rotation_vector(R)
+        # a half turn is the same rotation about +axis and -axis
+        assert min(np.abs(back - v).max(), np.abs(back + v).max() if angle == np.pi else 1.0) < 1e-14 * max(angle, 1)

@@ -38,7 +38,8 @@ from gecgen.model.kinematics import tool_poses
 from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
-from gecgen.fit.registration import FITS_M, HOLD_M, kabsch
+from gecgen.fit import robust
+from gecgen.fit.registration import FITS_M, HOLD_M, kabsch, rotation_angle, rotation_matrix
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
@@ -55,6 +56,10 @@ FAR_RAD = 0.02
 #: singular values of the refinement's column-scaled Jacobian below this share of the largest leave a
 #: direction of the placement undetermined
 RANK_TOL = 1e-7
+#: the refinement's damped Gauss-Newton steps (`_robust_refine`): at most REFINE_STEPS, starting from
+#: REFINE_DAMPING (a share of the scaled normal matrix's unit diagonal), until a step lowers the robust
+#: objective by less than REFINE_TOL of itself
+REFINE_STEPS, REFINE_DAMPING, REFINE_TOL = 100, 1e-3, 1e-12
 #: measured rows the placement is estimated from at most: it only starts the fit, which sees every
 #: row, and its dense Jacobian would otherwise take memory in proportion to the data (330 MB at
 #: 200,000 rows); spread evenly through each stationing and target, each keeping at least MIN_STATION_ROWS
@@ -111,14 +116,6 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     """The targets the data measures, placed on the tool (see the module docstring); every
     stationing of the data gets its own tracker frame. Raises ModelError when the poses do not
     turn the tool enough to place them."""
-    # here, not at the top: scipy.optimize, scipy's rotations and fit.robust's scipy.special cost
-    # several tenths of a second of start-up, and a command that reads a calibration imports this
-    # module for `with_targets` alone
-    from scipy.optimize import least_squares
-    from scipy.spatial.transform import Rotation
-
-    from gecgen.fit import robust
-
     robust.check_loss(loss)
     tools = np.stack(tool_poses(robot, data.q))  # (branches, N, 4, 4)
     T = tools[[robot.branch_of(n) for n in robot.target_names]][data.target, data.pose]  # each row's tool
@@ -133,8 +130,12 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
     # the other stationings start from a Kabsch fit of their points to the first estimate
     p0 = np.einsum("nij,nj->ni", T[:, :3, :3], m0[index]) + T[:, :3, 3]
     frames = [(R0, t0) if s == largest else kabsch(p0[sidx == s], data.xyz[sidx == s]) for s in range(len(stations))]
-    x0 = np.concatenate([np.concatenate([Rotation.from_matrix(R).as_rotvec(), t]) for R, t in frames] + [m0.ravel()])
+    # unknowns: per stationing a rotation vector turning its starting rotation, and its translation; then the targets
+    x0 = np.concatenate([np.concatenate([np.zeros(3), t]) for _, t in frames] + [m0.ravel()])
     Rp, pp = T[:, :3, :3], T[:, :3, 3]
+
+    def rotation(x, s):
+        return rotation_matrix(x[6 * s:6 * s + 3]) @ frames[s][0]
 
     def residual(x):
         m = x[6 * len(stations):].reshape(k, 3)
@@ -142,51 +143,88 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
         out = np.empty_like(data.xyz)
         for s in range(len(stations)):
             on = sidx == s
-            R = Rotation.from_rotvec(x[6 * s:6 * s + 3]).as_matrix()
-            out[on] = p[on] @ R.T + x[6 * s + 3:6 * s + 6] - data.xyz[on]
-        return out.ravel()
+            out[on] = p[on] @ rotation(x, s).T + x[6 * s + 3:6 * s + 6] - data.xyz[on]
+        return out
 
     coords = np.arange(3 * len(data.xyz)).reshape(-1, 3)[:, :, None]  # each row's three residuals
 
     def jacobian(x):
-        """d residual / d x: exact in the frames' translations and the targets (the residual is linear
-        in them), forward differences in the rotation vectors: 3 residuals per station rather than
-        one per unknown, which made this step a second of a PPS identify."""
+        """d residual / d x (3 rows per measured row): exact in the frames' translations and the targets
+        (the residual is linear in them), forward differences in the rotation vectors: 3 residuals per
+        station rather than one per unknown, which made this step a second of a PPS identify."""
         J = np.zeros((3 * len(data.xyz), len(x)))
-        base = residual(x)
+        base = residual(x).ravel()
         for s in range(len(stations)):
             on = sidx == s
-            R = Rotation.from_rotvec(x[6 * s:6 * s + 3]).as_matrix()
             J[coords[on], 6 * s + 3 + np.arange(3)] = np.eye(3)
-            J[coords[on], 6 * len(stations) + 3 * index[on][:, None, None] + np.arange(3)] = R @ Rp[on]
+            J[coords[on], 6 * len(stations) + 3 * index[on][:, None, None] + np.arange(3)] = rotation(x, s) @ Rp[on]
             for j in range(3):
                 step = np.zeros_like(x)
                 step[6 * s + j] = ROTATION_STEP
-                J[:, 6 * s + j] = (residual(x + step) - base) / ROTATION_STEP
+                J[:, 6 * s + j] = (residual(x + step).ravel() - base) / ROTATION_STEP
         return J
 
-    e0 = np.linalg.norm(residual(x0).reshape(-1, 3), axis=1)
-    kind = {"l2": "linear", "huber": "huber", "cauchy": "cauchy"}[loss]
-    f_scale = max(robust.scale(e0), robust.SCALE_FLOOR_M)
-    sol = least_squares(residual, x0, jac=jacobian, loss=kind, f_scale=f_scale, x_scale="jac", max_nfev=200)
-    J = sol.jac * np.maximum(np.linalg.norm(sol.jac, axis=0), 1e-300) ** -1
+    x, J = _robust_refine(residual, jacobian, x0, loss)
+    J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
     s = np.linalg.svd(J, compute_uv=False)
     names = [robot.target_names[t] for t in measured]
     # fewer residuals than unknowns leave directions without a singular value at all
-    if not (np.isfinite(sol.x).all() and len(s) == J.shape[1] and s[-1] > RANK_TOL * s[0]):
+    if not (np.isfinite(x).all() and len(s) == J.shape[1] and s[-1] > RANK_TOL * s[0]):
         raise ModelError(f"the data does not place target(s) {', '.join(names)} on the tool: the poses turn the "
                          f"tool about fewer than two independent axes; give the targets' positions in the robot "
                          f"file, or measure poses that turn the tool more")
-    m = sol.x[6 * len(stations):].reshape(k, 3)
-    e = np.linalg.norm(residual(sol.x).reshape(-1, 3), axis=1)
+    m = x[6 * len(stations):].reshape(k, 3)
+    e = np.linalg.norm(residual(x), axis=1)
     placed = {n: tuple(float(v) for v in xyz) for n, xyz in zip(names, m)}
     moved = {n: None if n in robot.estimated else float(1e3 * np.linalg.norm(np.subtract(placed[n], robot.targets[n])))
              for n in names}
-    rotations = [Rotation.from_rotvec(sol.x[6 * s:6 * s + 3]).as_matrix() for s in range(len(stations))]
-    turns = _measured_frames(T, data, index, sidx, rotations, names)
-    turned = {n: float(1e3 * (Rotation.from_rotvec(x) * Rotation.from_rotvec(robot.target_frames.get(n, (0.0,) * 3)).inv())
-                       .magnitude()) for n, x in turns.items()}
+    turns = _measured_frames(T, data, index, sidx, [rotation(x, s) for s in range(len(stations))], names)
+    turned = {n: float(1e3 * rotation_angle(rotation_matrix(np.array(x)) @ rotation_matrix(
+        np.array(robot.target_frames.get(n, (0.0,) * 3))).T)) for n, x in turns.items()}
     return Placement(placed, float(1e3 * np.sqrt(np.mean(e ** 2))), moved, turns, turned)
+
+
+#: the refinement's losses of a residual coordinate f at scale c, as functions of z = (f / c)^2: rho(z)
+#: (the cost, in units of c^2) and rho'(z) (the weight of iteratively reweighted least squares); a
+#: point's coordinates are scored one by one, and the scale is one robust sigma, not the fit's outlier
+#: limit of ten: the nominal kinematics leaves the robot's own millimetres in every residual, so a
+#: glitch is told from them only by a loss that gives up on a point soon
+LOSSES = {"l2": (lambda z: z, np.ones_like),
+          "huber": (lambda z: np.where(z <= 1, z, 2 * np.sqrt(z) - 1), lambda z: np.where(z <= 1, 1.0, 1 / np.sqrt(z))),
+          "cauchy": (np.log1p, lambda z: 1 / (1 + z))}
+
+
+def _robust_refine(residual, jacobian, x0: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
+    """x minimising sum rho((f / c)^2) over the coordinates f of residual(x) (R, 3) (`LOSSES`), c the
+    robust sigma of the residual lengths at x0, and the Jacobian (3R, len(x)) there with each row
+    weighted as the last step weighted it: iteratively reweighted Gauss-Newton steps on column-scaled
+    normal equations, damped (Levenberg-Marquardt) until a step lowers the cost. This is what
+    scipy.optimize.least_squares does with these losses, but importing it takes a fifth of a second
+    that every identify would pay for a starting point."""
+    rho, weight = LOSSES[loss]
+    f = residual(x0).ravel()
+    c = max(robust.scale(np.linalg.norm(f.reshape(-1, 3), axis=1)), robust.SCALE_FLOOR_M)
+    x, cost, damping = x0, float(np.sum(rho((f / c) ** 2))), REFINE_DAMPING
+    for _ in range(REFINE_STEPS):
+        w = np.sqrt(weight((f / c) ** 2))
+        J = jacobian(x) * w[:, None]
+        scale = np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+        A = J / scale
+        N, g = A.T @ A, A.T @ (w * f)
+        while damping < 1e12:
+            step = -np.linalg.solve(N + damping * np.eye(len(N)), g) / scale
+            f_new = residual(x + step).ravel()
+            cost_new = float(np.sum(rho((f_new / c) ** 2)))
+            if cost_new <= cost:
+                break
+            damping *= 10
+        else:
+            return x, J  # no step lowers the cost: at its minimum to rounding
+        x, f, done = x + step, f_new, cost - cost_new <= REFINE_TOL * cost
+        cost, damping = cost_new, max(damping / 10, 1e-12)
+        if done:
+            break
+    return x, jacobian(x) * np.sqrt(weight((f / c) ** 2))[:, None]
 
 
 def given_rms_mm(robot: Robot, data: Measurements) -> float:

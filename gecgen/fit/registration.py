@@ -50,14 +50,14 @@ class Registration:
 
     @property
     def angle_rad(self) -> float:
-        return _angle(self.R)
+        return rotation_angle(self.R)
 
     def relative_to(self, other: "Registration") -> dict:
         """How far this tracker frame is from `other`: {angle_deg, distance_mm}, the rotation
         between them and the distance between the tracker origins in the world. A registration
         not applied stands for the world frame itself, since that is what the data was taken in."""
         (R1, t1), (R0, t0) = (r._frame() for r in (self, other))
-        return {"angle_deg": float(np.degrees(_angle(R1 @ R0.T))),
+        return {"angle_deg": float(np.degrees(rotation_angle(R1 @ R0.T))),
                 "distance_mm": float(1e3 * np.linalg.norm(R1.T @ t1 - R0.T @ t0))}
 
     def _frame(self) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +76,7 @@ class Registration:
 IDENTITY = Registration(np.eye(3), np.zeros(3), False)
 
 
-def _angle(R: np.ndarray) -> float:
+def rotation_angle(R: np.ndarray) -> float:
     """Rotation angle (rad) of a rotation matrix (3, 3)."""
     return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
 
@@ -153,7 +153,7 @@ def register(p_nominal: np.ndarray, y: np.ndarray, mode: str = "auto", loss: str
         R, t, held = _hold_weak(p_nominal, y, R, t, prior)
         for why in held:
             warnings.warn(f"registration: {why}", stacklevel=2)
-    far = _angle(R) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
+    far = rotation_angle(R) > FAR_ANGLE_RAD or np.linalg.norm(t) > FAR_DISTANCE_M
     return Registration(R, t, mode == "always" or (mode == "auto" and bool(far)), held)
 
 
@@ -162,6 +162,37 @@ def _skew(v: np.ndarray) -> np.ndarray:
     z = np.zeros(len(v))
     return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
                      np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def rotation_matrix(v: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) whose rotation vector is v (3,) (axis times angle, rad): Rodrigues' formula,
+    its Taylor series below a microradian where sin(theta) / theta loses digits."""
+    K = _skew(np.asarray(v, float)[None])[0]
+    theta = float(np.linalg.norm(v))
+    if theta < 1e-6:
+        return np.eye(3) + K + K @ K / 2
+    return np.eye(3) + np.sin(theta) / theta * K + (1 - np.cos(theta)) / theta ** 2 * K @ K
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """The rotation vector (3,) (axis times angle, rad, angle in [0, pi]) of a rotation R (3, 3): from its
+    unit quaternion by Shepperd's choice of the largest of four pivots, accurate at every angle."""
+    t = np.trace(R)
+    pivots = [t, R[0, 0], R[1, 1], R[2, 2]]
+    i = int(np.argmax(pivots))
+    if i == 0:
+        w = np.sqrt(1 + t) / 2
+        v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (4 * w)
+    else:
+        a, b, c = i - 1, i % 3, (i + 1) % 3
+        v = np.empty(3)
+        v[a] = np.sqrt(1 + 2 * R[a, a] - t) / 2
+        v[b], v[c] = (R[b, a] + R[a, b]) / (4 * v[a]), (R[c, a] + R[a, c]) / (4 * v[a])
+        w = (R[c, b] - R[b, c]) / (4 * v[a])
+    if w < 0:
+        w, v = -w, -v
+    n = float(np.linalg.norm(v))
+    return v * (2 * np.arctan2(n, w) / n) if n > 0 else 2 * v
 
 
 def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior: np.ndarray | None
@@ -195,11 +226,7 @@ def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior
     lam, U = np.linalg.eigh(J.T @ J)
     with np.errstate(divide="ignore"):
         std = np.where(lam > 0, sigma / np.sqrt(np.maximum(lam, 0)), np.inf)
-    # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and most frames
-    # leave more than FITS_M and return above
-    from scipy.spatial.transform import Rotation
-
-    rotvec = Rotation.from_matrix(R).as_rotvec()
+    rotvec = rotation_vector(R)
     move = np.r_[L * rotvec, R @ pc + t - pc]  # the fitted frame against the world frame, workspace units
     along = U.T @ move
     weak = (std > HOLD_M) & (np.abs(along) > HOLD_M)
@@ -217,13 +244,13 @@ def _hold_weak(p: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray, prior
     free = U[:, ~weak]
     m = free @ (free.T @ move)  # the move with the weak directions held
     for _ in range(HELD_STEPS):
-        Rm = Rotation.from_rotvec(m[:3] / L).as_matrix()
+        Rm = rotation_matrix(m[:3] / L)
         tm = pc + m[3:] - Rm @ pc
         r = (y - p @ Rm.T - tm).reshape(-1) * sw
         step = free @ np.linalg.lstsq(jacobian(Rm) * sw[:, None] @ free, r, rcond=None)[0]
         m = m + step
         if np.abs(step).max() < 1e-12:
             break
-    Rm = Rotation.from_rotvec(m[:3] / L).as_matrix()
+    Rm = rotation_matrix(m[:3] / L)
     return Rm, pc + m[3:] - Rm @ pc, tuple(held)
 

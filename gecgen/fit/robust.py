@@ -30,17 +30,30 @@ The weights are those of iteratively reweighted least squares, w = rho'(e) / (2 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
-# scipy.special, not scipy.stats: the same functions, and a third of the import time every command pays
-from scipy import special
 
 LOSSES = ("cauchy", "huber", "l2")
 #: outlier limit in robust sigmas (see the module docstring for why 10)
 THRESHOLD = 10.0
 #: the robust sigma is at least this (m): far below any instrument's noise
 SCALE_FLOOR_M = 1e-7
+
+
+def _median_chi3() -> float:
+    """The median of a chi variable with 3 degrees of freedom (sqrt of chi2.ppf(0.5, 3)): the root of
+    its distribution function erf(r / sqrt 2) - sqrt(2 / pi) r exp(-r^2 / 2) = 1/2 by Newton's method
+    (its density is sqrt(2 / pi) r^2 exp(-r^2 / 2)); closed forms, so that no command pays for
+    importing a special-function library to know one number."""
+    r, c = 1.5, math.sqrt(2 / math.pi)
+    for _ in range(8):
+        r -= (math.erf(r / math.sqrt(2)) - c * r * math.exp(-r * r / 2) - 0.5) / (c * r * r * math.exp(-r * r / 2))
+    return r
+
+
 #: median of a chi variable with 3 degrees of freedom: median(e) = MEDIAN_CHI3 * sigma
-MEDIAN_CHI3 = float(np.sqrt(2 * special.gammaincinv(1.5, 0.5)))  # chi2.ppf(0.5, 3) = 2 P^-1(3/2, 1/2)
+MEDIAN_CHI3 = _median_chi3()
 
 
 def scale(e: np.ndarray) -> float:
