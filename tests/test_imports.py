@@ -159,9 +159,8 @@ def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(wa
 
 
 def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeypatch):
-    """Compensating with a calibration (warm cache) loads no scipy at all, and scoring one neither
-    scipy.optimize nor scipy's rotations (only a placement's least squares and a fit that holds a weak
-    direction use them): each is a tenth of a second or more of every start-up."""
+    """Compensating with a calibration (warm cache) loads no scipy at all, and scoring one or fitting
+    one neither scipy.optimize nor scipy's rotations: each is a tenth of a second or more of every start-up."""
     from gecgen.api import Calibrator
 
     _warmed(warm, tmp_path, monkeypatch)
@@ -172,6 +171,7 @@ def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeyp
             "assert main(['compensate', 'c.json', 'cmd.csv', '-o', 'q.csv']) in (0, 1)\n"
             "print('loaded', sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'sympy')))\n"
             "assert main(['evaluate', 'c.json', 'data.csv']) == 0\n"
+            "assert main(['identify', 'arm3.yaml', 'data.csv', '-o', 'again.json']) == 0\n"
             "print('loaded', sorted(m for m in ('scipy.optimize', 'scipy.spatial', 'sympy') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=os.environ,
                           timeout=600)
