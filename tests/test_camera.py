@@ -254,8 +254,8 @@ def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
     rig, *_, data = hand_rig(arm, n=3)
     write_pixels(tmp_path / "pixels.csv", robot, data)
     assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
-    with pytest.raises(ModelError, match=r"a pixel file .*identify, diagnose, calibrate, redundancy and evaluate read with the "
-                                         r"camera file \(--cameras; .*in place of accuracy and check\)"):
+    with pytest.raises(ModelError, match=r"a pixel file .*identify, diagnose, calibrate, redundancy, evaluate, check, "
+                                         r"accuracy and export --data read with the camera file \(--cameras\)"):
         from gecgen.model.measurements import read_measurements
         read_measurements(tmp_path / "pixels.csv", robot)
     # an option a command lacks: the refusal points to the command's own help

@@ -196,12 +196,22 @@ def test_compensate_places_each_hand_of_a_tree_calibrated_from_pixels(tree, iden
 
 def test_export_a_tree_calibrated_from_pixels(tree, identified, tmp_path):
     d = tree
-    out = run_json("export", d / "cal.json", "--urdf", tmp_path / "out.urdf", "--table", "--c", tmp_path / "c")
+    out = run_json("export", d / "cal.json", "--urdf", tmp_path / "out.urdf", "--table", "--c", tmp_path / "c",
+                   "--data", d / "train.csv", "--val", d / "val.csv", "--cameras", d / "cams.yaml")
     urdf = (tmp_path / "out.urdf").read_text()
     for marker in ("l1", "l2", "l3", "l4", "r1", "r2", "r3", "r4"):  # each marker a link of its own, on its hand
         side = "left" if marker[0] == "l" else "right"
         assert f'<link name="arm_{side}_5_link_{marker}"/>' in urdf
     assert "humanoid_calibration.h" in out["c"]["files"] and out["table"]
+    # what the URDF leaves out (the coupled torso joint's term), scored on the images as evaluate scores them
+    # (it refused the pixel files before)
+    assert out["urdf"]["not_carried"]
+    cost = out["urdf"]["cost"]
+    scored = run_json("evaluate", d / "cal.json", d / "val.csv", "--cameras", d / "cams.yaml")
+    assert abs(cost["held_out"]["calibration_rms_px"] - scored["after"]["rms_px"]) < 1e-9
+    assert abs(cost["training"]["calibration_rms_px"] - identified["train"]["rms_px"]) < 1e-9
+    for c in cost.values():
+        assert 0 < c["gap_rms_mm"] <= c["gap_max_mm"] and c["exported_rms_px"] != c["calibration_rms_px"]
 
 
 def test_check_a_tree_calibrated_from_pixels(tree, identified, checked):
