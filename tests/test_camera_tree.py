@@ -147,7 +147,9 @@ def test_diagnose_on_a_tree_from_pixels(tree):
     # the held-out images: what the declared model leaves is near the 0.1 px noise, and diagnose's model
     # does not do worse there than the declared one
     assert before["val_rms_px"] < 0.3 and after["val_rms_px"] <= before["val_rms_px"] + 1e-9, out
-    assert "--cameras" in out["next"]
+    # the next step fits the diagnosed model as diagnose did: the same cameras and stated noise
+    assert out["next"].endswith(f"--errors {d / 'diag' / 'tree.errors.yaml'} --cameras {d / 'cams.yaml'} --noise-px 0.1 "
+                                f"-o humanoid.calib.json"), out["next"]
 
 
 def test_calibrate_on_a_tree_from_pixels(tree):

@@ -155,8 +155,10 @@ def diagnosed(args) -> dict:
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
     generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
+    # the stated noise too: identify holds against it what the images determine too weakly, as diagnose's fits did
     rig = (f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
-           + (" --refine-intrinsics" if args.refine_intrinsics else ""))
+           + (" --refine-intrinsics" if args.refine_intrinsics else "")
+           + (f" --noise-px {args.noise_px:g}" if args.noise_px is not None else ""))
     result = {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
             "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
             "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
