@@ -68,6 +68,14 @@ def test_fixed_cameras_calibrate_both_hands_of_a_tree_to_the_oracles_floor(tree,
            f"{d / 'cal.json'} POSES.csv -o OUT.csv --branch right" in fit["next"], fit["next"]
     scored = run_json("evaluate", d / "cal.json", d / "val.csv", "--cameras", d / "cams.yaml")
     assert scored["after"]["rms_px"] < 1.5 * fit["train"]["rms_px"] < 0.2 * scored["before"]["rms_px"]
+    # each hand's held-out points apart (four markers a hand, every one seen by both cameras: the two
+    # hands' mean square is the whole's)
+    for stage in ("before", "after"):
+        hands = scored[stage]["branches"]
+        assert set(hands) == {"left", "right"}
+        assert np.isclose(np.mean([h["rms_px"] ** 2 for h in hands.values()]), scored[stage]["rms_px"] ** 2)
+    assert all(scored["after"]["branches"][h]["rms_px"] < 0.2 * scored["before"]["branches"][h]["rms_px"]
+               for h in ("left", "right"))
     # the oracle: the same pixels, the true cameras' poses given
     cameras = read_cameras(d / "cams.yaml")
     model = load_error_model(ROBOTS / "constant.errors.yaml", robot)
@@ -160,7 +168,7 @@ def test_calibrate_on_a_tree_from_pixels(tree):
     assert (d / "calib" / "calibration.json").is_file() and (d / "calib" / "generated" / "humanoid.c").is_file()
     # held out, the calibration's images against the nominal model's through the same cameras
     assert out["val"]["rms_px"] < 0.2 * out["val_before"]["rms_px"] and out["val"]["rms_px"] < 0.3, out
-    assert set(out["val"]["cameras"]) == {"cam1", "cam2"}
+    assert set(out["val"]["cameras"]) == {"cam1", "cam2"} and set(out["val"]["branches"]) == {"left", "right"}
     assert out["camera_uncertainty"]["cameras"]["cam2"]["relative_to"] == "cam1"
     assert "--branch left" in out["next"] and "--branch right" in out["next"]
 
