@@ -155,6 +155,13 @@ def test_diagnose_on_a_tree_from_pixels(tree):
     # the held-out images: what the declared model leaves is near the 0.1 px noise, and diagnose's model
     # does not do worse there than the declared one
     assert before["val_rms_px"] < 0.3 and after["val_rms_px"] <= before["val_rms_px"] + 1e-9, out
+    # each hand apart, as for tracker points (four markers a hand seen by both cameras: the mean square of
+    # the two hands' is the whole's)
+    for key, whole in (("train_branches", "train_rms_px"), ("val_branches", "val_rms_px")):
+        hands = out[key]
+        assert set(hands) == {"left", "right"}
+        for stage, figures in (("before", before), ("after", after)):
+            assert np.isclose(np.mean([h[stage]["rms_px"] ** 2 for h in hands.values()]), figures[whole] ** 2)
     # the next step fits the diagnosed model as diagnose did: the same cameras and stated noise
     assert out["next"].endswith(f"--errors {d / 'diag' / 'tree.errors.yaml'} --cameras {d / 'cams.yaml'} --noise-px 0.1 "
                                 f"-o humanoid.calib.json"), out["next"]

@@ -87,6 +87,15 @@ def identified(args) -> dict:
     return result
 
 
+def _by_branch(summaries: dict) -> dict:
+    """{stage: a summary with `branches`} as {branch: {stage: its figures}} (px, and mm at the target)."""
+    out: dict = {}
+    for stage, summary in summaries.items():
+        for branch, figures in summary["branches"].items():
+            out.setdefault(branch, {})[stage] = figures
+    return out
+
+
 def recorded_rig(args):
     """For a command that reads a pixel calibration with new images (evaluate, check, accuracy --cameras):
     the calibration (CALIB) and its cameras and board files, read, after refusing in one line files other
@@ -166,6 +175,11 @@ def diagnosed(args) -> dict:
             "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
             if args.holdout is not None else "internal hold-out of 1/5 of the poses",
             "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
+    if robot.branches:  # a tree: each hand's figures, as diagnose gives them from tracker points
+        for key, test in (("train_branches", None), ("val_branches", val)):
+            if key == "train_branches" or test is not None:  # diagnose's internal hold-out is its own
+                result[key] = _by_branch({stage: rnd.fit.train if test is None else measure.held_out(rnd, test)
+                                          for stage, rnd in (("before", diag.initial), ("after", diag.final))})
     if args.report:  # the diagnosed model's fit on the training images, what it added first
         from gecgen import report
         from gecgen.fit.camera import calibration_of
