@@ -178,6 +178,10 @@ def test_calibrate_on_a_tree_from_pixels(tree):
     assert set(out["val"]["cameras"]) == {"cam1", "cam2"} and set(out["val"]["branches"]) == {"left", "right"}
     assert out["camera_uncertainty"]["cameras"]["cam2"]["relative_to"] == "cam1"
     assert "--branch left" in out["next"] and "--branch right" in out["next"]
+    # the report scores the validation images, and says so (it said "Training data only")
+    text = (d / "calib" / "report.md").read_text()
+    assert "Validation images (" in text and "Training data only" not in text
+    assert "The held-out images are scored in the first sections" in text
 
 
 def test_compensate_places_each_hand_of_a_tree_calibrated_from_pixels(tree, identified, tmp_path):

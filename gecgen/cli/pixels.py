@@ -187,7 +187,7 @@ def diagnosed(args) -> dict:
         final = diag.final
         content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit, cameras, board),
                                         str(out), cameras, command="diagnose",
-                                        lead=report.content.pixel_diagnosis(result))
+                                        lead=report.content.pixel_diagnosis(result), held_out=True)
         result.update(report.write(content, args.report))
     return result
 
@@ -279,7 +279,8 @@ def calibrated(args, out, build, status) -> dict:
     result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, "
                       f"{compensate_next(robot, out / 'calibration.json')}")
     content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
-                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
+                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result),
+                                    held_out=val is not None)
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
     if delivered.c_pending:
         build_in_background(delivered.robot, delivered.model, delivered.key, alongside=True)

@@ -388,13 +388,13 @@ def image_coverage(data, cameras: dict) -> dict[str, tuple[int, int]]:
 
 
 def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warnings: list[str] | None = None,
-           assessment=None, command: str = "identify", lead: tuple[Section, ...] = ()) -> Report:
+           assessment=None, command: str = "identify", lead: tuple[Section, ...] = (), held_out: bool = False) -> Report:
     """The report of a calibration from image points (`fit.camera.PixelFit` on `model.pixels.Pixels`):
     reprojection residuals in px and in mm at the points, per camera, image and point; how much of each
     image the points cover; the coefficients with what the images left undetermined; first the verdict
     and next step (`verdict.pixels_next_step`) and the warnings the command printed. command: the
     command whose report it is; lead: its own sections, after the verdict (`pixel_choice`,
-    `pixel_diagnosis`)."""
+    `pixel_diagnosis`); held_out: whether those score held-out images (the rest is the training images')."""
     px, mm = fit.residuals[:, 0], fit.residuals[:, 1]
     names = data.cameras
 
@@ -456,7 +456,9 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
     return Report(f"gecgen {command}: {robot.name} from image points",
                   [f"{'The diagnosed model' if command == 'diagnose' else 'Calibration'} `{calib_path}` fitted on "
                    f"`{data.source}` ({data.n_poses} poses, {len(names)} "
-                   f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). Training data only."], sections)
+                   f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). "
+                   + ("The held-out images are scored in the first sections; the residuals, images and points below "
+                      "are the training images'." if held_out else "Training data only.")], sections)
 
 
 def camera_pose_section(uncertainty: dict | None) -> tuple[Section, ...]:
