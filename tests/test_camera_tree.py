@@ -1,6 +1,7 @@
 """Image points on a tree: two fixed cameras see markers on both hands of the simulated humanoid (a torso
 carrying two arms). simulate --cameras writes them, identify --cameras fits every branch with the
 cameras' poses, and the held-out hands land within 1.2x a fit that is told the true cameras."""
+import json
 import re
 
 import numpy as np
@@ -182,6 +183,9 @@ def test_calibrate_on_a_tree_from_pixels(tree):
     text = (d / "calib" / "report.md").read_text()
     assert "Validation images (" in text and "Training data only" not in text
     assert "The held-out images are scored in the first sections" in text
+    train = json.loads((d / "calib" / "calibration.json").read_text())["train"]["branches"]
+    for hand in ("left", "right"):  # each hand's row (60 poses, 4 markers, 2 cameras), as the calibration records it
+        assert f"| `{hand}` | 480 | " in text and f"| {train[hand]['rms_px']:.3g} |" in text
 
 
 def test_compensate_places_each_hand_of_a_tree_calibrated_from_pixels(tree, identified, tmp_path):

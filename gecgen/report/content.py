@@ -407,6 +407,13 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
                        [(f"`{n}`", str(int(np.sum(data.camera == k))), f"{b['rms_px']:.3g}", f"{a['rms_px']:.3g}",
                          f"{a['max_px']:.3g}", f"{a['rms_mm_at_target']:.3g}", f"{a['distance_m']:.3g}")
                         for k, (n, b, a) in enumerate(cams)])
+    # on a tree, each branch over the points it carries (fixed cameras see the targets of every branch)
+    branch_of = np.array([robot.branch_of(n) for n in data.points])[data.point] if robot.branches else None
+    per_branch = () if branch_of is None else (Table(
+        ("branch", "points", "before rms px", "after rms px", "after max px", "after rms mm at target", "distance m"),
+        [(f"`{b.name}`", str(int(np.sum(branch_of == k))), f"{fit.before['branches'][b.name]['rms_px']:.3g}",
+          f"{a['rms_px']:.3g}", f"{a['max_px']:.3g}", f"{a['rms_mm_at_target']:.3g}", f"{a['distance_m']:.3g}")
+         for k, b in enumerate(robot.branches) if (a := fit.train["branches"].get(b.name)) is not None]),)
     images = []
     for p in range(data.n_poses):
         for k, n in enumerate(names):
@@ -436,7 +443,7 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
             f"the focal length); the median working distance is {fit.train['distance_m']:.3g} m. Over all "
             f"{len(px)} points: {fit.before['rms_px']:.3g} -> {fit.train['rms_px']:.3g} px rms "
             f"({fit.train['rms_mm_at_target']:.3g} mm at target), largest {fit.train['max_px']:.3g} px.",
-            per_camera]),
+            per_camera, *per_branch]),
         Section("Images with the largest residual", [
             f"The {min(WORST, len(images))} of {len(images)} images (one pose, one camera) with the largest RMS "
             f"residual after the calibration.",
