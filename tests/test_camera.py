@@ -254,8 +254,8 @@ def test_a_pixel_file_without_cameras_is_refused_in_one_line(arm, tmp_path):
     rig, *_, data = hand_rig(arm, n=3)
     write_pixels(tmp_path / "pixels.csv", robot, data)
     assert main(["identify", str(ROBOTS / "industrial6r.yaml"), str(tmp_path / "pixels.csv"), "--json"]) != 0
-    with pytest.raises(ModelError, match=r"a pixel file .*identify, diagnose, calibrate, redundancy and evaluate read with the "
-                                         r"camera file \(--cameras; .*in place of accuracy and check\)"):
+    with pytest.raises(ModelError, match=r"a pixel file .*identify, diagnose, calibrate, redundancy, evaluate, check, "
+                                         r"accuracy and export --data read with the camera file \(--cameras\)"):
         from gecgen.model.measurements import read_measurements
         read_measurements(tmp_path / "pixels.csv", robot)
     # an option a command lacks: the refusal points to the command's own help
@@ -709,3 +709,19 @@ def test_an_eye_in_hand_urdf_carries_the_camera_where_the_fit_put_it(tmp_path):
         pin.framesForwardKinematics(urdf, data, np.concatenate([qi, np.zeros(urdf.nq - len(qi))]))
         np.testing.assert_allclose(data.oMf[frame].rotation, Ti[:3, :3] @ R, atol=1e-9)
         np.testing.assert_allclose(data.oMf[frame].translation, Ti[:3, :3] @ t + Ti[:3, 3], atol=1e-9)
+
+
+def test_the_next_step_of_a_fit_that_refined_the_intrinsics_does_not_ask_to_refine_them():
+    """Beyond the stated noise, identify --cameras names refining the intrinsics as a next step, unless the
+    fit refined them already: then a larger error model alone."""
+    from gecgen.report.verdict import pixels_next_step
+
+    figures = {"rms_px": 0.15, "max_px": 0.4, "rms_mm_at_target": 0.2, "distance_m": 2.4}
+    result = {"train": figures, "before": figures, "eliminated": [], "n_identifiable": 30}
+    noise = {"beyond_noise": True, "sigma_mm": 0.15, "noise_mm": 0.1}
+    plain = pixels_next_step(result, noise, {}, "gecgen evaluate c.json V.csv --cameras c.yaml")
+    refined = pixels_next_step(result | {"intrinsics": {"cam1": {}}}, noise, {}, "gecgen evaluate c.json V.csv "
+                                                                                  "--cameras c.yaml")
+    assert "--refine-intrinsics" in plain.next_step and "--errors" in plain.next_step
+    assert "--refine-intrinsics" not in refined.next_step and "fit a larger error model (`--errors`)" in \
+        refined.next_step

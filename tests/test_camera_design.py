@@ -222,3 +222,34 @@ def test_rig_file_refusals_name_the_file_and_key(hand, tmp_path):
         path.write_text(yaml.safe_dump(bad))
         with pytest.raises(ModelError, match=expect):
             read_rig(path, rig.cameras, rig.board)
+
+
+def test_too_few_images_for_the_model_are_refused_and_every_candidate_may_be_chosen(arm, hand):
+    """Eleven images of the board cannot determine the default model's 89 coefficients with the two poses
+    (each adds six directions at most, the camera's pose against the board): refused in one line, where it
+    wrote a design whose information was singular (no log det, O3 0); and asked for as many poses as there
+    are candidates, design takes them all (it failed with a traceback looking for one to exchange)."""
+    robot, _, _ = arm
+    rig, designed = hand
+    default = load_error_model(ROBOTS / "industrial6r.errors.yaml", robot)
+    with pytest.raises(ModelError, match=r"--poses 11: the 11 most informative poses .* determine only 66 of the "
+                                         r"101 unknowns \(12 of the cameras' and board's poses, 89 coefficients\)"):
+        design_images(robot, rig.cameras, (rig.poses, rig.board_pose), 11, board=rig.board, errors=default,
+                      candidates=2000, home=HAND_HOME, seed=2)
+    everything = design_images(robot, rig.cameras, (rig.poses, rig.board_pose), 15, board=rig.board,
+                               errors=load_error_model(ROBOTS / "constant.errors.yaml", robot), candidates=designed.q,
+                               seed=2)
+    assert sorted(map(tuple, everything.q)) == sorted(map(tuple, designed.q))
+    assert everything.design.to_dict()["log_det"] is not None
+
+
+def test_tracker_only_design_options_are_refused_with_cameras(hand, tmp_path):
+    """--given (tracker data the design adds to) and --payload-kg (a wrench the images do not weigh) are the
+    tracker design's: with --cameras each is refused in one line."""
+    args = _files(hand, tmp_path)
+    base = ["design", ROBOTS / "industrial6r.yaml", "--poses", 15, "-o", tmp_path / "p.csv", *args]
+    (tmp_path / "given.csv").write_text("pose,q1,q2,q3,q4,q5,q6,target,x,y,z\n")
+    for option in (["--given", tmp_path / "given.csv"], ["--payload-kg", "0,10"]):
+        line = _refused(*base, *option)
+        assert line.endswith(f"{option[0]} does not apply to a design for images (--cameras); drop it"), line
+        assert len(line.splitlines()) == 1

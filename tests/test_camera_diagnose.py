@@ -133,7 +133,7 @@ def test_a_board_without_cameras_and_a_pixel_file_without_them_are_refused_in_on
     for args, message in ((["--board", str(d / "b.yaml")], "give --cameras too"),
                           (["--refine-intrinsics"], "--refine-intrinsics refines the intrinsics of the cameras of "
                                                     "image points: give --cameras too"),
-                          ([], "which identify, diagnose, calibrate, redundancy and evaluate read")):
+                          ([], "which identify, diagnose, calibrate, redundancy, evaluate, check, accuracy and export --data read")):
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             assert main(["diagnose", str(d / "arm.yaml"), str(d / "train.csv"), *args]) != 0

@@ -87,6 +87,15 @@ def identified(args) -> dict:
     return result
 
 
+def _by_branch(summaries: dict) -> dict:
+    """{stage: a summary with `branches`} as {branch: {stage: its figures}} (px, and mm at the target)."""
+    out: dict = {}
+    for stage, summary in summaries.items():
+        for branch, figures in summary["branches"].items():
+            out.setdefault(branch, {})[stage] = figures
+    return out
+
+
 def recorded_rig(args):
     """For a command that reads a pixel calibration with new images (evaluate, check, accuracy --cameras):
     the calibration (CALIB) and its cameras and board files, read, after refusing in one line files other
@@ -155,8 +164,10 @@ def diagnosed(args) -> dict:
     write_error_model(robot, diag.final.model, diag.effects, out)
     generated = args.generated or out.removesuffix(".yaml").removesuffix(".errors") + "_generated"
     generate(robot, diag.final.model, generated, printed_code(robot, diag.final.model))
+    # the stated noise too: identify holds against it what the images determine too weakly, as diagnose's fits did
     rig = (f"--cameras {args.cameras}" + (f" --board {args.board}" if args.board else "")
-           + (" --refine-intrinsics" if args.refine_intrinsics else ""))
+           + (" --refine-intrinsics" if args.refine_intrinsics else "")
+           + (f" --noise-px {args.noise_px:g}" if args.noise_px is not None else ""))
     result = {"robot": robot.name, "measurement": "pixels", "error_model": diag.initial.model.source,
             "before": diag.before, "after": diag.after, "effects": [e.to_dict() for e in diag.effects],
             "errors_out": str(out), "generated": str(generated), "rounds": diag.history,
@@ -164,6 +175,11 @@ def diagnosed(args) -> dict:
             "validation": str(args.val) if args.val else f"--holdout {args.holdout:g} of DATA (seed {args.seed})"
             if args.holdout is not None else "internal hold-out of 1/5 of the poses",
             "next": f"gecgen identify {args.robot} {args.data} --errors {out} {rig} -o {robot.name}.calib.json"}
+    if robot.branches:  # a tree: each hand's figures, as diagnose gives them from tracker points
+        for key, test in (("train_branches", None), ("val_branches", val)):
+            if key == "train_branches" or test is not None:  # diagnose's internal hold-out is its own
+                result[key] = _by_branch({stage: rnd.fit.train if test is None else measure.held_out(rnd, test)
+                                          for stage, rnd in (("before", diag.initial), ("after", diag.final))})
     if args.report:  # the diagnosed model's fit on the training images, what it added first
         from gecgen import report
         from gecgen.fit.camera import calibration_of
@@ -171,7 +187,7 @@ def diagnosed(args) -> dict:
         final = diag.final
         content = report.content.pixels(robot, data, final.fit, calibration_of(robot, final.model, final.fit, cameras, board),
                                         str(out), cameras, command="diagnose",
-                                        lead=report.content.pixel_diagnosis(result))
+                                        lead=report.content.pixel_diagnosis(result), held_out=True)
         result.update(report.write(content, args.report))
     return result
 
@@ -263,7 +279,8 @@ def calibrated(args, out, build, status) -> dict:
     result["next"] = (f"gecgen evaluate {out / 'calibration.json'} HELD_OUT.csv {rig}, "
                       f"{compensate_next(robot, out / 'calibration.json')}")
     content = report.content.pixels(robot, data, fit, calib, str(out / "calibration.json"), cameras,
-                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result))
+                                    result["warnings"], command="calibrate", lead=report.content.pixel_choice(result),
+                                    held_out=val is not None)
     result["files"].update({k: str(out / Path(v).relative_to(build)) for k, v in report.write(content, build).items()})
     if delivered.c_pending:
         build_in_background(delivered.robot, delivered.model, delivered.key, alongside=True)

@@ -349,11 +349,17 @@ def _rms_max(e: np.ndarray, mm: np.ndarray, depth: np.ndarray) -> dict:
 
 def _summary(problem: _Problem, g: np.ndarray, c: np.ndarray, e: np.ndarray) -> dict:
     """The residual lengths e (R,) px: RMS and largest, in px and in mm at the points (`at_target_mm`),
-    the median working distance (m), over all points and per camera (`cameras`)."""
+    the median working distance (m), over all points, per camera (`cameras`) and, on a tree, per branch
+    over the points it carries (`branches`, by name)."""
     mm, depth = at_target_mm(problem, g, c, e)
     cam = problem.data.camera
-    return _rms_max(e, mm, depth) | {"cameras": {n: _rms_max(e[cam == k], mm[cam == k], depth[cam == k])
-                                                 for k, n in enumerate(problem.data.cameras) if (cam == k).any()}}
+    out = _rms_max(e, mm, depth) | {"cameras": {n: _rms_max(e[cam == k], mm[cam == k], depth[cam == k])
+                                                for k, n in enumerate(problem.data.cameras) if (cam == k).any()}}
+    if problem.robot.branches:
+        branch = problem.at[1]
+        out["branches"] = {b.name: _rms_max(e[branch == k], mm[branch == k], depth[branch == k])
+                           for k, b in enumerate(problem.robot.branches) if (branch == k).any()}
+    return out
 
 
 def _analysis(problem: _Problem, g: np.ndarray, c: np.ndarray, struct_kept: list[int], names: list[str],

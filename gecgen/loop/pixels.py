@@ -62,10 +62,10 @@ class ImagePoints:
     def squared_error(self, rnd: Round, test: Pixels) -> tuple[float, float]:
         """(sum of squared image-point errors in m at the target, the points they count for) of poses the
         fit did not see, seen from the cameras (and board) as it placed them."""
-        s = self._held_out(rnd, test)
+        s = self.held_out(rnd, test)
         return 1e-6 * s["rms_mm_at_target"] ** 2 * len(test.uv), float(len(test.uv))
 
-    def _held_out(self, rnd: Round, test: Pixels) -> dict:
+    def held_out(self, rnd: Round, test: Pixels) -> dict:
         """The residual of images the fit did not see (`summary_at`), through the cameras as it placed them."""
         return summary_at(rnd.cm, self.robot, test, self.cameras, self.board, rnd.fit.g, rnd.fit.c, self.intrinsics)
 
@@ -91,7 +91,7 @@ class ImagePoints:
     def scores(self, rnd: Round, val: Pixels) -> dict:
         """Training and held-out residuals, mm at the target (`*_mm`, as `loop.diagnose._scores` names
         them) and px: the held-out points seen from the cameras (and board) as the fit placed them."""
-        s = self._held_out(rnd, val)
+        s = self.held_out(rnd, val)
         train = rnd.fit.train
         return {"train_rms_mm": train["rms_mm_at_target"], "val_rms_mm": s["rms_mm_at_target"],
                 "val_max_mm": s["max_mm_at_target"], "train_rms_px": train["rms_px"], "val_rms_px": s["rms_px"],

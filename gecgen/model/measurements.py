@@ -168,9 +168,8 @@ def read_measurements(path, robot: Robot, limit_tolerance: float = LIMIT_TOLERAN
     header = table.header
     require(not ("u" in header and "v" in header and "target" not in header),
             f"{where}: row 1: columns u and v: a pixel file (image points), which identify, diagnose, calibrate, "
-            f"redundancy and evaluate read with the camera file (--cameras; evaluate --cameras scores held-out "
-            f"images, in place of accuracy and check); this step takes tracker measurements (pose, q1..qn, target, "
-            f"x, y, z)")
+            f"redundancy, evaluate, check, accuracy and export --data read with the camera file (--cameras); this "
+            f"step takes tracker measurements (pose, q1..qn, target, x, y, z)")
     for col in required:
         require(col in header, f"{where}: row 1: missing column '{col}' (needed: {', '.join(required)})"
                                f"{named_joints(header, robot, IMPORT) if col in qcols else ''}")

@@ -98,7 +98,8 @@ def load_volume(path: str | Path, robot: Robot) -> Volume:
     """Read and check a volume file against the robot it is stated for (one-line refusals)."""
     where = str(path)
     require(not robot.branches, f"{where}: {robot.name} is branched; a statement over a volume is made for a serial "
-                                f"chain (one tool) only")
+                                f"chain (one tool) only: score held-out data with `gecgen evaluate` instead "
+                                f"(images: `gecgen evaluate CALIB PIXELS.csv --cameras FILE`)")
     require(robot.n >= 6, f"{where}: {robot.name} has {robot.n} joints: compensation places the tool's pose (6 "
                           f"degrees of freedom), so a statement over a volume needs 6 joints or more")
     spec = read_yaml(Path(path), "volume")

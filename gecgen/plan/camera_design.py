@@ -268,6 +268,18 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
                                  f"unknowns ({ng} of the cameras' and board's poses, {len(kept)} coefficients; {rank} "
                                  f"each); give at least {int(np.ceil(m / rank))} poses")
     chosen, swaps, passes, history, _ = choose(Hw, RIDGE * np.eye(m), n_poses, rng, crit, max_passes)
+    # each image informs up to `rank` directions, but images of nearby poses share many: the count above
+    # passes designs whose information is still singular, whose poses would not determine the fit
+    M = np.einsum("pik,pil->kl", Hw[chosen], Hw[chosen])
+    # a direction counts when its std is within 1000 times the best-informed one's (whitened against the mean
+    # candidate): so counted, eye-in-hand designs of 8, 12 and 16 images determined 48, 72 and 95 directions,
+    # six an image, as the camera's pose against the board allows; weaker ones are not information
+    eig = np.linalg.eigvalsh(M)
+    determined = int((eig > RANK_TOL * eig.max()).sum())
+    require(determined == m, f"--poses {n_poses}: the {n_poses} most informative poses among the candidates still "
+                             f"determine only {determined} of the {m} unknowns ({ng} of the cameras' and board's "
+                             f"poses, {len(kept)} coefficients): give more poses, candidates over a wider span "
+                             f"(--span), or a smaller error model (--errors)")
     random_pick = rng_random.choice(K, n_poses, replace=False)
     val = rng_val.choice(K, min(n_validation, K), replace=False)
     H_val = basis.whiten(blocks[val])

@@ -351,6 +351,8 @@ class _Search:
         checked once more from the inverse before it is made."""
         size = max(1, int(EXCHANGE_BUDGET // ((1 + self.criterion.uses_E) * self.r ** 2 * (self.k + self.r))))
         history, swaps, passes = [self.criterion.objective(self.M)], 0, 0
+        if len(self.chosen) >= self.P:  # every candidate is in the design: none to exchange for
+            return swaps, passes, history
         for passes in range(1, max_passes + 1):
             self._refactor()
             trial = self._trial_set(size)

@@ -388,13 +388,13 @@ def image_coverage(data, cameras: dict) -> dict[str, tuple[int, int]]:
 
 
 def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warnings: list[str] | None = None,
-           assessment=None, command: str = "identify", lead: tuple[Section, ...] = ()) -> Report:
+           assessment=None, command: str = "identify", lead: tuple[Section, ...] = (), held_out: bool = False) -> Report:
     """The report of a calibration from image points (`fit.camera.PixelFit` on `model.pixels.Pixels`):
     reprojection residuals in px and in mm at the points, per camera, image and point; how much of each
     image the points cover; the coefficients with what the images left undetermined; first the verdict
     and next step (`verdict.pixels_next_step`) and the warnings the command printed. command: the
     command whose report it is; lead: its own sections, after the verdict (`pixel_choice`,
-    `pixel_diagnosis`)."""
+    `pixel_diagnosis`); held_out: whether those score held-out images (the rest is the training images')."""
     px, mm = fit.residuals[:, 0], fit.residuals[:, 1]
     names = data.cameras
 
@@ -407,6 +407,13 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
                        [(f"`{n}`", str(int(np.sum(data.camera == k))), f"{b['rms_px']:.3g}", f"{a['rms_px']:.3g}",
                          f"{a['max_px']:.3g}", f"{a['rms_mm_at_target']:.3g}", f"{a['distance_m']:.3g}")
                         for k, (n, b, a) in enumerate(cams)])
+    # on a tree, each branch over the points it carries (fixed cameras see the targets of every branch)
+    branch_of = np.array([robot.branch_of(n) for n in data.points])[data.point] if robot.branches else None
+    per_branch = () if branch_of is None else (Table(
+        ("branch", "points", "before rms px", "after rms px", "after max px", "after rms mm at target", "distance m"),
+        [(f"`{b.name}`", str(int(np.sum(branch_of == k))), f"{fit.before['branches'][b.name]['rms_px']:.3g}",
+          f"{a['rms_px']:.3g}", f"{a['max_px']:.3g}", f"{a['rms_mm_at_target']:.3g}", f"{a['distance_m']:.3g}")
+         for k, b in enumerate(robot.branches) if (a := fit.train["branches"].get(b.name)) is not None]),)
     images = []
     for p in range(data.n_poses):
         for k, n in enumerate(names):
@@ -436,7 +443,7 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
             f"the focal length); the median working distance is {fit.train['distance_m']:.3g} m. Over all "
             f"{len(px)} points: {fit.before['rms_px']:.3g} -> {fit.train['rms_px']:.3g} px rms "
             f"({fit.train['rms_mm_at_target']:.3g} mm at target), largest {fit.train['max_px']:.3g} px.",
-            per_camera]),
+            per_camera, *per_branch]),
         Section("Images with the largest residual", [
             f"The {min(WORST, len(images))} of {len(images)} images (one pose, one camera) with the largest RMS "
             f"residual after the calibration.",
@@ -456,7 +463,9 @@ def pixels(robot: Robot, data, fit, calib, calib_path: str, cameras: dict, warni
     return Report(f"gecgen {command}: {robot.name} from image points",
                   [f"{'The diagnosed model' if command == 'diagnose' else 'Calibration'} `{calib_path}` fitted on "
                    f"`{data.source}` ({data.n_poses} poses, {len(names)} "
-                   f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). Training data only."], sections)
+                   f"camera{'s' if len(names) > 1 else ''}, {len(px)} image points). "
+                   + ("The held-out images are scored in the first sections; the residuals, images and points below "
+                      "are the training images'." if held_out else "Training data only.")], sections)
 
 
 def camera_pose_section(uncertainty: dict | None) -> tuple[Section, ...]:

@@ -337,7 +337,8 @@ def pixels_next_step(result: dict, noise: dict | None, coverage: dict[str, tuple
         verdict = BEYOND_NOISE
         limits.append(f"The model leaves more than the noise: the residual is {noise['sigma_mm']:.3g} px per "
                       f"coordinate against the stated {noise['noise_mm']:.3g} px.")
-        steps.append("refine the cameras' intrinsics with the robot (`--refine-intrinsics`) or fit a larger error "
+        steps.append("fit a larger error model (`--errors`)" if result.get("intrinsics") else
+                     "refine the cameras' intrinsics with the robot (`--refine-intrinsics`) or fit a larger error "
                      "model (`--errors`)")
     else:
         verdict = AT_NOISE

@@ -16,6 +16,7 @@ temporary folder for the rest of the run.
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import functools
@@ -298,8 +299,19 @@ def build_in_background(robot: Robot, model: ErrorModel, key: str, alongside: bo
             pickle.dump((robot, model, key), proc.stdin)
     except OSError:  # no process to be had, or it ended at once: this run needs none, the next builds
         return False
+    if not _background:
+        atexit.register(_leave_builds)
     _background[entry] = proc
     return True
+
+
+def _leave_builds():
+    """Let go of the builds still running as this process ends (they are meant to outlive it): left to
+    the interpreter's shutdown, each one's Popen said "ResourceWarning: subprocess N is still running"
+    on stderr whatever the warning filters, after the command's own output."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        _background.clear()
 
 
 def _ptr(a: np.ndarray | None):
