@@ -94,8 +94,10 @@ def test_cli_diagnose_writes_model_code_and_report(tmp_path, capsys):
     const.write_text('default: ["1"]\n')
     out = tmp_path / "new.errors.yaml"
     assert main(["diagnose", str(ROBOTS / "pps.yaml"), str(tmp_path / "train.csv"), "--errors", str(const),
-                 "-o", str(out), "--report", str(tmp_path / "rep"), "--json"]) == 0
+                 "-o", str(out), "--report", str(tmp_path / "rep"), "--noise-mm", "0.05", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
+    # the fit it asks for next holds what the data leave weak against the same stated noise
+    assert res["next"].startswith("gecgen identify ") and res["next"].endswith(" --noise-mm 0.05")
     assert set(res["before"]) == {"train_rms_mm", "val_rms_mm", "val_max_mm"}
     eff = res["effects"][0]
     assert eff["variables"] == ["q1"] and eff["gain_mm"] > 0 and "." in eff["error"] and eff["terms"]

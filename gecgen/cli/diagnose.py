@@ -96,11 +96,12 @@ def _diagnosed(args, caught: list) -> dict:
                 result[key] = {b: {STAGES[stage]: v for stage, v in by.items()} for b, by in figures[name].items()}
     # what to run with the new model: fit it on all the data (diagnose's own fit held part out)
     calib = Path(out).with_name(f"{robot.name}.calib.json")  # beside the error model, not in the working folder
-    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}"
+    # with the stated noise: identify holds against it what the data determine too weakly, as diagnose's fits did
+    noise = f"--noise-mm {args.noise_mm:g}" if args.noise_mm else ""
+    result["next"] = f"gecgen identify {args.robot} {args.data} --errors {out} -o {calib}" + (f" {noise}" if noise else "")
     val, relative = diagnoser.val_, diagnoser.data_.relative is not None
     held = f"--val {quote(args.val)}" if args.val else f"--holdout {args.holdout:g}" if args.holdout is not None else ""
-    commands = next_commands(args.robot, args.data, held, str(calib), diagnoser.data_.n_poses, relative,
-                             f"--noise-mm {args.noise_mm:g}" if args.noise_mm else "")
+    commands = next_commands(args.robot, args.data, held, str(calib), diagnoser.data_.n_poses, relative, noise)
     # diagnose has looked for what the model misses: the new model's fit on all the data shows the rest;
     # that fit writes the calibration the other commands read, so they come after it
     fit = result["next"]
