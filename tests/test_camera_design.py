@@ -226,16 +226,21 @@ def test_rig_file_refusals_name_the_file_and_key(hand, tmp_path):
 
 def test_too_few_images_for_the_model_are_refused_and_every_candidate_may_be_chosen(arm, hand):
     """Eleven images of the board cannot determine the default model's 89 coefficients with the two poses
-    (each adds six directions at most, the camera's pose against the board): refused in one line, where it
-    wrote a design whose information was singular (no log det, O3 0); and asked for as many poses as there
-    are candidates, design takes them all (it failed with a traceback looking for one to exchange)."""
+    (each determines six directions, the camera's pose against the board): refused in one line with the
+    count that could (17), where it wrote a design whose information was singular (no log det, O3 0);
+    17 images chosen among nearby candidates still share directions, and are refused too; and asked for as
+    many poses as there are candidates, design takes them all (it failed with a traceback looking for one
+    to exchange)."""
     robot, _, _ = arm
     rig, designed = hand
     default = load_error_model(ROBOTS / "industrial6r.errors.yaml", robot)
-    with pytest.raises(ModelError, match=r"--poses 11: the 11 most informative poses .* determine only 66 of the "
-                                         r"101 unknowns \(12 of the cameras' and board's poses, 89 coefficients\)"):
-        design_images(robot, rig.cameras, (rig.poses, rig.board_pose), 11, board=rig.board, errors=default,
-                      candidates=2000, home=HAND_HOME, seed=2)
+    for n, expect in ((11, r"--poses 11: 11 poses determine at most 66 of the 101 unknowns \(12 of the cameras' and "
+                           r"board's poses, 89 coefficients; 6 each\); give at least 17 poses"),
+                      (17, r"--poses 17: the 17 most informative poses .* determine only \d+ of the 101 unknowns .* "
+                           r"give more poses \(each determines 6 at most\)")):
+        with pytest.raises(ModelError, match=expect):
+            design_images(robot, rig.cameras, (rig.poses, rig.board_pose), n, board=rig.board, errors=default,
+                          candidates=2000, home=HAND_HOME, seed=2)
     everything = design_images(robot, rig.cameras, (rig.poses, rig.board_pose), 15, board=rig.board,
                                errors=load_error_model(ROBOTS / "constant.errors.yaml", robot), candidates=designed.q,
                                seed=2)

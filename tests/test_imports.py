@@ -160,7 +160,8 @@ def test_exporting_the_c_of_a_calibration_whose_code_is_cached_loads_no_sympy(wa
 
 def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeypatch):
     """Compensating with a calibration (warm cache) loads no scipy at all, and scoring one or fitting
-    one neither scipy.optimize nor scipy's rotations: each is a tenth of a second or more of every start-up."""
+    one, weak directions held too, neither scipy.optimize nor scipy's rotations: each is a tenth of a
+    second or more of every start-up."""
     from gecgen.api import Calibrator
 
     _warmed(warm, tmp_path, monkeypatch)
@@ -172,6 +173,10 @@ def test_a_command_loads_only_the_scipy_it_computes_with(warm, tmp_path, monkeyp
             "print('loaded', sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'sympy')))\n"
             "assert main(['evaluate', 'c.json', 'data.csv']) == 0\n"
             "assert main(['identify', 'arm3.yaml', 'data.csv', '-o', 'again.json']) == 0\n"
+            # what a fit that holds weak directions computes besides: why (the tool's turn) and the noise's limit
+            "import numpy\nfrom gecgen.fit import identify, weak\nfrom gecgen.model import load_robot\n"
+            "assert weak.tool_turn(load_robot('arm3.yaml'), numpy.zeros((3, 3))) < 1e-6\n"
+            "assert 6.6 < identify.noise_rise_limit(1) < 6.7\n"
             "print('loaded', sorted(m for m in ('scipy.optimize', 'scipy.spatial', 'sympy') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=os.environ,
                           timeout=600)

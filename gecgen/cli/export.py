@@ -133,6 +133,6 @@ def _warn_left_out(left: list[dict], cost: dict, pixels: bool):
             "--board FILE for a camera on the tool)" if pixels else "give the calibration's data (--data TRAIN.csv, --val VAL.csv)")
     warnings.warn(f"the URDF carries the constant errors only: {len(left)} coefficients of other terms are left out "
                   f"(largest {top['coefficient']}, up to {top['max_effect']:.3g} {top['unit']} over the training "
-                  f"ranges); " + (said + " (urdf.cost)" if said else give + " to learn what that costs in mm")
+                  f"ranges); " + (said + " (urdf.cost)" if said else f"{give} to learn what that costs in {'px' if pixels else 'mm'}")
                   + "; see not_carried")
 

@@ -36,7 +36,7 @@ from gecgen.model.pixels import Pixels
 from gecgen.model.robot import WRENCH, Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust, weak
-from gecgen.fit.identify import HOLD_P, RSS_TOL, WIDEN, structural_analysis
+from gecgen.fit.identify import RSS_TOL, WIDEN, noise_rise_limit, structural_analysis
 from gecgen.fit.redundancy import Eliminated
 from gecgen.fit.significance import clustered_covariance, judge
 from gecgen.runtime.compiled import CompiledModel
@@ -604,10 +604,8 @@ def _costs_only_noise(full: PixelFit, held: PixelFit, noise_px: float, free_g: b
     """Whether the held fit's larger residual is what the noise alone makes of the coefficients it holds:
     the rise in the weighted residual sum of squares within the identify.HOLD_P chi-square quantile, in
     units of the stated noise noise_px (px per coordinate; `identify._costs_only_noise` for a tracker)."""
-    from scipy.stats import chi2
-
     rise = _rss(held, free_g) - _rss(full, free_g)
-    return rise / noise_px ** 2 <= chi2.ppf(HOLD_P, max(len(full.kept) - len(held.kept), 1))
+    return rise / noise_px ** 2 <= noise_rise_limit(len(full.kept) - len(held.kept))
 
 
 def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str, Camera], board: Board | None = None,

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy import special
 from scipy.linalg import solve_triangular
 
 from gecgen.model.measurements import Measurements
@@ -722,11 +723,17 @@ def _costs_only_noise(full: Fit, held: Fit, noise_m: float) -> bool:
     """Whether the held fit's larger residual is what the noise alone makes of the coefficients it
     holds (their true values near zero): the rise in the weighted residual sum of squares within the
     HOLD_P chi-square quantile, in units of the instrument noise noise_m (m per coordinate)."""
-    from scipy.stats import chi2
-
     k_full, k_held = len(full.redundancy.kept), len(held.redundancy.kept)
     rss = [f.sigma_m ** 2 * max(f.measured_dof - k, 1.0) for f, k in ((full, k_full), (held, k_held))]
-    return (rss[1] - rss[0]) / noise_m ** 2 <= chi2.ppf(HOLD_P, max(k_full - k_held, 1))
+    return (rss[1] - rss[0]) / noise_m ** 2 <= noise_rise_limit(k_full - k_held)
+
+
+def noise_rise_limit(k: int) -> float:
+    """The HOLD_P quantile of the chi-square law with k (at least 1) degrees of freedom: how far, in units
+    of the noise variance, holding k coefficients whose true values are near zero may raise the weighted
+    residual sum of squares (scipy.special's inverse, not scipy.stats's: the same function without the
+    import of scipy.stats, which loads scipy.optimize)."""
+    return float(special.chdtri(max(k, 1), 1 - HOLD_P))
 
 
 def _identify(cm: CompiledModel, data: Measurements, registration_mode: str, max_iter: int, step_tol_m: float,

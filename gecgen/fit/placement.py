@@ -30,6 +30,7 @@ memory does not grow with the data.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,7 +40,7 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust
-from gecgen.fit.registration import FITS_M, HOLD_M, kabsch, rotation_angle, rotation_matrix
+from gecgen.fit.registration import FITS_M, HOLD_M, kabsch, rotation_angle, rotation_matrix, rotation_vector
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
@@ -189,19 +190,19 @@ def estimate_placement(robot: Robot, data: Measurements, loss: str = "cauchy") -
 #: point's coordinates are scored one by one, and the scale is one robust sigma, not the fit's outlier
 #: limit of ten: the nominal kinematics leaves the robot's own millimetres in every residual, so a
 #: glitch is told from them only by a loss that gives up on a point soon
-LOSSES = {"l2": (lambda z: z, np.ones_like),
+REFINE_LOSSES = {"l2": (lambda z: z, np.ones_like),
           "huber": (lambda z: np.where(z <= 1, z, 2 * np.sqrt(z) - 1), lambda z: np.where(z <= 1, 1.0, 1 / np.sqrt(z))),
           "cauchy": (np.log1p, lambda z: 1 / (1 + z))}
 
 
 def _robust_refine(residual, jacobian, x0: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
-    """x minimising sum rho((f / c)^2) over the coordinates f of residual(x) (R, 3) (`LOSSES`), c the
+    """x minimising sum rho((f / c)^2) over the coordinates f of residual(x) (R, 3) (`REFINE_LOSSES`), c the
     robust sigma of the residual lengths at x0, and the Jacobian (3R, len(x)) there with each row
     weighted as the last step weighted it: iteratively reweighted Gauss-Newton steps on column-scaled
     normal equations, damped (Levenberg-Marquardt) until a step lowers the cost. This is what
-    scipy.optimize.least_squares does with these losses, but importing it takes a fifth of a second
-    that every identify would pay for a starting point."""
-    rho, weight = LOSSES[loss]
+    scipy.optimize.least_squares does with these losses, but importing it takes a tenth of a second or
+    more that every identify would pay for a starting point."""
+    rho, weight = REFINE_LOSSES[loss]
     f = residual(x0).ravel()
     c = max(robust.scale(np.linalg.norm(f.reshape(-1, 3), axis=1)), robust.SCALE_FLOOR_M)
     x, cost, damping = x0, float(np.sum(rho((f / c) ** 2))), REFINE_DAMPING
@@ -224,6 +225,9 @@ def _robust_refine(residual, jacobian, x0: np.ndarray, loss: str) -> tuple[np.nd
         cost, damping = cost_new, max(damping / 10, 1e-12)
         if done:
             break
+    else:
+        warnings.warn(f"the targets' placement on the tool did not settle in {REFINE_STEPS} steps: the fit starts "
+                      f"from where it stopped (its own residual and checks judge the result)", stacklevel=2)
     return x, jacobian(x) * np.sqrt(weight((f / c) ** 2))[:, None]
 
 
@@ -248,8 +252,6 @@ def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> di
     rotation): X_k is the rotation nearest to sum R_i^T R_s^T R (SVD), as a rotation vector (rad)."""
     if data.orientation is None:
         return {}
-    from scipy.spatial.transform import Rotation  # here: only pose data needs it (start-up time)
-
     out = {}
     oriented = ~np.isnan(data.orientation[:, 0, 0])
     Rs = np.stack(rotations)[sidx]
@@ -259,7 +261,7 @@ def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> di
             S = np.einsum("nji,nkj,nkl->il", T[rows, :3, :3], Rs[rows], data.orientation[rows])
             U, _, Vt = np.linalg.svd(S)
             X = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-            out[name] = tuple(float(v) for v in Rotation.from_matrix(X).as_rotvec())
+            out[name] = tuple(float(v) for v in rotation_vector(X))
     return out
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gecgen.model.kinematics import joint_motion
 from gecgen.model.validation import ModelError
 
 #: beyond these the measurement frame counts as "far" and is registered before the fit
@@ -76,9 +77,12 @@ class Registration:
 IDENTITY = Registration(np.eye(3), np.zeros(3), False)
 
 
-def rotation_angle(R: np.ndarray) -> float:
-    """Rotation angle (rad) of a rotation matrix (3, 3)."""
-    return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+def rotation_angle(R: np.ndarray) -> float | np.ndarray:
+    """Rotation angle (rad, in [0, pi]) of a rotation matrix (3, 3), or of each of a stack (..., 3, 3):
+    from |R - I| = 2 sqrt(2) sin(angle / 2) (Frobenius), which keeps its digits at small angles where
+    arccos((trace R - 1) / 2) loses half of them."""
+    angle = 2 * np.arcsin(np.clip(np.linalg.norm(R - np.eye(3), axis=(-2, -1)) / np.sqrt(8), 0, 1))
+    return float(angle) if np.ndim(angle) == 0 else angle
 
 
 def kabsch(p: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -165,13 +169,15 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def rotation_matrix(v: np.ndarray) -> np.ndarray:
-    """The rotation (3, 3) whose rotation vector is v (3,) (axis times angle, rad): Rodrigues' formula,
-    its Taylor series below a microradian where sin(theta) / theta loses digits."""
-    K = _skew(np.asarray(v, float)[None])[0]
+    """The rotation (3, 3) whose rotation vector is v (3,) (axis times angle, rad): a revolute joint's
+    motion about v's axis (Rodrigues' formula), its Taylor series below a microradian where the axis
+    loses digits."""
+    v = np.asarray(v, float)
     theta = float(np.linalg.norm(v))
     if theta < 1e-6:
+        K = _skew(v[None])[0]
         return np.eye(3) + K + K @ K / 2
-    return np.eye(3) + np.sin(theta) / theta * K + (1 - np.cos(theta)) / theta ** 2 * K @ K
+    return joint_motion(v / theta, "R", np.array(theta))[:3, :3]
 
 
 def rotation_vector(R: np.ndarray) -> np.ndarray:

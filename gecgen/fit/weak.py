@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.kinematics import tool_poses
+from gecgen.fit.registration import rotation_angle
 
 #: 1-sigma of a generalized error beyond which the data do not determine it (m, rad): real robots
 #: are off their nominal model by tenths of a millimetre to a few, and a value known only to 5 mm
@@ -175,14 +176,13 @@ def hold(cm, data, kept, R: np.ndarray, scale: np.ndarray, dof: float, noise: fl
 def tool_turn(robot, q: np.ndarray) -> float:
     """The largest angle (rad) between the nominal tool orientation at a pose of q (P, n) and
     its mean over them (on a tree: over every branch's tool, the largest)."""
-    # here, not at the top: scipy's rotations cost a tenth of a second of start-up, and only a fit
-    # that holds weak directions says why
-    from scipy.spatial.transform import Rotation
-
     out = 0.0
     for T in tool_poses(robot, q):
-        rot = Rotation.from_matrix(T[:, :3, :3])
-        out = max(out, float(np.max((rot * rot.mean().inv()).magnitude())))
+        R = T[:, :3, :3]
+        # the mean rotation: the rotation nearest the sum of the matrices (SVD), the chordal mean
+        U, _, Vt = np.linalg.svd(R.sum(axis=0))
+        mean = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        out = max(out, float(rotation_angle(R @ mean.T).max()))
     return out
 
 

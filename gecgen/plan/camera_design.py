@@ -264,22 +264,25 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     rank = int((s > RANK_TOL * s.max()).sum(axis=1).max())
     Hw = s[:, :rank, None] * Vt[:, :rank]  # (K, rank, m): each pose's information, H_w^T H_w
     m = J.shape[1]
-    require(n_poses * rank >= m, f"--poses {n_poses}: {n_poses} poses inform at most {n_poses * rank} of the {m} "
-                                 f"unknowns ({ng} of the cameras' and board's poses, {len(kept)} coefficients; {rank} "
-                                 f"each); give at least {int(np.ceil(m / rank))} poses")
+    # a direction is determined when its std is within 1000 times the best-informed one's (whitened against
+    # the mean candidate; eigenvalues of the information above RANK_TOL of the largest): an image informs
+    # weaker directions too, but so weakly that they do not count; so counted, an image of a board gives
+    # six, as the camera's pose against the board allows
+    strong = int((s > np.sqrt(RANK_TOL) * s.max()).sum(axis=1).max())
+    posed = "cameras' and board's" if rig.board is not None else "cameras'"
+    unknowns = f"{ng} of the {posed} poses, {len(kept)} coefficients"
+    require(n_poses * strong >= m, f"--poses {n_poses}: {n_poses} poses determine at most {n_poses * strong} of the "
+                                   f"{m} unknowns ({unknowns}; {strong} each); give at least "
+                                   f"{int(np.ceil(m / strong))} poses")
     chosen, swaps, passes, history, _ = choose(Hw, RIDGE * np.eye(m), n_poses, rng, crit, max_passes)
-    # each image informs up to `rank` directions, but images of nearby poses share many: the count above
-    # passes designs whose information is still singular, whose poses would not determine the fit
-    M = np.einsum("pik,pil->kl", Hw[chosen], Hw[chosen])
-    # a direction counts when its std is within 1000 times the best-informed one's (whitened against the mean
-    # candidate): so counted, eye-in-hand designs of 8, 12 and 16 images determined 48, 72 and 95 directions,
-    # six an image, as the camera's pose against the board allows; weaker ones are not information
-    eig = np.linalg.eigvalsh(M)
+    # images of nearby poses share directions: the count above passes designs whose information is still
+    # singular, whose poses would not determine the fit
+    eig = np.linalg.eigvalsh(np.einsum("pik,pil->kl", Hw[chosen], Hw[chosen]))
     determined = int((eig > RANK_TOL * eig.max()).sum())
     require(determined == m, f"--poses {n_poses}: the {n_poses} most informative poses among the candidates still "
-                             f"determine only {determined} of the {m} unknowns ({ng} of the cameras' and board's "
-                             f"poses, {len(kept)} coefficients): give more poses, candidates over a wider span "
-                             f"(--span), or a smaller error model (--errors)")
+                             f"determine only {determined} of the {m} unknowns ({unknowns}): give more poses (each "
+                             f"determines {strong} at most), candidates over a wider span (--span), or a smaller "
+                             f"error model (--errors)")
     random_pick = rng_random.choice(K, n_poses, replace=False)
     val = rng_val.choice(K, min(n_validation, K), replace=False)
     H_val = basis.whiten(blocks[val])
@@ -295,5 +298,5 @@ def design_images(robot: Robot, model: ErrorModel, rig: Rig, q: np.ndarray, n_po
     names = model.coefficient_names(robot)
     return CameraDesign(chosen, random_pick, criterion, {n: o[0] for n, o in out.items()},
                         {n: o[1] for n, o in out.items()}, {n: o[2] for n, o in out.items()}, noise_px, len(val), K,
-                        ng, tuple(names[j] for j in kept), eliminated, rank,
+                        ng, tuple(names[j] for j in kept), eliminated, strong,
                         swaps, passes, reported_history(basis, history, crit))
