@@ -4,6 +4,7 @@ scripts/reproduce_camera.py's).
 
     python scripts/reproduce_camera_tree.py [--seeds 5] [--noise PX] [--spread MM] [--keep-insignificant]
                                             [--loss l2] [--first-seed N] [--flip] [--truth-seed N]
+                                            [--without-compliance]
     python scripts/reproduce_camera_tree.py --scale --seeds 20
 
 The first form writes the section's table (its default set-up: markers 150 mm apart, the significance
@@ -76,15 +77,17 @@ def tree_robot(spread: float = 0.15):
 
 
 def run(seed: int, noise: float, n: int = 60, spread: float = 0.15, significance: bool = True,
-        loss: str = "cauchy", flipped: bool = False, truth_seed: int | None = None) -> dict:
+        loss: str = "cauchy", flipped: bool = False, truth_seed: int | None = None, compliance: bool = True) -> dict:
     """Both fits and the oracles on one seed's pixels: noise px per coordinate, markers `spread` m apart,
     the significance gate on or off, the fit's robust loss; flipped: the seed's noise with its sign
     turned (as likely as the seed's own: the mean of the two is what an estimator's bias is, without
     the part linear in the noise); truth_seed: the truth's errors drawn from this seed instead of the truth
-    file's."""
+    file's; compliance: False drops the truth's compliance, which the constant model cannot represent (then
+    without noise every fit recovers the truth)."""
     robot = tree_robot(spread)
     spec = read_yaml(ROOT / "robots" / "humanoid.truth.yaml", "truth file")
-    truth = load_truth(spec if truth_seed is None else {**spec, "seed": truth_seed}, robot)
+    spec = {**spec, **({} if truth_seed is None else {"seed": truth_seed}), **({} if compliance else {"sources": []})}
+    truth = load_truth(spec, robot)
     model = load_error_model(ROOT / "robots" / "constant.errors.yaml", robot)
     rng = np.random.default_rng(seed)
     cams = [Camera(f"cam{k + 1}", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960) for k in range(2)]
@@ -285,6 +288,7 @@ def main():
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--flip", action="store_true", help="each seed's noise with its sign turned")
     parser.add_argument("--truth-seed", type=int, help="draw the truth's errors from this seed, not the truth file's")
+    parser.add_argument("--without-compliance", action="store_true", help="the truth without its compliance")
     parser.add_argument("--scale", action="store_true", help="write the subsection on the scale instead")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
@@ -301,12 +305,12 @@ def main():
         write_scale(runs)
         return
     default = (args.spread == 150.0 and not args.keep_insignificant and args.loss == "cauchy" and not args.flip
-               and args.first_seed == 0 and args.truth_seed is None)
+               and args.first_seed == 0 and args.truth_seed is None and not args.without_compliance)
     rows = []
     for noise in args.noise or NOISES:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             r = run(seed, noise, spread=args.spread / 1e3, significance=not args.keep_insignificant, loss=args.loss,
-                    flipped=args.flip, truth_seed=args.truth_seed)
+                    flipped=args.flip, truth_seed=args.truth_seed, compliance=not args.without_compliance)
             rows.append((noise, seed, r))
             print(noise, seed, json.dumps(r), flush=True)
         at = [r for n, _, r in rows if n == noise]
