@@ -356,8 +356,8 @@ def write(rows: dict, seeds: int):
               "moved by holding coefficients at zero, `scale.gate_ppm`, in quadrature: the truth need not hold "
               "them at zero). The error over it is in the summary, "
               "for the oracle as for the fit (the constant model misses the truth's gravity compliance). The "
-              "fit's stated scale is near the oracle's, which knows the cameras: most of the scale's uncertainty "
-              "is the robot's lengths, not the markers' spacing.",
+              "oracle, which knows the cameras, states less (the summary's medians): it takes the scale from the "
+              "cameras' known positions too, the fit from the markers' spacing alone.",
               "- What the registered comparison leaves beyond the oracle on the 300 mm plate is mostly scale (the "
               "column with it taken out). A wider plate, a longer known length seen from the same cameras, narrows "
               "it: compare the two plates' registered ratios in the summary. Closer cameras were not measured: "
