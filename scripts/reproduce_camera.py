@@ -352,11 +352,12 @@ def write(rows: dict, seeds: int):
               "points (as a tracker would see the compensated robot), fit and oracle are close.",
               "- The scale is determined, not lost: the fit states its 1-sigma (`scale.std_ppm`, `scale.std_mm` "
               "in the JSON: the relative scale of the tool positions it predicts, from the covariance of the "
-              "coefficients before the significance gate, the cameras' poses carried in: given the zeros of the "
-              "coefficients the gate holds, it would understate the error). The error over it is in the summary, "
+              "coefficients before the significance gate, the cameras' poses carried in, and the scale the gate "
+              "moved by holding coefficients at zero, `scale.gate_ppm`, in quadrature: the truth need not hold "
+              "them at zero). The error over it is in the summary, "
               "for the oracle as for the fit (the constant model misses the truth's gravity compliance). The "
-              "fit's stated scale is near the oracle's, which knows the cameras: most of the scale's uncertainty "
-              "is the robot's lengths, not the markers' spacing.",
+              "oracle, which knows the cameras, states less (the summary's medians): it takes the scale from the "
+              "cameras' known positions too, the fit from the markers' spacing alone.",
               "- What the registered comparison leaves beyond the oracle on the 300 mm plate is mostly scale (the "
               "column with it taken out). A wider plate, a longer known length seen from the same cameras, narrows "
               "it: compare the two plates' registered ratios in the summary. Closer cameras were not measured: "

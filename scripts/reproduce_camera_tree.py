@@ -59,6 +59,8 @@ SCALE_STUDY = ([(150, px, gate, False, None) for gate in (True, False) for px in
                + [(150, 0.3, gate, True, None) for gate in (True, False)]
                + [(150, 0.3, gate, False, OTHER_TRUTH) for gate in (True, False)]
                + [(mm, 0.3, True, False, None) for mm in (200, 250, 300, 350, 400, 450)])
+#: the --scale study's fits of fresh 0.3 px noise on the same poses: these seeds' poses, this many fits each
+FRESH_SEEDS, FRESH_DRAWS = (0, 1), 40
 NOISES = (0.1, 0.3)
 #: the posture about which the poses are drawn (rad): torso upright, both forearms forward
 HOME = np.array([0, 0.2, -0.2, -0.3, 0.9, 0, -1.2, 0, 0.3, -0.9, 0, -1.2, 0])
@@ -76,14 +78,9 @@ def tree_robot(spread: float = 0.15):
     return replace(robot, targets=targets, target_branch={t: int(t[0] == "r") for t in targets})
 
 
-def run(seed: int, noise: float, n: int = 60, spread: float = 0.15, significance: bool = True,
-        loss: str = "cauchy", flipped: bool = False, truth_seed: int | None = None, compliance: bool = True) -> dict:
-    """Both fits and the oracles on one seed's pixels: noise px per coordinate, markers `spread` m apart,
-    the significance gate on or off, the fit's robust loss; flipped: the seed's noise with its sign
-    turned (as likely as the seed's own: the mean of the two is what an estimator's bias is, without
-    the part linear in the noise); truth_seed: the truth's errors drawn from this seed instead of the truth
-    file's; compliance: False drops the truth's compliance, which the constant model cannot represent (then
-    without noise every fit recovers the truth)."""
+def set_up(seed: int, n: int = 60, spread: float = 0.15, truth_seed: int | None = None, compliance: bool = True):
+    """One seed's robot, truth, model, cameras, rig, training and held-out poses (n each) and the random
+    generator as the poses left it (see `run`)."""
     robot = tree_robot(spread)
     spec = read_yaml(ROOT / "robots" / "humanoid.truth.yaml", "truth file")
     spec = {**spec, **({} if truth_seed is None else {"seed": truth_seed}), **({} if compliance else {"sources": []})}
@@ -93,7 +90,33 @@ def run(seed: int, noise: float, n: int = 60, spread: float = 0.15, significance
     cams = [Camera(f"cam{k + 1}", 1800.0, 1800.0, 640.0, 480.0, DIST, 1280, 960) for k in range(2)]
     at = np.mean([true_tools(robot, truth, HOME[None], b)[0, :3, 3] for b in (0, 1)], axis=0)
     rig, q = eye_to_hand(robot, truth, cams, EYES, at, HOME, SPAN, 2 * n, rng)
-    train, held = q[:n], q[n:]
+    return robot, truth, model, cams, rig, q[:n], q[n:], rng
+
+
+def fresh(seed: int, draws: int, significance: bool, noise: float = 0.3) -> list[list[float]]:
+    """The fit's scale error on the held-out poses (ppm), its stated 1-sigma and the scale the gate moved
+    (ppm) over `draws` fits of one seed's training poses with fresh corner noise (noise px)."""
+    robot, truth, model, cams, rig, train, held, _ = set_up(seed)
+    exact = simulate_pixels(robot, truth, rig, train, 0.0, np.random.default_rng(0))
+    p_true = np.concatenate([true_tools(robot, truth, held, b)[:, :3, 3] for b in (0, 1)])
+    rng, out = np.random.default_rng(1000 + seed), []
+    for _ in range(draws):
+        data = replace(exact, uv=exact.uv + rng.normal(0, noise, exact.uv.shape))
+        fit = fit_pixels(robot, model, data, {c.name: c for c in cams}, significance=significance)
+        p_fit = np.concatenate([fitted_tools(robot, model, fit.c, held, branch=b)[:, :3, 3] for b in (0, 1)])
+        out.append([1e6 * (1 / similarity_scale(p_fit, p_true) - 1), fit.scale["std_ppm"], fit.scale["gate_ppm"]])
+    return out
+
+
+def run(seed: int, noise: float, n: int = 60, spread: float = 0.15, significance: bool = True,
+        loss: str = "cauchy", flipped: bool = False, truth_seed: int | None = None, compliance: bool = True) -> dict:
+    """Both fits and the oracles on one seed's pixels: noise px per coordinate, markers `spread` m apart,
+    the significance gate on or off, the fit's robust loss; flipped: the seed's noise with its sign
+    turned (as likely as the seed's own: the mean of the two is what an estimator's bias is, without
+    the part linear in the noise); truth_seed: the truth's errors drawn from this seed instead of the truth
+    file's; compliance: False drops the truth's compliance, which the constant model cannot represent (then
+    without noise every fit recovers the truth)."""
+    robot, truth, model, cams, rig, train, held, rng = set_up(seed, n, spread, truth_seed, compliance)
     exact = simulate_pixels(robot, truth, rig, train, 0.0, deepcopy(rng)) if flipped else None
     data = simulate_pixels(robot, truth, rig, train, noise, rng)
     if flipped:  # the points in view both without the noise and with it (rarely one fewer at an image's edge)
@@ -196,7 +219,17 @@ def mean_se(x, digits: int = 0) -> str:
     return f"{x.mean():.{digits}f} +- {x.std(ddof=1) / np.sqrt(len(x)):.{digits}f}"
 
 
-def write_scale(runs: dict):
+def fresh_ratio(per_seed: list, gate: bool = True) -> str:
+    """The scale error's RMS over the stated 1-sigma's, per seed of `fresh` runs, in words; gate False: the
+    1-sigma without the scale the gate moved."""
+    ratio = []
+    for rows in per_seed:
+        error, std, moved = np.array(rows).T
+        ratio.append(np.sqrt(np.mean(error ** 2) / np.mean(std ** 2 - (0 if gate else moved ** 2))))
+    return " and ".join(f"{x:.2f}" for x in ratio)
+
+
+def write_scale(runs: dict, fresh_runs: dict):
     """Write the subsection SCALE_HEADING at the end of the section from runs {SCALE_STUDY's: [run(), ...]}
     (the same seeds in every set-up, so that their noise draws are the same up to the factor px and the
     sign)."""
@@ -238,7 +271,12 @@ def write_scale(runs: dict):
                  for truth in (None, OTHER_TRUTH)}
     sd = {on: [np.std(v, ddof=1) for (mm, px, gate, _, _), v in scale.items() if (mm, px, gate) == (150, 0.3, on)]
           for on in (True, False)}
-    stated = np.mean([r["fit_scale_std_ppm"] for r in runs[(150, 0.3, True, False, None)]])
+    stated = {on: np.mean([r["fit_scale_std_ppm"] for r in runs[(150, 0.3, on, False, None)]])
+              for on in (True, False)}
+    # the error over what each fit states, RMS over the seeds: above 1, the statement understates
+    over = {on: np.sqrt(np.mean([(r["fit_scale_ppm"] / r["fit_scale_std_ppm"]) ** 2
+                                 for k, v in runs.items() if k[:3] == (150, 0.3, on) for r in v]))
+            for on in (True, False)}
     lines += ["", f"- The fit's scale error at 0.3 px, the mean of each seed's and its with the noise's sign turned: "
               f"{mean_se(both[True])} ppm with the gate, {mean_se(both[False])} ppm without (at 0 px "
               f"{mean_se(scale[(150, 0.0, True, False, None)])} and {mean_se(s0)} ppm). Without the gate, the "
@@ -246,19 +284,29 @@ def write_scale(runs: dict):
               f"{mean_se(second, 1)} ppm; the gate's part at 0.3 px (gate on less gate off, seed by seed): "
               f"{mean_se(gate_part[None])} ppm with the truth file's errors, {mean_se(gate_part[OTHER_TRUTH])} ppm "
               f"with errors drawn from seed {OTHER_TRUTH}.",
+              f"- The fit's scale error over its stated 1-sigma, RMS over the seeds of the rows at 150 mm and 0.3 px: "
+              f"{over[True]:.2f} with the gate, {over[False]:.2f} without it.",
+              f"- The same over {FRESH_DRAWS} fits each of seed {' and '.join(map(str, FRESH_SEEDS))}'s poses with "
+              f"fresh 0.3 px noise (markers 150 mm apart), the scale error's RMS over the stated 1-sigma's: "
+              f"{fresh_ratio(fresh_runs[True])} with the gate (over the 1-sigma before the gate alone: "
+              f"{fresh_ratio(fresh_runs[True], gate=False)}), {fresh_ratio(fresh_runs[False])} without it.",
               f"- The squares of markers at which the registered ratio is within 1.2 on every seed at 0.3 px: "
               f"{', '.join(map(str, within)) or 'none of those run'} mm.", ""]
     spread = {mm: np.std(scale[(mm, 0.3, True, False, None)], ddof=1) for mm, px, gate, flipped, truth in runs
               if px == 0.3 and gate and not flipped and truth is None}
     lines += [f"What limits the tree's accuracy from pixels is its scale. Pixels are angles: the one length the "
               f"images hold is the markers' spacing on each hand, and seen from 2.6 m four markers 150 mm apart fix "
-              f"the robot's size to about {stated:.0f} ppm (1-sigma, as the fit states it) at 0.3 px; its scale "
+              f"the robot's size to about {stated[False]:.0f} ppm (1-sigma, as the fit states it without the gate) at "
+              f"0.3 px; its scale "
               f"errors spread {min(sd[True]):.0f} to {max(sd[True]):.0f} ppm from seed to seed with the gate and "
               f"{min(sd[False]):.0f} to {max(sd[False]):.0f} ppm without it (the rows at 150 mm and 0.3 px). The fit "
               f"is not biased by the noise: without the significance gate, a seed's noise and the same noise with "
               f"its sign turned give scale errors that average to the noise-free one. The gate, which holds at "
               f"zero the coefficients the images do not determine, moves the scale by a few tens of ppm, one way "
-              f"or the other as the robot's own errors fall, and widens its spread somewhat. The scale is fixed "
+              f"or the other as the robot's own errors fall, and widens its spread somewhat: the coefficients it "
+              f"holds at zero need not be zero in the robot. So the fit's stated 1-sigma with the gate is the one "
+              f"before it and the scale the gate moved (`scale.gate_ppm`) in quadrature, {stated[True]:.0f} ppm on "
+              f"average at 150 mm and 0.3 px. The scale is fixed "
               f"better as the markers spread: from {spread[150]:.0f} ppm seed to seed at 150 mm to "
               f"{spread[max(spread)]:.0f} ppm at {max(spread)} mm; at {', '.join(map(str, within)) or '-'} mm the "
               f"fit's registered held-out error is within 1.2 times that of an oracle that knows the cameras' poses "
@@ -301,8 +349,10 @@ def main():
                     for seed in range(args.seeds)]
             runs[(mm, px, gate, flipped, truth)] = rows
             print(mm, px, gate, flipped, truth, json.dumps([r["fit_scale_ppm"] for r in rows]), flush=True)
+        fresh_runs = {gate: [fresh(seed, FRESH_DRAWS, gate) for seed in FRESH_SEEDS] for gate in (True, False)}
         (saved / "tree_scale.json").write_text(json.dumps([[*k, v] for k, v in runs.items()]))
-        write_scale(runs)
+        (saved / "tree_fresh.json").write_text(json.dumps([[gate, v] for gate, v in fresh_runs.items()]))
+        write_scale(runs, fresh_runs)
         return
     default = (args.spread == 150.0 and not args.keep_insignificant and args.loss == "cauchy" and not args.flip
                and args.first_seed == 0 and args.truth_seed is None and not args.without_compliance)

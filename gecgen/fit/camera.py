@@ -692,7 +692,7 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
         names = model.coefficient_names(robot)
         _, insignificant = judge(names, c, std, cols, cov, sigma, 2 * float(wr.sum()) - (problem.n_geom if free_g else 0))
         if insignificant:
-            ungated = (cols, cov)
+            ungated = (c, cols, cov)
             cols = np.array([j for j in cols if j not in insignificant], int)
             c = c.copy()
             c[list(insignificant)] = 0.0
@@ -710,9 +710,7 @@ def _fit_pixels(robot: Robot, model: ErrorModel, data: Pixels, cameras: dict[str
                       f"poses, targets or cameras determine more", stacklevel=2)
     wr = robust.weights(e, limit, loss)
     std, cov, sigma, std_g = _uncertainty(problem, g, c, cols, wr, free_g)
-    # the scale's uncertainty before the gate: holding coefficients at zero would state it given their
-    # zeros, which understates it (docs/camera.md)
-    scale = _scale(problem, c, *(ungated or (cols, cov)))
+    scale = _scale(problem, c, cols, cov, ungated)
     flagged = np.nonzero(e > limit)[0]
     d = data
     outliers = tuple(Outlier(int(d.row[r]), int(d.pose_ids[d.pose[r]]), d.cameras[d.camera[r]], d.points[d.point[r]],
@@ -846,21 +844,32 @@ def _hold_weak(problem: _Problem, g: np.ndarray, c: np.ndarray, kept: list[int],
     return [kept[i] for i in stay], held
 
 
-def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray) -> dict:
+def _scale(problem: _Problem, c: np.ndarray, cols: np.ndarray, cov: np.ndarray,
+           ungated: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """How well the fit fixes the scale of the robot it calibrates: the 1-sigma of the relative scale of
-    the tool origins it predicts at the training poses, from the covariance cov of c[cols] (`std_ppm`; the scale of a similarity fit of
-    them onto the truth's, the rest rigid) and what that moves them by, RMS about their centre
-    (`std_mm`). Pixels fix a length only through a known one (the markers' spacing, the board's
-    square), seen from afar only weakly; a similarity fit's scale of small perturbations dp (P, 3) is
-    sum(r . dp) / sum(|r|^2), r the positions about their centre, so its variance is a^T cov a with a
-    that sum's gradient in the coefficients."""
+    the tool origins it predicts at the training poses (`std_ppm`; the scale of a similarity fit of them
+    onto the truth's, the rest rigid) and what that moves them by, RMS about their centre (`std_mm`),
+    from the covariance cov of c[cols]. Pixels fix a length only through a known one (the markers'
+    spacing, the board's square), seen from afar only weakly; a similarity fit's scale of small
+    perturbations dp (P, 3) is sum(r . dp) / sum(|r|^2), r the positions about their centre, so its
+    variance is a^T cov a with a that sum's gradient in the coefficients.
+    ungated: (c, cols, cov) of the fit before the significance gate held coefficients at zero. Holding
+    them moves the scale by what they truly are, which the gated covariance (given their zeros) leaves
+    out and the ungated one does not know: the 1-sigma is then the ungated one and the move the gate
+    made (`gate_ppm`) in quadrature. For a linear fit holding a set chosen in advance, its mean square
+    exceeds the gated error's by twice the variance the gate removed; the ungated 1-sigma alone falls
+    short of the gated error by what the held coefficients truly carry (tests/test_camera.py).
+    Without the gate `gate_ppm` is 0."""
+    c0, cols, cov = (c, cols, cov) if ungated is None else ungated
     o, _, H = problem.frames(c, with_H=True)
     o, H = o.reshape(-1, 3), H[:, :, 0].reshape(len(o) * problem.n_branches, 3, -1)  # every branch's tool
     r = o - o.mean(axis=0)
     a = np.einsum("pi,pik->k", r, H[..., cols]) / float(np.sum(r ** 2))
+    moved = float(a @ (c - c0)[cols])
     with np.errstate(invalid="ignore"):
-        std = float(np.sqrt(a @ cov @ a)) if len(cols) else 0.0
-    return {"std_ppm": 1e6 * std, "std_mm": 1e3 * std * float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))}
+        std = float(np.sqrt(a @ cov @ a + moved ** 2)) if len(cols) else 0.0
+    return {"std_ppm": 1e6 * std, "std_mm": 1e3 * std * float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))),
+            "gate_ppm": 1e6 * moved}
 
 
 def _uncertainty(problem: _Problem, g: np.ndarray, c: np.ndarray, cols: np.ndarray, wr: np.ndarray, free_g: bool):
