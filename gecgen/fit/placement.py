@@ -40,7 +40,8 @@ from gecgen.model.measurements import Measurements
 from gecgen.model.robot import Robot
 from gecgen.model.validation import ModelError, require
 from gecgen.fit import robust
-from gecgen.fit.registration import FITS_M, HOLD_M, kabsch, rotation_angle, rotation_matrix, rotation_vector
+from gecgen.fit.registration import (FITS_M, HOLD_M, kabsch, nearest_rotation, rotation_angle, rotation_matrix,
+                                     rotation_vector)
 
 #: a given target this far from where the data puts it (m) is replaced by the estimate before the fit
 FAR_M = 0.02
@@ -106,8 +107,7 @@ def _closed_form(T: np.ndarray, data: Measurements, rows: np.ndarray, k_targets:
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     X = np.linalg.lstsq(A / scale, data.xyz[rows], rcond=None)[0] / scale[:, None]  # (9K + 4, 3): column a
-    U, _, Vt = np.linalg.svd(X[-4:-1].T)
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    R = nearest_rotation(X[-4:-1].T)
     W = X[:-4].reshape(k_targets, 3, 3, 3)  # [k, b, c, a]
     m = np.einsum("ab,kbca->kc", R, W) / 3
     return R, X[-1], m
@@ -259,9 +259,7 @@ def _measured_frames(T, data: Measurements, index, sidx, rotations, names) -> di
         rows = oriented & (index == k)
         if rows.any():
             S = np.einsum("nji,nkj,nkl->il", T[rows, :3, :3], Rs[rows], data.orientation[rows])
-            U, _, Vt = np.linalg.svd(S)
-            X = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-            out[name] = tuple(float(v) for v in rotation_vector(X))
+            out[name] = tuple(float(v) for v in rotation_vector(nearest_rotation(S)))
     return out
 
 

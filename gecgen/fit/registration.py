@@ -89,10 +89,16 @@ def kabsch(p: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[n
     """R, t minimising sum w |y - (R p + t)|^2 over points p, y (N, 3), weights w (N,) (default 1)."""
     w = np.ones(len(p)) if w is None else w
     pc, yc = w @ p / w.sum(), w @ y / w.sum()
-    U, _, Vt = np.linalg.svd((w[:, None] * (y - yc)).T @ (p - pc))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ D @ Vt
+    R = nearest_rotation((w[:, None] * (y - yc)).T @ (p - pc))
     return R, yc - R @ pc
+
+
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) nearest to M (3, 3) in the Frobenius norm: U diag(1, 1, +-1) V^T from M's SVD,
+    the sign making its determinant +1 (for a cross-covariance, Kabsch's rotation; for a sum of
+    rotations, their chordal mean)."""
+    U, _, Vt = np.linalg.svd(M)
+    return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
 
 
 #: reweighted closed-form solves of a robust registration (weights settle within a few)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gecgen.model.kinematics import tool_poses
-from gecgen.fit.registration import rotation_angle
+from gecgen.fit.registration import nearest_rotation, rotation_angle
 
 #: 1-sigma of a generalized error beyond which the data do not determine it (m, rad): real robots
 #: are off their nominal model by tenths of a millimetre to a few, and a value known only to 5 mm
@@ -179,9 +179,7 @@ def tool_turn(robot, q: np.ndarray) -> float:
     out = 0.0
     for T in tool_poses(robot, q):
         R = T[:, :3, :3]
-        # the mean rotation: the rotation nearest the sum of the matrices (SVD), the chordal mean
-        U, _, Vt = np.linalg.svd(R.sum(axis=0))
-        mean = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        mean = nearest_rotation(R.sum(axis=0))  # the chordal mean
         out = max(out, float(rotation_angle(R @ mean.T).max()))
     return out
 
